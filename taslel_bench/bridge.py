@@ -1,0 +1,105 @@
+"""State bridge MuJoCo (plant) <-> Pinocchio (controller's model). The only module that knows both.
+
+Conversions (see DESIGN.md, "conversion traps"):
+  * quaternion: MuJoCo wxyz -> Pinocchio xyzw;
+  * trunk linear velocity: MuJoCo world axes -> Pinocchio trunk axes (angular is in the trunk frame in both);
+  * leg order: MuJoCo keeps the plant model's joint order (URDF: FR, FL, RR, RL); Pinocchio and the core use
+    :data:`robot.LEGS` = FL, FR, RL, RR. The permutation is built from joint and actuator names, so any
+    plant MJCF with the A1 joint names works.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from taslel_bench import robot
+
+
+def _quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
+    w, x, y, z = quat_wxyz
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+class StateBridge:
+    """Index maps between a MuJoCo plant model and the core's joint order."""
+
+    def __init__(self, mj_model: mujoco.MjModel) -> None:
+        missing = []
+        qadr, dadr, act = [], [], []
+        for name in robot.JOINT_NAMES:
+            jid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            aid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+            if jid < 0:
+                missing.append(f"joint {name}")
+            if aid < 0:
+                missing.append(f"actuator {name}")
+            qadr.append(mj_model.jnt_qposadr[jid] if jid >= 0 else -1)
+            dadr.append(mj_model.jnt_dofadr[jid] if jid >= 0 else -1)
+            act.append(aid)
+        free = [j for j in range(mj_model.njnt) if mj_model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        if not free:
+            missing.append("a free joint on the trunk")
+        if missing:
+            raise ValueError(f"plant model does not fit the A1 controller: missing {', '.join(missing)}")
+        self.free_qadr = int(mj_model.jnt_qposadr[free[0]])
+        self.free_dadr = int(mj_model.jnt_dofadr[free[0]])
+        self.joint_qadr = np.array(qadr)  # core joint i -> MuJoCo qpos index
+        self.joint_dadr = np.array(dadr)  # core joint i -> MuJoCo qvel index
+        self.actuator_ids = np.array(act)  # core joint i -> MuJoCo actuator index
+        self.nu = mj_model.nu
+
+    # --- MuJoCo -> Pinocchio -------------------------------------------------------------------------
+    def q_pin(self, qpos: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Pinocchio configuration (19) from MuJoCo ``qpos``."""
+        out = np.empty(robot.NQ) if out is None else out
+        a = self.free_qadr
+        out[:3] = qpos[a : a + 3]
+        out[3:6] = qpos[a + 4 : a + 7]  # x, y, z
+        out[6] = qpos[a + 3]  # w
+        out[7:] = qpos[self.joint_qadr]
+        return out
+
+    def v_pin(self, qpos: np.ndarray, qvel: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Pinocchio velocity (18) from MuJoCo ``qvel``: trunk linear velocity rotated into trunk axes."""
+        out = np.empty(robot.NV) if out is None else out
+        a, d = self.free_qadr, self.free_dadr
+        rot_world_from_trunk = _quat_wxyz_to_matrix(qpos[a + 3 : a + 7])
+        out[:3] = rot_world_from_trunk.T @ qvel[d : d + 3]
+        out[3:6] = qvel[d + 3 : d + 6]
+        out[6:] = qvel[self.joint_dadr]
+        return out
+
+    # --- Pinocchio -> MuJoCo -------------------------------------------------------------------------
+    def qpos_mj(self, q: np.ndarray, qpos: np.ndarray) -> np.ndarray:
+        """Write a Pinocchio configuration into MuJoCo ``qpos`` (in place) and return it."""
+        a = self.free_qadr
+        qpos[a : a + 3] = q[:3]
+        qpos[a + 3] = q[6]
+        qpos[a + 4 : a + 7] = q[3:6]
+        qpos[self.joint_qadr] = q[7:]
+        return qpos
+
+    def qvel_mj(self, q: np.ndarray, v: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        """Write a Pinocchio velocity into MuJoCo ``qvel`` (in place) and return it."""
+        d = self.free_dadr
+        rot_world_from_trunk = _quat_wxyz_to_matrix(np.array([q[6], q[3], q[4], q[5]]))
+        qvel[d : d + 3] = rot_world_from_trunk @ v[:3]
+        qvel[d + 3 : d + 6] = v[3:6]
+        qvel[self.joint_dadr] = v[6:]
+        return qvel
+
+    def ctrl_mj(self, u: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
+        """Write joint torques in core order [N·m] into MuJoCo ``ctrl`` (in place)."""
+        ctrl[self.actuator_ids] = u
+        return ctrl
+
+    def joint_vector(self, mj_vec: np.ndarray, by: str = "dof") -> np.ndarray:
+        """Reorder a per-joint MuJoCo vector (indexed by qvel address) into core order."""
+        return mj_vec[self.joint_dadr if by == "dof" else self.actuator_ids]

@@ -1,0 +1,86 @@
+"""Nominal controller (paper, "Quadruped Implementation"): trot, open-loop feet, analytic IK, joint PD."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from taslel_bench import robot
+from taslel_bench.gait import GaitParams, GaitState, TrotGait
+from taslel_bench.kinematics import legs_ik, legs_ik_list
+
+
+@dataclass(frozen=True)
+class PDGains:
+    kp: float = 100.0  # [N·m/rad]
+    kd: float = 3.0  # [N·m·s/rad]
+
+
+class NominalController:
+    """``u_nom = Kp (q_des - q) + Kd (qdot_des - qdot)``, clipped to the torque limit.
+
+    ``q_des`` comes from IK of the gait's foot targets; ``qdot_des`` is its time derivative by a central
+    difference over ``fd_dt_s`` (the IK is smooth within a gait phase). Set ``fd_dt_s`` to the control
+    period: the IK at t + h is then reused as the IK at t - h of the next tick.
+    """
+
+    def __init__(
+        self,
+        gait: GaitParams,
+        gains: PDGains,
+        stand_duration_s: float = 0.5,
+        torque_limit_nm: float = robot.TORQUE_LIMIT_NM,
+        fd_dt_s: float = 1e-3,
+    ) -> None:
+        self.gait = TrotGait(gait)
+        self.gains = gains
+        self.stand_duration_s = stand_duration_s
+        self.torque_limit_nm = torque_limit_nm
+        self.fd_dt_s = fd_dt_s
+        self.q_des = np.zeros(robot.N_JOINTS)
+        self.qd_des = np.zeros(robot.N_JOINTS)
+        self._u = np.zeros(robot.N_JOINTS)
+        self._tmp = np.zeros(robot.N_JOINTS)
+        self._cache_t: float = float("nan")
+        self._cache_list: list[float] = []
+
+    def gait_time(self, t: float) -> float:
+        """Time since walking started [s] (negative while standing)."""
+        return t - self.stand_duration_s
+
+    def gait_state(self, t: float) -> GaitState:
+        return self.gait.state(self.gait_time(t))
+
+    def desired_joints(self, t: float) -> np.ndarray:
+        """IK of the gait's foot targets at episode time ``t`` [s] -> (12,) [rad]."""
+        return np.array(self._desired_list(t))
+
+    def _desired_list(self, t: float) -> list[float]:
+        return legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
+
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray) -> np.ndarray:
+        """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]."""
+        h = 0.5 * self.fd_dt_s
+        t_minus = round(t - h, 9)
+        # q_des(t - h) was this controller's q_des(t + h) one tick ago when ticks are fd_dt_s apart.
+        before = self._cache_list if self._cache_t == t_minus else self._desired_list(t_minus)
+        after = self._desired_list(t + h)
+        self._cache_t, self._cache_list = round(t + h, 9), after
+        self.q_des[:] = self._desired_list(t)
+        self.qd_des[:] = after
+        self.qd_des -= before
+        self.qd_des *= 1.0 / self.fd_dt_s
+        u = self._u
+        np.subtract(self.q_des, q_joints, out=u)
+        u *= self.gains.kp
+        np.subtract(self.qd_des, qd_joints, out=self._tmp)
+        self._tmp *= self.gains.kd
+        u += self._tmp
+        np.minimum(u, self.torque_limit_nm, out=u)
+        np.maximum(u, -self.torque_limit_nm, out=u)
+        return u.copy()
+
+    def stand_configuration(self) -> np.ndarray:
+        """Joint angles [rad] of the initial stand (nominal feet under the hips)."""
+        return legs_ik(self.gait.nominal_foot_in_hip)

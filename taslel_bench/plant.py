@@ -1,0 +1,141 @@
+"""The MuJoCo plant: the A1 URDF turned into an ``MjSpec`` with a free joint, a floor and torque motors.
+
+Frames: MuJoCo world is z-up, the floor is the plane z = 0. ``qpos[:3]`` is the trunk-frame origin in
+world [m], ``qpos[3:7]`` its orientation as a wxyz quaternion; ``qvel[:3]`` is the trunk linear velocity
+in **world** axes [m/s], ``qvel[3:6]`` the angular velocity in the **trunk** frame [rad/s].
+
+Friction: terrain geoms get ``priority=1`` so a contact uses the terrain's friction, not MuJoCo's
+max(foot, floor); the cone is elliptic, so the friction configured is the friction the feet get (checked
+from contact data by :func:`measure_contact_friction`). Robot geoms collide only with terrain geoms
+(``contype=1, conaffinity=0`` on the robot, ``contype=0, conaffinity=1`` on terrain).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from taslel_bench import robot
+
+TERRAIN_PRIORITY = 1
+
+
+@dataclass(frozen=True)
+class PlantOptions:
+    """What the plant builder needs; validated by :mod:`taslel_bench.config` before use."""
+
+    timestep_s: float = 0.001  # [s] physics step
+    floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
+    torque_limit_nm: float = robot.TORQUE_LIMIT_NM  # [N·m] motor ctrlrange
+
+
+def _strip_visuals(spec: mujoco.MjSpec) -> None:
+    """Delete mesh geoms (the URDF visuals; MuJoCo cannot read the .dae files) and their mesh assets."""
+    for geom in list(spec.geoms):
+        if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+            spec.delete(geom)
+    for mesh in list(spec.meshes):
+        spec.delete(mesh)
+
+
+def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+    """Uncompiled A1 plant: URDF collision geometry, free joint on the trunk, floor, 12 motors.
+
+    Scenarios edit the returned spec (terrain, obstacles, perturbations) before :func:`compile_plant`.
+    """
+    # Parse from a string with visuals removed: the URDF's package:// .dae meshes are not loadable.
+    import re
+
+    urdf_text = robot.a1_urdf_path().read_text()
+    urdf_text = re.sub(r"<visual>.*?</visual>", "", urdf_text, flags=re.S)
+    spec = mujoco.MjSpec.from_string(urdf_text)
+    _strip_visuals(spec)
+    spec.compiler.fusestatic = True  # the massless `base` root and fixed links are fused away
+    spec.option.timestep = options.timestep_s
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+
+    trunk = spec.body(robot.TRUNK_BODY)
+    trunk.add_freejoint(name="root")
+    for geom in spec.geoms:
+        geom.contype, geom.conaffinity = 1, 0
+        geom.condim = 3
+    for leg in robot.LEGS:
+        foot_body = spec.body(f"{leg}_foot")
+        for geom in foot_body.geoms:
+            if geom.type == mujoco.mjtGeom.mjGEOM_SPHERE:
+                geom.name = f"{leg}_foot"
+        foot_body.add_site(name=f"{leg}_foot", pos=[0, 0, 0])
+    spec.body(robot.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])
+
+    add_terrain_geom(
+        spec,
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        friction=options.floor_friction,
+    )
+    for name in robot.JOINT_NAMES:
+        act = spec.add_actuator(name=name, target=name)
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_motor()
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = [-options.torque_limit_nm, options.torque_limit_nm]
+    return spec
+
+
+def add_terrain_geom(
+    spec: mujoco.MjSpec,
+    *,
+    name: str,
+    type: mujoco.mjtGeom,
+    size: list[float],
+    friction: float,
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    rgba: tuple[float, float, float, float] = (0.5, 0.55, 0.6, 1.0),
+) -> mujoco.MjsGeom:
+    """Add a static terrain geom on the world body whose friction wins every foot contact."""
+    geom = spec.worldbody.add_geom(name=name, type=type, size=size, pos=list(pos), rgba=list(rgba))
+    geom.friction = [friction, 0.005, 0.0001]
+    geom.priority = TERRAIN_PRIORITY
+    geom.contype, geom.conaffinity = 0, 1
+    geom.condim = 3
+    return geom
+
+
+def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    """Compile with a clear error if the spec lost what the harness relies on."""
+    model = spec.compile()
+    missing = [
+        n for n in robot.JOINT_NAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) < 0
+    ]
+    missing += [
+        f"geom {f}" for f in robot.FOOT_FRAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) < 0
+    ]
+    if missing:
+        raise ValueError(f"plant model is missing {', '.join(missing)}")
+    return model
+
+
+def build_plant(options: PlantOptions = PlantOptions()) -> mujoco.MjModel:
+    """The default flat-floor plant."""
+    return compile_plant(a1_spec(options))
+
+
+def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
+    """MuJoCo geom ids of the four foot spheres, in :data:`robot.LEGS` order."""
+    return np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) for f in robot.FOOT_FRAMES])
+
+
+def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, float]]:
+    """(foot name, sliding friction coefficient) of every active foot contact, read from ``data.contact``."""
+    feet = {int(g): name for g, name in zip(foot_geom_ids(model), robot.FOOT_FRAMES)}
+    out = []
+    for i in range(data.ncon):
+        c = data.contact[i]
+        for g in (int(c.geom1), int(c.geom2)):
+            if g in feet:
+                out.append((feet[g], float(c.friction[0])))
+    return out
