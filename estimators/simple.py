@@ -1,0 +1,38 @@
+"""Estimators without a model: the oracle (reads the true friction) and a fixed constant."""
+
+from __future__ import annotations
+
+import math
+
+from taslel_bench.interfaces import FrictionEstimate, Proprioception
+
+
+class OracleEstimator:
+    """Returns the true ground friction under the robot every tick (upper bound of any estimator)."""
+
+    name = "oracle"
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def step(self, obs: Proprioception) -> FrictionEstimate:
+        """``mu`` = ``obs.true_friction`` [-], ``sigma`` = 0, always ready."""
+        return FrictionEstimate(mu=float(obs.true_friction), sigma=0.0, ready=True)
+
+
+class FixedEstimator:
+    """Always returns the same friction coefficient ``mu`` [-] (the filter without terrain awareness)."""
+
+    name = "fixed"
+
+    def __init__(self, mu: float = 0.5) -> None:
+        if not (math.isfinite(mu) and mu > 0.0):
+            raise ValueError(f"FixedEstimator mu must be a positive finite number, got {mu!r}")
+        self.mu = float(mu)
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def step(self, obs: Proprioception) -> FrictionEstimate:
+        """The configured constant, ``sigma`` = 0, always ready."""
+        return FrictionEstimate(mu=self.mu, sigma=0.0, ready=True)
