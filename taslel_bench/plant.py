@@ -139,3 +139,43 @@ def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list
             if g in feet:
                 out.append((feet[g], float(c.friction[0])))
     return out
+
+
+class FootContactReader:
+    """Plant-side contact quantities of the four feet, read from ``data.contact`` after a step.
+
+    ``forces_in_world`` (4, 3): total contact force **on** each foot [N], world axes (0 without contact).
+    ``in_contact`` (4,) bool. ``non_foot_contact``: True if any robot geom other than a foot touches terrain.
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.foot_geoms = foot_geom_ids(model)
+        self._leg_of_geom = np.full(model.ngeom, -1)
+        self._leg_of_geom[self.foot_geoms] = np.arange(len(self.foot_geoms))
+        robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
+        self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
+        self.forces_in_world = np.zeros((robot.N_LEGS, 3))
+        self.in_contact = np.zeros(robot.N_LEGS, bool)
+        self.non_foot_contact = False
+        self._f6 = np.zeros(6)
+
+    def read(self, data: mujoco.MjData) -> None:
+        self.forces_in_world[:] = 0.0
+        self.in_contact[:] = False
+        self.non_foot_contact = False
+        for i in range(data.ncon):
+            c = data.contact[i]
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            leg = self._leg_of_geom[g2]
+            sign = 1.0  # MuJoCo's contact force acts from geom1 on geom2 along the frame's normal
+            if leg < 0:
+                leg, sign = self._leg_of_geom[g1], -1.0
+            if leg < 0:
+                if self._is_robot_geom[g1] != self._is_robot_geom[g2]:
+                    self.non_foot_contact = True
+                continue
+            mujoco.mj_contactForce(self.model, data, i, self._f6)
+            frame = c.frame.reshape(3, 3)  # rows: normal, tangent1, tangent2 (world)
+            self.forces_in_world[leg] += sign * (frame.T @ self._f6[:3])
+            self.in_contact[leg] = True

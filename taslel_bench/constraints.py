@@ -1,0 +1,169 @@
+"""Constraint families of the ID-CBF-QP. Each is a small object owning a block of rows that it (re)writes
+every tick in place; none allocates per tick.
+
+Decision variables X = (vdot [18], u [12], lambda [12]):
+  * vdot: generalised acceleration in Pinocchio's convention (trunk-frame linear/angular, joints);
+  * u: joint torques [N·m], core joint order;
+  * lambda: contact forces [N] of the four feet (LEGS order) **on the robot, in world axes**, applied at
+    the foot-sphere centre. A swing foot's lambda is constrained to zero so the layout never changes.
+
+The layout is fixed (42 variables, 30 equality rows, 20 + 4 inequality rows), which lets persistent
+solvers keep one sparsity pattern for a whole episode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from taslel_bench import robot
+from taslel_bench.interfaces import ClearanceProfile, QPProblem
+from taslel_bench.model import A1Model
+
+NV, NU, NL = robot.NV, robot.N_JOINTS, 3 * robot.N_LEGS
+VDOT, U, LAM = slice(0, NV), slice(NV, NV + NU), slice(NV + NU, NV + NU + NL)
+N_VARS = NV + NU + NL
+INACTIVE_RHS = 1e6  # right-hand side of an inactive inequality row (0 <= 1e6); finite for every solver
+
+
+@dataclass
+class TickInputs:
+    """What the constraint families read each tick (model already updated at (q, v))."""
+
+    model: A1Model
+    v: np.ndarray  # Pinocchio velocity (18)
+    in_stance: np.ndarray  # bool (4,)
+    mu: float  # [-] friction coefficient the filter assumes
+    swing_phase: np.ndarray  # [-] (4,) progress of each swing in [0, 1]
+    swing_phase_rate: float  # [1/s]
+
+
+class EqualityFamily:
+    name = "eq"
+    n_rows = 0
+    start = 0
+
+    def pattern(self, mask: np.ndarray) -> None: ...
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None: ...
+
+
+class EquationsOfMotion(EqualityFamily):
+    """M vdot - B u - Jc' lambda = -h  (18 rows); B selects the 12 actuated joints."""
+
+    name, n_rows = "eom", NV
+
+    def pattern(self, mask: np.ndarray) -> None:
+        rows = slice(self.start, self.start + NV)
+        mask[rows, VDOT] = True
+        mask[rows, U] = np.vstack([np.zeros((6, NU), bool), np.eye(NU, dtype=bool)])
+        mask[rows, LAM] = True
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        r0, m = self.start, x.model
+        qp.A[r0 : r0 + NV, VDOT] = m.M
+        qp.A[r0 + 6 : r0 + NV, U] = -np.eye(NU)
+        for i in range(robot.N_LEGS):
+            qp.A[r0 : r0 + NV, NV + NU + 3 * i : NV + NU + 3 * i + 3] = -m.foot_jac_in_world[i].T
+        qp.b[r0 : r0 + NV] = -m.h
+
+
+class ContactOrSwing(EqualityFamily):
+    """Per foot, 3 rows: stance -> J_i vdot = -J̇_i v (foot centre does not accelerate);
+    swing -> lambda_i = 0."""
+
+    name, n_rows = "contact", NL
+
+    def pattern(self, mask: np.ndarray) -> None:
+        for i in range(robot.N_LEGS):
+            rows = slice(self.start + 3 * i, self.start + 3 * i + 3)
+            mask[rows, VDOT] = True
+            mask[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = np.eye(3, dtype=bool)
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        for i in range(robot.N_LEGS):
+            r = self.start + 3 * i
+            lam = slice(NV + NU + 3 * i, NV + NU + 3 * i + 3)
+            if x.in_stance[i]:
+                qp.A[r : r + 3, VDOT] = x.model.foot_jac_in_world[i]
+                qp.A[r : r + 3, lam] = 0.0
+                qp.b[r : r + 3] = -x.model.foot_jdotv_in_world[i]
+            else:
+                qp.A[r : r + 3, VDOT] = 0.0
+                qp.A[r : r + 3, lam] = np.eye(3)
+                qp.b[r : r + 3] = 0.0
+
+
+class FrictionCone:
+    """Per foot, 5 rows of G x <= h: unilateral -lambda_z <= -lambda_min (stance; 0 for swing) and the
+    square pyramid |lambda_x|, |lambda_y| <= mu_tilde lambda_z with mu_tilde = mu / sqrt(2) (inscribed in
+    the Coulomb cone, as in the paper)."""
+
+    name, n_rows = "friction", 5 * robot.N_LEGS
+
+    def __init__(self, lambda_min_n: float) -> None:
+        self.lambda_min_n = lambda_min_n  # [N]
+        self.start = 0
+
+    def pattern(self, mask: np.ndarray) -> None:
+        for i in range(robot.N_LEGS):
+            mask[self.start + 5 * i : self.start + 5 * i + 5, NV + NU + 3 * i : NV + NU + 3 * i + 3] = True
+
+    def labels(self) -> list[str]:
+        return [f"{leg}_{k}" for leg in robot.LEGS for k in ("unilateral", "fx+", "fx-", "fy+", "fy-")]
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        mu_t = x.mu / np.sqrt(2.0)
+        for i in range(robot.N_LEGS):
+            r, c = self.start + 5 * i, NV + NU + 3 * i
+            qp.G[r, c + 2] = -1.0
+            qp.h[r] = -self.lambda_min_n if x.in_stance[i] else 0.0
+            qp.G[r + 1, c : c + 3] = (1.0, 0.0, -mu_t)
+            qp.G[r + 2, c : c + 3] = (-1.0, 0.0, -mu_t)
+            qp.G[r + 3, c : c + 3] = (0.0, 1.0, -mu_t)
+            qp.G[r + 4, c : c + 3] = (0.0, -1.0, -mu_t)
+            qp.h[r + 1 : r + 5] = 0.0
+
+
+class SwingClearanceECBF:
+    """Ground-clearance exponential CBF (paper, "Ground Clearance Enforced by an ECBF"), one row per foot.
+
+    h = p_z - r_foot - z(s) (foot-sphere bottom above the obstacle profile), hdot = v_z - z'(s) sdot,
+    h_e = hdot + a1 h, and the row enforces a2 h_e + hdot_e >= 0 with
+    hdot_e = (J_z vdot + (J̇v)_z) - z''(s) sdot² + a1 hdot  (s̈ = 0; the chain rule gives sdot², where the
+    paper's printed formula has sdot). Written as  -J_z vdot <= a2 h_e + (J̇v)_z - z'' sdot² + a1 hdot.
+    Stance feet get an inactive row (0 <= INACTIVE_RHS).
+    """
+
+    name, n_rows = "ecbf", robot.N_LEGS
+
+    def __init__(self, profile: ClearanceProfile, alpha1: float, alpha2: float) -> None:
+        self.profile, self.alpha1, self.alpha2 = profile, alpha1, alpha2
+        self.start = 0
+        self.h = np.full(robot.N_LEGS, np.nan)  # [m] barrier value per foot (nan in stance)
+        self.h_e = np.full(robot.N_LEGS, np.nan)  # [m/s]
+
+    def pattern(self, mask: np.ndarray) -> None:
+        mask[self.start : self.start + robot.N_LEGS, VDOT] = True
+
+    def labels(self) -> list[str]:
+        return [f"{leg}_clearance" for leg in robot.LEGS]
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        m, a1, a2 = x.model, self.alpha1, self.alpha2
+        sdot = x.swing_phase_rate
+        for i in range(robot.N_LEGS):
+            r = self.start + i
+            if x.in_stance[i]:
+                qp.G[r, VDOT] = 0.0
+                qp.h[r] = INACTIVE_RHS
+                self.h[i] = self.h_e[i] = np.nan
+                continue
+            z, dz, ddz = self.profile(float(x.swing_phase[i]))
+            h = m.foot_pos_in_world[i, 2] - robot.FOOT_RADIUS_M - z
+            hdot = m.foot_vel_in_world[i, 2] - dz * sdot
+            h_e = hdot + a1 * h
+            qp.G[r, VDOT] = -m.foot_jac_in_world[i, 2]
+            qp.h[r] = a2 * h_e + m.foot_jdotv_in_world[i, 2] - ddz * sdot * sdot + a1 * hdot
+            self.h[i], self.h_e[i] = h, h_e

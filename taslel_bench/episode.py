@@ -1,0 +1,176 @@
+"""One episode: initial stand, then walk for ``duration_s`` under the nominal controller, the safety filter
+(optional) and an estimator, in the MuJoCo plant. Returns per-tick arrays and a status; never raises for
+faults inside the episode (NaN state, solver exceptions): they end or mark the run instead.
+
+Time: ``t`` [s] is episode time from the start of the stand; walking starts at ``stand_duration_s``.
+The control tick reads the plant state, computes u_nom, filters it, holds u for ``physics_per_tick``
+physics steps (zero-order hold), then reads plant contact forces of the last physics step.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from taslel_bench import plant, robot
+from taslel_bench.bridge import StateBridge
+from taslel_bench.constraints import TickInputs
+from taslel_bench.controller import NominalController
+from taslel_bench.interfaces import Estimator, Proprioception, Scenario
+from taslel_bench.model import A1Model
+from taslel_bench.safety_filter import SafetyFilter
+from taslel_bench.trace import EpisodeTrace
+
+
+@dataclass(frozen=True)
+class EpisodeSettings:
+    duration_s: float = 10.0  # [s] walking time after the stand
+    physics_dt_s: float = 0.001  # [s]
+    control_dt_s: float = 0.001  # [s] an integer multiple of physics_dt_s
+    fall_height_m: float = 0.12  # [m] trunk origin below this -> fall
+    fall_tilt_rad: float = 1.0  # [rad] angle between trunk z and world z above this -> fall
+    max_joint_speed_radps: float = 200.0  # [rad/s] beyond this (or non-finite) -> "exploding state" error
+    init_joint_noise_rad: float = 0.02  # [rad] std of the initial joint-angle perturbation (seeded)
+    init_base_vel_noise_mps: float = 0.05  # [m/s] std of the initial trunk velocity perturbation
+    clearance_tolerance_m: float = 0.001  # [m] swing-foot bottom below z(s) - tol counts as a violation
+
+
+@dataclass
+class EpisodeResult:
+    trace: EpisodeTrace
+    status: str = "ok"  # "ok" or "error"
+    message: str = ""
+    fell: bool = False
+    time_to_fall_s: float = math.nan
+    fall_reason: str = ""
+    n_ticks: int = 0
+    wall_time_s: float = 0.0
+    extras: dict[str, object] = field(default_factory=dict)
+
+
+class Episode:
+    """Wires plant, model, controller, filter and estimator for one run."""
+
+    def __init__(
+        self,
+        settings: EpisodeSettings,
+        scenario: Scenario,
+        mj_model: mujoco.MjModel,
+        controller: NominalController,
+        safety_filter: SafetyFilter | None,
+        estimator: Estimator,
+        rng: np.random.Generator,
+        stance_from_contact: bool = False,
+    ) -> None:
+        self.s = settings
+        self.scenario = scenario
+        self.m = mj_model
+        self.d = mujoco.MjData(mj_model)
+        self.bridge = StateBridge(mj_model)
+        self.model = A1Model()
+        self.controller = controller
+        self.filter = safety_filter
+        self.estimator = estimator
+        self.rng = rng
+        self.stance_from_contact = stance_from_contact
+        self.contacts = plant.FootContactReader(mj_model)
+        self.physics_per_tick = int(round(settings.control_dt_s / settings.physics_dt_s))
+        self.n_ticks = int(round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s))
+        self.trunk_body = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
+        self.foot_sites = [mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SITE, f) for f in robot.FOOT_FRAMES]
+
+    def initial_state(self) -> None:
+        """Stand pose with feet on the ground, perturbed by the seeded rng."""
+        s, d = self.s, self.d
+        q = np.zeros(robot.NQ)
+        q[6] = 1.0
+        q[2] = self.controller.gait.p.stand_height_m + robot.FOOT_RADIUS_M
+        q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
+        v = np.zeros(robot.NV)
+        v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)
+        mujoco.mj_resetData(self.m, d)
+        self.bridge.qpos_mj(q, d.qpos)
+        self.bridge.qvel_mj(q, v, d.qvel)
+        mujoco.mj_forward(self.m, d)
+
+    def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
+        s, m, d, br = self.s, self.m, self.d, self.bridge
+        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None)
+        res = EpisodeResult(trace=trace)
+        self.initial_state()
+        self.estimator.reset()
+        profile = self.scenario.clearance_profile()
+        q = np.zeros(robot.NQ)
+        v = np.zeros(robot.NV)
+        qj = np.zeros(robot.N_JOINTS)
+        qdj = np.zeros(robot.N_JOINTS)
+        tau_prev = np.zeros(robot.N_JOINTS)
+        need_model = self.filter is not None
+        cos_tilt_min = math.cos(s.fall_tilt_rad)
+        wall0 = time.perf_counter()
+        k = 0
+        try:
+            for k in range(self.n_ticks):
+                tick0 = time.perf_counter()
+                t = k * s.control_dt_s
+                qj[:] = d.qpos[br.joint_qadr]
+                qdj[:] = d.qvel[br.joint_dadr]
+                trunk_xy = d.qpos[br.free_qadr : br.free_qadr + 2]
+                true_mu = self.scenario.friction_at(trunk_xy)
+                est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu))
+                u_nom = self.controller.compute(t, qj, qdj)
+                gs = self.controller.gait_state(t)
+                in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+                if need_model:
+                    br.q_pin(d.qpos, q)
+                    br.v_pin(d.qpos, d.qvel, v)
+                    self.model.update(q, v)
+                    inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
+                    fres = self.filter.filter(inputs, u_nom)
+                    u = fres.u
+                else:
+                    fres = None
+                    u = u_nom
+                br.ctrl_mj(u, d.ctrl)
+                for _ in range(self.physics_per_tick):
+                    self.scenario.on_tick(m, d, t)
+                    mujoco.mj_step(m, d)
+                self.contacts.read(d)
+                tau_prev[:] = u
+                tick_s = time.perf_counter() - tick0
+                trace.record(k, t, d, br, self.trunk_body, self.foot_sites, gs, in_stance, u_nom, u, fres,
+                             self.contacts, est.mu, true_mu, tick_s, profile,
+                             self.filter.ecbf if (self.filter is not None) else None)
+                # --- termination checks (plant state after the tick) ---
+                if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))) or np.max(
+                    np.abs(d.qvel[br.joint_dadr])
+                ) > s.max_joint_speed_radps or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0:
+                    res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
+                    break
+                z = d.xpos[self.trunk_body, 2]
+                cos_tilt = d.xmat[self.trunk_body, 8]  # world-z component of the trunk z axis
+                reason = ""
+                if z < s.fall_height_m:
+                    reason = f"trunk height {z:.3f} m < {s.fall_height_m} m"
+                elif cos_tilt < cos_tilt_min:
+                    reason = f"trunk tilt {math.degrees(math.acos(max(-1.0, cos_tilt))):.0f} deg"
+                elif self.contacts.non_foot_contact:
+                    reason = "non-foot body touched the ground"
+                if reason:
+                    res.fell, res.time_to_fall_s, res.fall_reason = True, t + s.control_dt_s, reason
+                    break
+                if progress is not None and k % 500 == 0:
+                    progress(t)
+        except Exception as exc:  # a fault in one run is recorded, never crashes the sweep
+            res.status = "error"
+            res.message = f"{type(exc).__name__}: {exc}"
+            res.extras["traceback"] = traceback.format_exc()
+        res.n_ticks = trace.n
+        res.wall_time_s = time.perf_counter() - wall0
+        return res

@@ -1,0 +1,146 @@
+"""Episode metrics for ``summary.json``: a flat dict, units in the key names, all measured in the plant
+(MuJoCo) unless the key says ``filter``. Each function states how its number is measured."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from taslel_bench.episode import EpisodeResult
+
+MIN_NORMAL_FORCE_N = 1.0  # [N] contacts below this are ignored in force ratios and GRF errors
+
+
+def _pct(x: np.ndarray, p: float) -> float:
+    return float(np.percentile(x, p)) if x.size else math.nan
+
+
+def _median(x: np.ndarray) -> float:
+    return float(np.median(x)) if x.size else math.nan
+
+
+def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float) -> dict[str, object]:
+    tr, n = res.trace, res.trace.n
+    out: dict[str, object] = {
+        "status": res.status,
+        "message": res.message,
+        "fell": bool(res.fell),
+        "time_to_fall_s": float(res.time_to_fall_s),
+        "fall_reason": res.fall_reason,
+        "ticks": int(n),
+        "sim_time_s": float(n * control_dt_s),
+        "wall_time_s": float(res.wall_time_s),
+        "real_time_factor": float(n * control_dt_s / res.wall_time_s) if res.wall_time_s > 0 else math.nan,
+        "tick_us_median": _median(tr.tick_us[:n]),
+        "tick_us_p99": _pct(tr.tick_us[:n], 99),
+    }
+    out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
+    out.update(filter_metrics(res))
+    out.update(contact_metrics(res, control_dt_s))
+    out.update(clearance_metrics(res))
+    out.update(estimator_metrics(res))
+    return out
+
+
+def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[str, float]:
+    """Distance = world-x displacement of the trunk origin from the start of walking to the last tick;
+    mean speed = that distance / walking time; drift = |y| displacement; yaw change in degrees."""
+    tr, n = res.trace, res.trace.n
+    k0 = min(int(round(stand_s / dt)), max(n - 1, 0))
+    if n == 0:
+        return {"distance_m": math.nan, "mean_speed_mps": math.nan, "lateral_drift_m": math.nan}
+    walk_time = (n - 1 - k0) * dt
+    dx = tr.base_pos_w[n - 1, 0] - tr.base_pos_w[k0, 0]
+    yaw = tr.base_rpy()[:, 2]
+    return {
+        "distance_m": float(dx),
+        "mean_speed_mps": float(dx / walk_time) if walk_time > 0 else math.nan,
+        "lateral_drift_m": float(abs(tr.base_pos_w[n - 1, 1] - tr.base_pos_w[k0, 1])),
+        "yaw_change_deg": float(np.degrees(yaw[-1] - yaw[k0])),
+        "trunk_height_mean_m": float(np.mean(tr.base_pos_w[k0:n, 2])),
+    }
+
+
+def filter_metrics(res: EpisodeResult) -> dict[str, float]:
+    """Intervention = mean over ticks of ||u - u_nom||_2 [N·m]; QP timings from the backend's own timer
+    (solve) and the filter's (build)."""
+    tr, n = res.trace, res.trace.n
+    du = np.linalg.norm(tr.u[:n] - tr.u_nom[:n], axis=1)
+    out: dict[str, float] = {"intervention_nm_mean": float(du.mean()) if n else math.nan}
+    if not tr.filter_on:
+        out.update(qp_solves=0, qp_failed_rate=math.nan)
+        return out
+    solve = tr.qp_solve_us[:n]
+    solve = solve[np.isfinite(solve)]
+    build = tr.qp_build_us[:n]
+    out.update(
+        qp_solves=int(n),
+        qp_failed=int(tr.qp_fallback[:n].sum()),
+        qp_failed_rate=float(tr.qp_fallback[:n].mean()) if n else math.nan,
+        qp_solve_us_median=_median(solve),
+        qp_solve_us_p99=_pct(solve, 99),
+        qp_solve_us_max=float(solve.max()) if solve.size else math.nan,
+        qp_build_us_median=_median(build[np.isfinite(build)]),
+        intervention_nm_max=float(du.max()) if n else math.nan,
+    )
+    it = tr.qp_iterations[:n]
+    if np.any(it >= 0):
+        out["qp_iterations_median"] = float(np.median(it[it >= 0]))
+    return out
+
+
+def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
+    """Over (tick, foot) pairs where the foot is in the filter's stance set AND touches the ground in the
+    plant with a normal force >= MIN_NORMAL_FORCE_N:
+      * grf_mae_{z,xy}_n: |lambda (filter prediction) - MuJoCo contact force| (x and y pooled), world axes;
+      * friction_ratio_p95: 95th percentile of |f_t| / f_n of the plant force;
+      * slip_mps_{mean,p95}: horizontal speed of the foot centre (finite difference over one tick)."""
+    tr, n = res.trace, res.trace.n
+    f = tr.grf_plant_w[:n]
+    sel = tr.in_stance[:n] & tr.in_contact[:n] & (f[..., 2] >= MIN_NORMAL_FORCE_N)
+    out: dict[str, float] = {}
+    ft = np.hypot(f[..., 0], f[..., 1])
+    ratio = ft[sel] / f[..., 2][sel]
+    out["friction_ratio_p95"] = _pct(ratio, 95)
+    out["friction_ratio_max"] = float(ratio.max()) if ratio.size else math.nan
+    vel = tr.foot_vel_w(dt)
+    slip = np.hypot(vel[..., 0], vel[..., 1])
+    sel_slip = sel.copy()
+    sel_slip[0] = False  # no finite difference on the first tick
+    out["slip_mps_mean"] = float(slip[sel_slip].mean()) if sel_slip.any() else math.nan
+    out["slip_mps_p95"] = _pct(slip[sel_slip], 95)
+    if tr.filter_on:
+        lam = tr.grf_filter_w[:n]
+        ok = sel & np.all(np.isfinite(lam), axis=2)
+        err = np.abs(lam - f)
+        out["grf_mae_z_n"] = float(err[..., 2][ok].mean()) if ok.any() else math.nan
+        out["grf_mae_xy_n"] = float(err[..., :2][ok].mean()) if ok.any() else math.nan
+    return out
+
+
+def clearance_metrics(res: EpisodeResult) -> dict[str, float]:
+    """Swing ticks (schedule) of every foot: violation when foot-sphere bottom < z(s) - 1 mm;
+    clearance_min_m = min of (bottom - z(s)). NaN when the scenario has no clearance profile."""
+    tr, n = res.trace, res.trace.n
+    c = tr.clearance_m[:n]
+    c = c[np.isfinite(c)]
+    if c.size == 0:
+        return {"clearance_violation_rate": math.nan, "clearance_min_m": math.nan}
+    return {
+        "clearance_violation_rate": float(np.mean(c < -0.001)),
+        "clearance_min_m": float(c.min()),
+    }
+
+
+def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
+    """mu_hat (what the filter used) vs the true friction under the trunk, every tick."""
+    tr, n = res.trace, res.trace.n
+    err = tr.mu_hat[:n] - tr.mu_true[:n]
+    if n == 0:
+        return {}
+    return {
+        "estimator_mae": float(np.abs(err).mean()),
+        "estimator_bias": float(err.mean()),
+        "estimator_overestimate_rate": float(np.mean(err > 0.05)),
+    }

@@ -1,0 +1,151 @@
+"""ID-CBF-QP safety filter (paper, "Inverse Dynamics Formulation with CBF Constraints").
+
+    min_X 0.5 ||u - u_nom||² + 0.5 eps (||vdot||² + ||lambda||²)
+    s.t. equations of motion, stance-contact acceleration, unilateral + friction pyramid (mu / sqrt 2),
+         torque limits (as bounds on u), swing-foot ground-clearance ECBF rows.
+
+:meth:`SafetyFilter.build` writes the QP into one preallocated :class:`QPProblem`; a backend
+(:class:`taslel_bench.interfaces.QPBackend`) solves it; :meth:`SafetyFilter.filter` does both and applies
+the failure policy. Build time and solve time are measured separately.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from taslel_bench import robot
+from taslel_bench.constraints import (
+    LAM,
+    N_VARS,
+    NL,
+    NV,
+    U,
+    VDOT,
+    ContactOrSwing,
+    EqualityFamily,
+    EquationsOfMotion,
+    FrictionCone,
+    SwingClearanceECBF,
+    TickInputs,
+)
+from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution
+
+FALLBACKS = ("nominal", "hold_last")
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    enabled: bool = True
+    regularization: float = 1e-5  # eps on vdot and lambda (keeps P positive definite)
+    lambda_min_n: float = 1.0  # [N] minimum normal force of a stance foot
+    torque_limit_nm: float = robot.TORQUE_LIMIT_NM  # [N·m]
+    ecbf_enabled: bool = True  # only used when the scenario provides a clearance profile
+    ecbf_alpha1: float = 20.0  # [1/s]
+    ecbf_alpha2: float = 20.0  # [1/s]
+    fallback: str = "nominal"  # on QP failure: pass u_nom ("nominal") or the last filtered u ("hold_last")
+    stance_source: str = "schedule"  # "schedule" (gait) or "contact" (plant contact flags)
+
+
+@dataclass
+class FilterResult:
+    u: np.ndarray  # [N·m] torques sent to the plant (core order)
+    lam: np.ndarray  # [N] (12,) predicted contact forces on the robot, world axes (nan on failure)
+    vdot: np.ndarray  # (18,) predicted acceleration (nan on failure)
+    status: str
+    used_fallback: bool
+    build_time_s: float
+    solve: QPSolution | None = field(default=None)
+
+
+class SafetyFilter:
+    """Owns the QP layout and the constraint families; one instance per episode."""
+
+    def __init__(
+        self, settings: FilterSettings, backend: QPBackend, profile: ClearanceProfile | None = None
+    ) -> None:
+        if settings.fallback not in FALLBACKS:
+            raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
+        self.settings = settings
+        self.backend = backend
+        self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing()]
+        self.friction = FrictionCone(settings.lambda_min_n)
+        self.ecbf = (
+            SwingClearanceECBF(profile, settings.ecbf_alpha1, settings.ecbf_alpha2)
+            if (profile is not None and settings.ecbf_enabled)
+            else None
+        )
+        ineq = [self.friction] + ([self.ecbf] if self.ecbf is not None else [])
+        m_eq = 0
+        for fam in self.eq_families:
+            fam.start, m_eq = m_eq, m_eq + fam.n_rows
+        m_in = 0
+        for fam in ineq:
+            fam.start, m_in = m_in, m_in + fam.n_rows
+        self.ineq_families = ineq
+        self.problem = self._allocate(m_eq, m_in)
+        self._last_u: np.ndarray | None = None
+
+    def _allocate(self, m_eq: int, m_in: int) -> QPProblem:
+        s = self.settings
+        P = np.zeros((N_VARS, N_VARS))
+        np.fill_diagonal(P, s.regularization)
+        P[U, U] = np.eye(robot.N_JOINTS)
+        lb = np.full(N_VARS, -np.inf)
+        ub = np.full(N_VARS, np.inf)
+        lb[U], ub[U] = -s.torque_limit_nm, s.torque_limit_nm
+        A_pattern = np.zeros((m_eq, N_VARS), bool)
+        G_pattern = np.zeros((m_in, N_VARS), bool)
+        for fam in self.eq_families:
+            fam.pattern(A_pattern)
+        for fam in self.ineq_families:
+            fam.pattern(G_pattern)
+        labels = [lab for fam in self.ineq_families for lab in fam.labels()]
+        return QPProblem(
+            P=P,
+            q=np.zeros(N_VARS),
+            A=np.zeros((m_eq, N_VARS)),
+            b=np.zeros(m_eq),
+            G=np.zeros((m_in, N_VARS)),
+            h=np.zeros(m_in),
+            lb=lb,
+            ub=ub,
+            P_pattern=P != 0.0,
+            A_pattern=A_pattern,
+            G_pattern=G_pattern,
+            layout={"vdot": VDOT, "u": U, "lambda": LAM},
+            row_labels=labels,
+        )
+
+    def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
+        """Write this tick's QP (in place) and return it."""
+        qp = self.problem
+        qp.q[U] = -u_nom
+        for fam in self.eq_families:
+            fam.write(qp, inputs)
+        for fam in self.ineq_families:
+            fam.write(qp, inputs)
+        return qp
+
+    def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
+        """Build, solve, and apply the failure policy. Never raises for solver failures."""
+        t0 = time.perf_counter()
+        qp = self.build(inputs, u_nom)
+        build_s = time.perf_counter() - t0
+        try:
+            sol = self.backend.solve(qp)
+        except Exception as exc:  # a backend bug must not end the episode: record it
+            sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
+        if sol.ok:
+            x = sol.x
+            u = np.clip(x[U], -self.settings.torque_limit_nm, self.settings.torque_limit_nm)
+            self._last_u = u
+            return FilterResult(u, x[LAM].copy(), x[VDOT].copy(), sol.status, False, build_s, sol)
+        if self.settings.fallback == "hold_last" and self._last_u is not None:
+            u = self._last_u.copy()
+        else:
+            u = u_nom.copy()
+        status = sol.status if sol.status != "solved" else "non-finite solution"
+        return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
