@@ -1,0 +1,60 @@
+"""Shipped checkpoints: ``<name>.pt`` (a plain ``state_dict`` of tensors, loaded with
+``torch.load(weights_only=True)`` — no arbitrary pickle) beside ``<name>.json`` (model config,
+normalisation statistics, training record and recorded metrics)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from estimators.models import FrictionModel, ModelConfig, build_model
+
+CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
+
+
+def checkpoint_paths(name_or_path: str | Path) -> tuple[Path, Path]:
+    """(weights .pt, metadata .json) for a shipped name (``"linformer"``) or a path with or without suffix."""
+    p = Path(name_or_path)
+    if p.suffix in (".pt", ".json"):
+        p = p.with_suffix("")
+    elif p.parent == Path(".") and not p.exists():
+        p = CHECKPOINT_DIR / p.name
+    return p.with_suffix(".pt"), p.with_suffix(".json")
+
+
+def save_checkpoint(model: FrictionModel, path: str | Path, meta: dict[str, object] | None = None) -> Path:
+    """Write weights and metadata; returns the .pt path. ``meta`` is merged into the JSON."""
+    pt, js = checkpoint_paths(path)
+    pt.parent.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    torch.save(state, pt)
+    n = model.norm
+    info: dict[str, object] = {
+        "model": model.cfg.to_dict(),
+        "normalisation": {
+            "x_mean": n.x_mean.tolist(),
+            "x_std": n.x_std.tolist(),
+            "y_mean": float(n.y_mean),
+            "y_std": float(n.y_std),
+        },
+    }
+    if js.is_file():  # keep metrics recorded earlier (evaluation) unless overwritten
+        old = json.loads(js.read_text())
+        info = {**old, **info}
+    info.update(meta or {})
+    js.write_text(json.dumps(info, indent=2))
+    return pt
+
+
+def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel, dict[str, object]]:
+    """Model in eval mode and its metadata. Raises FileNotFoundError naming the shipped checkpoints."""
+    pt, js = checkpoint_paths(name_or_path)
+    if not (pt.is_file() and js.is_file()):
+        shipped = sorted(p.stem for p in CHECKPOINT_DIR.glob("*.pt"))
+        raise FileNotFoundError(f"checkpoint {pt} / {js} not found; shipped checkpoints: {shipped}")
+    meta = json.loads(js.read_text())
+    model = build_model(ModelConfig(**meta["model"]))
+    model.load_state_dict(torch.load(pt, map_location="cpu", weights_only=True))
+    return model.eval(), meta

@@ -1,0 +1,82 @@
+"""A trained friction model in the control loop (``estimator=mlp|attention|linformer``).
+
+Every control tick the runner calls :meth:`LearnedEstimator.step`. The estimator keeps a ring buffer of
+``WINDOW_STEPS`` samples taken every ``WINDOW_DT_S`` seconds of episode time (the first tick at or after
+each sample instant, as in :mod:`estimators.collect`). Until the buffer is full it returns ``prior_mu``
+with ``ready=False``; afterwards, at each new sample it runs the model once (``torch.no_grad``, one CPU
+thread by default) and holds the result between samples. The reported ``mu`` is the conservative bound
+``max(mu_min, mean - conservative_k * sigma)``; ``sigma`` is the model's predicted standard deviation.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from estimators.checkpoint import load_checkpoint
+from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
+from estimators.models import VARIANTS
+from taslel_bench.interfaces import FrictionEstimate, Proprioception
+
+
+class LearnedEstimator:
+    """Estimator protocol around a shipped (or given) checkpoint."""
+
+    def __init__(
+        self,
+        variant: str = "linformer",
+        checkpoint: str | Path | None = None,
+        prior_mu: float = 0.5,
+        conservative_k: float = 1.0,
+        mu_min: float = 0.05,
+        threads: int | None = 1,
+    ) -> None:
+        """``variant`` names the shipped checkpoint used when ``checkpoint`` is None; ``prior_mu`` [-] is
+        returned until the window is full; ``conservative_k`` [-] sigmas are subtracted from the mean;
+        ``mu_min`` [-] floors the result; ``threads`` sets ``torch.set_num_threads`` (None: leave it)."""
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
+        if not (prior_mu > 0 and math.isfinite(prior_mu)):
+            raise ValueError(f"prior_mu must be positive and finite, got {prior_mu!r}")
+        if conservative_k < 0:
+            raise ValueError(f"conservative_k must be >= 0, got {conservative_k!r}")
+        if threads is not None:
+            torch.set_num_threads(int(threads))
+        self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+        self.name = variant
+        self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
+        self._buf = np.zeros((WINDOW_STEPS, N_FEATURES), np.float32)
+        self._x = torch.zeros(1, WINDOW_STEPS, N_FEATURES)
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty the window; the next estimates are the prior."""
+        self._count = 0  # samples taken this episode
+        self._next_t = 0.0  # [s] next sample instant
+        self._last = FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
+        self.mean, self.sigma = float("nan"), float("nan")  # last raw model output
+
+    def step(self, obs: Proprioception) -> FrictionEstimate:
+        if obs.t_s + 1e-9 < self._next_t:
+            return self._last
+        self._buf[self._count % WINDOW_STEPS] = sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints)
+        self._count += 1
+        self._next_t += WINDOW_DT_S
+        while self._next_t <= obs.t_s + 1e-9:  # ticks coarser than the sample period: skip instants
+            self._next_t += WINDOW_DT_S
+        if self._count >= WINDOW_STEPS:
+            self._last = self._estimate()
+        return self._last
+
+    def _estimate(self) -> FrictionEstimate:
+        start = self._count % WINDOW_STEPS  # oldest sample in the ring
+        self._x[0] = torch.from_numpy(np.roll(self._buf, -start, axis=0))
+        with torch.no_grad():
+            mean, log_var = self.model(self._x)
+        self.mean = float(mean[0])
+        self.sigma = float(torch.exp(0.5 * log_var[0]))
+        mu = max(self.mu_min, self.mean - self.k * self.sigma)
+        return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)

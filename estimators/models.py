@@ -1,0 +1,225 @@
+"""Friction regressors as plain ``nn.Module``s: MLP, full-attention transformer, Linformer.
+
+Every model maps raw windows ``x`` (B, T=40, 36) — q [rad], qdot [rad/s], tau [N·m] per step, core joint
+order — to a Gaussian over the friction coefficient: ``(mean, log_var)`` each (B,), in physical units
+([-] and log [-]^2). Feature and label normalisation statistics are buffers of the model, so a saved
+``state_dict`` is self-contained.
+
+Tokenisation for the transformers (paper, "Network Architecture", ViT-like):
+* ``"joint"``: one token per joint per time step (T x 12 = 480 tokens of 3 features q, qdot, tau), with a
+  learned temporal embedding (T, d) plus a learned spatial (joint) embedding (12, d);
+* ``"step"``: one token per time step (T = 40 tokens of 36 features) with a learned temporal embedding.
+Pooling is the mean over tokens or a learned CLS token. Linformer projects keys and values along the
+sequence from n to ``linformer_k`` with learned (k, n) matrices (Wang et al. 2020), one pair per layer.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from estimators.features import N_CHANNELS, N_FEATURES, N_JOINTS, WINDOW_STEPS
+
+VARIANTS = ("mlp", "attention", "linformer")
+TOKENISATIONS = ("joint", "step")
+POOLINGS = ("mean", "cls")
+LOG_VAR_RANGE = (-12.0, 4.0)  # clamp of the normalised log-variance
+
+
+@dataclass
+class ModelConfig:
+    """Architecture hyper-parameters (one dataclass for every variant; unused fields are ignored)."""
+
+    variant: str = "linformer"
+    tokens: str = "joint"
+    pooling: str = "mean"
+    d_model: int = 32
+    n_layers: int = 2
+    n_heads: int = 2
+    ff_mult: int = 2
+    dropout: float = 0.0
+    linformer_k: int = 32
+    mlp_hidden: list[int] = field(default_factory=lambda: [256, 256])
+    window_steps: int = WINDOW_STEPS
+
+    def validate(self) -> "ModelConfig":
+        for name, value, valid in (
+            ("variant", self.variant, VARIANTS),
+            ("tokens", self.tokens, TOKENISATIONS),
+            ("pooling", self.pooling, POOLINGS),
+        ):
+            if value not in valid:
+                raise ValueError(f"unknown {name} {value!r}; valid choices: {', '.join(valid)}")
+        if self.variant != "mlp" and self.d_model % self.n_heads:
+            raise ValueError(f"d_model={self.d_model} is not divisible by n_heads={self.n_heads}")
+        return self
+
+    @property
+    def n_tokens(self) -> int:
+        """Sequence length seen by attention (CLS included)."""
+        n = self.window_steps * (N_JOINTS if self.tokens == "joint" else 1)
+        return n + (1 if self.pooling == "cls" else 0)
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+class Normaliser(nn.Module):
+    """Per-feature standardisation of x and of the label; statistics are buffers (saved with the model)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("x_mean", torch.zeros(N_FEATURES))
+        self.register_buffer("x_std", torch.ones(N_FEATURES))
+        self.register_buffer("y_mean", torch.tensor(0.0))
+        self.register_buffer("y_std", torch.tensor(1.0))
+
+    @torch.no_grad()
+    def fit(self, x: torch.Tensor, y: torch.Tensor) -> None:
+        """Set statistics from training windows (N, T, 36) and labels (N,)."""
+        flat = x.reshape(-1, x.shape[-1]).double()
+        self.x_mean.copy_(flat.mean(0).float())
+        self.x_std.copy_(flat.std(0).clamp_min(1e-6).float())
+        self.y_mean.copy_(y.double().mean().float())
+        self.y_std.copy_(y.double().std().clamp_min(1e-6).float())
+
+
+class FrictionModel(nn.Module):
+    """Base: normalise, ``encode`` to (B, 2) normalised (mean, log_var), de-normalise."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.cfg = cfg.validate()
+        self.norm = Normaliser()
+
+    def encode(self, x: torch.Tensor) -> torch.Tensor:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2]) each (B,)."""
+        if x.ndim != 3 or x.shape[-1] != N_FEATURES or x.shape[1] != self.cfg.window_steps:
+            raise ValueError(
+                f"expected windows (B, {self.cfg.window_steps}, {N_FEATURES}), got {tuple(x.shape)}"
+            )
+        z = (x - self.norm.x_mean) / self.norm.x_std
+        out = self.encode(z)
+        mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
+        log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std)
+        return mean, log_var
+
+
+class MLPModel(FrictionModel):
+    """Flattened window (T x 36) -> GELU MLP -> (mean, log_var)."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__(cfg)
+        layers: list[nn.Module] = []
+        width = cfg.window_steps * N_FEATURES
+        for h in cfg.mlp_hidden:
+            layers += [nn.Linear(width, h), nn.GELU(), nn.Dropout(cfg.dropout)]
+            width = h
+        layers.append(nn.Linear(width, 2))
+        self.net = nn.Sequential(*layers)
+
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x.flatten(1))
+
+
+class SelfAttention(nn.Module):
+    """Multi-head self-attention; full, or Linformer with keys/values projected along the sequence."""
+
+    def __init__(self, d: int, heads: int, n_tokens: int, linformer_k: int | None, dropout: float) -> None:
+        super().__init__()
+        self.heads, self.dropout = heads, dropout
+        self.qkv = nn.Linear(d, 3 * d)
+        self.out = nn.Linear(d, d)
+        self.proj_k = self.proj_v = None
+        if linformer_k is not None:
+            scale = 1.0 / math.sqrt(n_tokens)
+            self.proj_k = nn.Parameter(torch.randn(linformer_k, n_tokens) * scale)  # (k, n)
+            self.proj_v = nn.Parameter(torch.randn(linformer_k, n_tokens) * scale)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        b, n, d = x.shape
+        q, k, v = self.qkv(x).chunk(3, dim=-1)
+        if self.proj_k is not None:
+            k = torch.einsum("kn,bnd->bkd", self.proj_k, k)
+            v = torch.einsum("kn,bnd->bkd", self.proj_v, v)
+
+        def heads(t: torch.Tensor) -> torch.Tensor:
+            return t.reshape(b, t.shape[1], self.heads, d // self.heads).transpose(1, 2)
+
+        p = self.dropout if self.training else 0.0
+        y = F.scaled_dot_product_attention(heads(q), heads(k), heads(v), dropout_p=p)
+        return self.out(y.transpose(1, 2).reshape(b, n, d))
+
+
+class Block(nn.Module):
+    """Pre-norm transformer block: x + Attn(LN(x)); x + FF(LN(x))."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        d = cfg.d_model
+        k = cfg.linformer_k if cfg.variant == "linformer" else None
+        self.ln1, self.ln2 = nn.LayerNorm(d), nn.LayerNorm(d)
+        self.attn = SelfAttention(d, cfg.n_heads, cfg.n_tokens, k, cfg.dropout)
+        self.ff = nn.Sequential(
+            nn.Linear(d, cfg.ff_mult * d), nn.GELU(), nn.Dropout(cfg.dropout), nn.Linear(cfg.ff_mult * d, d)
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = x + self.attn(self.ln1(x))
+        return x + self.ff(self.ln2(x))
+
+
+class TransformerModel(FrictionModel):
+    """ViT-like regressor: tokens + learned spatial/temporal embeddings -> blocks -> pool -> Gaussian head."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__(cfg)
+        d, t = cfg.d_model, cfg.window_steps
+        in_dim = N_CHANNELS if cfg.tokens == "joint" else N_FEATURES
+        self.embed = nn.Linear(in_dim, d)
+        self.pos_time = nn.Parameter(torch.randn(t, 1, d) * 0.02)  # (T, 1, d)
+        n_space = N_JOINTS if cfg.tokens == "joint" else 1
+        self.pos_space = nn.Parameter(torch.randn(1, n_space, d) * 0.02)  # (1, J, d)
+        self.cls = nn.Parameter(torch.zeros(1, 1, d)) if cfg.pooling == "cls" else None
+        self.blocks = nn.ModuleList(Block(cfg) for _ in range(cfg.n_layers))
+        self.ln = nn.LayerNorm(d)
+        self.head = nn.Linear(d, 2)
+
+    def tokens(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, T, 36) normalised -> (B, n_tokens, d) with position embeddings (time-major order)."""
+        b, t, _ = x.shape
+        if self.cfg.tokens == "joint":
+            x = x.reshape(b, t, N_CHANNELS, N_JOINTS).transpose(2, 3)  # (B, T, 12, 3)
+        else:
+            x = x.unsqueeze(2)  # (B, T, 1, 36)
+        h = self.embed(x) + self.pos_time + self.pos_space
+        h = h.reshape(b, -1, self.cfg.d_model)
+        if self.cls is not None:
+            h = torch.cat([self.cls.expand(b, -1, -1), h], dim=1)
+        return h
+
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        h = self.tokens(x)
+        for blk in self.blocks:
+            h = blk(h)
+        h = self.ln(h)
+        pooled = h[:, 0] if self.cls is not None else h.mean(1)
+        return self.head(pooled)
+
+
+def build_model(cfg: ModelConfig) -> FrictionModel:
+    """Model for ``cfg.variant`` (mlp, attention, linformer)."""
+    cfg.validate()
+    return MLPModel(cfg) if cfg.variant == "mlp" else TransformerModel(cfg)
+
+
+def parameter_count(model: nn.Module) -> int:
+    """Trainable parameters (normalisation buffers excluded)."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)

@@ -1,0 +1,170 @@
+"""Train one friction estimator variant (``python -m estimators.train estimator=linformer [key=value ...]``).
+
+Overrides are OmegaConf dot-list entries on :data:`DEFAULTS` (merged with the variant's entry in
+:data:`VARIANT_DEFAULTS`), e.g. ``model.d_model=64 trainer.max_minutes=10 data_dir=/work/data/estimators``.
+The run folder (Lightning checkpoints, CSV log) is ``<runs_dir>/<estimator>``; the best model (lowest
+validation MAE) is exported to ``estimators/checkpoints/<estimator>.pt/.json`` with the training record
+(wall-clock training time, epochs, steps, best validation MAE, threads, versions).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import lightning as L
+import torch
+from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint, TQDMProgressBar
+from lightning.pytorch.loggers import CSVLogger
+from omegaconf import DictConfig, OmegaConf
+
+from estimators.checkpoint import CHECKPOINT_DIR, save_checkpoint
+from estimators.data import WindowDataModule
+from estimators.models import VARIANTS, FrictionModel, ModelConfig, build_model, parameter_count
+
+LOSSES = ("mae+nll", "nll", "mae")
+
+DEFAULTS: dict[str, object] = {
+    "estimator": "linformer",
+    "data_dir": "/work/data/estimators",
+    "runs_dir": "/work/data/runs",
+    "export": True,  # write estimators/checkpoints/<estimator>.*
+    "seed": 0,
+    "threads": 2,
+    "batch_size": 128,
+    "lr": 1e-3,
+    "weight_decay": 1e-4,
+    "loss": "mae+nll",
+    "model": {},
+    "trainer": {"max_epochs": 60, "max_minutes": 13.0, "patience": 8, "fast_dev_run": False},
+}
+VARIANT_DEFAULTS: dict[str, dict[str, object]] = {
+    "mlp": {"model": {"variant": "mlp", "mlp_hidden": [256, 128], "dropout": 0.1}, "lr": 1e-3},
+    "attention": {"model": {"variant": "attention", "tokens": "joint", "d_model": 32, "n_layers": 2,
+                            "n_heads": 2}},
+    "linformer": {"model": {"variant": "linformer", "tokens": "joint", "d_model": 32, "n_layers": 2,
+                            "n_heads": 2, "linformer_k": 32}},
+}
+
+
+def gaussian_nll(mean: torch.Tensor, log_var: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Mean Gaussian negative log-likelihood (constant dropped)."""
+    return 0.5 * (log_var + (y - mean) ** 2 * torch.exp(-log_var)).mean()
+
+
+class FrictionTask(L.LightningModule):
+    """One task around any :class:`FrictionModel`.
+
+    Losses: ``"mae"`` (mean only), ``"nll"`` (Gaussian NLL on mean and variance), ``"mae+nll"`` (MAE trains
+    the mean; NLL with the mean detached trains only the variance, so the uncertainty never pulls the
+    estimate). Friction values and errors are in [-]; the logged ``val_mae`` drives checkpointing.
+    """
+
+    def __init__(self, model_cfg: dict[str, object], lr: float = 1e-3, weight_decay: float = 1e-4,
+                 loss: str = "mae+nll") -> None:
+        super().__init__()
+        if loss not in LOSSES:
+            raise ValueError(f"unknown loss {loss!r}; valid choices: {', '.join(LOSSES)}")
+        self.save_hyperparameters()
+        self.model: FrictionModel = build_model(ModelConfig(**model_cfg))
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.model(x)
+
+    def _loss(self, batch: tuple[torch.Tensor, torch.Tensor], stage: str) -> torch.Tensor:
+        x, y = batch
+        mean, log_var = self.model(x)
+        mae = (mean - y).abs().mean()
+        if self.hparams.loss == "mae":
+            loss = mae
+        elif self.hparams.loss == "nll":
+            loss = gaussian_nll(mean, log_var, y)
+        else:
+            loss = mae + 0.1 * gaussian_nll(mean.detach(), log_var, y)
+        self.log(f"{stage}_loss", loss, prog_bar=stage == "train", on_epoch=True, on_step=False)
+        self.log(f"{stage}_mae", mae, prog_bar=True, on_epoch=True, on_step=False)
+        return loss
+
+    def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> torch.Tensor:
+        return self._loss(batch, "train")
+
+    def validation_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> None:
+        self._loss(batch, "val")
+
+    def test_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> None:
+        self._loss(batch, "test")
+
+    def configure_optimizers(self) -> dict[str, object]:
+        opt = torch.optim.AdamW(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=3)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": "val_mae"}}
+
+
+def make_config(overrides: list[str] | None = None) -> DictConfig:
+    """DEFAULTS <- VARIANT_DEFAULTS[estimator] <- overrides (dot-list)."""
+    cli = OmegaConf.from_dotlist(list(overrides or []))
+    variant = str(cli.get("estimator", DEFAULTS["estimator"]))
+    if variant not in VARIANT_DEFAULTS:
+        raise ValueError(f"unknown estimator {variant!r}; trainable estimators: {', '.join(VARIANTS)}")
+    cfg = OmegaConf.merge(OmegaConf.create(DEFAULTS), OmegaConf.create(VARIANT_DEFAULTS[variant]), cli)
+    return cfg  # type: ignore[return-value]
+
+
+def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[FrictionTask, dict[str, object]]:
+    """Fit, export the best model (if ``cfg.export``) and return (task with best weights, training record)."""
+    torch.set_num_threads(int(cfg.threads))
+    L.seed_everything(int(cfg.seed), workers=True)
+    dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size))
+    dm.setup("fit")
+    task = FrictionTask(OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss)  # type: ignore[arg-type]
+    task.model.norm.fit(*dm.tensors["train"])
+    run_dir = Path(cfg.runs_dir) / str(cfg.estimator)
+    tcfg = cfg.trainer
+    ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", monitor="val_mae", mode="min", save_top_k=1)
+    trainer = L.Trainer(
+        max_epochs=int(tcfg.max_epochs),
+        max_time={"minutes": float(tcfg.max_minutes)},
+        accelerator="cpu",
+        devices=1,
+        deterministic=False,
+        fast_dev_run=bool(tcfg.fast_dev_run),
+        logger=CSVLogger(str(run_dir), name="csv"),
+        callbacks=[ckpt, EarlyStopping("val_mae", patience=int(tcfg.patience), mode="min"),
+                   TQDMProgressBar(refresh_rate=20)],
+        enable_model_summary=False,
+    )
+    t0 = time.perf_counter()
+    trainer.fit(task, datamodule=dm)
+    train_s = time.perf_counter() - t0
+    if ckpt.best_model_path:
+        state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=True)["state_dict"]
+        task.load_state_dict(state)
+    record: dict[str, object] = {
+        "train_wall_time_s": round(train_s, 2),
+        "epochs": int(trainer.current_epoch),
+        "global_steps": int(trainer.global_step),
+        "best_val_mae": float(ckpt.best_model_score) if ckpt.best_model_score is not None else None,
+        "train_windows": int(len(dm.tensors["train"][1])),
+        "parameters": parameter_count(task.model),
+        "torch_threads": int(cfg.threads),
+        "versions": {"torch": torch.__version__, "lightning": L.__version__},
+        "train_config": OmegaConf.to_container(cfg),
+    }
+    if bool(cfg.export) and not bool(tcfg.fast_dev_run):
+        task.model.eval()
+        out = save_checkpoint(task.model, CHECKPOINT_DIR / str(cfg.estimator), {"training": record})
+        print(f"exported {out}")
+    return task, record
+
+
+def main(argv: list[str] | None = None) -> None:
+    cfg = make_config(sys.argv[1:] if argv is None else argv)
+    print(OmegaConf.to_yaml(cfg))
+    _, record = train(cfg)
+    print(json.dumps({k: v for k, v in record.items() if k != "train_config"}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
