@@ -20,6 +20,8 @@ import numpy as np
 from taslel_bench import robot
 
 TERRAIN_PRIORITY = 1
+_XYZ = np.arange(3)
+_LEG_IDS = np.arange(robot.N_LEGS)
 
 
 @dataclass(frozen=True)
@@ -159,23 +161,35 @@ class FootContactReader:
         self.in_contact = np.zeros(robot.N_LEGS, bool)
         self.non_foot_contact = False
         self._f6 = np.zeros(6)
+        self._elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
     def read(self, data: mujoco.MjData) -> None:
         self.forces_in_world[:] = 0.0
         self.in_contact[:] = False
         self.non_foot_contact = False
-        for i in range(data.ncon):
-            c = data.contact[i]
-            g1, g2 = int(c.geom[0]), int(c.geom[1])
-            leg = self._leg_of_geom[g2]
-            sign = 1.0  # MuJoCo's contact force acts from geom1 on geom2 along the frame's normal
-            if leg < 0:
-                leg, sign = self._leg_of_geom[g1], -1.0
-            if leg < 0:
-                if self._is_robot_geom[g1] != self._is_robot_geom[g2]:
-                    self.non_foot_contact = True
-                continue
-            mujoco.mj_contactForce(self.model, data, i, self._f6)
-            frame = c.frame.reshape(3, 3)  # rows: normal, tangent1, tangent2 (world)
-            self.forces_in_world[leg] += sign * (frame.T @ self._f6[:3])
-            self.in_contact[leg] = True
+        n = data.ncon
+        if n == 0:
+            return
+        con = data.contact
+        geom = con.geom
+        leg2 = self._leg_of_geom[geom[:, 1]]
+        leg1 = self._leg_of_geom[geom[:, 0]]
+        is_foot = (leg1 >= 0) | (leg2 >= 0)
+        if not is_foot.all():
+            other = ~is_foot
+            robot_side = self._is_robot_geom[geom[other]]
+            self.non_foot_contact = bool(np.any(robot_side[:, 0] != robot_side[:, 1]))
+        if self._elliptic and np.all(con.dim == 3):
+            # elliptic cone: efc_force rows of a contact are its (normal, t1, t2) force in the contact frame
+            f_con = data.efc_force[con.efc_address[:, None] + _XYZ]
+        else:
+            f_con = np.zeros((n, 3))
+            for i in range(n):
+                mujoco.mj_contactForce(self.model, data, i, self._f6)
+                f_con[i] = self._f6[:3]
+        # MuJoCo's contact force acts from geom1 on geom2; rows of `frame` are the contact axes in world
+        f_world = np.einsum("nij,ni->nj", con.frame.reshape(n, 3, 3), f_con)
+        on2 = leg2[:, None] == _LEG_IDS  # (n, 4): foot is geom2 -> force acts on it
+        on1 = leg1[:, None] == _LEG_IDS  # foot is geom1 -> reaction
+        self.forces_in_world[:] = on2.T @ f_world - on1.T @ f_world
+        self.in_contact[:] = on2.any(axis=0) | on1.any(axis=0)
