@@ -1,0 +1,91 @@
+"""Shared pieces of every backend: the extended solution record, the layout key, the final check."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import metadata
+
+import numpy as np
+
+from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution
+from solvers.checks import Residuals, Tolerances, residuals, verdict
+
+
+@dataclass
+class BackendSolution(QPSolution):
+    """:class:`QPSolution` plus what the benchmark reports.
+
+    Timing split (all [s]):
+      * ``solve_time_s`` -- the solver call itself (for qpsolvers: ``solve_problem``, which includes its own
+        matrix packing and the native solver's setup; for persistent backends: update + solve);
+      * ``setup_time_s`` -- the part of ``solve_time_s`` spent (re)building solver data, when known;
+      * ``overhead_s`` -- harness work *outside* the timed call: conversions (sparse CSC, bound rows,
+        presolve, pattern values) and the residual check of the answer.
+    """
+
+    overhead_s: float = 0.0
+    native_status: str = ""  # the solver's own status string
+    residuals: Residuals | None = None
+    y: np.ndarray | None = None  # equality multipliers (original rows)
+    z: np.ndarray | None = None  # inequality multipliers (original G rows)
+    z_box: np.ndarray | None = None  # bound multipliers (n)
+
+
+def layout_key(problem: QPProblem) -> tuple:
+    """Everything that forces a persistent solver to set up again: shapes, patterns, which bounds are finite."""
+    return (
+        problem.n,
+        problem.A.shape[0],
+        problem.G.shape[0],
+        problem.P_pattern.tobytes(),
+        problem.A_pattern.tobytes(),
+        problem.G_pattern.tobytes(),
+        np.isfinite(problem.lb).tobytes(),
+        np.isfinite(problem.ub).tobytes(),
+    )
+
+
+def package_version(dist: str) -> str:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def checked(
+    problem: QPProblem,
+    x: np.ndarray | None,
+    native_ok: bool,
+    native_status: str,
+    tol: Tolerances,
+    solve_time_s: float,
+    *,
+    y: np.ndarray | None = None,
+    z: np.ndarray | None = None,
+    z_box: np.ndarray | None = None,
+    iterations: int | None = None,
+    setup_time_s: float = 0.0,
+    overhead_s: float = 0.0,
+) -> BackendSolution:
+    """Turn a native result into a :class:`BackendSolution`, checking it against the original problem.
+
+    A solver that reports failure keeps its own status; one that reports success must also pass
+    :func:`solvers.checks.verdict`, else the status says which residual is bad (``x`` is still returned for
+    diagnosis but ``ok`` is False)."""
+    if x is None or not native_ok:
+        return BackendSolution(
+            None, native_status or "failed", solve_time_s, iterations, setup_time_s, overhead_s, native_status
+        )
+    x = np.array(x, dtype=float, copy=True)
+    if not np.all(np.isfinite(x)):
+        return BackendSolution(
+            None, "non-finite solution", solve_time_s, iterations, setup_time_s, overhead_s, native_status
+        )
+    res = residuals(problem, x, y, z, z_box)
+    status = verdict(res, tol)
+    return BackendSolution(
+        x, status, solve_time_s, iterations, setup_time_s, overhead_s, native_status, res, y, z, z_box
+    )
+
+
+__all__ = ["SOLVED", "BackendSolution", "checked", "layout_key", "package_version"]
