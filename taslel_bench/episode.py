@@ -114,7 +114,8 @@ class Episode:
         need_model = self.filter is not None
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
-        badqacc = mujoco.mjtWarning.mjWARN_BADQACC
+        w = mujoco.mjtWarning
+        instability_warnings = (w.mjWARN_BADQPOS, w.mjWARN_BADQVEL, w.mjWARN_BADQACC)
         wall0 = time.perf_counter()
         k = 0
         try:
@@ -152,7 +153,8 @@ class Episode:
                 # --- termination checks (plant state after the tick) ---
                 # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
                 vel_sq, pos_sq = float(d.qvel @ d.qvel), float(d.qpos @ d.qpos)
-                if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or d.warning[badqacc].number > 0:
+                unstable = any(d.warning[w].number > 0 for w in instability_warnings)  # MuJoCo reset the state
+                if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:
                     res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
                     break
                 z = d.xpos[self.trunk_body, 2]

@@ -66,6 +66,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
     return FilterSettings(
         enabled=bool(f.enabled),
         regularization=float(f.regularization),
+        regularization_target=str(f.get("regularization_target", "nominal")),
         lambda_min_n=float(f.lambda_min_n),
         torque_limit_nm=float(cfg.robot.torque_limit_nm),
         ecbf_enabled=bool(f.ecbf.enabled),

@@ -1,0 +1,159 @@
+"""Closed loop: short episodes through the real config tree, faults, falls and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+import pandas as pd
+import pytest
+from hydra.errors import ConfigCompositionException, MissingConfigException
+from omegaconf import OmegaConf
+
+from taslel_bench.config import ConfigError, validate
+from taslel_bench.run import Built, run
+from tests.conftest import compose_cfg
+
+
+def short(*extra: str) -> list[str]:
+    return ["duration=1.0", "progress=false", "record.mcap=false", *extra]
+
+
+def test_short_walk_writes_run_folder(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false"))
+    summary = run(cfg, tmp_path, {"scenario": "flat"})
+    assert summary["status"] == "ok" and summary["fell"] is False
+    assert summary["mean_speed_mps"] > 0.1
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    for key in ("fell", "time_to_fall_s", "status", "distance_m", "mean_speed_mps", "tick_us_median",
+                "real_time_factor"):
+        assert key in on_disk
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    assert len(steps) == summary["ticks"] == 1500  # 0.5 s stand + 1.0 s walk at 1 kHz
+    assert steps["t_s"].dtype == np.float64 and steps["FL_stance"].dtype == bool
+    assert np.allclose(np.diff(steps["t_s"]), 1e-3)
+
+
+def test_rerun_skips_completed_and_force_reruns(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false", "duration=0.2"))
+    first = run(cfg, tmp_path)
+    again = run(cfg, tmp_path)
+    assert again.get("skipped") is True and again["ticks"] == first["ticks"]
+    forced = run(compose_cfg(short("filter.enabled=false", "duration=0.2", "force=true")), tmp_path)
+    assert "skipped" not in forced
+
+
+def test_control_rate_below_physics_rate(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false", "control_rate_hz=500", "duration=0.5"))
+    summary = run(cfg, tmp_path)
+    assert summary["ticks"] == 500 and summary["status"] == "ok"
+
+
+def test_no_gains_falls_with_time_to_fall(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false", "controller.kp=0", "controller.kd=0", "duration=2"))
+    summary = run(cfg, tmp_path)
+    assert summary["fell"] is True and 0 < summary["time_to_fall_s"] < 2.5
+    assert summary["status"] == "ok"
+    events = json.loads((tmp_path / "events.json").read_text())
+    assert any(e["kind"] == "fall" for e in events)
+
+
+def test_nan_state_ends_with_error_not_crash(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false"))
+    built = Built(cfg)
+
+    def poison(model, data, t):
+        if t >= 0.3:
+            data.qvel[0] = np.nan
+
+    built.scenario.on_tick = poison
+    res = built.episode.run()
+    assert res.status == "error" and "non-finite" in res.message
+    assert abs(res.trace.n * 1e-3 - 0.301) < 2e-3
+
+
+def test_exception_in_episode_is_recorded(tmp_path):
+    cfg = compose_cfg(short("filter.enabled=false"))
+    built = Built(cfg)
+
+    def explode(model, data, t):
+        if t >= 0.2:
+            raise RuntimeError("scenario exploded")
+
+    built.scenario.on_tick = explode
+    res = built.episode.run()
+    assert res.status == "error" and "scenario exploded" in res.message and "traceback" in res.extras
+
+
+def test_filter_in_the_loop_short(tmp_path):
+    cfg = compose_cfg(short("solver=daqp"))
+    summary = run(cfg, tmp_path, {"solver": "daqp"})
+    assert summary["status"] == "ok" and not summary["fell"]
+    assert summary["qp_failed_rate"] == 0.0 and summary["qp_solves"] == summary["ticks"]
+    assert summary["grf_mae_z_n"] < 3.0
+
+
+@pytest.mark.parametrize(
+    ("override", "field"),
+    [
+        ("duration=-1", "duration"),
+        ("scenario.friction=0", "scenario.friction"),
+        ("control_rate_hz=300", "control_rate_hz"),
+        ("controller.duty=1.5", "controller.duty"),
+        ("filter.fallback=pray", "filter.fallback"),
+        ("controller.stand_height=0.6", "controller.stand_height"),
+    ],
+)
+def test_bad_values_are_refused_naming_the_field(override, field):
+    cfg = compose_cfg([override])
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        validate(cfg)
+
+
+def test_bad_value_refused_before_simulating(tmp_path):
+    cfg = compose_cfg(["duration=-1"])
+    with pytest.raises(ConfigError):
+        run(cfg, tmp_path)
+    assert not (tmp_path / "steps.parquet").exists()
+
+
+def test_unknown_group_option_lists_valid_ones():
+    with pytest.raises((MissingConfigException, ConfigCompositionException)) as err:
+        compose_cfg(["scenario=moon"])
+    assert "flat" in str(err.value) and "low_friction" in str(err.value)
+
+
+def test_friction_check_catches_misconfigured_floor():
+    """A scenario that claims mu = 0.3 but leaves the feet on the default 1.0 floor is refused."""
+    cfg = compose_cfg(["scenario=low_friction", "scenario.friction=0.3"])
+    from scenarios.flat import FlatGround
+
+    class Liar(FlatGround):
+        def build(self, spec, rng):  # forgets to set the floor friction
+            return None
+
+    OmegaConf.set_struct(cfg, False)
+    cfg.scenario["_target_"] = f"{__name__}.LiarForTest"
+    globals()["LiarForTest"] = Liar
+    from taslel_bench.run import FrictionMismatch
+
+    with pytest.raises(FrictionMismatch, match="0.3"):
+        Built(cfg)
+
+
+def test_plant_gets_configured_friction():
+    built = Built(compose_cfg(["scenario=low_friction", "scenario.friction=0.35", "filter.enabled=false"]))
+    assert built.friction_checked and all(abs(p - 0.35) < 1e-12 for _, p, _ in built.friction_checked)
+    assert built.mj_model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_flat_trot_10s_no_fall(tmp_path, seed):
+    """Issue bar: flat ground, 0.4 m/s commanded, 10 s, filter off -> no fall, >= 0.25 m/s."""
+    cfg = compose_cfg(["duration=10", "progress=false", "record.mcap=false", "filter.enabled=false",
+                       "controller.speed=0.4", f"seed={seed}"])
+    summary = run(cfg, tmp_path)
+    assert summary["status"] == "ok" and summary["fell"] is False
+    assert summary["mean_speed_mps"] >= 0.25

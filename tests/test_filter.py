@@ -1,0 +1,226 @@
+"""ID-CBF-QP filter on real states, solved by an independent tight reference (qpsolvers' clarabel at
+1e-10 tolerances, called directly here so the core is tested without the solvers package)."""
+
+from __future__ import annotations
+
+import time
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+import qpsolvers
+
+from taslel_bench import plant, robot
+from taslel_bench.bridge import StateBridge
+from taslel_bench.constraints import LAM, U, VDOT, TickInputs
+from taslel_bench.controller import NominalController, PDGains
+from taslel_bench.gait import GaitParams
+from taslel_bench.interfaces import ClearanceProfile, QPSolution
+from taslel_bench.model import A1Model
+from taslel_bench.safety_filter import FilterSettings, SafetyFilter
+
+
+class TightReference:
+    name = "clarabel-tight"
+
+    def solve(self, p):
+        t0 = time.perf_counter()
+        x = qpsolvers.solve_qp(p.P, p.q, p.G, p.h, p.A, p.b, p.lb, p.ub, solver="clarabel",
+                               tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)
+        return QPSolution(x, "solved" if x is not None else "infeasible", time.perf_counter() - t0)
+
+    def reset(self):
+        pass
+
+    def describe(self):
+        return {"name": self.name}
+
+
+class Broken:
+    name = "broken"
+
+    def solve(self, p):
+        raise RuntimeError("boom")
+
+    def reset(self):
+        pass
+
+    def describe(self):
+        return {}
+
+
+BUMP = ClearanceProfile((0.0, 0.0, 1.28, -2.56, 1.28))  # 8 cm 4th-order bump
+
+
+def walking_states(n_states: int, t_start: float = 1.0, friction: float = 1.0):
+    """(TickInputs-ready) plant states of the nominal trot after t_start, every 37 ms."""
+    m = plant.build_plant(plant.PlantOptions(floor_friction=friction))
+    d, br, pm = mujoco.MjData(m), StateBridge(m), A1Model()
+    ctl = NominalController(GaitParams(), PDGains())
+    q0 = pin.neutral(pm.model)
+    q0[2] = 0.27 + robot.FOOT_RADIUS_M
+    q0[7:] = ctl.stand_configuration()
+    br.qpos_mj(q0, d.qpos)
+    mujoco.mj_forward(m, d)
+    out, k = [], 0
+    while len(out) < n_states:
+        t = k * 1e-3
+        u = ctl.compute(t, d.qpos[br.joint_qadr], d.qvel[br.joint_dadr])
+        if t >= t_start and k % 37 == 0:
+            q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
+            out.append((q, v, ctl.gait_state(t), u.copy()))
+        br.ctrl_mj(u, d.ctrl)
+        mujoco.mj_step(m, d)
+        k += 1
+    return out, pm
+
+
+def inputs_for(pm, state, mu):
+    q, v, gs, _ = state
+    pm.update(q, v)
+    return TickInputs(pm, v, gs.in_stance, mu, gs.swing_phase, gs.swing_phase_rate)
+
+
+@pytest.fixture(scope="module")
+def states():
+    return walking_states(12)
+
+
+def unfiltered_prediction(f: SafetyFilter, u: np.ndarray) -> np.ndarray:
+    """(vdot, lambda) that the equality constraints give for a fixed u (square linear system)."""
+    p = f.problem
+    A_free = np.hstack([p.A[:, VDOT], p.A[:, LAM]])
+    sol = np.linalg.solve(A_free, p.b - p.A[:, U] @ u)
+    return np.concatenate([sol[:18], u, sol[18:]])
+
+
+def test_filter_returns_u_nom_when_no_inequality_is_active(states):
+    """Where u_nom's own contact forces satisfy every inequality, the filter must not intervene."""
+    st, pm = states
+    f = SafetyFilter(FilterSettings(regularization=1e-4, lambda_min_n=0.0), TightReference())
+    checked = 0
+    for s in st:
+        x = inputs_for(pm, s, mu=1.0)
+        f.build(x, s[3])
+        x_nom = unfiltered_prediction(f, s[3])
+        stance_rows = [r for r, lab in enumerate(f.problem.row_labels) if s[2].in_stance[robot.LEGS.index(lab[:2])]]
+        # swing feet's rows read 0 <= 0 (lambda_i = 0 by equality): trivially tight, not binding
+        if np.all((f.problem.G @ x_nom - f.problem.h)[stance_rows] <= -1e-6):
+            res = f.filter(x, s[3])
+            assert res.status == "solved"
+            assert np.abs(res.u - s[3]).max() < 1e-6
+            checked += 1
+    assert checked >= 3, "too few walking states with all inequalities slack"
+
+
+def test_solution_satisfies_dynamics_and_cones(states):
+    st, pm = states
+    f = SafetyFilter(FilterSettings(lambda_min_n=2.0), TightReference(), BUMP)
+    mu = 0.3
+    for s in st:
+        x = inputs_for(pm, s, mu)
+        res = f.filter(x, s[3])
+        assert res.status == "solved"
+        lam = res.lam.reshape(4, 3)
+        # equations of motion: M vdot + h = B u + sum J_i' lambda_i
+        tau = np.concatenate([np.zeros(6), res.u]) + sum(pm.foot_jac_in_world[i].T @ lam[i] for i in range(4))
+        assert np.abs(pm.M @ res.vdot + pm.h - tau).max() <= 1e-6
+        mu_t = mu / np.sqrt(2.0)
+        for i in range(4):
+            if s[2].in_stance[i]:
+                assert lam[i, 2] >= 2.0 - 1e-6
+                assert abs(lam[i, 0]) <= mu_t * lam[i, 2] + 1e-6
+                assert abs(lam[i, 1]) <= mu_t * lam[i, 2] + 1e-6
+                # stance foot does not accelerate
+                acc = pm.foot_jac_in_world[i] @ res.vdot + pm.foot_jdotv_in_world[i]
+                assert np.abs(acc).max() < 1e-6
+            else:
+                assert np.abs(lam[i]).max() < 1e-8
+        assert np.all(np.abs(res.u) <= robot.TORQUE_LIMIT_NM + 1e-9)
+
+
+def test_ecbf_rows_hold_at_the_solution(states):
+    st, pm = states
+    f = SafetyFilter(FilterSettings(), TightReference(), BUMP)
+    active = 0
+    for s in st:
+        x = inputs_for(pm, s, 1.0)
+        res = f.filter(x, s[3])
+        p = f.problem
+        rows = [i for i, lab in enumerate(p.row_labels) if lab.endswith("clearance")]
+        xvec = np.concatenate([res.vdot, res.u, res.lam])
+        slack = p.h[rows] - p.G[rows] @ xvec
+        assert np.all(slack >= -1e-6)
+        active += int(np.sum(np.abs(slack) < 1e-6))
+        # the row is the paper's ECBF: a2 h_e + hdot_e >= 0 with hdot_e from the predicted foot acceleration
+        for i in range(4):
+            if not s[2].in_stance[i]:
+                z, dz, ddz = BUMP(float(s[2].swing_phase[i]))
+                sd = s[2].swing_phase_rate
+                h = pm.foot_pos_in_world[i, 2] - robot.FOOT_RADIUS_M - z
+                hdot = pm.foot_vel_in_world[i, 2] - dz * sd
+                acc_z = pm.foot_jac_in_world[i, 2] @ res.vdot + pm.foot_jdotv_in_world[i, 2]
+                hddot = acc_z - ddz * sd**2
+                a1, a2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
+                assert a2 * (hdot + a1 * h) + hddot + a1 * hdot >= -1e-6
+    assert active > 0, "the 8 cm bump should make the ECBF bind on some swing ticks"
+
+
+def test_friction_pyramid_binds_on_low_mu(states):
+    """On mu = 0.05 the pyramid rows bind and the filter moves u; the bound holds at the solution."""
+    st, pm = states
+    f = SafetyFilter(FilterSettings(), TightReference())
+    binding, du = 0, []
+    for s in st:
+        res = f.filter(inputs_for(pm, s, 0.05), s[3])
+        p = f.problem
+        xvec = np.concatenate([res.vdot, res.u, res.lam])
+        rows = [i for i, lab in enumerate(p.row_labels) if lab[-3:] in ("fx+", "fx-", "fy+", "fy-")]
+        slack = p.h[rows] - p.G[rows] @ xvec
+        assert np.all(slack >= -1e-6)
+        binding += int(np.sum(slack < 1e-6))
+        du.append(np.linalg.norm(res.u - s[3]))
+    assert binding > 0 and np.mean(du) > 1.0
+
+
+def test_backend_exception_falls_back_and_is_recorded(states):
+    st, pm = states
+    f = SafetyFilter(FilterSettings(fallback="nominal"), Broken())
+    res = f.filter(inputs_for(pm, st[0], 1.0), st[0][3])
+    assert res.used_fallback and res.status.startswith("error: RuntimeError")
+    assert np.array_equal(res.u, st[0][3]) and np.all(np.isnan(res.lam))
+
+
+def test_hold_last_fallback(states):
+    st, pm = states
+    f = SafetyFilter(FilterSettings(fallback="hold_last"), TightReference())
+    good = f.filter(inputs_for(pm, st[0], 0.3), st[0][3])
+    f.backend = Broken()
+    res = f.filter(inputs_for(pm, st[1], 0.3), st[1][3])
+    assert res.used_fallback and np.array_equal(res.u, good.u)
+
+
+def test_bad_fallback_name():
+    with pytest.raises(ValueError, match="valid: nominal, hold_last"):
+        SafetyFilter(FilterSettings(fallback="pray"), TightReference())
+
+
+def test_layout_is_fixed(states):
+    st, pm = states
+    f = SafetyFilter(FilterSettings(), TightReference(), BUMP)
+    p = f.problem
+    assert p.n == 42 and p.A.shape == (30, 42) and p.G.shape == (24, 42)
+    assert (p.layout["vdot"], p.layout["u"], p.layout["lambda"]) == (VDOT, U, LAM)
+    for s in st:
+        f.build(inputs_for(pm, s, 0.5), s[3])
+        assert not np.any(p.A[~p.A_pattern]) and not np.any(p.G[~p.G_pattern])
+
+
+def test_zero_regularization_target_is_biased(states):
+    """Documents why the default regularises towards the nominal prediction (safety_filter docstring)."""
+    st, pm = states
+    f = SafetyFilter(FilterSettings(regularization=1e-4, lambda_min_n=0.0, regularization_target="zero"),
+                     TightReference())
+    du = [np.abs(f.filter(inputs_for(pm, s, 10.0), s[3]).u - s[3]).max() for s in st]
+    assert max(du) > 1e-2

@@ -1,0 +1,143 @@
+"""The controller's model (Pinocchio) against the plant (MuJoCo) and finite differences."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from taslel_bench import kinematics, plant, robot
+from taslel_bench.bridge import StateBridge, _quat_wxyz_to_matrix
+from taslel_bench.model import A1Model
+
+
+@pytest.fixture(scope="module")
+def setup():
+    m = plant.build_plant()
+    return m, mujoco.MjData(m), StateBridge(m), A1Model()
+
+
+def random_state(pm: A1Model, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    q = pin.randomConfiguration(pm.model, -np.ones(robot.NQ), np.ones(robot.NQ))
+    q[7:] = rng.uniform(-0.8, 0.8, 12)
+    q[9::3] = rng.uniform(-2.6, -1.0, 4)  # calf range
+    return q, rng.normal(0.0, 2.0, robot.NV)
+
+
+def velocity_map(br: StateBridge, q: np.ndarray) -> np.ndarray:
+    """T with qvel_mujoco = T v_pinocchio (linear part rotated, joints permuted)."""
+    T = np.zeros((robot.NV, robot.NV))
+    for i in range(robot.NV):
+        e = np.zeros(robot.NV)
+        e[i] = 1.0
+        br.qvel_mj(q, e, T[:, i])
+    return T
+
+
+def test_mass_bias_feet_match_mujoco(setup):
+    m, d, br, pm = setup
+    rng = np.random.default_rng(0)
+    worst = {"M": 0.0, "h": 0.0, "pos": 0.0, "jac": 0.0}
+    for _ in range(20):
+        q, v = random_state(pm, rng)
+        br.qpos_mj(q, d.qpos)
+        br.qvel_mj(q, v, d.qvel)
+        mujoco.mj_forward(m, d)
+        pm.update(q, v)
+        T = velocity_map(br, q)
+        M_mj = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M_mj)  # MuJoCo 4 signature
+        worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
+        # qacc = T vdot + Tdot v; Tdot v is R (w x v_lin) on the linear rows (linear velocity frame change)
+        tdot_v = np.zeros(robot.NV)
+        tdot_v[:3] = _quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
+        worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - pm.h).max())
+        for i, foot in enumerate(robot.FOOT_FRAMES):
+            sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
+            worst["pos"] = max(worst["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
+            jac = np.zeros((3, m.nv))
+            mujoco.mj_jacSite(m, d, jac, None, sid)
+            worst["jac"] = max(worst["jac"], np.abs(jac @ T - pm.foot_jac_in_world[i]).max())
+    assert worst["M"] < 1e-9, worst
+    assert worst["h"] < 1e-9, worst
+    assert worst["pos"] < 1e-9, worst
+    assert worst["jac"] < 1e-9, worst
+
+
+def test_total_mass_matches(setup):
+    m, _, _, pm = setup
+    assert pm.total_mass_kg == pytest.approx(float(m.body_mass.sum()), abs=1e-12)
+    assert pm.total_mass_kg == pytest.approx(13.741, abs=1e-9)  # URDF masses summed
+
+
+def test_foot_jdotv_matches_finite_differences(setup):
+    _, _, _, pm = setup
+    rng = np.random.default_rng(1)
+    dt = 1e-6
+    for _ in range(5):
+        q, v = random_state(pm, rng)
+        pm.update(q, v)
+        jdotv = pm.foot_jdotv_in_world.copy()
+        jac0 = pm.foot_jac_in_world.copy()
+        pm.update(pin.integrate(pm.model, q, v * dt), v)
+        jac1 = pm.foot_jac_in_world.copy()
+        fd = np.einsum("lij,j->li", (jac1 - jac0) / dt, v)
+        assert np.abs(fd - jdotv).max() < 1e-4 * max(1.0, np.abs(jdotv).max())
+
+
+def test_foot_velocity_is_jacobian_times_v(setup):
+    _, _, _, pm = setup
+    q, v = random_state(pm, np.random.default_rng(2))
+    pm.update(q, v)
+    assert np.allclose(np.einsum("lij,j->li", pm.foot_jac_in_world, v), pm.foot_vel_in_world, atol=1e-12)
+
+
+def test_bridge_round_trip(setup):
+    m, d, br, pm = setup
+    rng = np.random.default_rng(3)
+    q, v = random_state(pm, rng)
+    qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
+    br.qpos_mj(q, qpos)
+    br.qvel_mj(q, v, qvel)
+    assert np.allclose(br.q_pin(qpos), q, atol=1e-15)
+    assert np.allclose(br.v_pin(qpos, qvel), v, atol=1e-12)
+    # leg order: core joint 0 is FL_hip, which MuJoCo (URDF order FR, FL, ...) stores at index 3
+    assert br.joint_qadr[0] == 7 + 3
+    ctrl = np.zeros(m.nu)
+    u = np.arange(12.0)
+    br.ctrl_mj(u, ctrl)
+    fl_hip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, "FL_hip_joint")
+    assert ctrl[fl_hip] == 0.0 and ctrl[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, "RR_calf_joint")] == 11.0
+
+
+def test_leg_ik_inverts_fk_and_matches_pinocchio(setup):
+    _, _, _, pm = setup
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        qj = np.concatenate([[rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 1.5), rng.uniform(-2.5, -1.0)] for _ in range(4)])
+        q = pin.neutral(pm.model)
+        q[7:] = qj
+        pm.update(q, np.zeros(robot.NV))
+        for i in range(robot.N_LEGS):
+            p = kinematics.leg_fk(qj[3 * i : 3 * i + 3], robot.LEG_SIDE[i])
+            assert np.allclose(p + robot.HIP_POSITIONS_IN_TRUNK[i], pm.foot_pos_in_world[i], atol=1e-12)
+            assert np.allclose(kinematics.leg_ik(p, robot.LEG_SIDE[i]), qj[3 * i : 3 * i + 3], atol=1e-9)
+
+
+def test_plant_limits_and_friction(setup):
+    m, d, br, _ = setup
+    assert np.allclose(m.actuator_ctrlrange, [[-33.5, 33.5]] * 12)
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec = plant.a1_spec(plant.PlantOptions(floor_friction=0.3, timestep_s=0.002))
+    m2 = plant.compile_plant(spec)
+    assert m2.opt.timestep == 0.002
+    d2 = mujoco.MjData(m2)
+    q = pin.neutral(A1Model().model)
+    q[2] = 0.3
+    q[7:] = kinematics.legs_ik([[0.0, s * robot.HIP_OFFSET_Y_M, -0.28] for s in robot.LEG_SIDE])
+    StateBridge(m2).qpos_mj(q, d2.qpos)
+    for _ in range(300):
+        mujoco.mj_step(m2, d2)
+    frictions = [mu for _, mu in plant.measure_contact_friction(m2, d2)]
+    assert frictions and np.allclose(frictions, 0.3)
