@@ -37,7 +37,11 @@ def available_backends() -> list[str]:
 
 
 def _split(cls: type, settings: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    params = set(inspect.signature(cls.__init__).parameters) - {"self", "settings", "solver"}
+    params: set[str] = set()
+    for klass in cls.__mro__:  # constructor keywords of the class and of its bases (**kwargs pass-through)
+        if "__init__" in vars(klass):
+            params |= set(inspect.signature(klass.__init__).parameters)
+    params -= {"self", "settings", "solver", "kwargs", "args"}
     ctor = {k: v for k, v in settings.items() if k in params}
     native = {k: v for k, v in settings.items() if k not in params and k != "settings"}
     native.update(dict(settings.get("settings") or {}))

@@ -1,0 +1,118 @@
+"""Skeleton of a persistent, warm-started native backend.
+
+The solver is set up once per QP *layout* (shapes, sparsity masks, which bounds are finite:
+:func:`solvers.base.layout_key`), then each tick only its values are updated and it starts from the last
+solution. The filter overwrites one :class:`QPProblem` in place every tick, so subclasses copy whatever
+they keep. A layout change (e.g. a problem without ECBF rows after one with) triggers a new setup;
+:meth:`reset` forgets the solver and the warm start.
+
+Subclasses implement :meth:`_setup`, :meth:`_update` and :meth:`_solve`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from taslel_bench.interfaces import QPProblem
+from solvers.base import BackendSolution, checked, layout_key, package_version
+from solvers.checks import Tolerances
+
+BIG = 1e20  # finite stand-in for an infinite bound, where a solver needs one
+
+
+@dataclass
+class NativeResult:
+    """What a native solve returns, duals already in the convention of :mod:`solvers.checks`."""
+
+    x: np.ndarray | None
+    ok: bool
+    status: str  # native status (or the failure reason when not ok)
+    iterations: int | None = None
+    y: np.ndarray | None = None
+    z: np.ndarray | None = None
+    z_box: np.ndarray | None = None
+
+
+class PersistentBackend:
+    """Common machinery; see module doc."""
+
+    name = "persistent"
+    package = ""
+
+    def __init__(self, settings: Mapping[str, Any] | None = None, check: Mapping[str, float] | None = None,
+                 warm_start: bool = True) -> None:  # fmt: skip
+        self.settings = dict(settings or {})
+        self.tol = Tolerances(**dict(check or {}))
+        self.warm_start = bool(warm_start)
+        self._key: tuple | None = None
+        self.setups = 0  # how many times the solver was (re)built -- for tests and reports
+
+    # ------------------------------------------------------------------ to implement
+    def _setup(self, problem: QPProblem) -> None:
+        raise NotImplementedError
+
+    def _update(self, problem: QPProblem) -> None:
+        raise NotImplementedError
+
+    def _solve(self) -> NativeResult:
+        raise NotImplementedError
+
+    def _layout_key(self, problem: QPProblem) -> tuple:
+        """What forces a new setup (override to add solver-specific reasons)."""
+        return layout_key(problem)
+
+    def _prepare(self, problem: QPProblem, fresh: bool) -> None:
+        """Gather this tick's values into the backend's own buffers (harness overhead, not timed); on a
+        ``fresh`` layout, build those buffers first."""
+
+    def _forget(self) -> None:
+        """Drop the native solver object."""
+
+    # ------------------------------------------------------------------ protocol
+    def reset(self) -> None:
+        self._forget()
+        self._key = None
+
+    def describe(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "kind": "persistent",
+            "package": self.package,
+            "version": package_version(self.package),
+            "settings": dict(self.settings),
+            "warm_start": self.warm_start,
+            "check": self.tol.as_dict(),
+        }
+
+    def solve(self, problem: QPProblem) -> BackendSolution:
+        t0 = time.perf_counter()
+        try:
+            key = self._layout_key(problem)
+            fresh = key != self._key
+            if fresh:
+                self.reset()
+            self._prepare(problem, fresh)
+            t1 = time.perf_counter()
+            if fresh:
+                self._setup(problem)
+                self._key = key
+                self.setups += 1
+            else:
+                self._update(problem)
+            t2 = time.perf_counter()
+            res = self._solve()
+            t3 = time.perf_counter()
+        except Exception as exc:  # a native failure must not end the episode
+            self.reset()
+            return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+        out = checked(
+            problem, res.x, res.ok, res.status, self.tol, t3 - t1, y=res.y, z=res.z, z_box=res.z_box,
+            iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0,
+        )  # fmt: skip
+        out.overhead_s += time.perf_counter() - t3
+        return out
