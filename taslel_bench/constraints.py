@@ -46,6 +46,9 @@ class EqualityFamily:
 
     def pattern(self, mask: np.ndarray) -> None: ...
 
+    def init(self, qp: QPProblem) -> None:
+        """Write the rows' constant entries once (the QP arrays are reused every tick)."""
+
     def write(self, qp: QPProblem, x: TickInputs) -> None: ...
 
 
@@ -60,13 +63,15 @@ class EquationsOfMotion(EqualityFamily):
         mask[rows, U] = np.vstack([np.zeros((6, NU), bool), np.eye(NU, dtype=bool)])
         mask[rows, LAM] = True
 
+    def init(self, qp: QPProblem) -> None:
+        qp.A[self.start + 6 : self.start + NV, U] = -np.eye(NU)
+
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         r0, m = self.start, x.model
         qp.A[r0 : r0 + NV, VDOT] = m.M
-        qp.A[r0 + 6 : r0 + NV, U] = -np.eye(NU)
-        for i in range(robot.N_LEGS):
-            qp.A[r0 : r0 + NV, NV + NU + 3 * i : NV + NU + 3 * i + 3] = -m.foot_jac_in_world[i].T
-        qp.b[r0 : r0 + NV] = -m.h
+        # columns of lambda_i: -J_i' (world-axes force at the foot centre -> generalised force)
+        np.negative(m.foot_jac_in_world.reshape(NL, NV).T, out=qp.A[r0 : r0 + NV, LAM])
+        np.negative(m.h, out=qp.b[r0 : r0 + NV])
 
 
 class ContactOrSwing(EqualityFamily):
@@ -81,18 +86,17 @@ class ContactOrSwing(EqualityFamily):
             mask[rows, VDOT] = True
             mask[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = np.eye(3, dtype=bool)
 
+    def init(self, qp: QPProblem) -> None:
+        self._diag = (np.arange(self.start, self.start + NL), np.arange(LAM.start, LAM.stop))
+        self._stance_rows = np.zeros(NL)
+
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        for i in range(robot.N_LEGS):
-            r = self.start + 3 * i
-            lam = slice(NV + NU + 3 * i, NV + NU + 3 * i + 3)
-            if x.in_stance[i]:
-                qp.A[r : r + 3, VDOT] = x.model.foot_jac_in_world[i]
-                qp.A[r : r + 3, lam] = 0.0
-                qp.b[r : r + 3] = -x.model.foot_jdotv_in_world[i]
-            else:
-                qp.A[r : r + 3, VDOT] = 0.0
-                qp.A[r : r + 3, lam] = np.eye(3)
-                qp.b[r : r + 3] = 0.0
+        sr = self._stance_rows
+        sr[:] = np.repeat(x.in_stance, 3)
+        rows = slice(self.start, self.start + NL)
+        np.multiply(x.model.foot_jac_in_world.reshape(NL, NV), sr[:, None], out=qp.A[rows, VDOT])
+        qp.A[self._diag] = 1.0 - sr
+        np.multiply(x.model.foot_jdotv_in_world.reshape(NL), -sr, out=qp.b[rows])
 
 
 class FrictionCone:
@@ -105,6 +109,7 @@ class FrictionCone:
     def __init__(self, lambda_min_n: float) -> None:
         self.lambda_min_n = lambda_min_n  # [N]
         self.start = 0
+        self._mu = np.nan
 
     def pattern(self, mask: np.ndarray) -> None:
         for i in range(robot.N_LEGS):
@@ -113,17 +118,24 @@ class FrictionCone:
     def labels(self) -> list[str]:
         return [f"{leg}_{k}" for leg in robot.LEGS for k in ("unilateral", "fx+", "fx-", "fy+", "fy-")]
 
-    def write(self, qp: QPProblem, x: TickInputs) -> None:
-        mu_t = x.mu / np.sqrt(2.0)
+    def init(self, qp: QPProblem) -> None:
+        mu_rows, mu_cols = [], []
         for i in range(robot.N_LEGS):
             r, c = self.start + 5 * i, NV + NU + 3 * i
             qp.G[r, c + 2] = -1.0
-            qp.h[r] = -self.lambda_min_n if x.in_stance[i] else 0.0
-            qp.G[r + 1, c : c + 3] = (1.0, 0.0, -mu_t)
-            qp.G[r + 2, c : c + 3] = (-1.0, 0.0, -mu_t)
-            qp.G[r + 3, c : c + 3] = (0.0, 1.0, -mu_t)
-            qp.G[r + 4, c : c + 3] = (0.0, -1.0, -mu_t)
-            qp.h[r + 1 : r + 5] = 0.0
+            qp.G[r + 1 : r + 5, c : c + 2] = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]
+            mu_rows += [r + 1, r + 2, r + 3, r + 4]
+            mu_cols += [c + 2] * 4
+        self._mu_idx = (np.array(mu_rows), np.array(mu_cols))
+        self._unilateral_rows = self.start + 5 * np.arange(robot.N_LEGS)
+        qp.h[self.start : self.start + self.n_rows] = 0.0
+        self._mu = np.nan
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        if x.mu != self._mu:
+            qp.G[self._mu_idx] = -x.mu / np.sqrt(2.0)
+            self._mu = x.mu
+        qp.h[self._unilateral_rows] = -self.lambda_min_n * x.in_stance
 
 
 class SwingClearanceECBF:
@@ -150,20 +162,20 @@ class SwingClearanceECBF:
     def labels(self) -> list[str]:
         return [f"{leg}_clearance" for leg in robot.LEGS]
 
+    def init(self, qp: QPProblem) -> None:
+        pass
+
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m, a1, a2 = x.model, self.alpha1, self.alpha2
         sdot = x.swing_phase_rate
-        for i in range(robot.N_LEGS):
-            r = self.start + i
-            if x.in_stance[i]:
-                qp.G[r, VDOT] = 0.0
-                qp.h[r] = INACTIVE_RHS
-                self.h[i] = self.h_e[i] = np.nan
-                continue
-            z, dz, ddz = self.profile(float(x.swing_phase[i]))
-            h = m.foot_pos_in_world[i, 2] - robot.FOOT_RADIUS_M - z
-            hdot = m.foot_vel_in_world[i, 2] - dz * sdot
-            h_e = hdot + a1 * h
-            qp.G[r, VDOT] = -m.foot_jac_in_world[i, 2]
-            qp.h[r] = a2 * h_e + m.foot_jdotv_in_world[i, 2] - ddz * sdot * sdot + a1 * hdot
-            self.h[i], self.h_e[i] = h, h_e
+        rows = slice(self.start, self.start + robot.N_LEGS)
+        swing = ~x.in_stance
+        np.multiply(m.foot_jac_in_world[:, 2, :], np.where(swing, -1.0, 0.0)[:, None], out=qp.G[rows, VDOT])
+        z, dz, ddz = self.profile.evaluate(x.swing_phase)
+        h = m.foot_pos_in_world[:, 2] - robot.FOOT_RADIUS_M - z
+        hdot = m.foot_vel_in_world[:, 2] - dz * sdot
+        h_e = hdot + a1 * h
+        rhs = a2 * h_e + m.foot_jdotv_in_world[:, 2] - ddz * (sdot * sdot) + a1 * hdot
+        qp.h[rows] = np.where(swing, rhs, INACTIVE_RHS)
+        self.h[:] = np.where(swing, h, np.nan)
+        self.h_e[:] = np.where(swing, h_e, np.nan)

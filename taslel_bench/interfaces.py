@@ -114,6 +114,21 @@ class ClearanceProfile:
                 ddz += k * (k - 1) * c * s ** (k - 2)
         return z, dz, ddz
 
+    def evaluate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vectorised (z, dz/ds, d²z/ds²) for an array of phases (one Vandermonde matrix, three dots)."""
+        powers = np.asarray(s, float)[:, None] ** self._k  # (n, K): s^0 .. s^(K-1)
+        return powers @ self._c, powers @ self._c1, powers @ self._c2
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.coeffs, float)
+        k = np.arange(len(c))
+        c1 = np.zeros_like(c)
+        c1[: len(c) - 1] = c[1:] * k[1:]  # coefficients of dz/ds, padded to K
+        c2 = np.zeros_like(c)
+        c2[: len(c) - 2] = c[2:] * k[2:] * k[1:-1]  # coefficients of d²z/ds²
+        for name, value in (("_k", k), ("_c", c), ("_c1", c1), ("_c2", c2)):
+            object.__setattr__(self, name, value)  # frozen dataclass: cached derived arrays
+
     @property
     def peak_m(self) -> float:
         return float(max(self(s)[0] for s in np.linspace(0.0, 1.0, 201)))

@@ -20,8 +20,6 @@ import numpy as np
 from taslel_bench import robot
 
 TERRAIN_PRIORITY = 1
-_XYZ = np.arange(3)
-_LEG_IDS = np.arange(robot.N_LEGS)
 
 
 @dataclass(frozen=True)
@@ -79,6 +77,7 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
         size=[0, 0, 0.05],
         friction=options.floor_friction,
     )
+    add_foot_contact_sensors(spec)
     for name in robot.JOINT_NAMES:
         act = spec.add_actuator(name=name, target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
@@ -86,6 +85,20 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.ctrlrange = [-options.torque_limit_nm, options.torque_limit_nm]
     return spec
+
+
+# MuJoCo contact-sensor parameters (as the MJCF <contact data="found force" reduce="netforce" num="1">):
+# intprm = (data bits: found|force, reduction: netforce, num)
+_CONTACT_SENSOR_INTPRM = (3, 3, 1)
+
+
+def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
+    """One contact sensor per foot geom: (number of contacts, net force in world axes exerted *by* the foot
+    on what it touches) — read in one slice of ``sensordata`` instead of looping over ``data.contact``."""
+    for foot in robot.FOOT_FRAMES:
+        sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                                 objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
+        sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
 
 
 def add_terrain_geom(
@@ -144,52 +157,39 @@ def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list
 
 
 class FootContactReader:
-    """Plant-side contact quantities of the four feet, read from ``data.contact`` after a step.
+    """Plant-side contact quantities of the four feet after a step, from the foot contact sensors.
 
-    ``forces_in_world`` (4, 3): total contact force **on** each foot [N], world axes (0 without contact).
-    ``in_contact`` (4,) bool. ``non_foot_contact``: True if any robot geom other than a foot touches terrain.
+    ``forces_in_world`` (4, 3): net contact force **on** each foot [N], world axes (0 without contact) —
+    the constraint forces MuJoCo applied in the last physics step. ``in_contact`` (4,) bool.
+    ``non_foot_contact``: True if any robot geom other than a foot touches terrain (checked through
+    ``data.contact`` only when the contact count exceeds the feet's).
     """
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model
         self.foot_geoms = foot_geom_ids(model)
-        self._leg_of_geom = np.full(model.ngeom, -1)
-        self._leg_of_geom[self.foot_geoms] = np.arange(len(self.foot_geoms))
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_contact") for f in robot.FOOT_FRAMES]
+        if min(ids) < 0:
+            raise ValueError("plant model has no foot contact sensors; build it with plant.add_foot_contact_sensors")
+        adr = model.sensor_adr[ids]
+        self._rows = adr[:, None] + np.arange(4)  # (found, fx, fy, fz) per foot
+        self._is_foot = np.zeros(model.ngeom, bool)
+        self._is_foot[self.foot_geoms] = True
         robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
         self.forces_in_world = np.zeros((robot.N_LEGS, 3))
         self.in_contact = np.zeros(robot.N_LEGS, bool)
         self.non_foot_contact = False
-        self._f6 = np.zeros(6)
-        self._elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
     def read(self, data: mujoco.MjData) -> None:
-        self.forces_in_world[:] = 0.0
-        self.in_contact[:] = False
-        self.non_foot_contact = False
-        n = data.ncon
-        if n == 0:
-            return
-        con = data.contact
-        geom = con.geom
-        leg2 = self._leg_of_geom[geom[:, 1]]
-        leg1 = self._leg_of_geom[geom[:, 0]]
-        is_foot = (leg1 >= 0) | (leg2 >= 0)
-        if not is_foot.all():
-            other = ~is_foot
-            robot_side = self._is_robot_geom[geom[other]]
-            self.non_foot_contact = bool(np.any(robot_side[:, 0] != robot_side[:, 1]))
-        if self._elliptic and np.all(con.dim == 3):
-            # elliptic cone: efc_force rows of a contact are its (normal, t1, t2) force in the contact frame
-            f_con = data.efc_force[con.efc_address[:, None] + _XYZ]
-        else:
-            f_con = np.zeros((n, 3))
-            for i in range(n):
-                mujoco.mj_contactForce(self.model, data, i, self._f6)
-                f_con[i] = self._f6[:3]
-        # MuJoCo's contact force acts from geom1 on geom2; rows of `frame` are the contact axes in world
-        f_world = np.einsum("nij,ni->nj", con.frame.reshape(n, 3, 3), f_con)
-        on2 = leg2[:, None] == _LEG_IDS  # (n, 4): foot is geom2 -> force acts on it
-        on1 = leg1[:, None] == _LEG_IDS  # foot is geom1 -> reaction
-        self.forces_in_world[:] = on2.T @ f_world - on1.T @ f_world
-        self.in_contact[:] = on2.any(axis=0) | on1.any(axis=0)
+        block = data.sensordata[self._rows]
+        found = block[:, 0]
+        np.negative(block[:, 1:], out=self.forces_in_world)  # sensor: force by the foot; we want on it
+        np.greater(found, 0.0, out=self.in_contact)
+        self.non_foot_contact = data.ncon > found.sum() and self._other_contact(data)
+
+    def _other_contact(self, data: mujoco.MjData) -> bool:
+        geom = data.contact.geom
+        other = ~(self._is_foot[geom[:, 0]] | self._is_foot[geom[:, 1]])
+        robot_side = self._is_robot_geom[geom[other]]
+        return bool(np.any(robot_side[:, 0] != robot_side[:, 1]))

@@ -99,6 +99,8 @@ class SafetyFilter:
             fam.start, m_in = m_in, m_in + fam.n_rows
         self.ineq_families = ineq
         self.problem = self._allocate(m_eq, m_in)
+        for fam in [*self.eq_families, *self.ineq_families]:
+            fam.init(self.problem)
         self._free = np.r_[np.arange(N_VARS)[VDOT], np.arange(N_VARS)[LAM]]  # columns determined by u
         self._last_u: np.ndarray | None = None
 

@@ -141,3 +141,38 @@ def test_plant_limits_and_friction(setup):
         mujoco.mj_step(m2, d2)
     frictions = [mu for _, mu in plant.measure_contact_friction(m2, d2)]
     assert frictions and np.allclose(frictions, 0.3)
+
+
+def test_foot_contact_sensors_match_contact_forces(setup):
+    """The sensor-based reader equals summing mj_contactForce over data.contact (sign: force on the foot)."""
+    from taslel_bench.controller import NominalController, PDGains
+    from taslel_bench.gait import GaitParams
+
+    m, _, br, _ = setup
+    d = mujoco.MjData(m)
+    ctl = NominalController(GaitParams(), PDGains())
+    q = np.zeros(robot.NQ)
+    q[6], q[2], q[7:] = 1.0, 0.29, ctl.stand_configuration()
+    br.qpos_mj(q, d.qpos)
+    reader = plant.FootContactReader(m)
+    feet = plant.foot_geom_ids(m)
+    checked = 0
+    for k in range(1500):
+        br.ctrl_mj(ctl.compute(k * 1e-3, d.qpos[br.joint_qadr], d.qvel[br.joint_dadr]), d.ctrl)
+        mujoco.mj_step(m, d)
+        if k % 50:
+            continue
+        reader.read(d)
+        ref = np.zeros((4, 3))
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            mujoco.mj_contactForce(m, d, i, f6)
+            f_world = d.contact.frame[i].reshape(3, 3).T @ f6[:3]  # force of geom1 on geom2
+            for leg, g in enumerate(feet):
+                ref[leg] += f_world if d.contact.geom[i, 1] == g else 0.0
+                ref[leg] -= f_world if d.contact.geom[i, 0] == g else 0.0
+        assert np.allclose(reader.forces_in_world, ref, atol=1e-9)
+        checked += int(reader.in_contact.sum())
+    assert checked > 20
+    # standing still, the feet carry the weight
+    assert reader.non_foot_contact is False

@@ -1,0 +1,102 @@
+"""Per-tick cost and real-time factor of an episode, with a breakdown of the tick's parts.
+
+    python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp_persistent] [--scenario obstacle]
+
+Prints, for the nominal-only loop and for the filter with each solver: median tick time, real-time
+factor, and the median cost of each part measured in isolation on states of the same episode. The
+machine is shared (2 cores): runs are interleaved in one process and reported side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import mujoco
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from taslel_bench.constraints import TickInputs
+from taslel_bench.run import Built
+
+
+def _compose(overrides: list[str]):
+    from pathlib import Path
+
+    from hydra import compose, initialize_config_dir
+
+    conf = str(Path(__file__).resolve().parent.parent / "conf")
+    with initialize_config_dir(config_dir=conf, version_base="1.3"):
+        return compose(config_name="config", overrides=overrides)
+
+
+def _median_us(fn, n: int = 2000) -> float:
+    times = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        fn()
+        times[i] = time.perf_counter() - t0
+    return float(np.median(times) * 1e6)
+
+
+def part_costs(built: Built) -> dict[str, float]:
+    """Median µs of each tick part at the episode's final state."""
+    e = built.episode
+    m, d, br = e.m, e.d, e.bridge
+    qj, qdj = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
+    q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
+    t = [e.controller.stand_duration_s + 1.0]
+
+    def ctrl():
+        t[0] += 1e-3
+        e.controller.compute(t[0], qj, qdj)
+
+    d_copy = mujoco.MjData(m)
+    d_copy.qpos[:], d_copy.qvel[:] = d.qpos, d.qvel
+    costs = {
+        "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
+        "controller": _median_us(ctrl),
+        "pinocchio_update": _median_us(lambda: e.model.update(q, v)),
+        "contact_read": _median_us(lambda: e.contacts.read(d)),
+    }
+    if built.filter is not None:
+        gs = e.controller.gait_state(t[0])
+        u = e.controller.compute(t[0], qj, qdj)
+        inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
+        costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
+        costs["qp_solve"] = _median_us(lambda: built.backend.solve(built.filter.problem), 500)
+    return costs
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=5.0, help="walking time per episode [s]")
+    ap.add_argument("--solvers", default="daqp,osqp_persistent,osqp", help="comma-separated solver options")
+    ap.add_argument("--scenario", default="flat")
+    args = ap.parse_args(argv)
+    rows = []
+    configs = [("nominal only", ["filter.enabled=false"])] + [
+        (f"filter + {s}", [f"solver={s}"]) for s in args.solvers.split(",") if s
+    ]
+    for label, extra in configs:
+        cfg = _compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
+        built = Built(cfg)
+        res = built.episode.run()
+        n = res.trace.n
+        rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
+        rows.append((label, float(np.median(res.trace.tick_us[:n])), rtf, res.status, res.fell, part_costs(built)))
+    table = Table(title=f"tick cost, {args.scenario}, {args.duration} s walk, 1 kHz control "
+                  f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
+    for col in ("loop", "tick µs (median)", "real-time factor", "status", "fell", "parts µs (median, isolated)"):
+        table.add_column(col)
+    for label, tick, rtf, status, fell, parts in rows:
+        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell),
+                      ", ".join(f"{k} {v:.1f}" for k, v in parts.items()))
+    Console().print(table)
+
+
+if __name__ == "__main__":
+    main()
