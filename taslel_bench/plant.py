@@ -186,7 +186,7 @@ class FootContactReader:
         found = block[:, 0]
         np.negative(block[:, 1:], out=self.forces_in_world)  # sensor: force by the foot; we want on it
         np.greater(found, 0.0, out=self.in_contact)
-        self.non_foot_contact = data.ncon > found.sum() and self._other_contact(data)
+        self.non_foot_contact = bool(data.ncon > found.sum()) and self._other_contact(data)
 
     def _other_contact(self, data: mujoco.MjData) -> bool:
         geom = data.contact.geom
