@@ -10,9 +10,11 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from taslel_bench.console import print_summary
+from taslel_bench.run import record_job_error
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 
@@ -24,7 +26,13 @@ def main(cfg: DictConfig) -> dict:
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if "/" not in k and not k.startswith("hydra")}
-    summary = run(cfg, out_dir, choices)
+    try:
+        summary = run(cfg, out_dir, choices)
+    except Exception as exc:
+        if hc.mode != RunMode.MULTIRUN:
+            raise  # a single run: the error (e.g. a bad value, naming the field) is the output
+        # in a sweep one bad job must not stop the others: leave an error summary the report lists
+        summary = record_job_error(out_dir, choices, cfg, exc)
     print_summary(summary, out_dir)
     return summary
 

@@ -203,4 +203,22 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
     return summary
 
 
+def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException) -> dict:
+    """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tb = traceback.format_exc()
+    recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
+    summary = {
+        "scenario": choices.get("scenario", ""),
+        "solver": choices.get("solver", ""),
+        "estimator": choices.get("estimator", ""),
+        "seed": int(cfg.seed) if str(cfg.get("seed", "")).isdigit() else -1,
+        "status": "error",
+        "message": f"{type(exc).__name__}: {exc}",
+        "fell": False,
+    }
+    recording.write_json(out_dir / recording.SUMMARY, summary)
+    return summary
+
+
 __all__ = ["run", "Built", "ConfigError", "FrictionMismatch", "check_friction"]

@@ -1,0 +1,262 @@
+"""Sweep report: ``python -m taslel_bench.report <sweep folder>`` (also run by the sweep callback).
+
+Writes ``report.md``, ``table.csv``, ``table.tex`` and PNG figures into the sweep folder: per scenario x
+solver x estimator (runs pooled over seeds) the fall rate with counts, violations, intervention, GRF error,
+QP timings with the shifted geometric mean relative to the best backend (as qpbenchmark reports it), and
+the machine and package versions. Every number says how it was measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import importlib.metadata
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from taslel_bench import recording
+from taslel_bench.sweep import SUMMARY_TABLE, aggregate
+
+SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
+GROUP = ["scenario", "solver", "estimator"]
+PACKAGES = ("mujoco", "pin", "numpy", "scipy", "qpsolvers", "osqp", "clarabel", "piqp", "proxsuite", "daqp",
+            "quadprog", "hydra-core", "pandas", "torch", "lightning")
+
+
+def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT_US) -> float:
+    """exp(mean(log(t + shift))) - shift over all solve times [µs]; robust to a few huge outliers and to
+    tiny times, as in qpbenchmark."""
+    v = np.asarray(values_us, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return float("nan")
+    return float(np.exp(np.mean(np.log(v + shift_us))) - shift_us)
+
+
+def machine_info() -> dict[str, str]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    versions = {}
+    for pkg in PACKAGES:
+        try:
+            versions[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    return {
+        "cpu": cpu,
+        "cores": str(os.cpu_count()),
+        "os": f"{platform.system()} {platform.release()}",
+        "python": platform.python_version(),
+        "packages": ", ".join(f"{k} {v}" for k, v in versions.items()),
+    }
+
+
+def _fall_rate(frame: pd.DataFrame) -> str:
+    ok = frame[frame["status"] == "ok"]
+    return f"{int(ok['fell'].sum())}/{len(ok)}" if len(ok) else "—"
+
+
+def _mean(frame: pd.DataFrame, col: str) -> float:
+    return float(frame[col].astype(float).mean()) if col in frame and frame[col].notna().any() else float("nan")
+
+
+def solve_times(sweep_dir: Path, frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Per solver: every tick's solve time [µs] from the runs' steps.parquet."""
+    out: dict[str, list[np.ndarray]] = {}
+    for _, row in frame.iterrows():
+        if row.get("solver") in (None, "none") or not isinstance(row.get("run_dir"), str):
+            continue
+        steps = sweep_dir / row["run_dir"] / recording.STEPS
+        if steps.is_file():
+            t = pd.read_parquet(steps, columns=["qp_solve_us"])["qp_solve_us"].to_numpy()
+            out.setdefault(str(row["solver"]), []).append(t[np.isfinite(t)])
+    return {k: np.concatenate(v) for k, v in out.items() if v}
+
+
+def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
+    times = solve_times(sweep_dir, frame)
+    shgeom = {s: shifted_geometric_mean(t) for s, t in times.items()}
+    best = min(shgeom.values()) if shgeom else float("nan")
+    rows = []
+    for keys, g in frame.groupby([c for c in GROUP if c in frame.columns], dropna=False):
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        row = dict(zip([c for c in GROUP if c in frame.columns], keys))
+        solver = str(row.get("solver", ""))
+        row.update({
+            "runs": len(g),
+            "errors": int((g["status"] == "error").sum()),
+            "fall_rate": _fall_rate(g),
+            "speed_mps": _mean(g, "mean_speed_mps"),
+            "intervention_nm": _mean(g, "intervention_nm_mean"),
+            "qp_failed_rate": _mean(g, "qp_failed_rate"),
+            "grf_mae_z_n": _mean(g, "grf_mae_z_n"),
+            "grf_mae_xy_n": _mean(g, "grf_mae_xy_n"),
+            "friction_ratio_p95": _mean(g, "friction_ratio_p95"),
+            "slip_mps_mean": _mean(g, "slip_mps_mean"),
+            "clearance_violation_rate": _mean(g, "clearance_violation_rate"),
+            "qp_solve_us_median": _mean(g, "qp_solve_us_median"),
+            "qp_solve_us_p99": _mean(g, "qp_solve_us_p99"),
+            "qp_shgeom_rel_best": shgeom.get(solver, float("nan")) / best if solver in shgeom else float("nan"),
+            "real_time_factor": _mean(g, "real_time_factor"),
+        })
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    made = []
+    times = solve_times(sweep_dir, frame)
+    if times:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        names = sorted(times)
+        ax.boxplot([times[n] for n in names], showfliers=False)
+        ax.set_xticks(range(1, len(names) + 1), names, rotation=20)
+        ax.set_yscale("log")
+        ax.set_ylabel("QP solve time per tick [µs]")
+        ax.set_title("QP solve-time distribution (backend timer, whiskers 1.5 IQR)")
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "qp_solve_times.png", dpi=120)
+        plt.close(fig)
+        made.append("qp_solve_times.png")
+    if "scenario" in table and len(table):
+        ok = frame[frame["status"] == "ok"]
+        rates = ok.groupby("scenario")["fell"].mean() if len(ok) else pd.Series(dtype=float)
+        if len(rates):
+            fig, ax = plt.subplots(figsize=(6, 3))
+            ax.bar(rates.index.astype(str), rates.to_numpy())
+            ax.set_ylim(0, 1)
+            ax.set_ylabel("fall rate")
+            ax.set_title("Fall rate per scenario (all solvers/estimators/seeds pooled)")
+            fig.tight_layout()
+            fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
+            plt.close(fig)
+            made.append("fall_rates.png")
+    made += _episode_figures(sweep_dir, frame, plt)
+    return made
+
+
+def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:  # noqa: ANN001
+    """The paper's figures from the first matching runs: lateral GRF of one stance foot with the filter
+    off vs on; swing-foot bottom height vs the obstacle profile."""
+    made = []
+    if "run_dir" not in frame:
+        return made
+    first = frame.iloc[0]
+    steps_path = sweep_dir / str(first["run_dir"]) / recording.STEPS
+    if steps_path.is_file():
+        steps = pd.read_parquet(steps_path)
+        leg = "FL"
+        t = steps["t_s"].to_numpy()
+        fig, ax = plt.subplots(figsize=(7, 3))
+        ax.plot(t, steps[f"{leg}_grf_plant_y_w_n"], label="MuJoCo contact force")
+        if steps[f"{leg}_grf_filter_y_w_n"].notna().any():
+            ax.plot(t, steps[f"{leg}_grf_filter_y_w_n"], "--", label="filter's lambda (prediction)")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"{leg} lateral force y [N]")
+        ax.set_title(f"{leg} lateral GRF, {first.get('scenario')} / {first.get('solver')} / seed {first.get('seed')}")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "grf_lateral.png", dpi=120)
+        plt.close(fig)
+        made.append("grf_lateral.png")
+        if steps[f"{leg}_clearance_m"].notna().any():
+            fig, ax = plt.subplots(figsize=(7, 3))
+            swing = steps[f"{leg}_clearance_m"].notna()
+            bottom = steps[f"{leg}_foot_z_w_m"] - 0.02
+            ax.plot(t, bottom, label="foot-sphere bottom z [m]")
+            ax.plot(t[swing], (bottom - steps[f"{leg}_clearance_m"])[swing], ".", ms=1, label="obstacle z(s)")
+            ax.set_xlabel("t [s]")
+            ax.legend()
+            ax.set_title(f"{leg} swing-foot height vs obstacle profile")
+            fig.tight_layout()
+            fig.savefig(sweep_dir / "clearance.png", dpi=120)
+            plt.close(fig)
+            made.append("clearance.png")
+    return made
+
+
+def _md_table(table: pd.DataFrame) -> str:
+    def fmt(v: object) -> str:
+        if isinstance(v, float):
+            return "—" if not np.isfinite(v) else f"{v:.3g}"
+        return str(v)
+
+    head = "| " + " | ".join(table.columns) + " |\n|" + "---|" * len(table.columns) + "\n"
+    return head + "".join("| " + " | ".join(fmt(v) for v in row) + " |\n" for row in table.itertuples(index=False))
+
+
+HOW_MEASURED = """
+How each column is measured (all plant quantities in MuJoCo, per run, then averaged over the runs of
+the row; `fall_rate` counts falls over runs that ended without error):
+- `speed_mps`: world-x displacement of the trunk from the start of walking / walking time.
+- `intervention_nm`: mean over ticks of ||u - u_nom||₂.
+- `grf_mae_*`: |filter lambda - MuJoCo contact force| over stance ticks with the foot in contact (>= 1 N).
+- `friction_ratio_p95`: 95th percentile of |f_t|/f_n of the plant contact force of stance feet.
+- `slip_mps_mean`: mean horizontal foot speed of stance feet in contact (finite difference over one tick).
+- `clearance_violation_rate`: swing ticks with the foot-sphere bottom below z(s) - 1 mm.
+- `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
+- `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
+  solver, divided by the best solver's; 1.0 = fastest.
+- `real_time_factor`: simulated time / wall time of the whole episode (jobs ran in parallel, so they
+  competed for the cores).
+"""
+
+
+def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
+    sweep_dir = Path(sweep_dir)
+    if frame is None:
+        frame = pd.read_parquet(sweep_dir / SUMMARY_TABLE) if (sweep_dir / SUMMARY_TABLE).is_file() else aggregate(sweep_dir)
+    table = summary_table(sweep_dir, frame) if not frame.empty else pd.DataFrame()
+    recording.atomic_write(sweep_dir / "table.csv", lambda p: table.to_csv(p, index=False))
+    recording.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
+    figures = _figures(sweep_dir, frame, table) if not frame.empty else []
+    info = machine_info()
+    lines = [
+        f"# taslel_bench sweep report\n",
+        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
+        f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
+        f"Packages: {info['packages']}\n",
+        "## Results per scenario × solver × estimator\n",
+        _md_table(table) if len(table) else "_no runs found_\n",
+        HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
+    ]
+    errors = frame[frame.get("status", pd.Series(dtype=str)) == "error"] if not frame.empty else frame
+    if len(errors):
+        lines.append("## Runs that ended in an error\n")
+        for _, r in errors.iterrows():
+            lines.append(f"- `{r.get('run_dir')}`: {r.get('message')}\n")
+    if figures:
+        lines.append("## Figures\n")
+        lines += [f"![{f}]({f})\n" for f in figures]
+    path = sweep_dir / "report.md"
+    recording.atomic_write(path, lambda p: p.write_text("\n".join(lines)))
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Aggregate a sweep folder and write its report.")
+    ap.add_argument("sweep_dir", type=Path)
+    args = ap.parse_args(argv)
+    if not args.sweep_dir.is_dir():
+        raise SystemExit(f"not a folder: {args.sweep_dir}")
+    frame = aggregate(args.sweep_dir)
+    print(write_report(args.sweep_dir, frame))
+
+
+if __name__ == "__main__":
+    main()

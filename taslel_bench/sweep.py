@@ -1,0 +1,75 @@
+"""Sweep aggregation: every run folder's ``summary.json`` -> one ``summary.parquet`` row per run, failed
+runs included, then the report. Called by Hydra at the end of a multirun (:class:`SweepCallback`, which
+gets no job results: it reads the sweep folder) and usable on any folder of runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig
+
+from taslel_bench import recording
+
+SUMMARY_TABLE = "summary.parquet"
+AXES = ("scenario", "solver", "estimator", "seed")
+
+
+def run_folders(sweep_dir: Path) -> list[Path]:
+    """Folders under ``sweep_dir`` that hold a job (its ``config.yaml`` or Hydra's ``.hydra``)."""
+    found = {p.parent for p in sweep_dir.rglob("summary.json")}
+    found |= {p.parent.parent for p in sweep_dir.rglob(".hydra/config.yaml")}
+    return sorted(found)
+
+
+def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
+    """A job folder without a summary: it crashed before finishing; say so, with what is known."""
+    row: dict[str, Any] = {"status": "error", "message": "job left no summary.json (crashed or killed)"}
+    overrides = run_dir / ".hydra" / "overrides.yaml"
+    if overrides.is_file():
+        for line in overrides.read_text().splitlines():
+            item = line.strip().lstrip("- ").strip()
+            if "=" in item:
+                key, value = item.split("=", 1)
+                if key in AXES:
+                    row[key] = value
+    tb = run_dir / "traceback.txt"
+    if tb.is_file():
+        row["message"] = tb.read_text().strip().splitlines()[-1]
+    return row
+
+
+def aggregate(sweep_dir: Path) -> pd.DataFrame:
+    """Write ``summary.parquet`` in ``sweep_dir`` (atomically) and return it."""
+    sweep_dir = Path(sweep_dir)
+    rows = []
+    for run_dir in run_folders(sweep_dir):
+        summary_path = run_dir / recording.SUMMARY
+        try:
+            row = json.loads(summary_path.read_text()) if summary_path.is_file() else _row_for_unfinished(run_dir)
+        except json.JSONDecodeError as exc:
+            row = {"status": "error", "message": f"unreadable summary.json: {exc}"}
+        row.pop("skipped", None)
+        row["run_dir"] = str(run_dir.relative_to(sweep_dir))
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    if not frame.empty:
+        frame = frame.sort_values([c for c in (*AXES, "run_dir") if c in frame.columns]).reset_index(drop=True)
+    recording.write_parquet(sweep_dir / SUMMARY_TABLE, frame)
+    return frame
+
+
+class SweepCallback(Callback):
+    """Hydra callback: aggregate the sweep folder and write the report when a multirun ends."""
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        from taslel_bench.report import write_report
+
+        sweep_dir = Path(config.hydra.sweep.dir)
+        frame = aggregate(sweep_dir)
+        report = write_report(sweep_dir, frame)
+        n_err = int((frame.get("status") == "error").sum()) if not frame.empty else 0
+        print(f"sweep: {len(frame)} runs ({n_err} with errors) -> {sweep_dir / SUMMARY_TABLE}, {report}")
