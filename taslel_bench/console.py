@@ -23,7 +23,7 @@ def _fmt(v: object) -> str:
 
 def print_summary(summary: dict, out_dir: Path) -> None:
     title = f"{summary.get('scenario')} · solver={summary.get('solver')} · estimator={summary.get('estimator')}"
-    title += f" · seed={summary.get('seed')}" + (" (already complete, skipped)" if summary.get("skipped") else "")
+    title += f" · seed={summary.get('seed')}"
     table = Table(title=title, show_header=True, header_style="bold")
     table.add_column("metric")
     table.add_column("value", justify="right")
@@ -35,3 +35,5 @@ def print_summary(summary: dict, out_dir: Path) -> None:
     console = Console(stderr=False)
     console.print(table)
     console.print(f"run folder: {out_dir}")
+    if summary.get("skipped"):
+        console.print("already complete, skipped (force=true reruns it)")

@@ -35,7 +35,7 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
             if "=" in item:
                 key, value = item.split("=", 1)
                 if key in AXES:
-                    row[key] = value
+                    row[key] = int(value) if key == "seed" and value.isdigit() else value
     tb = run_dir / "traceback.txt"
     if tb.is_file():
         row["message"] = tb.read_text().strip().splitlines()[-1]

@@ -1,0 +1,101 @@
+"""Recording, sweep aggregation, report, and a real `-m` sweep through Hydra (subprocess)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from mcap.reader import make_reader
+
+from taslel_bench.mcap_log import CHANNELS
+from taslel_bench.report import shifted_geometric_mean, write_report
+from taslel_bench.run import Built, run
+from taslel_bench.sweep import aggregate
+from tests.conftest import compose_cfg
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def mcap_counts(path: Path) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            json.loads(message.data)
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    return counts
+
+
+def test_mcap_reads_back_with_every_channel(tmp_path):
+    run(compose_cfg(["duration=0.3", "progress=false", "scenario=obstacle"]), tmp_path, {"solver": "daqp"})
+    counts = mcap_counts(tmp_path / "episode.mcap")
+    assert set(counts) == set(CHANNELS)
+    assert all(n > 0 for n in counts.values())
+    assert counts["/torques"] == 800  # one per control tick (0.5 s stand + 0.3 s)
+
+
+def test_run_that_raises_leaves_readable_mcap_and_error_summary(tmp_path, monkeypatch):
+    cfg = compose_cfg(["duration=1", "progress=false", "filter.enabled=false"])
+    original = Built.__init__
+
+    def sabotaged(self, cfg):
+        original(self, cfg)
+
+        def explode(model, data, t):
+            if t > 0.4:
+                raise RuntimeError("mid-episode fault")
+
+        self.scenario.on_tick = explode
+
+    monkeypatch.setattr(Built, "__init__", sabotaged)
+    summary = run(cfg, tmp_path)
+    assert summary["status"] == "error" and "mid-episode fault" in summary["message"]
+    assert (tmp_path / "traceback.txt").is_file()
+    counts = mcap_counts(tmp_path / "episode.mcap")
+    assert counts["/events"] >= 2 and counts["/base_state"] > 300
+
+
+def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
+    for seed in (0, 1):
+        run(compose_cfg(["duration=0.3", "progress=false", f"seed={seed}"]), tmp_path / f"seed={seed}",
+            {"scenario": "flat", "solver": "daqp", "estimator": "oracle"})
+    crashed = tmp_path / "seed=2" / ".hydra"
+    crashed.mkdir(parents=True)
+    (crashed / "config.yaml").write_text("seed: 2\n")
+    (crashed / "overrides.yaml").write_text("- seed=2\n")
+    frame = aggregate(tmp_path)
+    assert len(frame) == 3 and (frame["status"] == "error").sum() == 1
+    assert pd.read_parquet(tmp_path / "summary.parquet").shape[0] == 3
+    report = write_report(tmp_path, frame).read_text()
+    assert "| flat | daqp | oracle | 2 | 0 | 0/2 |" in report
+    assert "left no summary.json" in report
+    assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
+
+
+def test_shifted_geometric_mean():
+    assert shifted_geometric_mean([10.0, 10.0]) == pytest.approx(10.0)
+    # one huge outlier moves it far less than it moves the arithmetic mean
+    v = [20.0] * 99 + [1e6]
+    assert shifted_geometric_mean(v) < 0.01 * (sum(v) / len(v))
+
+
+@pytest.mark.slow
+def test_real_multirun_two_solvers(tmp_path):
+    """`python -m taslel_bench -m solver=osqp,clarabel` end to end (short episodes), then a resume."""
+    env = {**os.environ, "HYDRA_FULL_ERROR": "1"}
+    cmd = [sys.executable, "-m", "taslel_bench", "-m", "solver=osqp,clarabel", "duration=0.5", "progress=false",
+           f"hydra.sweep.dir={tmp_path}"]
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    table = pd.read_parquet(tmp_path / "summary.parquet")
+    assert sorted(table["solver"]) == ["clarabel", "osqp"] and (table["status"] == "ok").all()
+    assert (tmp_path / "report.md").is_file()
+    mcaps = sorted(tmp_path.glob("*/episode.mcap"))
+    assert len(mcaps) == 2 and all(min(mcap_counts(p).values()) > 0 for p in mcaps)
+    # same sweep again: both runs are complete, so they are skipped
+    again = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and again.stdout.count("already complete, skipped") == 2
