@@ -45,6 +45,20 @@ def layout_key(problem: QPProblem) -> tuple:
     )
 
 
+def invalid_data(problem: QPProblem) -> str | None:
+    """A reason if the problem holds NaN/inf where only finite numbers belong (some solvers loop forever
+    on NaN, e.g. ProxQP through qpsolvers), else None. One reduction per array in the common case."""
+    total = sum(float(np.sum(a)) for a in (problem.P, problem.q, problem.A, problem.b, problem.G, problem.h))
+    if not np.isfinite(total):
+        for label, a in (("P", problem.P), ("q", problem.q), ("A", problem.A), ("b", problem.b),
+                         ("G", problem.G), ("h", problem.h)):  # fmt: skip
+            if not np.all(np.isfinite(a)):
+                return f"error: non-finite values in {label}"
+    if np.isnan(np.sum(problem.lb)) or np.isnan(np.sum(problem.ub)):
+        return "error: NaN or wrong-signed infinity in lb/ub"
+    return None
+
+
 def package_version(dist: str) -> str:
     try:
         return metadata.version(dist)
@@ -88,4 +102,4 @@ def checked(
     )
 
 
-__all__ = ["SOLVED", "BackendSolution", "checked", "layout_key", "package_version"]
+__all__ = ["SOLVED", "BackendSolution", "checked", "invalid_data", "layout_key", "package_version"]

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from taslel_bench.interfaces import QPProblem
-from solvers.base import BackendSolution, checked, layout_key, package_version
+from solvers.base import BackendSolution, checked, invalid_data, layout_key, package_version
 from solvers.checks import Tolerances
 
 BIG = 1e20  # finite stand-in for an infinite bound, where a solver needs one
@@ -91,6 +91,9 @@ class PersistentBackend:
 
     def solve(self, problem: QPProblem) -> BackendSolution:
         t0 = time.perf_counter()
+        bad = invalid_data(problem)
+        if bad:  # keep the solver and its warm start: the next good tick continues from them
+            return BackendSolution(None, bad, 0.0, overhead_s=time.perf_counter() - t0)
         try:
             key = self._layout_key(problem)
             fresh = key != self._key

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from taslel_bench.interfaces import QPProblem
-from solvers.base import BackendSolution, checked, package_version
+from solvers.base import BackendSolution, checked, invalid_data, package_version
 from solvers.checks import Tolerances
 from solvers.presolve import Reduced, reduce
 from solvers.sparse import PatternCache
@@ -130,6 +130,9 @@ class QpsolversBackend:
         import qpsolvers
 
         t0 = time.perf_counter()
+        bad = invalid_data(problem)
+        if bad:
+            return BackendSolution(None, bad, 0.0, overhead_s=time.perf_counter() - t0)
         try:
             red = reduce(problem, self.bounds == "rows", self.presolve)
             qpp = self._qpsolvers_problem(red, problem)
