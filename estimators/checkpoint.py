@@ -38,6 +38,7 @@ def save_checkpoint(model: FrictionModel, path: str | Path, meta: dict[str, obje
             "x_std": n.x_std.tolist(),
             "y_mean": float(n.y_mean),
             "y_std": float(n.y_std),
+            "log_var_offset": float(n.log_var_offset),
         },
     }
     if js.is_file():  # keep metrics recorded earlier (evaluation) unless overwritten
@@ -56,5 +57,7 @@ def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel, dict[str, 
         raise FileNotFoundError(f"checkpoint {pt} / {js} not found; shipped checkpoints: {shipped}")
     meta = json.loads(js.read_text())
     model = build_model(ModelConfig(**meta["model"]))
-    model.load_state_dict(torch.load(pt, map_location="cpu", weights_only=True))
+    state = torch.load(pt, map_location="cpu", weights_only=True)
+    state.setdefault("norm.log_var_offset", torch.tensor(0.0))  # checkpoints from before calibration
+    model.load_state_dict(state)
     return model.eval(), meta

@@ -77,6 +77,8 @@ class Normaliser(nn.Module):
         self.register_buffer("x_std", torch.ones(N_FEATURES))
         self.register_buffer("y_mean", torch.tensor(0.0))
         self.register_buffer("y_std", torch.tensor(1.0))
+        # added to the predicted log-variance: log of the variance scale fitted on validation data
+        self.register_buffer("log_var_offset", torch.tensor(0.0))
 
     @torch.no_grad()
     def fit(self, x: torch.Tensor, y: torch.Tensor) -> None:
@@ -86,6 +88,21 @@ class Normaliser(nn.Module):
         self.x_std.copy_(flat.std(0).clamp_min(1e-6).float())
         self.y_mean.copy_(y.double().mean().float())
         self.y_std.copy_(y.double().std().clamp_min(1e-6).float())
+
+
+@torch.no_grad()
+def calibrate_variance(model: "FrictionModel", x: torch.Tensor, y: torch.Tensor, batch: int = 512) -> float:
+    """Scale the predicted variance so the Gaussian NLL on (x, y) is minimal (closed form:
+    s = mean((y - mean)^2 / var)); stores log s in the model and returns s (variance scale)."""
+    model.eval()
+    model.norm.log_var_offset.zero_()
+    ratios = []
+    for i in range(0, len(y), batch):
+        mean, log_var = model(x[i : i + batch])
+        ratios.append((y[i : i + batch] - mean) ** 2 * torch.exp(-log_var))
+    s = float(torch.cat(ratios).mean())
+    model.norm.log_var_offset.fill_(math.log(max(s, 1e-6)))
+    return s
 
 
 class FrictionModel(nn.Module):
@@ -108,7 +125,7 @@ class FrictionModel(nn.Module):
         z = (x - self.norm.x_mean) / self.norm.x_std
         out = self.encode(z)
         mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
-        log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std)
+        log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
         return mean, log_var
 
 

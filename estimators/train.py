@@ -10,6 +10,7 @@ validation MAE) is exported to ``estimators/checkpoints/<estimator>.pt/.json`` w
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -22,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from estimators.checkpoint import CHECKPOINT_DIR, save_checkpoint
 from estimators.data import WindowDataModule
-from estimators.models import VARIANTS, FrictionModel, ModelConfig, build_model, parameter_count
+from estimators.models import VARIANTS, FrictionModel, ModelConfig, build_model, calibrate_variance, parameter_count
 
 LOSSES = ("mae+nll", "nll", "mae")
 
@@ -30,13 +31,18 @@ DEFAULTS: dict[str, object] = {
     "estimator": "linformer",
     "data_dir": "/work/data/estimators",
     "runs_dir": "/work/data/runs",
-    "export": True,  # write estimators/checkpoints/<estimator>.*
+    "export": True,  # write the best model to <export_dir>/<name>.pt/.json
+    "export_dir": None,  # default: estimators/checkpoints (the shipped ones)
+    "name": None,  # default: the estimator name
     "seed": 0,
     "threads": 2,
     "batch_size": 128,
     "lr": 1e-3,
     "weight_decay": 1e-4,
     "loss": "mae+nll",
+    # training-time augmentation: per-window torque scale ~ log-uniform(range) (payload / motor strength
+    # change the torque readings), and Gaussian noise of noise_std x the feature's std on every feature
+    "augment": {"tau_scale": [1.0, 1.0], "noise_std": 0.0},
     "model": {},
     "trainer": {"max_epochs": 60, "max_minutes": 13.0, "patience": 8, "fast_dev_run": False},
 }
@@ -63,7 +69,8 @@ class FrictionTask(L.LightningModule):
     """
 
     def __init__(self, model_cfg: dict[str, object], lr: float = 1e-3, weight_decay: float = 1e-4,
-                 loss: str = "mae+nll") -> None:
+                 loss: str = "mae+nll", tau_scale: tuple[float, float] = (1.0, 1.0),
+                 noise_std: float = 0.0) -> None:
         super().__init__()
         if loss not in LOSSES:
             raise ValueError(f"unknown loss {loss!r}; valid choices: {', '.join(LOSSES)}")
@@ -73,8 +80,20 @@ class FrictionTask(L.LightningModule):
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.model(x)
 
+    def augment(self, x: torch.Tensor) -> torch.Tensor:
+        """Training-only augmentation of raw windows (B, T, 36): torque scale and feature noise."""
+        lo, hi = self.hparams.tau_scale
+        if hi > lo:
+            log_s = torch.empty(x.shape[0], 1, 1, device=x.device).uniform_(math.log(lo), math.log(hi))
+            x = torch.cat([x[..., :24], x[..., 24:] * torch.exp(log_s)], dim=-1)
+        if self.hparams.noise_std > 0:
+            x = x + torch.randn_like(x) * self.hparams.noise_std * self.model.norm.x_std
+        return x
+
     def _loss(self, batch: tuple[torch.Tensor, torch.Tensor], stage: str) -> torch.Tensor:
         x, y = batch
+        if stage == "train":
+            x = self.augment(x)
         mean, log_var = self.model(x)
         mae = (mean - y).abs().mean()
         if self.hparams.loss == "mae":
@@ -118,9 +137,12 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     L.seed_everything(int(cfg.seed), workers=True)
     dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size))
     dm.setup("fit")
-    task = FrictionTask(OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss)  # type: ignore[arg-type]
+    task = FrictionTask(
+        OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss,  # type: ignore[arg-type]
+        tuple(cfg.augment.tau_scale), float(cfg.augment.noise_std),
+    )
     task.model.norm.fit(*dm.tensors["train"])
-    run_dir = Path(cfg.runs_dir) / str(cfg.estimator)
+    run_dir = Path(cfg.runs_dir) / str(cfg.name or cfg.estimator)
     tcfg = cfg.trainer
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", monitor="val_mae", mode="min", save_top_k=1)
     trainer = L.Trainer(
@@ -135,18 +157,21 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
                    TQDMProgressBar(refresh_rate=20)],
         enable_model_summary=False,
     )
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     trainer.fit(task, datamodule=dm)
-    train_s = time.perf_counter() - t0
+    train_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
     if ckpt.best_model_path:
         state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=True)["state_dict"]
         task.load_state_dict(state)
+    var_scale = calibrate_variance(task.model, *dm.tensors["val"]) if not bool(tcfg.fast_dev_run) else 1.0
     record: dict[str, object] = {
         "train_wall_time_s": round(train_s, 2),
+        "train_cpu_time_s": round(cpu_s, 2),  # this process, all threads (the CPU is shared)
         "epochs": int(trainer.current_epoch),
         "global_steps": int(trainer.global_step),
         "best_val_mae": float(ckpt.best_model_score) if ckpt.best_model_score is not None else None,
         "train_windows": int(len(dm.tensors["train"][1])),
+        "variance_scale_fitted_on_val": var_scale,
         "parameters": parameter_count(task.model),
         "torch_threads": int(cfg.threads),
         "versions": {"torch": torch.__version__, "lightning": L.__version__},
@@ -154,7 +179,8 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     }
     if bool(cfg.export) and not bool(tcfg.fast_dev_run):
         task.model.eval()
-        out = save_checkpoint(task.model, CHECKPOINT_DIR / str(cfg.estimator), {"training": record})
+        export_dir = Path(cfg.export_dir) if cfg.export_dir else CHECKPOINT_DIR
+        out = save_checkpoint(task.model, export_dir / str(cfg.name or cfg.estimator), {"training": record})
         print(f"exported {out}")
     return task, record
 
