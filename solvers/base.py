@@ -8,7 +8,7 @@ from importlib import metadata
 import numpy as np
 
 from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution
-from solvers.checks import Residuals, Tolerances, residuals, verdict
+from solvers.checks import Residuals, Tolerances, residuals_at_level, verdict
 
 
 @dataclass
@@ -91,11 +91,11 @@ def checked(
             None, native_status or "failed", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
     x = np.array(x, dtype=float, copy=True)
-    if not np.all(np.isfinite(x)):
+    if not np.isfinite(x.sum()):
         return BackendSolution(
             None, "non-finite solution", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
-    res = residuals(problem, x, y, z, z_box)
+    res = residuals_at_level(problem, x, y, z, z_box, tol.level)
     status = verdict(res, tol)
     return BackendSolution(
         x, status, solve_time_s, iterations, setup_time_s, overhead_s, native_status, res, y, z, z_box

@@ -22,13 +22,25 @@ import numpy as np
 from taslel_bench.interfaces import SOLVED, QPProblem
 
 
+LEVELS = ("kkt", "primal", "none")
+
+
 @dataclass(frozen=True)
 class Tolerances:
-    """Acceptance thresholds (absolute, infinity norm) for a solution that a solver calls optimal."""
+    """Acceptance thresholds (absolute, infinity norm) for a solution that a solver calls optimal.
+
+    ``level``: ``"kkt"`` checks primal residual, dual residual and duality gap (needed for iterative
+    methods: OSQP, ProxQP, interior points); ``"primal"`` only the primal residual (cheaper, enough to catch
+    garbage from an exact active-set method); ``"none"`` trusts the solver."""
 
     primal: float = 1e-6  # max(|Ax - b|, [Gx - h]+, bound violation)
     dual: float = 1e-5  # |Px + q + A'y + G'z + z_box|
     gap: float = 1e-5  # duality gap [same unit as the cost: (N·m)²]
+    level: str = "kkt"
+
+    def __post_init__(self) -> None:
+        if self.level not in LEVELS:
+            raise ValueError(f"check level {self.level!r}; valid: {', '.join(LEVELS)}")
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -45,11 +57,11 @@ def primal_residual(problem: QPProblem, x: np.ndarray) -> float:
     """Largest violation of A x = b, G x <= h and lb <= x <= ub."""
     r = 0.0
     if problem.A.shape[0]:
-        r = float(np.max(np.abs(problem.A @ x - problem.b)))
+        r = float(np.abs(problem.A @ x - problem.b).max())
     if problem.G.shape[0]:
-        r = max(r, float(np.max(problem.G @ x - problem.h)))
-    r = max(r, float(np.max(problem.lb - x)), float(np.max(x - problem.ub)))
-    return max(r, 0.0)
+        r = max(r, float((problem.G @ x - problem.h).max()))
+    r = max(r, float((problem.lb - x).max()), float((x - problem.ub).max()))
+    return r if r == r else float("nan")
 
 
 def residuals(
@@ -63,23 +75,34 @@ def residuals(
     rp = primal_residual(problem, x)
     if y is None or z is None or z_box is None:
         return Residuals(rp, float("nan"), float("nan"))
-    z = np.where(np.any(problem.G != 0.0, axis=1), z, 0.0)
+    if z.size:
+        z = z * problem.G.any(axis=1)  # inert all-zero rows: constant, not constraints
     Px = problem.P @ x
-    rd = float(np.max(np.abs(Px + problem.q + problem.A.T @ y + problem.G.T @ z + z_box)))
-    fin_l, fin_u = np.isfinite(problem.lb), np.isfinite(problem.ub)
-    gap = (
-        x @ Px
-        + problem.q @ x
-        + problem.b @ y
-        + problem.h @ z
-        + problem.lb[fin_l] @ np.minimum(z_box[fin_l], 0.0)
-        + problem.ub[fin_u] @ np.maximum(z_box[fin_u], 0.0)
-    )
+    stat = Px + problem.q
+    stat += y @ problem.A
+    stat += z @ problem.G
+    stat += z_box
+    rd = float(np.abs(stat).max())
+    # bound terms: lb * min(z_box, 0) + ub * max(z_box, 0), with 0 * inf read as 0
+    zb_bound = np.where(z_box < 0.0, problem.lb, problem.ub)
+    active = z_box != 0.0
+    gap = x @ Px + problem.q @ x + problem.b @ y + problem.h @ z + zb_bound[active] @ z_box[active]
     return Residuals(rp, rd, float(abs(gap)))
 
 
-def verdict(res: Residuals, tol: Tolerances) -> str:
+def residuals_at_level(problem: QPProblem, x: np.ndarray, y, z, z_box, level: str) -> Residuals | None:
+    """:func:`residuals` with only what ``level`` asks for (None for level "none")."""
+    if level == "none":
+        return None
+    if level == "primal":
+        return Residuals(primal_residual(problem, x), float("nan"), float("nan"))
+    return residuals(problem, x, y, z, z_box)
+
+
+def verdict(res: Residuals | None, tol: Tolerances) -> str:
     """``"solved"`` if every available residual is within tolerance, else a short reason."""
+    if res is None:
+        return SOLVED
     if not np.isfinite(res.primal) or res.primal > tol.primal:
         return f"inaccurate: primal residual {res.primal:.1e} > {tol.primal:.0e}"
     if not np.isnan(res.dual) and not res.dual <= tol.dual:

@@ -6,6 +6,9 @@ solution. The filter overwrites one :class:`QPProblem` in place every tick, so s
 they keep. A layout change (e.g. a problem without ECBF rows after one with) triggers a new setup;
 :meth:`reset` forgets the solver and the warm start.
 
+After a failed solve the backend resets itself, so the next tick sets up from scratch instead of warm
+starting from a failed (possibly NaN) iterate.
+
 Subclasses implement :meth:`_setup`, :meth:`_update` and :meth:`_solve`.
 """
 
@@ -43,6 +46,7 @@ class PersistentBackend:
 
     name = "persistent"
     package = ""
+    validate_input = False  # check the problem for NaN/inf first (for solvers that hang on NaN)
 
     def __init__(self, settings: Mapping[str, Any] | None = None, check: Mapping[str, float] | None = None,
                  warm_start: bool = True) -> None:  # fmt: skip
@@ -91,7 +95,7 @@ class PersistentBackend:
 
     def solve(self, problem: QPProblem) -> BackendSolution:
         t0 = time.perf_counter()
-        bad = invalid_data(problem)
+        bad = invalid_data(problem) if self.validate_input else None
         if bad:  # keep the solver and its warm start: the next good tick continues from them
             return BackendSolution(None, bad, 0.0, overhead_s=time.perf_counter() - t0)
         try:
@@ -117,5 +121,7 @@ class PersistentBackend:
             problem, res.x, res.ok, res.status, self.tol, t3 - t1, y=res.y, z=res.z, z_box=res.z_box,
             iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0,
         )  # fmt: skip
+        if not out.ok:  # never warm start from a failed (possibly NaN) iterate: set up afresh next tick
+            self.reset()
         out.overhead_s += time.perf_counter() - t3
         return out

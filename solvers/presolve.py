@@ -80,14 +80,14 @@ def kept_rows(problem: QPProblem, drop_implied: bool) -> np.ndarray:
 
 
 def reduce(problem: QPProblem, bounds_as_rows: bool, drop_implied: bool) -> Reduced:
-    """Build the solver-side problem (copies: the filter overwrites its arrays every tick)."""
+    """Build the solver-side problem. P, q, A, b (and lb, ub in native mode) are the caller's arrays, not
+    copies: fine for a solver that is set up and run within one call."""
     g_rows = kept_rows(problem, drop_implied)
     G, h, mask = problem.G[g_rows], problem.h[g_rows], problem.G_pattern[g_rows]
     empty = np.zeros(0, dtype=int)
     if not bounds_as_rows:
         return Reduced(
-            problem.P.copy(), problem.q.copy(), problem.A.copy(), problem.b.copy(), G, h,
-            problem.lb.copy(), problem.ub.copy(), g_rows, empty, empty, mask,
+            problem.P, problem.q, problem.A, problem.b, G, h, problem.lb, problem.ub, g_rows, empty, empty, mask,
         )  # fmt: skip
     up = np.flatnonzero(np.isfinite(problem.ub))
     lo = np.flatnonzero(np.isfinite(problem.lb))
@@ -96,6 +96,6 @@ def reduce(problem: QPProblem, bounds_as_rows: bool, drop_implied: bool) -> Redu
     h = np.concatenate([h, problem.ub[up], -problem.lb[lo]])
     mask = np.vstack([mask, eye[up] != 0.0, eye[lo] != 0.0])
     return Reduced(
-        problem.P.copy(), problem.q.copy(), problem.A.copy(), problem.b.copy(), G, h, None, None,
+        problem.P, problem.q, problem.A, problem.b, G, h, None, None,
         g_rows, up, lo, mask,
     )  # fmt: skip

@@ -38,6 +38,7 @@ DEFAULT_SETTINGS: dict[str, Any] = {
 class ProxqpPersistent(PersistentBackend):
     name = "proxqp_persistent"
     package = "proxsuite"
+    validate_input = True  # ProxQP loops (practically) forever on NaN input
 
     def __init__(self, settings: dict[str, Any] | None = None, **kwargs: Any) -> None:
         super().__init__({**DEFAULT_SETTINGS, **dict(settings or {})}, **kwargs)

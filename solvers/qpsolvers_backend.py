@@ -20,6 +20,8 @@ from solvers.sparse import PatternCache
 NATIVE_BOX = frozenset({"daqp", "proxqp", "piqp", "highs", "qpalm", "qpswift", "hpipm"})
 # Solvers that need the implied swing-foot friction rows removed (see solvers.presolve).
 NEEDS_PRESOLVE = frozenset({"quadprog"})
+# Solvers that (practically) never return on NaN input: the problem is checked for NaN/inf first.
+HANG_ON_NAN = frozenset({"proxqp"})
 # qpsolvers distribution name -> Python distribution to report the version of.
 DISTRIBUTIONS = {"proxqp": "proxsuite", "highs": "highspy", "qpalm": "qpalm", "kvxopt": "kvxopt"}
 
@@ -130,7 +132,7 @@ class QpsolversBackend:
         import qpsolvers
 
         t0 = time.perf_counter()
-        bad = invalid_data(problem)
+        bad = invalid_data(problem) if self.solver in HANG_ON_NAN else None
         if bad:
             return BackendSolution(None, bad, 0.0, overhead_s=time.perf_counter() - t0)
         try:

@@ -146,7 +146,7 @@ def test_solve_never_raises_on_garbage_or_infeasible(qps):
     infeasible.h[row] = -1.0  # a swing foot (lambda_i = 0) asked to push with 1 N
     for name in available_backends():
         backend = make_backend(name)
-        assert backend.solve(nan).status.startswith("error: non-finite"), name
+        assert not backend.solve(nan).ok, name
         assert not backend.solve(infeasible).ok, name
 
 
