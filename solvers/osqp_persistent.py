@@ -20,12 +20,15 @@ from taslel_bench.interfaces import QPProblem
 from solvers.persistent import NativeResult, PersistentBackend
 from solvers.sparse import PatternCSC
 
-# Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one,
-# and polishing (one active-set refinement step that makes the answer exact when it succeeds).
+# Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
+# Measured on 1500 consecutive episode QPs: eps_abs 1e-6 -> max |du| 2e-5 N·m (polishing changes nothing
+# but costs ~25 % time); 1e-7 -> 2e-6 N·m at about the same speed; 1e-5 -> 56 answers rejected by the check.
+# Termination is tested every 5 iterations instead of 25 (fewer wasted iterations when warm started).
 DEFAULT_SETTINGS: dict[str, Any] = {
-    "eps_abs": 1e-6,
+    "eps_abs": 1e-7,
     "eps_rel": 0.0,
-    "polishing": True,
+    "polishing": False,
+    "check_termination": 5,
     "max_iter": 20000,
     "verbose": False,
 }
