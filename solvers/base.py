@@ -7,8 +7,8 @@ from importlib import metadata
 
 import numpy as np
 
-from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution
 from solvers.checks import Residuals, Tolerances, residuals_at_level, verdict
+from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution
 
 
 @dataclass

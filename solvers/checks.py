@@ -21,7 +21,6 @@ import numpy as np
 
 from taslel_bench.interfaces import SOLVED, QPProblem
 
-
 LEVELS = ("kkt", "primal", "none")
 
 
@@ -61,7 +60,7 @@ def primal_residual(problem: QPProblem, x: np.ndarray) -> float:
     if problem.G.shape[0]:
         r = max(r, float((problem.G @ x - problem.h).max()))
     r = max(r, float((problem.lb - x).max()), float((x - problem.ub).max()))
-    return r if r == r else float("nan")
+    return float("nan") if np.isnan(r) else r
 
 
 def residuals(

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.persistent import NativeResult, PersistentBackend
+from taslel_bench.interfaces import QPProblem
 
 DAQP_INF = 1e30
 DEFAULT_SETTINGS: dict[str, Any] = {}  # exact active-set method: the defaults are accurate here

@@ -31,9 +31,17 @@ def save(path: Path, problems: list[QPProblem], x_ref: np.ndarray, ticks: np.nda
     """Write ``problems`` (one layout) to ``path``."""
     p0 = problems[0]
     for p in problems:
-        if p.A.shape != p0.A.shape or p.G.shape != p0.G.shape or not np.array_equal(p.A_pattern, p0.A_pattern):
+        if (
+            p.A.shape != p0.A.shape
+            or p.G.shape != p0.G.shape
+            or not np.array_equal(p.A_pattern, p0.A_pattern)
+        ):
             raise ValueError("all QPs of a fixture must share one layout")
-        if not np.array_equal(p.P, p0.P) or not np.array_equal(p.lb, p0.lb) or not np.array_equal(p.ub, p0.ub):
+        if (
+            not np.array_equal(p.P, p0.P)
+            or not np.array_equal(p.lb, p0.lb)
+            or not np.array_equal(p.ub, p0.ub)
+        ):
             raise ValueError("P, lb and ub must be constant over the fixture")
     layout = {k: [s.start, s.stop] for k, s in p0.layout.items()}
     np.savez_compressed(
@@ -61,13 +69,27 @@ def load(path: Path | str = DEFAULT_PATH) -> QPSet:
             G[d["G_pattern"]] = d["G_values"][i]
             problems.append(
                 QPProblem(
-                    d["P"].copy(), d["q"][i].copy(), A, d["b"][i].copy(), G, d["h"][i].copy(),
-                    d["lb"].copy(), d["ub"].copy(), d["P_pattern"], d["A_pattern"], d["G_pattern"],
-                    dict(layout), [str(s) for s in d["row_labels"]],
-                )  # fmt: skip
+                    d["P"].copy(),
+                    d["q"][i].copy(),
+                    A,
+                    d["b"][i].copy(),
+                    G,
+                    d["h"][i].copy(),
+                    d["lb"].copy(),
+                    d["ub"].copy(),
+                    d["P_pattern"],
+                    d["A_pattern"],
+                    d["G_pattern"],
+                    dict(layout),
+                    [str(s) for s in d["row_labels"]],
+                )
             )
         return QPSet(
-            problems, d["x_ref"].copy(), d["ticks"].copy(), [str(t) for t in d["tags"]], json.loads(str(d["meta"]))
+            problems,
+            d["x_ref"].copy(),
+            d["ticks"].copy(),
+            [str(t) for t in d["tags"]],
+            json.loads(str(d["meta"])),
         )
 
 

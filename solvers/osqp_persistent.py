@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from taslel_bench.interfaces import QPProblem
 from solvers.persistent import NativeResult, PersistentBackend
 from solvers.sparse import PatternCSC
+from taslel_bench.interfaces import QPProblem
 
 # Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
 # Measured on 1500 consecutive episode QPs: eps_abs 1e-6 -> max |du| 2e-5 N·m (polishing changes nothing
@@ -95,7 +95,9 @@ class OsqpPersistent(PersistentBackend):
         ok = r.info.status_val == osqp.SolverStatus.OSQP_SOLVED
         if not ok:
             low = status.lower()
-            reason = "infeasible" if "infeasible" in low else "max_iter" if "max" in low else f"failed: {status}"
+            reason = (
+                "infeasible" if "infeasible" in low else "max_iter" if "max" in low else f"failed: {status}"
+            )
             return NativeResult(None, False, reason, int(r.info.iter))
         m_eq, m_in = self._m_eq, self._m_in
         z_box = np.zeros(self._n)

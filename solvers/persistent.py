@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.base import BackendSolution, checked, invalid_data, layout_key, package_version
 from solvers.checks import Tolerances
+from taslel_bench.interfaces import QPProblem
 
 BIG = 1e20  # finite stand-in for an infinite bound, where a solver needs one
 
@@ -114,7 +114,7 @@ class PersistentBackend:
             t2 = time.perf_counter()
             res = self._solve()
             t3 = time.perf_counter()
-        except Exception as exc:  # a native failure must not end the episode
+        except Exception as exc:  # a native failure must not end the episode  # noqa: BLE001
             self.reset()
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
         out = checked(

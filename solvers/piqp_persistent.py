@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.base import layout_key
 from solvers.persistent import NativeResult, PersistentBackend
 from solvers.sparse import PatternCSC
+from taslel_bench.interfaces import QPProblem
 
 DEFAULT_SETTINGS: dict[str, Any] = {"eps_abs": 1e-9, "eps_rel": 0.0, "verbose": False}
 
@@ -85,7 +85,13 @@ class PiqpPersistent(PersistentBackend):
         iters = int(r.info.iter)
         if status != piqp.Status.PIQP_SOLVED:
             low = str(status).lower()
-            reason = "infeasible" if "infeasible" in low else "max_iter" if "max_iter" in low else f"failed: {status}"
+            reason = (
+                "infeasible"
+                if "infeasible" in low
+                else "max_iter"
+                if "max_iter" in low
+                else f"failed: {status}"
+            )
             return NativeResult(None, False, reason, iters)
         z = np.zeros(self._m_in)
         z[self._rows] = np.asarray(r.z_u) - np.asarray(r.z_l)

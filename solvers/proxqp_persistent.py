@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.persistent import NativeResult, PersistentBackend
+from taslel_bench.interfaces import QPProblem
 
 DEFAULT_SETTINGS: dict[str, Any] = {
     "eps_abs": 1e-9,
@@ -91,7 +91,13 @@ class ProxqpPersistent(PersistentBackend):
             self.cold_retries += 1
         if status != proxqp.QPSolverOutput.PROXQP_SOLVED:
             low = str(status).lower()
-            reason = "infeasible" if "infeasible" in low else "max_iter" if "max_iter" in low else f"failed: {status}"
+            reason = (
+                "infeasible"
+                if "infeasible" in low
+                else "max_iter"
+                if "max_iter" in low
+                else f"failed: {status}"
+            )
             return NativeResult(None, False, reason, iters)
         z = np.array(r.z)
         return NativeResult(

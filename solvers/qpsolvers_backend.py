@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.base import BackendSolution, checked, invalid_data, package_version
 from solvers.checks import Tolerances
 from solvers.presolve import Reduced, reduce
 from solvers.sparse import PatternCache
+from taslel_bench.interfaces import QPProblem
 
 # Solvers whose qpsolvers interface passes lb/ub to the native solver (others turn them into G rows,
 # infinite ones included): for the rest we pass only the finite bounds, as rows.
@@ -82,9 +82,13 @@ class QpsolversBackend:
 
         available = installed_solvers()
         if solver not in available:
-            raise ValueError(f"qpsolvers solver {solver!r} is not installed; available: {', '.join(available)}")
+            raise ValueError(
+                f"qpsolvers solver {solver!r} is not installed; available: {', '.join(available)}"
+            )
         if matrices not in ("auto", "dense", "sparse") or bounds not in ("auto", "native", "rows"):
-            raise ValueError(f"matrices={matrices!r} (auto|dense|sparse), bounds={bounds!r} (auto|native|rows)")
+            raise ValueError(
+                f"matrices={matrices!r} (auto|dense|sparse), bounds={bounds!r} (auto|native|rows)"
+            )
         if matrices == "auto":
             matrices = "dense" if solver in qpsolvers.dense_solvers else "sparse"
         if matrices == "sparse" and solver not in qpsolvers.sparse_solvers:
@@ -138,7 +142,7 @@ class QpsolversBackend:
         try:
             red = reduce(problem, self.bounds == "rows", self.presolve)
             qpp = self._qpsolvers_problem(red, problem)
-        except Exception as exc:  # malformed problem: report, do not raise
+        except Exception as exc:  # malformed problem: report, do not raise  # noqa: BLE001
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
         t1 = time.perf_counter()
         try:
@@ -146,7 +150,7 @@ class QpsolversBackend:
                 warnings.simplefilter("ignore")  # failures are reported through the status instead
                 sol = qpsolvers.solve_problem(qpp, solver=self.solver, **self.settings)
             t2 = time.perf_counter()
-        except Exception as exc:  # qpsolvers raises ProblemError / SolverError on some failures
+        except Exception as exc:  # qpsolvers raises ProblemError / SolverError on some failures  # noqa: BLE001
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t1)
         overhead = t1 - t0
         z, z_box = red.original_duals(problem.n, problem.G.shape[0], sol.z, sol.z_box)

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from taslel_bench.interfaces import QPProblem
 from solvers.fixture import DEFAULT_PATH, save
 from solvers.reference import reference_backend
+from taslel_bench.interfaces import QPProblem
 
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
 BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 - s)²
@@ -36,7 +36,7 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
 
     from taslel_bench import plant, robot
     from taslel_bench.bridge import StateBridge
-    from taslel_bench.constraints import U, TickInputs
+    from taslel_bench.constraints import TickInputs, U
     from taslel_bench.controller import NominalController, PDGains
     from taslel_bench.gait import GaitParams
     from taslel_bench.interfaces import ClearanceProfile
@@ -56,7 +56,7 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
     settings = FilterSettings()
     sf = SafetyFilter(settings, backend, ClearanceProfile(BUMP))
     qps, xs = [], []
-    for k in range(int(round(seconds * 1000))):
+    for k in range(round(seconds * 1000)):
         t = k * 1e-3
         u_nom = ctl.compute(t, d.qpos[bridge.joint_qadr], d.qvel[bridge.joint_dadr])
         v = bridge.v_pin(d.qpos, d.qvel)

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from taslel_bench.interfaces import QPBackend, QPProblem
 from solvers.base import BackendSolution
 from solvers.qpsolvers_backend import QpsolversBackend
+from taslel_bench.interfaces import QPBackend, QPProblem
 
 TIGHT_CHECK = {"primal": 1e-8, "dual": 1e-8, "gap": 1e-8}
 

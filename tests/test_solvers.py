@@ -132,7 +132,9 @@ def test_suboptimal_feasible_answer_is_caught(qps, monkeypatch):
     x_bad = good.x + d
     assert residuals(p, x_bad).primal <= 1e-9  # still feasible: only optimality is wrong
     monkeypatch.setattr(
-        DaqpPersistent, "_solve", lambda self: NativeResult(x_bad, True, "patched", 1, good.y, good.z, good.z_box)
+        DaqpPersistent,
+        "_solve",
+        lambda self: NativeResult(x_bad, True, "patched", 1, good.y, good.z, good.z_box),
     )
     bad = backend.solve(p)
     assert not bad.ok and bad.status.startswith("inaccurate: dual")
