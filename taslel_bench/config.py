@@ -67,6 +67,8 @@ def validate(cfg: DictConfig) -> None:
     f = "filter"
     _check(_num(cfg, f"{f}.regularization") > 0, f"{f}.regularization", cfg.filter.regularization, "must be > 0")
     _check(_num(cfg, f"{f}.lambda_min_n") >= 0, f"{f}.lambda_min_n", cfg.filter.lambda_min_n, "must be >= 0 N")
+    _check(_num(cfg, f"{f}.contact_velocity_gain") >= 0, f"{f}.contact_velocity_gain",
+           cfg.filter.contact_velocity_gain, "must be >= 0 1/s")
     for key in ("alpha1", "alpha2"):
         _check(_num(cfg, f"{f}.ecbf.{key}") > 0, f"{f}.ecbf.{key}", cfg.filter.ecbf[key], "must be > 0 1/s")
     _check(cfg.filter.fallback in FALLBACKS, f"{f}.fallback", cfg.filter.fallback,

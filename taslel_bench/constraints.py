@@ -75,10 +75,14 @@ class EquationsOfMotion(EqualityFamily):
 
 
 class ContactOrSwing(EqualityFamily):
-    """Per foot, 3 rows: stance -> J_i vdot = -J̇_i v (foot centre does not accelerate);
+    """Per foot, 3 rows: stance -> J_i vdot = -J̇_i v - k_v J_i v (the paper's eq. 3 for k_v = 0: the foot
+    centre does not accelerate; k_v > 0 [1/s] also brakes a foot that touched down sliding);
     swing -> lambda_i = 0."""
 
     name, n_rows = "contact", NL
+
+    def __init__(self, velocity_gain: float = 0.0) -> None:
+        self.velocity_gain = velocity_gain  # [1/s]
 
     def pattern(self, mask: np.ndarray) -> None:
         for i in range(robot.N_LEGS):
@@ -96,7 +100,10 @@ class ContactOrSwing(EqualityFamily):
         rows = slice(self.start, self.start + NL)
         np.multiply(x.model.foot_jac_in_world.reshape(NL, NV), sr[:, None], out=qp.A[rows, VDOT])
         qp.A[self._diag] = 1.0 - sr
-        np.multiply(x.model.foot_jdotv_in_world.reshape(NL), -sr, out=qp.b[rows])
+        rhs = x.model.foot_jdotv_in_world.reshape(NL)
+        if self.velocity_gain:
+            rhs = rhs + self.velocity_gain * x.model.foot_vel_in_world.reshape(NL)
+        np.multiply(rhs, -sr, out=qp.b[rows])
 
 
 class FrictionCone:

@@ -95,7 +95,8 @@ def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
     plant with a normal force >= MIN_NORMAL_FORCE_N:
       * grf_mae_{z,xy}_n: |lambda (filter prediction) - MuJoCo contact force| (x and y pooled), world axes;
       * friction_ratio_p95: 95th percentile of |f_t| / f_n of the plant force;
-      * slip_mps_{mean,p95}: horizontal speed of the foot centre (finite difference over one tick)."""
+      * slip_mps_{mean,p95}: horizontal speed of the foot's contact point (centre velocity + omega x (-r z),
+        from MuJoCo's frame-velocity sensors; a rolling foot has zero slip although its centre moves)."""
     tr, n = res.trace, res.trace.n
     f = tr.grf_plant_w[:n]
     sel = tr.in_stance[:n] & tr.in_contact[:n] & (f[..., 2] >= MIN_NORMAL_FORCE_N)
@@ -104,12 +105,9 @@ def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
     ratio = ft[sel] / f[..., 2][sel]
     out["friction_ratio_p95"] = _pct(ratio, 95)
     out["friction_ratio_max"] = float(ratio.max()) if ratio.size else math.nan
-    vel = tr.foot_vel_w(dt)
-    slip = np.hypot(vel[..., 0], vel[..., 1])
-    sel_slip = sel.copy()
-    sel_slip[0] = False  # no finite difference on the first tick
-    out["slip_mps_mean"] = float(slip[sel_slip].mean()) if sel_slip.any() else math.nan
-    out["slip_mps_p95"] = _pct(slip[sel_slip], 95)
+    slip = np.hypot(tr.slip_w[:n, :, 0], tr.slip_w[:n, :, 1])
+    out["slip_mps_mean"] = float(slip[sel].mean()) if sel.any() else math.nan
+    out["slip_mps_p95"] = _pct(slip[sel], 95)
     if tr.filter_on:
         lam = tr.grf_filter_w[:n]
         ok = sel & np.all(np.isfinite(lam), axis=2)

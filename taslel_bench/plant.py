@@ -93,12 +93,16 @@ _CONTACT_SENSOR_INTPRM = (3, 3, 1)
 
 
 def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
-    """One contact sensor per foot geom: (number of contacts, net force in world axes exerted *by* the foot
-    on what it touches) — read in one slice of ``sensordata`` instead of looping over ``data.contact``."""
+    """Per foot: a contact sensor (number of contacts, net force in world axes exerted *by* the foot on
+    what it touches) and the foot site's linear and angular velocity in world axes — read in one slice
+    of ``sensordata`` instead of looping over ``data.contact``. Requires a site named like the foot."""
     for foot in robot.FOOT_FRAMES:
         sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
         sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
+        for kind, typ in (("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+                          ("angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL)):
+            spec.add_sensor(name=f"{foot}_{kind}", type=typ, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=foot)
 
 
 def add_terrain_geom(
@@ -163,6 +167,9 @@ class FootContactReader:
     the constraint forces MuJoCo applied in the last physics step. ``in_contact`` (4,) bool.
     ``non_foot_contact``: True if any robot geom other than a foot touches terrain (checked through
     ``data.contact`` only when the contact count exceeds the feet's).
+    ``slip_velocity_in_world`` (4, 2): horizontal velocity [m/s] of the sphere's lowest point (the contact
+    point on flat ground): v_centre + omega x (-r z) — the centre of a rolling, non-slipping foot moves.
+    Velocities are the sensors' values, i.e. at the start of the last physics step.
     """
 
     def __init__(self, model: mujoco.MjModel) -> None:
@@ -173,6 +180,12 @@ class FootContactReader:
             raise ValueError("plant model has no foot contact sensors; build it with plant.add_foot_contact_sensors")
         adr = model.sensor_adr[ids]
         self._rows = adr[:, None] + np.arange(4)  # (found, fx, fy, fz) per foot
+        lin = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_linvel") for f in robot.FOOT_FRAMES]
+        ang = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_angvel") for f in robot.FOOT_FRAMES]
+        self._lin_rows = model.sensor_adr[lin][:, None] + np.arange(2)  # vx, vy
+        self._ang_rows = model.sensor_adr[ang][:, None] + np.array([1, 0])  # wy, wx
+        self._radius_sign = robot.FOOT_RADIUS_M * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
+        self.slip_velocity_in_world = np.zeros((robot.N_LEGS, 2))
         self._is_foot = np.zeros(model.ngeom, bool)
         self._is_foot[self.foot_geoms] = True
         robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
@@ -186,6 +199,8 @@ class FootContactReader:
         found = block[:, 0]
         np.negative(block[:, 1:], out=self.forces_in_world)  # sensor: force by the foot; we want on it
         np.greater(found, 0.0, out=self.in_contact)
+        np.multiply(data.sensordata[self._ang_rows], self._radius_sign, out=self.slip_velocity_in_world)
+        self.slip_velocity_in_world += data.sensordata[self._lin_rows]
         self.non_foot_contact = bool(data.ncon > found.sum()) and self._other_contact(data)
 
     def _other_contact(self, data: mujoco.MjData) -> bool:

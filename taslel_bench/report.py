@@ -207,7 +207,7 @@ the row; `fall_rate` counts falls over runs that ended without error):
 - `intervention_nm`: mean over ticks of ||u - u_nom||₂.
 - `grf_mae_*`: |filter lambda - MuJoCo contact force| over stance ticks with the foot in contact (>= 1 N).
 - `friction_ratio_p95`: 95th percentile of |f_t|/f_n of the plant contact force of stance feet.
-- `slip_mps_mean`: mean horizontal foot speed of stance feet in contact (finite difference over one tick).
+- `slip_mps_mean`: mean horizontal speed of the contact point of stance feet in contact (MuJoCo sensors).
 - `clearance_violation_rate`: swing ticks with the foot-sphere bottom below z(s) - 1 mm.
 - `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
 - `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the

@@ -68,6 +68,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         regularization=float(f.regularization),
         regularization_target=str(f.get("regularization_target", "nominal")),
         lambda_min_n=float(f.lambda_min_n),
+        contact_velocity_gain=float(f.get("contact_velocity_gain", 0.0)),
         torque_limit_nm=float(cfg.robot.torque_limit_nm),
         ecbf_enabled=bool(f.ecbf.enabled),
         ecbf_alpha1=float(f.ecbf.alpha1),

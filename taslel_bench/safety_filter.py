@@ -49,6 +49,7 @@ class FilterSettings:
     regularization: float = 1e-5  # eps on vdot and lambda (keeps P positive definite)
     regularization_target: str = "nominal"  # "nominal" (vdot_nom, lambda_nom) or "zero"
     lambda_min_n: float = 1.0  # [N] minimum normal force of a stance foot
+    contact_velocity_gain: float = 0.0  # [1/s] k_v in J vdot + J̇v = -k_v J v (0 = paper's eq. 3)
     torque_limit_nm: float = robot.TORQUE_LIMIT_NM  # [N·m]
     ecbf_enabled: bool = True  # only used when the scenario provides a clearance profile
     ecbf_alpha1: float = 20.0  # [1/s]
@@ -83,7 +84,7 @@ class SafetyFilter:
             )
         self.settings = settings
         self.backend = backend
-        self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing()]
+        self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
         self.friction = FrictionCone(settings.lambda_min_n)
         self.ecbf = (
             SwingClearanceECBF(profile, settings.ecbf_alpha1, settings.ecbf_alpha2)

@@ -37,6 +37,7 @@ class EpisodeTrace:
         self.foot_pos_w = np.zeros((c, nl, 3))  # [m] foot-sphere centres
         self.grf_plant_w = np.zeros((c, nl, 3))  # [N] contact force on each foot
         self.in_contact = np.zeros((c, nl), bool)
+        self.slip_w = np.zeros((c, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
         self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
         self.qp_status = np.full(c, -1, np.int8)
         self.qp_fallback = np.zeros(c, bool)
@@ -67,6 +68,7 @@ class EpisodeTrace:
         self.foot_pos_w[k] = d.site_xpos[foot_sites]
         self.grf_plant_w[k] = contacts.forces_in_world
         self.in_contact[k] = contacts.in_contact
+        self.slip_w[k] = contacts.slip_velocity_in_world
         self.mu_hat[k] = mu_hat
         self.mu_true[k] = mu_true
         self.tick_us[k] = tick_s * 1e6
@@ -92,14 +94,6 @@ class EpisodeTrace:
         self.n = k + 1
 
     # ------------------------------------------------------------------------------------------ derived
-    def foot_vel_w(self, dt: float) -> np.ndarray:
-        """(n, 4, 3) foot-centre velocity [m/s] averaged over each tick (finite difference of positions)."""
-        p = self.foot_pos_w[: self.n]
-        vel = np.zeros_like(p)
-        if self.n > 1:
-            vel[1:] = np.diff(p, axis=0) / dt
-        return vel
-
     def base_rpy(self) -> np.ndarray:
         """(n, 3) roll, pitch, yaw [rad] of the trunk (ZYX convention)."""
         w, x, y, z = self.base_quat_wxyz[: self.n].T
@@ -125,14 +119,14 @@ class EpisodeTrace:
             cols[f"u_nom_{short}_nm"] = self.u_nom[:n, j]
             cols[f"u_{short}_nm"] = self.u[:n, j]
         cols["gait_phase"] = self.gait_phase[:n]
-        vel = self.foot_vel_w(dt)
+        slip = np.hypot(self.slip_w[:n, :, 0], self.slip_w[:n, :, 1])
         for i, leg in enumerate(robot.LEGS):
             cols[f"{leg}_stance"] = self.in_stance[:n, i]
             cols[f"{leg}_contact"] = self.in_contact[:n, i]
             cols[f"{leg}_swing_phase"] = self.swing_phase[:n, i]
             for j, ax in enumerate("xyz"):
                 cols[f"{leg}_foot_{ax}_w_m"] = self.foot_pos_w[:n, i, j]
-            cols[f"{leg}_foot_slip_mps"] = np.hypot(vel[:, i, 0], vel[:, i, 1])
+            cols[f"{leg}_contact_point_speed_mps"] = slip[:, i]
             for j, ax in enumerate("xyz"):
                 cols[f"{leg}_grf_plant_{ax}_w_n"] = self.grf_plant_w[:n, i, j]
                 cols[f"{leg}_grf_filter_{ax}_w_n"] = self.grf_filter_w[:n, i, j]
