@@ -107,16 +107,17 @@ class ContactOrSwing(EqualityFamily):
 
 
 class FrictionCone:
-    """Per foot, 5 rows of G x <= h: unilateral -lambda_z <= -lambda_min (stance; 0 for swing) and the
-    square pyramid |lambda_x|, |lambda_y| <= mu_tilde lambda_z with mu_tilde = mu / sqrt(2) (inscribed in
-    the Coulomb cone, as in the paper)."""
+    """Per foot, 5 rows of G x <= h: unilateral -lambda_z <= -lambda_min and the square pyramid
+    |lambda_x|, |lambda_y| <= mu_tilde lambda_z with mu_tilde = mu / sqrt(2) (inscribed in the Coulomb
+    cone, as in the paper). A swing foot's rows are inactive zero rows (0 <= INACTIVE_RHS): its lambda is
+    already fixed to 0 by the equality rows, and duplicating that as inequalities makes some solvers
+    (quadprog, interior-point methods) see dependent constraints."""
 
     name, n_rows = "friction", 5 * robot.N_LEGS
 
     def __init__(self, lambda_min_n: float) -> None:
         self.lambda_min_n = lambda_min_n  # [N]
         self.start = 0
-        self._mu = np.nan
 
     def pattern(self, mask: np.ndarray) -> None:
         for i in range(robot.N_LEGS):
@@ -126,23 +127,28 @@ class FrictionCone:
         return [f"{leg}_{k}" for leg in robot.LEGS for k in ("unilateral", "fx+", "fx-", "fy+", "fy-")]
 
     def init(self, qp: QPProblem) -> None:
-        mu_rows, mu_cols = [], []
+        self._stance = np.zeros(robot.N_LEGS, bool)
+        self._mu = np.full(robot.N_LEGS, np.nan)
         for i in range(robot.N_LEGS):
-            r, c = self.start + 5 * i, NV + NU + 3 * i
-            qp.G[r, c + 2] = -1.0
-            qp.G[r + 1 : r + 5, c : c + 2] = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]
-            mu_rows += [r + 1, r + 2, r + 3, r + 4]
-            mu_cols += [c + 2] * 4
-        self._mu_idx = (np.array(mu_rows), np.array(mu_cols))
-        self._unilateral_rows = self.start + 5 * np.arange(robot.N_LEGS)
-        qp.h[self.start : self.start + self.n_rows] = 0.0
-        self._mu = np.nan
+            self._write_foot(qp, i, False, np.nan)
+
+    def _write_foot(self, qp: QPProblem, i: int, stance: bool, mu: float) -> None:
+        r, c = self.start + 5 * i, NV + NU + 3 * i
+        block = qp.G[r : r + 5, c : c + 3]
+        if stance:
+            mu_t = mu / np.sqrt(2.0)
+            block[:] = [[0.0, 0.0, -1.0], [1.0, 0.0, -mu_t], [-1.0, 0.0, -mu_t], [0.0, 1.0, -mu_t], [0.0, -1.0, -mu_t]]
+            qp.h[r : r + 5] = (-self.lambda_min_n, 0.0, 0.0, 0.0, 0.0)
+        else:
+            block[:] = 0.0
+            qp.h[r : r + 5] = INACTIVE_RHS
+        self._stance[i], self._mu[i] = stance, mu
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        if x.mu != self._mu:
-            qp.G[self._mu_idx] = -x.mu / np.sqrt(2.0)
-            self._mu = x.mu
-        qp.h[self._unilateral_rows] = -self.lambda_min_n * x.in_stance
+        for i in range(robot.N_LEGS):  # rewrite a foot's rows only when its contact mode or mu changed
+            stance = bool(x.in_stance[i])
+            if stance != self._stance[i] or (stance and x.mu != self._mu[i]):
+                self._write_foot(qp, i, stance, x.mu)
 
 
 class SwingClearanceECBF:
