@@ -140,8 +140,8 @@ class Episode:
                 else:
                     fres = None
                     u = u_nom
-                br.ctrl_mj(u, d.ctrl)
                 for _ in range(self.physics_per_tick):
+                    br.ctrl_mj(u, d.ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)
                     mujoco.mj_step(m, d)
                 self.contacts.read(d)
