@@ -13,6 +13,7 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -103,6 +104,51 @@ def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
         for kind, typ in (("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
                           ("angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL)):
             spec.add_sensor(name=f"{foot}_{kind}", type=typ, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=foot)
+
+
+def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+    """Plant from any A1 MJCF with the URDF's joint names, one torque actuator per joint (named like the
+    joint) and sphere foot geoms named FR_foot, FL_foot, RR_foot, RL_foot; the controller keeps its URDF model.
+
+    Adds what the harness needs if absent (free joint check, foot sites, foot sensors, a floor), sets the
+    time step and the elliptic cone, and makes terrain friction win. Raises ValueError naming what is missing.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"robot.plant_mjcf={str(path)!r}: no such file")
+    spec = mujoco.MjSpec.from_file(str(path))
+    geoms = {g.name: g for g in spec.geoms}
+    joints = {j.name for j in spec.joints}
+    actuated = {a.target for a in spec.actuators}
+    missing = [f"joint {n}" for n in robot.JOINT_NAMES if n not in joints]
+    missing += [f"actuator on {n}" for n in robot.JOINT_NAMES if n not in actuated]
+    missing += [f"torque motor (not a servo) on {a.target}" for a in spec.actuators
+                if a.biastype != mujoco.mjtBias.mjBIAS_NONE]
+    missing += [f"sphere geom {f}" for f in robot.FOOT_FRAMES
+                if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE]
+    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
+        missing.append("a free joint on the trunk")
+    if missing:
+        raise ValueError(f"robot.plant_mjcf={str(path)!r} does not fit the A1 controller: missing {', '.join(missing)}")
+    for act in spec.actuators:
+        act.name = act.name or act.target
+    spec.option.timestep = options.timestep_s
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    sites = {s.name for s in spec.sites}
+    for foot in robot.FOOT_FRAMES:
+        g = geoms[foot]
+        if foot not in sites:
+            g.parent.add_site(name=foot, pos=list(g.pos))
+        g.priority = 0
+    if "floor" not in geoms:
+        add_terrain_geom(spec, name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
+                         friction=options.floor_friction)
+    else:
+        geoms["floor"].priority = TERRAIN_PRIORITY
+    sensors = {s.name for s in spec.sensors}
+    if f"{robot.FOOT_FRAMES[0]}_contact" not in sensors:
+        add_foot_contact_sensors(spec)
+    return spec
 
 
 def add_terrain_geom(
