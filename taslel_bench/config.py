@@ -67,6 +67,7 @@ def validate(cfg: DictConfig) -> None:
     f = "filter"
     _check(_num(cfg, f"{f}.regularization") > 0, f"{f}.regularization", cfg.filter.regularization, "must be > 0")
     _check(_num(cfg, f"{f}.lambda_min_n") >= 0, f"{f}.lambda_min_n", cfg.filter.lambda_min_n, "must be >= 0 N")
+    _check(_num(cfg, f"{f}.start_time") >= 0, f"{f}.start_time", cfg.filter.start_time, "must be >= 0 s")
     _check(_num(cfg, f"{f}.contact_velocity_gain") >= 0, f"{f}.contact_velocity_gain",
            cfg.filter.contact_velocity_gain, "must be >= 0 1/s")
     for key in ("alpha1", "alpha2"):

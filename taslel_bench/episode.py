@@ -39,6 +39,7 @@ class EpisodeSettings:
     init_joint_noise_rad: float = 0.02  # [rad] std of the initial joint-angle perturbation (seeded)
     init_base_vel_noise_mps: float = 0.05  # [m/s] std of the initial trunk velocity perturbation
     clearance_tolerance_m: float = 0.001  # [m] swing-foot bottom below z(s) - tol counts as a violation
+    filter_start_s: float = 0.0  # [s] episode time before which u_nom passes unfiltered (paper's figure)
 
 
 @dataclass
@@ -130,7 +131,7 @@ class Episode:
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
-                if need_model:
+                if need_model and t >= s.filter_start_s:
                     br.q_pin(d.qpos, q)
                     br.v_pin(d.qpos, d.qvel, v)
                     self.model.update(q, v)

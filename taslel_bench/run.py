@@ -87,6 +87,7 @@ def episode_settings(cfg: DictConfig) -> EpisodeSettings:
         fall_tilt_rad=float(np.radians(cfg.robot.fall_tilt_deg)),
         init_joint_noise_rad=float(cfg.robot.init_joint_noise_rad),
         init_base_vel_noise_mps=float(cfg.robot.init_base_vel_noise_mps),
+        filter_start_s=float(cfg.filter.get("start_time", 0.0)),
     )
 
 
