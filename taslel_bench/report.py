@@ -146,48 +146,114 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
             fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
             plt.close(fig)
             made.append("fall_rates.png")
-    made += _episode_figures(sweep_dir, frame, plt)
+    if "run_dir" in frame:
+        made += _episode_figures(sweep_dir, frame, plt)
     return made
 
 
+def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series | None:
+    if "filter_enabled" not in frame or "scenario" not in frame:
+        return None
+    sel = frame[(frame["scenario"] == scenario) & (frame["filter_enabled"] == filter_on) & (frame["status"] == "ok")]
+    return sel.sort_values("seed").iloc[0] if len(sel) else None
+
+
+def _steps(sweep_dir: Path, row: pd.Series | None) -> pd.DataFrame | None:
+    if row is None:
+        return None
+    path = sweep_dir / str(row["run_dir"]) / recording.STEPS
+    return pd.read_parquet(path) if path.is_file() else None
+
+
 def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:  # noqa: ANN001
-    """The paper's figures from the first matching runs: lateral GRF of one stance foot with the filter
-    off vs on; swing-foot bottom height vs the obstacle profile."""
+    """The paper's figures where the sweep has the runs: lateral GRF of one stance foot without and with
+    the filter (low_friction, else the first scenario); swing-foot bottom height vs the obstacle profile."""
     made = []
-    if "run_dir" not in frame:
-        return made
-    first = frame.iloc[0]
-    steps_path = sweep_dir / str(first["run_dir"]) / recording.STEPS
-    if steps_path.is_file():
-        steps = pd.read_parquet(steps_path)
-        leg = "FL"
-        t = steps["t_s"].to_numpy()
-        fig, ax = plt.subplots(figsize=(7, 3))
-        ax.plot(t, steps[f"{leg}_grf_plant_y_w_n"], label="MuJoCo contact force")
-        if steps[f"{leg}_grf_filter_y_w_n"].notna().any():
-            ax.plot(t, steps[f"{leg}_grf_filter_y_w_n"], "--", label="filter's lambda (prediction)")
+    leg = "FL"
+    scenarios = list(dict.fromkeys(frame.get("scenario", pd.Series(dtype=str)).dropna()))
+    grf_scenario = "low_friction" if "low_friction" in scenarios else (scenarios[0] if scenarios else None)
+    runs = {on: _steps(sweep_dir, _first_run(frame, grf_scenario, on)) for on in (False, True)}
+    if any(r is not None for r in runs.values()):
+        fig, ax = plt.subplots(figsize=(8, 3.2))
+        for on, steps in runs.items():
+            if steps is None:
+                continue
+            window = steps[(steps["t_s"] >= 3.0) & (steps["t_s"] <= 5.0)]
+            label = "filter on" if on else "nominal only"
+            ax.plot(window["t_s"], window[f"{leg}_grf_plant_y_w_n"], label=f"{label}: MuJoCo contact force")
+            if on:
+                ax.plot(window["t_s"], window[f"{leg}_grf_filter_y_w_n"], ":", label="filter on: predicted lambda")
         ax.set_xlabel("t [s]")
         ax.set_ylabel(f"{leg} lateral force y [N]")
-        ax.set_title(f"{leg} lateral GRF, {first.get('scenario')} / {first.get('solver')} / seed {first.get('seed')}")
-        ax.legend()
+        ax.set_title(f"{leg} lateral ground reaction force, {grf_scenario}")
+        ax.legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(sweep_dir / "grf_lateral.png", dpi=120)
         plt.close(fig)
         made.append("grf_lateral.png")
-        if steps[f"{leg}_clearance_m"].notna().any():
-            fig, ax = plt.subplots(figsize=(7, 3))
-            swing = steps[f"{leg}_clearance_m"].notna()
-            bottom = steps[f"{leg}_foot_z_w_m"] - 0.02
-            ax.plot(t, bottom, label="foot-sphere bottom z [m]")
-            ax.plot(t[swing], (bottom - steps[f"{leg}_clearance_m"])[swing], ".", ms=1, label="obstacle z(s)")
-            ax.set_xlabel("t [s]")
-            ax.legend()
-            ax.set_title(f"{leg} swing-foot height vs obstacle profile")
-            fig.tight_layout()
-            fig.savefig(sweep_dir / "clearance.png", dpi=120)
-            plt.close(fig)
-            made.append("clearance.png")
+    clearance = {on: _steps(sweep_dir, _first_run(frame, "obstacle", on)) for on in (False, True)}
+    if any(r is not None for r in clearance.values()):
+        fig, ax = plt.subplots(figsize=(8, 3.2))
+        for on, steps in clearance.items():
+            if steps is None:
+                continue
+            window = steps[(steps["t_s"] >= 3.0) & (steps["t_s"] <= 4.0)]
+            bottom = window[f"{leg}_foot_z_w_m"] - 0.02
+            ax.plot(window["t_s"], bottom, label=("ECBF on" if on else "nominal only") + ": foot-sphere bottom")
+            if on:
+                swing = window[f"{leg}_clearance_m"].notna()
+                ax.plot(window["t_s"][swing], (bottom - window[f"{leg}_clearance_m"])[swing], "k.", ms=1.5,
+                        label="obstacle profile z(s)")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("height [m]")
+        ax.set_title(f"{leg} swing-foot height vs obstacle profile")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "clearance.png", dpi=120)
+        plt.close(fig)
+        made.append("clearance.png")
     return made
+
+
+PAPER = {"grf_mae_z_n": 3.051, "grf_mae_xy_n": 1.847}
+
+
+def paper_section(frame: pd.DataFrame) -> str:
+    """Paper vs ours, for the claims the sweep has runs for (mean over seeds, with min-max)."""
+    if "filter_enabled" not in frame or "scenario" not in frame:
+        return ""
+    ok = frame[frame["status"] == "ok"].copy()
+    ok["filter_enabled"] = ok["filter_enabled"].fillna(False).astype(bool)
+
+    def stat(scenario: str, on: bool, col: str) -> str:
+        v = ok[(ok["scenario"] == scenario) & (ok["filter_enabled"] == on)][col].astype(float).dropna()
+        return f"{v.mean():.3g} ({v.min():.3g}–{v.max():.3g}, n={len(v)})" if len(v) else "—"
+
+    rows = []
+    if (ok["scenario"] == "flat").any():
+        rows.append(("GRF MAE vertical [N], flat, filter on", f"{PAPER['grf_mae_z_n']}", stat("flat", True, "grf_mae_z_n")))
+        rows.append(("GRF MAE lateral [N], flat, filter on", f"{PAPER['grf_mae_xy_n']}", stat("flat", True, "grf_mae_xy_n")))
+    if (ok["scenario"] == "low_friction").any():
+        rows.append(("friction ratio p95, mu=0.2, nominal only", "—", stat("low_friction", False, "friction_ratio_p95")))
+        rows.append(("friction ratio p95, mu=0.2, filter", "<= 0.2 (cone)", stat("low_friction", True, "friction_ratio_p95")))
+        rows.append(("slip [m/s], mu=0.2, nominal only", "sliding", stat("low_friction", False, "slip_mps_mean")))
+        rows.append(("slip [m/s], mu=0.2, filter", "sliding eliminated", stat("low_friction", True, "slip_mps_mean")))
+        rows.append(("GRF MAE vertical [N], mu=0.2, filter", "—", stat("low_friction", True, "grf_mae_z_n")))
+    if (ok["scenario"] == "obstacle").any():
+        rows.append(("clearance violation rate, nominal only", "—", stat("obstacle", False, "clearance_violation_rate")))
+        rows.append(("clearance violation rate, ECBF", "foot kept clear (figure)", stat("obstacle", True, "clearance_violation_rate")))
+        rows.append(("min clearance [m], ECBF", "—", stat("obstacle", True, "clearance_min_m")))
+        rows.append(("intervention [N·m], ECBF", "minimal", stat("obstacle", True, "intervention_nm_mean")))
+    for scenario in dict.fromkeys(ok["scenario"]):
+        counts = []
+        for on in (True, False):
+            runs = ok[(ok["scenario"] == scenario) & (ok["filter_enabled"] == on)]
+            counts.append(f"{int(runs['fell'].sum())}/{len(runs)}")
+        rows.append((f"falls, {scenario}: filter on | nominal only", "no falls", " | ".join(counts)))
+    if not rows:
+        return ""
+    table = pd.DataFrame(rows, columns=["quantity", "paper", "ours: mean (min–max, runs)"])
+    return "## Paper vs this harness\n\n" + _md_table(table)
 
 
 def _md_table(table: pd.DataFrame) -> str:
@@ -234,6 +300,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         "## Results per scenario × solver × estimator\n",
         _md_table(table) if len(table) else "_no runs found_\n",
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
+        paper_section(frame) if not frame.empty else "",
     ]
     errors = frame[frame.get("status", pd.Series(dtype=str)) == "error"] if not frame.empty else frame
     if len(errors):
