@@ -22,6 +22,8 @@ NATIVE_BOX = frozenset({"daqp", "proxqp", "piqp", "highs", "qpalm", "qpswift", "
 NEEDS_PRESOLVE = frozenset({"quadprog"})
 # Solvers that (practically) never return on NaN input: the problem is checked for NaN/inf first.
 HANG_ON_NAN = frozenset({"proxqp"})
+# Solvers whose qpsolvers interface uses ``initvals`` (a primal initial guess); the others ignore it.
+USES_INITVALS = frozenset({"osqp", "proxqp", "daqp"})
 # qpsolvers distribution name -> Python distribution to report the version of.
 DISTRIBUTIONS = {"proxqp": "proxsuite", "highs": "highspy", "qpalm": "qpalm", "kvxopt": "kvxopt"}
 
@@ -67,6 +69,8 @@ class QpsolversBackend:
         bounds: ``"native"`` (lb/ub with +-inf), ``"rows"`` (finite bounds as G rows) or ``"auto"``.
         presolve: drop implied / zero G rows (:mod:`solvers.presolve`); None = only where needed.
         check: tolerances for accepting a solution the solver calls optimal (:mod:`solvers.checks`).
+        warm_start: pass the previous solved call's x as ``initvals`` (only solvers in
+            :data:`USES_INITVALS` use it; :attr:`supports_warm_start` says so). ``reset()`` forgets it.
     """
 
     def __init__(
@@ -77,6 +81,7 @@ class QpsolversBackend:
         bounds: str = "auto",
         presolve: bool | None = None,
         check: Mapping[str, float] | None = None,
+        warm_start: bool = False,
     ) -> None:
         import qpsolvers
 
@@ -102,9 +107,13 @@ class QpsolversBackend:
         self.presolve = (solver in NEEDS_PRESOLVE) if presolve is None else bool(presolve)
         self.tol = Tolerances(**dict(check or {}))
         self._patterns = PatternCache()
+        self.warm_start = bool(warm_start)
+        self.supports_warm_start = solver in USES_INITVALS
+        self._x_prev: np.ndarray | None = None
 
     def reset(self) -> None:
-        """Stateless between calls (set up every time): nothing to forget."""
+        """Set up on every call: only the warm-start guess (``warm_start=True``) is forgotten."""
+        self._x_prev = None
 
     def describe(self) -> dict[str, object]:
         return {
@@ -117,6 +126,7 @@ class QpsolversBackend:
             "matrices": self.matrices,
             "bounds": self.bounds,
             "presolve": self.presolve,
+            "warm_start": self.warm_start,
             "check": self.tol.as_dict(),
         }
 
@@ -148,7 +158,7 @@ class QpsolversBackend:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # failures are reported through the status instead
-                sol = qpsolvers.solve_problem(qpp, solver=self.solver, **self.settings)
+                sol = qpsolvers.solve_problem(qpp, solver=self.solver, initvals=self._x_prev, **self.settings)
             t2 = time.perf_counter()
         except Exception as exc:  # qpsolvers raises ProblemError / SolverError on some failures  # noqa: BLE001
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t1)
@@ -164,5 +174,7 @@ class QpsolversBackend:
             y=sol.y, z=z, z_box=z_box, iterations=_iterations(sol.extras),
             setup_time_s=float(getattr(sol, "build_time", 0.0) or 0.0), overhead_s=overhead,
         )  # fmt: skip
+        if self.warm_start:
+            self._x_prev = out.x if out.ok else None
         out.overhead_s += time.perf_counter() - t2
         return out

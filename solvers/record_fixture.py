@@ -23,10 +23,10 @@ import numpy as np
 from solvers.fixture import DEFAULT_PATH, save
 from solvers.reference import reference_backend
 from taslel_bench.interfaces import QPProblem
+from taslel_bench.qpset import active_sets, binding_tags
 
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
 BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 - s)²
-ACTIVE_TOL = 1e-7  # a G row binds when G x - h > -ACTIVE_TOL
 
 
 def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProblem], np.ndarray]:
@@ -75,19 +75,10 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
 
 
 def binding(problem: QPProblem, x: np.ndarray) -> list[str]:
-    """Constraint families that bind at x: "ecbf", "friction" (pyramid sides), "torque"."""
-    slack = problem.G @ x - problem.h
-    active = [problem.row_labels[i] for i in np.flatnonzero(slack > -ACTIVE_TOL) if np.any(problem.G[i])]
-    tags = set()
-    for lab in active:
-        if lab.endswith("clearance"):
-            tags.add("ecbf")
-        elif lab.endswith(("fx+", "fx-", "fy+", "fy-")):
-            tags.add("friction")
-    u = problem.layout["u"]
-    if np.any(np.abs(x[u]) >= problem.ub[u] - 1e-7):
-        tags.add("torque")
-    return sorted(tags) or ["none"]
+    """Constraint families that bind at x: "ecbf", "friction" (pyramid sides), "torque" (the core's rule,
+    :func:`taslel_bench.qpset.binding_tags`, also used for the stored sets)."""
+    rows, bounds = active_sets(problem, x)
+    return binding_tags(problem.row_labels, rows, bounds, problem.layout)
 
 
 def select(tags: list[list[str]], count: int) -> np.ndarray:
@@ -120,7 +111,8 @@ def main(argv: list[str] | None = None) -> None:
         "binding_counts": {f: sum(f in t for t in tags) for f in ("ecbf", "friction", "torque", "none")},
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    save(args.out, [qps[i] for i in keep], xs[keep], keep, ["+".join(tags[i]) for i in keep], meta)
+    run = {"scenario": f"fixture_bump_mu{args.mu:g}", "source": "solvers.record_fixture"}
+    save(args.out, [qps[i] for i in keep], xs[keep], keep, None, meta, run)
     kept = {f: sum(f in tags[i] for i in keep) for f in ("ecbf", "friction", "torque", "none")}
     print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB): {len(keep)} QPs, binding {kept}; "
           f"episode: {meta['binding_counts']}")  # fmt: skip

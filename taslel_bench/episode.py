@@ -85,6 +85,8 @@ class Episode:
         self.n_ticks = int(round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s))
         self.trunk_body = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         self.foot_sites = [mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SITE, f) for f in robot.FOOT_FRAMES]
+        # --- QP recording hook (record.qps, taslel_bench.qpset.QPRecorder): on_tick(k, t, problem, result)
+        self.qp_recorder = None
 
     def initial_state(self) -> None:
         """Stand pose with feet on the ground, perturbed by the seeded rng."""
@@ -138,6 +140,8 @@ class Episode:
                     inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
                     fres = self.filter.filter(inputs, u_nom)
                     u = fres.u
+                    if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
+                        self.qp_recorder.on_tick(k, t, self.filter.problem, fres)
                 else:
                     fres = None
                     u = u_nom

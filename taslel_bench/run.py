@@ -15,7 +15,7 @@ import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench import plant, recording
+from taslel_bench import plant, qpset, recording
 from taslel_bench.config import ConfigError, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
@@ -163,6 +163,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
     recording.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
+    qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
     res: EpisodeResult = built.episode.run(progress=show)
     if show is not None:
@@ -199,10 +200,30 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         except Exception:  # recording must not lose the run: note it and keep the other files
             mcap_error = traceback.format_exc()
             summary["mcap_error"] = mcap_error.strip().splitlines()[-1]
+    if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.qpset)
+        try:
+            qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.run"})
+            summary["qps_recorded"] = len(qp_recorder)
+        except Exception:  # recording must not lose the run
+            summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
     recording.write_parquet(out_dir / recording.STEPS, res.trace.to_frame(dt))
     recording.write_json(out_dir / recording.EVENTS, events)
     recording.write_json(out_dir / recording.SUMMARY, summary)  # written last: marks the run complete
     return summary
+
+
+def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
+    """A :class:`taslel_bench.qpset.QPRecorder` hooked into the episode when ``record.qps`` is on."""
+    if not cfg.record.get("qps", False) or built.filter is None:
+        return None
+    info = {
+        "scenario": choices.get("scenario", built.scenario.name), "solver": choices.get("solver", ""),
+        "estimator": choices.get("estimator", getattr(built.estimator, "name", "")), "seed": int(cfg.seed),
+        "control_rate_hz": float(cfg.control_rate_hz), "backend": str(built.backend.describe()),
+    }  # fmt: skip
+    rec = qpset.QPRecorder(info, every=int(cfg.record.get("qps_every", 1)))
+    built.episode.qp_recorder = rec
+    return rec
 
 
 def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException) -> dict:
