@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from taslel_bench.interfaces import ClearanceProfile
 from scenarios.flat import FlatGround
+from taslel_bench.interfaces import ClearanceProfile
 
 
 def bump_coefficients(height_m: float) -> tuple[float, ...]:

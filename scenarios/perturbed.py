@@ -10,8 +10,8 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from taslel_bench import robot
 from scenarios.flat import FlatGround
+from taslel_bench import robot
 
 
 class PerturbedPlant(FlatGround):

@@ -8,9 +8,8 @@ progress of its current swing (the ECBF's phase variable), advancing at ``1 / (T
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -45,7 +45,7 @@ class QPProblem:
     def n(self) -> int:
         return self.P.shape[0]
 
-    def copy(self) -> "QPProblem":
+    def copy(self) -> QPProblem:
         """Deep copy (for recording / replay): the filter overwrites its own instance each tick."""
         return QPProblem(
             *(np.array(a, copy=True) for a in (self.P, self.q, self.A, self.b, self.G, self.h, self.lb, self.ub)),

@@ -50,7 +50,7 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
     import re
 
     urdf_text = robot.a1_urdf_path().read_text()
-    urdf_text = re.sub(r"<visual>.*?</visual>", "", urdf_text, flags=re.S)
+    urdf_text = re.sub(r"<visual>.*?</visual>", "", urdf_text, flags=re.DOTALL)
     spec = mujoco.MjSpec.from_string(urdf_text)
     _strip_visuals(spec)
     spec.compiler.fusestatic = True  # the massless `base` root and fixed links are fused away

@@ -165,7 +165,7 @@ def _steps(sweep_dir: Path, row: pd.Series | None) -> pd.DataFrame | None:
     return pd.read_parquet(path) if path.is_file() else None
 
 
-def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:  # noqa: ANN001
+def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
     """The paper's figures where the sweep has the runs: lateral GRF of one stance foot without and with
     the filter (low_friction, else the first scenario); swing-foot bottom height vs the obstacle profile."""
     made = []
@@ -293,7 +293,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     figures = _figures(sweep_dir, frame, table) if not frame.empty else []
     info = machine_info()
     lines = [
-        f"# taslel_bench sweep report\n",
+        "# taslel_bench sweep report\n",
         f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
         f"Packages: {info['packages']}\n",

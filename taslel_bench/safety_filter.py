@@ -28,7 +28,6 @@ from taslel_bench.constraints import (
     N_VARS,
     NL,
     NV,
-    U,
     VDOT,
     ContactOrSwing,
     EqualityFamily,
@@ -36,6 +35,7 @@ from taslel_bench.constraints import (
     FrictionCone,
     SwingClearanceECBF,
     TickInputs,
+    U,
 )
 from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution
 

@@ -6,7 +6,6 @@ last physics step). Frames in the column names: ``_w`` = world axes, joint vecto
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 import pandas as pd
 
@@ -53,7 +52,7 @@ class EpisodeTrace:
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
 
     def record(self, k, t, d, br: StateBridge, trunk, foot_sites, gs, in_stance, u_nom, u, fres, contacts,
-               mu_hat, mu_true, tick_s, profile, ecbf) -> None:  # noqa: ANN001 - hot path, see Episode.run
+               mu_hat, mu_true, tick_s, profile, ecbf) -> None:
         self.t_s[k] = t
         self.base_pos_w[k] = d.xpos[trunk]
         self.base_quat_wxyz[k] = d.xquat[trunk]

@@ -13,7 +13,7 @@ import qpsolvers
 
 from taslel_bench import plant, robot
 from taslel_bench.bridge import StateBridge
-from taslel_bench.constraints import LAM, U, VDOT, TickInputs
+from taslel_bench.constraints import LAM, VDOT, TickInputs, U
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.gait import GaitParams
 from taslel_bench.interfaces import ClearanceProfile, QPSolution
