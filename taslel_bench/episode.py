@@ -117,8 +117,7 @@ class Episode:
         need_model = self.filter is not None
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
-        w = mujoco.mjtWarning
-        instability_warnings = (w.mjWARN_BADQPOS, w.mjWARN_BADQVEL, w.mjWARN_BADQACC)
+        t0_plant = d.time
         wall0 = time.perf_counter()
         k = 0
         try:
@@ -152,13 +151,15 @@ class Episode:
                 self.contacts.read(d)
                 tau_prev[:] = u
                 tick_s = time.perf_counter() - tick0
+                t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
                 trace.record(k, t, d, br, self.trunk_body, self.foot_sites, gs, in_stance, u_nom, u, fres,
                              self.contacts, est.mu, true_mu, tick_s, profile,
                              self.filter.ecbf if (self.filter is not None) else None)
                 # --- termination checks (plant state after the tick) ---
                 # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
                 vel_sq, pos_sq = float(d.qvel @ d.qvel), float(d.qpos @ d.qpos)
-                unstable = any(d.warning[w].number > 0 for w in instability_warnings)  # MuJoCo reset the state
+                # MuJoCo resets the data (time -> 0) on a NaN/huge qpos, qvel or qacc: catch that cheaply
+                unstable = d.time < t_end_of_tick
                 if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:
                     res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
                     break
