@@ -137,8 +137,30 @@ def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
     err = tr.mu_hat[:n] - tr.mu_true[:n]
     if n == 0:
         return {}
-    return {
+    out = {
         "estimator_mae": float(np.abs(err).mean()),
         "estimator_bias": float(err.mean()),
         "estimator_overestimate_rate": float(np.mean(err > 0.05)),
     }
+    out["estimator_settle_s"] = settle_time(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n])
+    return out
+
+
+SETTLE_BAND = 0.05  # [-] |mu_hat - mu| band for the settle time
+
+
+def settle_time(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: float = SETTLE_BAND) -> float:
+    """Time [s] from the first change of the true friction under the trunk until mu_hat enters
+    |mu_hat - mu| <= band and stays there to the end of the episode. NaN without a change; inf if it never
+    settles."""
+    changes = np.flatnonzero(np.diff(mu_true) != 0.0)
+    if changes.size == 0:
+        return math.nan
+    k0 = int(changes[0]) + 1
+    outside = np.abs(mu_hat[k0:] - mu_true[k0:]) > band
+    if not outside.any():
+        return 0.0
+    last_out = int(np.flatnonzero(outside)[-1])
+    if last_out == len(outside) - 1:
+        return math.inf
+    return float(t[k0 + last_out + 1] - t[k0])

@@ -157,3 +157,14 @@ def test_flat_trot_10s_no_fall(tmp_path, seed):
     summary = run(cfg, tmp_path)
     assert summary["status"] == "ok" and summary["fell"] is False
     assert summary["mean_speed_mps"] >= 0.25
+
+
+def test_settle_time_after_friction_change():
+    from taslel_bench.metrics import settle_time
+
+    t = np.arange(0, 2, 0.01)
+    mu = np.where(t < 1.0, 0.8, 0.2)
+    hat = np.where(t < 1.3, 0.8, 0.21)  # reacts 0.3 s after the change
+    assert settle_time(t, mu, hat) == pytest.approx(0.3, abs=0.011)
+    assert np.isnan(settle_time(t, np.full_like(t, 0.5), np.full_like(t, 0.5)))
+    assert settle_time(t, mu, np.full_like(t, 0.8)) == np.inf
