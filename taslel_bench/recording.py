@@ -29,8 +29,8 @@ def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
 
 
 def _json_safe(value: object) -> object:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None  # JSON has no NaN; None = "not measured"
+    if isinstance(value, float) and math.isnan(value):
+        return None  # None = "not measured"; +-inf (e.g. "never settled") stays Infinity
     if hasattr(value, "item"):
         return _json_safe(value.item())
     return value
