@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.qpset import QPSet, from_problems, load as _load, save as _save
+from taslel_bench.qpset import QPSet, from_problems
+from taslel_bench.qpset import load as _load
+from taslel_bench.qpset import save as _save
 
 DEFAULT_PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "qps_episode.npz"
 

@@ -79,7 +79,7 @@ class Group:
         return w.copy() if copy else w
 
 
-def layout_key(P, lb, ub, P_pattern, A_pattern, G_pattern, row_labels) -> tuple:  # noqa: ANN001
+def layout_key(P, lb, ub, P_pattern, A_pattern, G_pattern, row_labels) -> tuple:
     """What two QPs must share to live in one group."""
     return (
         P.shape, A_pattern.shape, G_pattern.shape, P.tobytes(), lb.tobytes(), ub.tobytes(),
@@ -231,7 +231,7 @@ class QPRecorder:
     def __len__(self) -> int:
         return len(self._rows["tick"])
 
-    def on_tick(self, tick: int, t_s: float, problem: QPProblem, result) -> None:  # noqa: ANN001
+    def on_tick(self, tick: int, t_s: float, problem: QPProblem, result) -> None:
         """Episode hook, after the filter: ``result`` is the :class:`taslel_bench.safety_filter.FilterResult`."""
         if tick % self.every:
             return
@@ -416,6 +416,8 @@ def main(argv: list[str] | None = None) -> None:
     mg = sub.add_parser("merge", help="merge qps.npz files (or folders holding them, e.g. a sweep)")
     mg.add_argument("paths", type=Path, nargs="+")
     mg.add_argument("-o", "--out", type=Path, required=True)
+    mg.add_argument("--reference", action="store_true",
+                    help="store the tight reference (conf/solver/reference.yaml) of every QP in the set")
     args = ap.parse_args(argv)
     if args.cmd == "info":
         print(describe(load(args.path)))
@@ -424,6 +426,10 @@ def main(argv: list[str] | None = None) -> None:
     if not files:
         raise SystemExit(f"no {FILENAME} under {', '.join(map(str, args.paths))} (run with record.qps=true)")
     qs = merge((load(f) for f in files), {"merged_from": [str(f) for f in files]})
+    if args.reference:
+        from taslel_bench.replay import reference_solutions
+
+        reference_solutions(qs)
     save(args.out, qs)
     print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.1f} MB)\n{describe(qs)}")
 
