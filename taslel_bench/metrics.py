@@ -95,6 +95,7 @@ def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
     plant with a normal force >= MIN_NORMAL_FORCE_N:
       * grf_mae_{z,xy}_n: |lambda (filter prediction) - MuJoCo contact force| (x and y pooled), world axes;
       * friction_ratio_p95: 95th percentile of |f_t| / f_n of the plant force;
+      * friction_saturated_rate: fraction of those contacts with |f_t| >= 0.98 mu f_n (true mu): sliding;
       * slip_mps_{mean,p95}: horizontal speed of the foot's contact point (centre velocity + omega x (-r z),
         from MuJoCo's frame-velocity sensors; a rolling foot has zero slip although its centre moves)."""
     tr, n = res.trace, res.trace.n
@@ -105,6 +106,9 @@ def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
     ratio = ft[sel] / f[..., 2][sel]
     out["friction_ratio_p95"] = _pct(ratio, 95)
     out["friction_ratio_max"] = float(ratio.max()) if ratio.size else math.nan
+    mu = np.broadcast_to(tr.mu_true[:n, None], sel.shape)[sel]
+    # at the edge of the plant's Coulomb cone = sliding (or about to): |f_t| >= 0.98 mu f_n
+    out["friction_saturated_rate"] = float(np.mean(ratio >= 0.98 * mu)) if ratio.size else math.nan
     slip = np.hypot(tr.slip_w[:n, :, 0], tr.slip_w[:n, :, 1])
     out["slip_mps_mean"] = float(slip[sel].mean()) if sel.any() else math.nan
     out["slip_mps_p95"] = _pct(slip[sel], 95)

@@ -236,6 +236,10 @@ def paper_section(frame: pd.DataFrame) -> str:
     if (ok["scenario"] == "low_friction").any():
         rows.append(("friction ratio p95, mu=0.2, nominal only", "—", stat("low_friction", False, "friction_ratio_p95")))
         rows.append(("friction ratio p95, mu=0.2, filter", "<= 0.2 (cone)", stat("low_friction", True, "friction_ratio_p95")))
+        rows.append(("stance contacts at the cone edge, mu=0.2, nominal only", "—",
+                     stat("low_friction", False, "friction_saturated_rate")))
+        rows.append(("stance contacts at the cone edge, mu=0.2, filter", "—",
+                     stat("low_friction", True, "friction_saturated_rate")))
         rows.append(("slip [m/s], mu=0.2, nominal only", "sliding", stat("low_friction", False, "slip_mps_mean")))
         rows.append(("slip [m/s], mu=0.2, filter", "sliding eliminated", stat("low_friction", True, "slip_mps_mean")))
         rows.append(("GRF MAE vertical [N], mu=0.2, filter", "—", stat("low_friction", True, "grf_mae_z_n")))
@@ -249,7 +253,7 @@ def paper_section(frame: pd.DataFrame) -> str:
         for on in (True, False):
             runs = ok[(ok["scenario"] == scenario) & (ok["filter_enabled"] == on)]
             counts.append(f"{int(runs['fell'].sum())}/{len(runs)}")
-        rows.append((f"falls, {scenario}: filter on | nominal only", "no falls", " | ".join(counts)))
+        rows.append((f"falls, {scenario}: filter on / nominal only", "no falls", " / ".join(counts)))
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "ours: mean (min–max, runs)"])
