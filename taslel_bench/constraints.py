@@ -92,18 +92,23 @@ class ContactOrSwing(EqualityFamily):
 
     def init(self, qp: QPProblem) -> None:
         self._diag = (np.arange(self.start, self.start + NL), np.arange(LAM.start, LAM.stop))
-        self._stance_rows = np.zeros(NL)
+        self._stance_rows = np.zeros(NL)  # 1.0 on the rows of stance feet
+        self._neg_stance_rows = np.zeros(NL)
+        self._key = b""
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        sr = self._stance_rows
-        sr[:] = np.repeat(x.in_stance, 3)
+        key = x.in_stance.tobytes()
+        if key != self._key:  # contact mode changed: new row selectors, lambda_i = 0 rows for swing feet
+            self._stance_rows[:] = np.repeat(x.in_stance, 3)
+            np.negative(self._stance_rows, out=self._neg_stance_rows)
+            qp.A[self._diag] = 1.0 - self._stance_rows
+            self._key = key
         rows = slice(self.start, self.start + NL)
-        np.multiply(x.model.foot_jac_in_world.reshape(NL, NV), sr[:, None], out=qp.A[rows, VDOT])
-        qp.A[self._diag] = 1.0 - sr
+        np.multiply(x.model.foot_jac_in_world.reshape(NL, NV), self._stance_rows[:, None], out=qp.A[rows, VDOT])
         rhs = x.model.foot_jdotv_in_world.reshape(NL)
         if self.velocity_gain:
             rhs = rhs + self.velocity_gain * x.model.foot_vel_in_world.reshape(NL)
-        np.multiply(rhs, -sr, out=qp.b[rows])
+        np.multiply(rhs, self._neg_stance_rows, out=qp.b[rows])
 
 
 class FrictionCone:
@@ -129,6 +134,7 @@ class FrictionCone:
     def init(self, qp: QPProblem) -> None:
         self._stance = np.zeros(robot.N_LEGS, bool)
         self._mu = np.full(robot.N_LEGS, np.nan)
+        self._key: tuple[bytes, float] | None = None
         for i in range(robot.N_LEGS):
             self._write_foot(qp, i, False, np.nan)
 
@@ -145,6 +151,10 @@ class FrictionCone:
         self._stance[i], self._mu[i] = stance, mu
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
+        key = (x.in_stance.tobytes(), x.mu)
+        if key == self._key:
+            return
+        self._key = key
         for i in range(robot.N_LEGS):  # rewrite a foot's rows only when its contact mode or mu changed
             stance = bool(x.in_stance[i])
             if stance != self._stance[i] or (stance and x.mu != self._mu[i]):
@@ -176,19 +186,46 @@ class SwingClearanceECBF:
         return [f"{leg}_clearance" for leg in robot.LEGS]
 
     def init(self, qp: QPProblem) -> None:
-        pass
+        self._active = [True] * robot.N_LEGS  # forces the first write of every row
+        c = np.asarray(self.profile.coeffs, float)
+        k = np.arange(len(c))
+        self._c = c.tolist()
+        self._c1 = (c[1:] * k[1:]).tolist()  # dz/ds coefficients
+        self._c2 = (c[2:] * k[2:] * k[1:-1]).tolist()  # d²z/ds² coefficients
+        for i in range(robot.N_LEGS):
+            self._deactivate(qp, i)
+
+    def _deactivate(self, qp: QPProblem, i: int) -> None:
+        if self._active[i]:
+            qp.G[self.start + i, VDOT] = 0.0
+            qp.h[self.start + i] = INACTIVE_RHS
+            self._active[i] = False
+        self.h[i] = self.h_e[i] = np.nan
+
+    @staticmethod
+    def _horner(coeffs: list[float], s: float) -> float:
+        acc = 0.0
+        for c in reversed(coeffs):
+            acc = acc * s + c
+        return acc
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
+        # Scalar code per swing foot: cheaper than numpy on 4-vectors in the 1 kHz loop.
         m, a1, a2 = x.model, self.alpha1, self.alpha2
         sdot = x.swing_phase_rate
-        rows = slice(self.start, self.start + robot.N_LEGS)
-        swing = ~x.in_stance
-        np.multiply(m.foot_jac_in_world[:, 2, :], np.where(swing, -1.0, 0.0)[:, None], out=qp.G[rows, VDOT])
-        z, dz, ddz = self.profile.evaluate(x.swing_phase)
-        h = m.foot_pos_in_world[:, 2] - robot.FOOT_RADIUS_M - z
-        hdot = m.foot_vel_in_world[:, 2] - dz * sdot
-        h_e = hdot + a1 * h
-        rhs = a2 * h_e + m.foot_jdotv_in_world[:, 2] - ddz * (sdot * sdot) + a1 * hdot
-        qp.h[rows] = np.where(swing, rhs, INACTIVE_RHS)
-        self.h[:] = np.where(swing, h, np.nan)
-        self.h_e[:] = np.where(swing, h_e, np.nan)
+        stance = x.in_stance.tolist()
+        phases = x.swing_phase.tolist()
+        for i in range(robot.N_LEGS):
+            if stance[i]:
+                self._deactivate(qp, i)
+                continue
+            s = phases[i]
+            z, dz, ddz = self._horner(self._c, s), self._horner(self._c1, s), self._horner(self._c2, s)
+            h = float(m.foot_pos_in_world[i, 2]) - robot.FOOT_RADIUS_M - z
+            hdot = float(m.foot_vel_in_world[i, 2]) - dz * sdot
+            h_e = hdot + a1 * h
+            r = self.start + i
+            np.negative(m.foot_jac_in_world[i, 2], out=qp.G[r, VDOT])
+            qp.h[r] = a2 * h_e + float(m.foot_jdotv_in_world[i, 2]) - ddz * sdot * sdot + a1 * hdot
+            self.h[i], self.h_e[i] = h, h_e
+            self._active[i] = True

@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import lapack
 
 from taslel_bench import robot
 from taslel_bench.constraints import (
@@ -102,7 +103,7 @@ class SafetyFilter:
         self.problem = self._allocate(m_eq, m_in)
         for fam in [*self.eq_families, *self.ineq_families]:
             fam.init(self.problem)
-        self._free = np.r_[np.arange(N_VARS)[VDOT], np.arange(N_VARS)[LAM]]  # columns determined by u
+        self._A_free = np.zeros((m_eq, NV + NL), order="F")  # columns of (vdot, lambda): determined by u
         self._last_u: np.ndarray | None = None
 
     def _allocate(self, m_eq: int, m_in: int) -> QPProblem:
@@ -150,13 +151,18 @@ class SafetyFilter:
 
     def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
         """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom."""
-        A_free = qp.A[:, self._free]
-        try:
-            z = np.linalg.solve(A_free, qp.b - qp.A[:, U] @ u_nom)
-        except np.linalg.LinAlgError:  # singular contact Jacobian: fall back to the zero target this tick
-            qp.q[self._free] = 0.0
+        A_free = self._A_free  # Fortran-ordered scratch: LAPACK factorises it in place
+        A_free[:, :NV] = qp.A[:, VDOT]
+        A_free[:, NV:] = qp.A[:, LAM]
+        rhs = qp.b - qp.A[:, U] @ u_nom
+        _, _, z, info = lapack.dgesv(A_free, rhs, overwrite_a=1, overwrite_b=1)
+        if info != 0:  # singular contact Jacobian: fall back to the zero target this tick
+            qp.q[VDOT] = 0.0
+            qp.q[LAM] = 0.0
             return
-        qp.q[self._free] = -self.settings.regularization * z
+        eps = self.settings.regularization
+        np.multiply(z[:NV], -eps, out=qp.q[VDOT])
+        np.multiply(z[NV:], -eps, out=qp.q[LAM])
 
     def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
         """Build, solve, and apply the failure policy. Never raises for solver failures."""
