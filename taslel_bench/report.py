@@ -107,6 +107,9 @@ def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
             "qp_solve_us_median": _mean(g, "qp_solve_us_median"),
             "qp_solve_us_p99": _mean(g, "qp_solve_us_p99"),
             "qp_shgeom_rel_best": shgeom.get(solver, float("nan")) / best if solver in shgeom else float("nan"),
+            "estimator_mae": _mean(g, "estimator_mae"),
+            "estimator_overestimate_rate": _mean(g, "estimator_overestimate_rate"),
+            "estimator_settle_s": _mean(g, "estimator_settle_s"),
             "real_time_factor": _mean(g, "real_time_factor"),
         })
         rows.append(row)
@@ -282,6 +285,9 @@ the row; `fall_rate` counts falls over runs that ended without error):
 - `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
 - `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
   solver, divided by the best solver's; 1.0 = fastest.
+- `estimator_*`: the friction the filter used (mu_hat) vs the true friction under the trunk, every tick:
+  mean |error|, fraction with mu_hat > mu + 0.05 (over-estimation: the dangerous side), and the time from
+  the first friction change until mu_hat stays within 0.05 (inf: never; — : no change in the run).
 - `real_time_factor`: simulated time / wall time of the whole episode (jobs ran in parallel, so they
   competed for the cores).
 """
