@@ -1,4 +1,6 @@
-"""Benchmark every QP backend on recorded filter QPs (not a test).
+"""Quick table: every QP backend on recorded filter QPs (not a test). The full benchmark (cold / warm /
+persistent modes, settings profiles, correctness checked against the reference, deadline misses, report) is
+``python -m taslel_bench.replay <QP set>``; this script is the fast look at one set in episode order.
 
     python -m solvers.bench                       # the fixture (tests/data/qps_episode.npz)
     python -m solvers.bench --episode 2           # a fresh 2 s closed-loop episode, every tick in order
@@ -77,7 +79,7 @@ def settings_line(backend: QPBackend) -> str:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episode", type=float, default=0.0, help="record a fresh episode of this many seconds")
-    ap.add_argument("--fixture", type=Path, default=None)
+    ap.add_argument("--fixture", type=Path, default=None, help="any QP set (taslel_bench.qpset); default: the fixture")
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)

@@ -70,8 +70,13 @@ def summarize(frame: pd.DataFrame, deadlines_hz: tuple[float, ...] = (1000.0, 50
             row[f"solve_{name}_us_min"], row[f"solve_{name}_us_max"] = float(s.min()), float(s.max())
         sg = per_pass["solve_s"].apply(lambda v: shifted_geometric_mean(v.to_numpy() * US))
         row["shgeom_us"], row["shgeom_us_min"], row["shgeom_us_max"] = float(np.median(sg)), sg.min(), sg.max()
+        # per-QP minimum over passes: filters out OS preemption on this shared machine (a stall rarely hits
+        # the same QP in every pass); compare with the raw per-pass numbers to see the noise
+        best = g.groupby("qp")[["solve_s", "build_s"]].min()
+        row["solve_p99_us_minpass"] = float(np.percentile(best["solve_s"], 99) * US) if row["passes"] > 1 else np.nan
         for hz in deadlines_hz:
             period = 1.0 / hz
+            row[f"miss_{hz:g}hz_minpass_pct"] = 100.0 * float(np.mean(best["build_s"] + best["solve_s"] > period))
             miss = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["solve_s"] > p))
             miss_py = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["call_s"] > p))
             row[f"miss_{hz:g}hz_pct"] = float(np.median(miss))
@@ -94,10 +99,18 @@ def summarize(frame: pd.DataFrame, deadlines_hz: tuple[float, ...] = (1000.0, 50
     return out
 
 
-def _pivot(summary: pd.DataFrame, value: str, fmt: str) -> pd.DataFrame:
-    """Rows: solver; columns: profile / mode (qpbenchmark's layout); unavailable cells '-'."""
+def _pivot(summary: pd.DataFrame, value: str, fmt: str, second: str | None = None) -> pd.DataFrame:
+    """Rows: solver; columns: profile / mode (qpbenchmark's layout); unavailable cells '-'. With ``second``:
+    cells "value / second"."""
     s = summary.copy()
-    s["cell"] = [fmt.format(v) if isinstance(v, float) and np.isfinite(v) else "-" for v in s.get(value, np.nan)]
+
+    def f(v: object) -> str:
+        return fmt.format(v) if isinstance(v, float) and np.isfinite(v) else "-"
+
+    cells = [f(v) for v in s.get(value, pd.Series(np.nan, index=s.index))]
+    if second is not None:
+        cells = [c if c == "-" else f"{c} / {f(w)}" for c, w in zip(cells, s.get(second, np.nan))]
+    s["cell"] = cells
     s["column"] = s["profile"] + " / " + s["mode"]
     cols = list(dict.fromkeys(s["column"]))
     return s.pivot(index="solver", columns="column", values="cell").reindex(columns=cols).fillna("-")
@@ -186,11 +199,11 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         "",
         "## Success rate [%] (backend status `solved`)",
         "",
-        _md(_pivot(summary, "success_pct", "{:.1f}")),
+        _md(_pivot(summary, "success_pct", "{:.2f}")),
         "",
         "## Correctness rate [%] (u within tolerance of the reference AND residuals/gap within tolerance)",
         "",
-        _md(_pivot(summary, "correct_pct", "{:.1f}")),
+        _md(_pivot(summary, "correct_pct", "{:.2f}")),
         "",
         f"## Shifted geometric mean of solve time, relative to the best of its profile (shift {SHGEOM_SHIFT_US:g} µs)",
         "",
@@ -198,21 +211,25 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         "",
         "## Deadline-miss rate [%] at 1 kHz (recorded build time + native solve time > 1 ms)",
         "",
-        _md(_pivot(summary, "miss_1000hz_pct", "{:.2f}")),
+        "Cells: median over passes / with each QP's fastest pass (the second filters out stalls of this shared "
+        "2-core machine: the slow solves have the same iteration counts as the typical ones).",
+        "",
+        _md(_pivot(summary, "miss_1000hz_pct", "{:.2f}", "miss_1000hz_minpass_pct")),
         "",
         "## Deadline-miss rate [%] at 500 Hz (> 2 ms)",
         "",
-        _md(_pivot(summary, "miss_500hz_pct", "{:.2f}")),
+        _md(_pivot(summary, "miss_500hz_pct", "{:.2f}", "miss_500hz_minpass_pct")),
         "",
     ]  # fmt: skip
     for prof in dict.fromkeys(summary["profile"]):
         s = summary[(summary["profile"] == prof) & (summary["status"] == "ran")]
         t = pd.DataFrame({
-            "solver": s["solver"], "mode": s["mode"], "success %": s["success_pct"].round(1),
-            "correct %": s["correct_pct"].round(1), "solved but wrong": s["wrong_but_solved"].astype(int),
+            "solver": s["solver"], "mode": s["mode"], "success %": s["success_pct"].round(2),
+            "correct %": s["correct_pct"].round(2), "solved but wrong": s["wrong_but_solved"].astype(int),
             "max abs du [N·m]": s["max_du_nm"].map(lambda v: f"{v:.1e}"),
             "median [µs]": s["solve_median_us_spread"], "p99 [µs]": s["solve_p99_us_spread"],
-            "max [µs]": s["solve_max_us_spread"], "shgeom [µs]": s["shgeom_us_spread"],
+            "max [µs]": s["solve_max_us_spread"],
+            "p99 fastest pass [µs]": s["solve_p99_us_minpass"].round(0), "shgeom [µs]": s["shgeom_us_spread"],
             "shgeom rel": s["shgeom_rel"].round(1), "miss 1 kHz %": s["miss_1000hz_pct_spread"],
             "miss 500 Hz %": s["miss_500hz_pct_spread"], "miss 1 kHz % (Python call)": s["miss_1000hz_python_pct"].round(2),
             "passes agree": s["passes_agree"],
@@ -247,11 +264,29 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
     return path
 
 
+OUTCOME = ["success_pct", "correct_pct", "wrong_but_solved"]
+
+
+def compare(first: Path, second: Path) -> tuple[bool, str]:
+    """Do two replays' ``results.csv`` give the same success / correctness tables? (identical?, markdown)"""
+    a, b = (pd.read_csv(p) for p in (first, second))
+    a, b = (f[f["status"] == "ran"].set_index(KEYS)[OUTCOME].sort_index() for f in (a, b))
+    joined = a.join(b.add_suffix(" (2nd)"), how="outer")
+    same = bool(a.index.equals(b.index) and np.array_equal(a.to_numpy(), b.to_numpy()))
+    return same, _md(joined.round(3))
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folder", type=Path)
     ap.add_argument("-o", "--out", type=Path, default=None)
+    ap.add_argument("--compare", type=Path, default=None,
+                    help="another replay's results.csv: print whether success/correctness tables are identical")
     args = ap.parse_args(argv)
+    if args.compare is not None:
+        same, table = compare(args.folder / "results.csv", args.compare)
+        print(f"success/correctness tables identical: {same}\n\n{table}")
+        raise SystemExit(0 if same else 1)
     print(write_report(args.folder, args.out))
 
 

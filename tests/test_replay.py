@@ -16,7 +16,7 @@ import pytest
 
 from taslel_bench import qpset, replay
 from taslel_bench.interfaces import QPSolution
-from taslel_bench.replay_report import summarize, write_report
+from taslel_bench.replay_report import compare, summarize, write_report
 from taslel_bench.run import run
 from tests.conftest import compose_cfg
 
@@ -157,6 +157,9 @@ def test_replaying_twice_gives_the_same_tables(runs_set, tmp_path):
     assert t.loc[("osqp", "high_accuracy", "persistent"), "correct_pct"] == 100.0
     assert t.loc[("osqp", "default", "persistent"), "wrong_but_solved"] > 0  # default OSQP: "solved", u off
     report = write_report(tmp_path / "r0")
+    write_report(tmp_path / "r1")
+    same, _ = compare(tmp_path / "r0" / "results.csv", tmp_path / "r1" / "results.csv")
+    assert same
     text = report.read_text()
     assert "Correctness rate" in text and "Deadline-miss rate" in text and "osqp" in text
     assert (tmp_path / "r0" / "results.csv").is_file() and (tmp_path / "r0" / "overhead.csv").is_file()
