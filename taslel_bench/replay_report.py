@@ -137,13 +137,14 @@ def _figure(frame: pd.DataFrame, out: Path) -> str | None:
     fig, axes = plt.subplots(1, len(profiles), figsize=(7 * len(profiles), 5), squeeze=False, sharey=True)
     for ax, prof in zip(axes[0], profiles):
         sub = ran[ran["profile"] == prof]
+        colors = {name: f"C{k % 10}" for k, name in enumerate(sorted(ran["solver"].unique()))}
         for (solver, mode), g in sub.groupby(["solver", "mode"]):
             t = np.sort(g["solve_s"].to_numpy() * US)
             ls = {"cold": ":", "warm": "--", "persistent": "-"}.get(mode, "-")
-            ax.plot(t, np.arange(1, t.size + 1) / t.size, ls, label=f"{solver} {mode}")
-        for hz, c in ((1000, "red"), (500, "orange")):
+            ax.plot(t, np.arange(1, t.size + 1) / t.size, ls, color=colors[solver], label=f"{solver} {mode}")
+        for hz, c, y in ((1000, "red", 0.02), (500, "orange", 0.07)):
             ax.axvline(1e6 / hz, color=c, lw=0.8)
-            ax.text(1e6 / hz, 0.02, f" {hz} Hz period", color=c, fontsize=8)
+            ax.text(1e6 / hz, y, f" {hz} Hz period", color=c, fontsize=8)
         ax.set_xscale("log")
         ax.set_xlabel("solve time [µs] (native call, all passes)")
         ax.set_title(f"profile: {prof}")
@@ -211,8 +212,8 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         "",
         "## Deadline-miss rate [%] at 1 kHz (recorded build time + native solve time > 1 ms)",
         "",
-        "Cells: median over passes / with each QP's fastest pass (the second filters out stalls of this shared "
-        "2-core machine: the slow solves have the same iteration counts as the typical ones).",
+        ("Cells: median over passes / with each QP's fastest pass (the second filters out stalls of this shared "
+         "2-core machine: the slow solves have the same iteration counts as the typical ones)."),
         "",
         _md(_pivot(summary, "miss_1000hz_pct", "{:.2f}", "miss_1000hz_minpass_pct")),
         "",
