@@ -10,21 +10,17 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import importlib.metadata
-import os
-import platform
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from taslel_bench import recording
+from taslel_bench.machine import machine_info
 from taslel_bench.sweep import SUMMARY_TABLE, aggregate
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "estimator"]
-PACKAGES = ("mujoco", "pin", "numpy", "scipy", "qpsolvers", "osqp", "clarabel", "piqp", "proxsuite", "daqp",
-            "quadprog", "hydra-core", "pandas", "torch", "lightning")
 
 
 def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT_US) -> float:
@@ -35,30 +31,6 @@ def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT
     if v.size == 0:
         return float("nan")
     return float(np.exp(np.mean(np.log(v + shift_us))) - shift_us)
-
-
-def machine_info() -> dict[str, str]:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    versions = {}
-    for pkg in PACKAGES:
-        try:
-            versions[pkg] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            continue
-    return {
-        "cpu": cpu,
-        "cores": str(os.cpu_count()),
-        "os": f"{platform.system()} {platform.release()}",
-        "python": platform.python_version(),
-        "packages": ", ".join(f"{k} {v}" for k, v in versions.items()),
-    }
 
 
 def _fall_rate(frame: pd.DataFrame) -> str:
