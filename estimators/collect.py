@@ -3,7 +3,8 @@
 Each episode: the A1 stands ``stand_duration_s`` then trots under the nominal controller (trot, IK, joint
 PD at 1 kHz) on a flat floor whose friction and plant parameters are drawn by
 :mod:`estimators.randomisation`. Every ``WINDOW_DT_S`` the 36 features (q, qdot, commanded tau; core
-joint order) are sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples from
+joint order; tau is the torque commanded on the previous tick, exactly what the core episode runner passes
+as ``Proprioception.tau_joints``) are sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples from
 ``first_window_s`` on, are labelled with the floor friction. Splits are by episode (train / val / test
 from the training ranges, ``shifted`` from :data:`SHIFTED_RANGES`). A fall (trunk below 0.15 m or tilted
 more than ~53 deg) ends the episode; windows ending later than ``fall_margin_s`` before the fall are
@@ -90,19 +91,21 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> Episo
     every = int(round(WINDOW_DT_S / cfg.timestep_s))
     samples: list[np.ndarray] = []
     fall_t = float("nan")
+    tau_prev = np.zeros(robot.N_JOINTS)  # [N·m] torque commanded on the previous tick (0 at t = 0)
     k = 0
     for k in range(n_steps):
         t = k * cfg.timestep_s
         qj, qd = d.qpos[br.joint_qadr], d.qvel[br.joint_dadr]
-        u = ctl.compute(t, qj, qd)
-        if k % every == 0:
-            samples.append(sample_vector(qj, qd, u))
+        if k % every == 0:  # sampled before this tick's control, as the episode runner feeds estimators
+            samples.append(sample_vector(qj, qd, tau_prev))
             qw, qx, qy = d.qpos[a + 3], d.qpos[a + 4], d.qpos[a + 5]
             upz = 1.0 - 2.0 * (qx * qx + qy * qy)
             if d.qpos[a + 2] < cfg.fall_height_m or upz < cfg.fall_upz or not np.isfinite(d.qpos).all():
                 fall_t = t
                 break
+        u = ctl.compute(t, qj, qd)
         br.ctrl_mj(u, d.ctrl)
+        tau_prev = u
         mujoco.mj_step(m, d)
 
     s = np.stack(samples)

@@ -3,8 +3,9 @@
 A *window* is ``WINDOW_STEPS`` proprioceptive samples taken every ``WINDOW_DT_S`` seconds (1.2 s of
 history). Each sample has ``N_FEATURES = 36`` features in the core joint order (legs FL, FR, RL, RR,
 ``[hip, thigh, calf]`` each): ``[q (12) [rad], qdot (12) [rad/s], tau (12) [N·m]]``. ``tau`` is the
-commanded joint torque (the controller output after clipping) — what a real A1 reports from its motor
-currents — not the torque a perturbed motor actually delivers.
+joint torque commanded on the previous control tick (after clipping; the episode runner's
+``Proprioception.tau_joints``) — what a real A1 reports from its motor currents — not the torque a
+perturbed (weaker / stronger) motor actually delivers.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Stand-alone check of the in-loop path (the harness's own sweep uses the core episode runner): the A1
 trots under the nominal controller (no safety filter) on a floor whose friction switches from ``mu_a``
 to ``mu_b`` at ``t_switch_s``; a :class:`LearnedEstimator` is stepped every 1 ms tick with the joint
-state and commanded torques. Reported per episode: MAE, bias and over-estimation rate (> truth + 0.05)
+state and the previous tick's commanded torques (as the core episode runner does). Reported per episode: MAE, bias and over-estimation rate (> truth + 0.05)
 of the reported (conservative) estimate over the ticks where it is ready, and the settle time: the time
 after the switch from which the model mean stays within ``settle_tol`` of the new friction.
 """
@@ -48,13 +48,15 @@ def run(est: LearnedEstimator, mu_a: float, mu_b: float, t_switch_s: float, dura
     est.reset()
     ts, truth, mus, means, ready = [], [], [], [], []
     fell = False
+    tau_prev = np.zeros(robot.N_JOINTS)  # [N·m] torque commanded on the previous tick
     for k in range(int(round(duration_s / m.opt.timestep))):
         t = k * m.opt.timestep
         mu_true = mu_a if t < t_switch_s else mu_b
         m.geom_friction[rand.floor_id, 0] = mu_true
         qj, qd = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
+        e = est.step(Proprioception(t, qj, qd, tau_prev.copy(), mu_true))  # as the episode runner does
         u = ctl.compute(t, qj, qd)
-        e = est.step(Proprioception(t, qj, qd, u, mu_true))
+        tau_prev = u
         ts.append(t), truth.append(mu_true), mus.append(e.mu), means.append(est.mean), ready.append(e.ready)
         br.ctrl_mj(u, d.ctrl)
         mujoco.mj_step(m, d)

@@ -175,7 +175,7 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
         LearnedEstimator("gru")
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer"])
+@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step"])
 def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     pytest.importorskip("torch")
     from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint
