@@ -34,6 +34,10 @@ def main(cfg: DictConfig) -> dict:
         # in a sweep one bad job must not stop the others: leave an error summary the report lists
         summary = record_job_error(out_dir, choices, cfg, exc)
     print_summary(summary, out_dir)
+    if hc.mode == RunMode.MULTIRUN:
+        sweep_dir = Path(hc.sweep.dir)
+        done = sum(1 for _ in sweep_dir.rglob("summary.json"))
+        print(f"sweep progress: {done} runs complete in {sweep_dir} (this was job #{hc.job.num})", flush=True)
     return summary
 
 

@@ -99,3 +99,17 @@ def test_real_multirun_two_solvers(tmp_path):
     # same sweep again: both runs are complete, so they are skipped
     again = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0 and again.stdout.count("already complete, skipped") == 2
+
+
+@pytest.mark.slow
+def test_multirun_with_a_failing_job_records_it_and_finishes_the_others(tmp_path):
+    """One job refuses its config (kp < 0) inside a sweep: an error row, the other job completes."""
+    cmd = [sys.executable, "-m", "taslel_bench", "-m", "controller.kp=100,-1", "duration=0.3", "progress=false",
+           "record.mcap=false", f"hydra.sweep.dir={tmp_path}"]
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+    assert out.returncode == 0, out.stderr[-3000:]
+    table = pd.read_parquet(tmp_path / "summary.parquet")
+    assert len(table) == 2
+    assert sorted(table["status"]) == ["error", "ok"]
+    assert "controller.kp" in table.loc[table["status"] == "error", "message"].iloc[0]
+    assert "sweep progress: 2 runs complete" in out.stdout or "sweep progress: 1 runs complete" in out.stdout
