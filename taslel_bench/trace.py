@@ -1,7 +1,9 @@
 """Per-tick record of an episode in preallocated arrays, turned into a typed table at the end.
 
-Every plant quantity is read from MuJoCo after the tick's physics steps (contact forces: those of the
-last physics step). Frames in the column names: ``_w`` = world axes, joint vectors in core order.
+Every plant quantity is read from MuJoCo after the tick's physics steps: the state (trunk pose and
+velocity, joints) is the one after the tick; foot positions, contact forces and contact-point velocities
+are those MuJoCo computed in the tick's last physics step (its starting state, 1 physics step earlier).
+Frames in the column names: ``_w`` = world axes, joint vectors in core order.
 """
 
 from __future__ import annotations
@@ -54,8 +56,9 @@ class EpisodeTrace:
     def record(self, k, t, d, br: StateBridge, trunk, foot_sites, gs, in_stance, u_nom, u, fres, contacts,
                mu_hat, mu_true, tick_s, profile, ecbf) -> None:
         self.t_s[k] = t
-        self.base_pos_w[k] = d.xpos[trunk]
-        self.base_quat_wxyz[k] = d.xquat[trunk]
+        a = br.free_qadr  # trunk pose from qpos: the state after the tick, like q and qd
+        self.base_pos_w[k] = d.qpos[a : a + 3]
+        self.base_quat_wxyz[k] = d.qpos[a + 3 : a + 7]
         self.base_linvel_w[k] = d.qvel[br.free_dadr : br.free_dadr + 3]
         self.q[k] = d.qpos[br.joint_qadr]
         self.qd[k] = d.qvel[br.joint_dadr]
