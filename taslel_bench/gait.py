@@ -59,10 +59,13 @@ class TrotGait:
         if t < 0.0:
             return GaitState(0.0, 0.0, np.ones(4, bool), np.zeros(4), 0.0)
         phi = (t % p.period_s) / p.period_s
-        leg_phase = (phi + TROT_OFFSETS) % 1.0  # [0, duty) stance, [duty, 1) swing
-        in_stance = leg_phase < p.duty
-        swing = np.where(in_stance, 0.0, (leg_phase - p.duty) / (1.0 - p.duty))
-        return GaitState(phi, 1.0 / p.period_s, in_stance, swing, 1.0 / (p.period_s * (1.0 - p.duty)))
+        stance, swing = [], []
+        for offset in _TROT_OFFSETS:  # scalar loop: cheaper than numpy on 4 legs, once per control tick
+            lp = (phi + offset) % 1.0  # [0, duty) stance, [duty, 1) swing
+            stance.append(lp < p.duty)
+            swing.append(0.0 if lp < p.duty else (lp - p.duty) / (1.0 - p.duty))
+        return GaitState(phi, 1.0 / p.period_s, np.array(stance), np.array(swing),
+                         1.0 / (p.period_s * (1.0 - p.duty)))
 
     def foot_targets_in_hip(self, t: float) -> np.ndarray:
         """(4, 3) foot-sphere centre targets [m] in each hip frame at time ``t``."""
