@@ -79,6 +79,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
     args = ap.parse_args(argv)
     rows = []
+    load_before = os.getloadavg()[0]
     configs = [("nominal only", ["filter.enabled=false"])] + [
         (f"filter + {s}", [f"solver={s}"]) for s in args.solvers.split(",") if s
     ]
@@ -106,7 +107,8 @@ def main(argv: list[str] | None = None) -> None:
             "# Control-tick cost\n",
             f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --scenario "
             f"{args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n",
-            f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n"
+            f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
+            f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
             f"Packages: {info['packages']}\n",
             "Tick = wall time of one 1 kHz control tick (state read, controller, Pinocchio, QP build + solve, "
             "physics step, recording), median over the episode; real-time factor = simulated / wall time of "
