@@ -46,7 +46,11 @@ class LearnedEstimator:
         if threads is not None:
             torch.set_num_threads(int(threads))
         self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
-        self.name = variant
+        if self.meta["model"]["variant"] != variant:
+            raise ValueError(
+                f"checkpoint {checkpoint!r} holds a {self.meta['model']['variant']!r} model, not {variant!r}"
+            )
+        self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
         self._buf = np.zeros((WINDOW_STEPS, N_FEATURES), np.float32)
         self._x = torch.zeros(1, WINDOW_STEPS, N_FEATURES)

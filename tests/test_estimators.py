@@ -173,6 +173,8 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
     assert not est.step(_obs(0.0)).ready
     with pytest.raises(ValueError, match="valid choices"):
         LearnedEstimator("gru")
+    with pytest.raises(ValueError, match="holds a 'mlp' model"):
+        LearnedEstimator("linformer", checkpoint=tmp_path / "m")
 
 
 @pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step"])
@@ -191,7 +193,7 @@ def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     assert recorded < 3 * meta["metrics"]["test/mean"]["mae"] + 0.02
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer"])
+@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step"])
 def test_learned_configs_instantiate(variant: str) -> None:
     pytest.importorskip("torch")
     from hydra.utils import instantiate
@@ -202,3 +204,24 @@ def test_learned_configs_instantiate(variant: str) -> None:
         pytest.skip(f"no shipped {variant} checkpoint")
     est = instantiate(OmegaConf.load(CONF / f"{variant}.yaml"))
     assert est.name == variant and json.dumps(est.meta["model"])
+
+
+def test_inloop_window_matches_collected_window(tmp_path: Path) -> None:
+    """The window the in-loop estimator feeds its model is exactly the one collection labels (same
+    sample instants, previous-tick torque, core joint order)."""
+    torch = pytest.importorskip("torch")
+    from estimators.checkpoint import save_checkpoint
+    from estimators.collect import EpisodeConfig, run_episode
+    from estimators.inloop import nominal_params, run
+    from estimators.learned import LearnedEstimator
+    from estimators.models import ModelConfig, build_model
+
+    save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).eval(), tmp_path / "m")
+    est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", threads=None)
+    seen: list[torch.Tensor] = []
+    model = est.model
+    est.model = lambda x: (seen.append(x.clone()), model(x))[1]  # type: ignore[assignment]
+    run(est, 0.6, 0.6, t_switch_s=10.0, duration_s=1.2)
+    collected = run_episode(nominal_params(0.6), EpisodeConfig(duration_s=1.2, first_window_s=0.0, stride=1))
+    assert len(seen) == 1 and collected.windows.shape[0] == 1
+    np.testing.assert_allclose(seen[0][0].numpy(), collected.windows[0], rtol=0, atol=1e-6)
