@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -26,6 +24,7 @@ from estimators.checkpoint import CHECKPOINT_DIR, checkpoint_paths, load_checkpo
 from estimators.data import load_split
 from estimators.metrics import regression_metrics
 from estimators.models import VARIANTS, FrictionModel, parameter_count
+from taslel_bench.machine import machine_info
 
 FIXTURE = CHECKPOINT_DIR / "heldout64.npz"
 K_SWEEP = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # conservative-bound sigmas for the trade-off table
@@ -103,27 +102,6 @@ def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np
     plt.close(fig)
 
 
-def machine_info() -> dict[str, str]:
-    import importlib.metadata as md
-
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    info = {"cpu": cpu, "cpus": str(os.cpu_count()), "python": platform.python_version(),
-            "platform": platform.platform(), "torch": torch.__version__}
-    for pkg in ("lightning", "mujoco", "numpy"):
-        try:
-            info[pkg] = md.version(pkg)
-        except md.PackageNotFoundError:
-            info[pkg] = "n/a"
-    return info
-
-
 def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path, latency_runs: int) -> list[dict[str, object]]:
     """Evaluate each variant; returns one row per (variant, split, estimate)."""
     torch.set_num_threads(1)
@@ -175,7 +153,7 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
     return rows
 
 
-def markdown_table(df: "object") -> str:
+def markdown_table(df: object) -> str:
     """A pipe table of a DataFrame (floats with 4 decimals) without the optional ``tabulate`` package."""
     cols = list(df.columns)  # type: ignore[attr-defined]
 
@@ -188,7 +166,7 @@ def markdown_table(df: "object") -> str:
     return "\n".join(lines)
 
 
-def summary_table(df: "object", names: list[str], ks: list[float], train_rec: dict[str, dict]) -> list[str]:
+def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict[str, dict]) -> list[str]:
     """One row per variant: the headline numbers of the issue side by side."""
     head = ["variant", "params", "train wall [s]", "train CPU [s]", "latency [ms]", "test MAE", "test RMSE",
             "test R²", "test bias", "test over", "shifted MAE", "shifted RMSE", "shifted bias", "shifted over"]
