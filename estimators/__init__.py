@@ -8,4 +8,4 @@ numpy and MuJoCo; ``estimators.models``, ``train``, ``evaluate`` and ``learned``
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS
 from estimators.simple import FixedEstimator, OracleEstimator
 
-__all__ = ["FixedEstimator", "OracleEstimator", "N_FEATURES", "WINDOW_DT_S", "WINDOW_STEPS"]
+__all__ = ["N_FEATURES", "WINDOW_DT_S", "WINDOW_STEPS", "FixedEstimator", "OracleEstimator"]

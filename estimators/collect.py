@@ -98,7 +98,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> Episo
         qj, qd = d.qpos[br.joint_qadr], d.qvel[br.joint_dadr]
         if k % every == 0:  # sampled before this tick's control, as the episode runner feeds estimators
             samples.append(sample_vector(qj, qd, tau_prev))
-            qw, qx, qy = d.qpos[a + 3], d.qpos[a + 4], d.qpos[a + 5]
+            qx, qy = d.qpos[a + 4], d.qpos[a + 5]
             upz = 1.0 - 2.0 * (qx * qx + qy * qy)
             if d.qpos[a + 2] < cfg.fall_height_m or upz < cfg.fall_upz or not np.isfinite(d.qpos).all():
                 fall_t = t
@@ -197,7 +197,7 @@ def collect(
         fell = [r for r in rs if r.fell]
         manifest["splits"][split] = {  # type: ignore[index]
             "episodes": len(rs),
-            "windows": int(len(X)),
+            "windows": len(X),
             "episodes_fallen": len(fell),
             "episodes_fallen_without_windows": sum(1 for r in fell if len(r.windows) == 0),
             "fallen_friction": sorted(round(r.params.friction, 3) for r in fell),

@@ -181,7 +181,7 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
     for v in names:
         r = train_rec.get(v, {})
         t = get(v, "test", "mean", "mae")
-        if t != t:
+        if np.isnan(t):
             continue
         cells = [v, str(int(get(v, "test", "mean", "params"))), str(r.get("train_wall_time_s", "n/a")),
                  str(r.get("train_cpu_time_s", "n/a")), f"{get(v, 'test', 'mean', 'latency_ms'):.2f}"]

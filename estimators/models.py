@@ -45,8 +45,9 @@ class ModelConfig:
     linformer_k: int = 32
     mlp_hidden: list[int] = field(default_factory=lambda: [256, 256])
     window_steps: int = WINDOW_STEPS
+    use_tau: bool = True  # False: torque features are zeroed after normalisation (q, qdot only)
 
-    def validate(self) -> "ModelConfig":
+    def validate(self) -> ModelConfig:
         for name, value, valid in (
             ("variant", self.variant, VARIANTS),
             ("tokens", self.tokens, TOKENISATIONS),
@@ -91,7 +92,7 @@ class Normaliser(nn.Module):
 
 
 @torch.no_grad()
-def calibrate_variance(model: "FrictionModel", x: torch.Tensor, y: torch.Tensor, batch: int = 512) -> float:
+def calibrate_variance(model: FrictionModel, x: torch.Tensor, y: torch.Tensor, batch: int = 512) -> float:
     """Scale the predicted variance so the Gaussian NLL on (x, y) is minimal (closed form:
     s = mean((y - mean)^2 / var)); stores log s in the model and returns s (variance scale)."""
     model.eval()
@@ -123,6 +124,8 @@ class FrictionModel(nn.Module):
                 f"expected windows (B, {self.cfg.window_steps}, {N_FEATURES}), got {tuple(x.shape)}"
             )
         z = (x - self.norm.x_mean) / self.norm.x_std
+        if not self.cfg.use_tau:
+            z = torch.cat([z[..., :24], torch.zeros_like(z[..., 24:])], dim=-1)
         out = self.encode(z)
         mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
         log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset

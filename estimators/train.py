@@ -23,7 +23,14 @@ from omegaconf import DictConfig, OmegaConf
 
 from estimators.checkpoint import CHECKPOINT_DIR, save_checkpoint
 from estimators.data import WindowDataModule
-from estimators.models import VARIANTS, FrictionModel, ModelConfig, build_model, calibrate_variance, parameter_count
+from estimators.models import (
+    VARIANTS,
+    FrictionModel,
+    ModelConfig,
+    build_model,
+    calibrate_variance,
+    parameter_count,
+)
 
 LOSSES = ("mae+nll", "nll", "mae")
 
@@ -170,7 +177,7 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
         "epochs": int(trainer.current_epoch),
         "global_steps": int(trainer.global_step),
         "best_val_mae": float(ckpt.best_model_score) if ckpt.best_model_score is not None else None,
-        "train_windows": int(len(dm.tensors["train"][1])),
+        "train_windows": len(dm.tensors["train"][1]),
         "variance_scale_fitted_on_val": var_scale,
         "parameters": parameter_count(task.model),
         "torch_threads": int(cfg.threads),

@@ -153,7 +153,7 @@ def test_checkpoint_round_trip(tmp_path: Path) -> None:
 
 
 def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
-    torch = pytest.importorskip("torch")
+    pytest.importorskip("torch")
     from estimators.checkpoint import save_checkpoint
     from estimators.learned import LearnedEstimator
     from estimators.models import ModelConfig, build_model
@@ -177,7 +177,7 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
         LearnedEstimator("linformer", checkpoint=tmp_path / "m")
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step"])
+@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
 def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     pytest.importorskip("torch")
     from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint
@@ -193,7 +193,7 @@ def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     assert recorded < 3 * meta["metrics"]["test/mean"]["mae"] + 0.02
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step"])
+@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
 def test_learned_configs_instantiate(variant: str) -> None:
     pytest.importorskip("torch")
     from hydra.utils import instantiate
@@ -225,3 +225,15 @@ def test_inloop_window_matches_collected_window(tmp_path: Path) -> None:
     collected = run_episode(nominal_params(0.6), EpisodeConfig(duration_s=1.2, first_window_s=0.0, stride=1))
     assert len(seen) == 1 and collected.windows.shape[0] == 1
     np.testing.assert_allclose(seen[0][0].numpy(), collected.windows[0], rtol=0, atol=1e-6)
+
+
+def test_model_without_tau_ignores_torques() -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.models import ModelConfig, build_model
+
+    model = build_model(ModelConfig(variant="attention", tokens="step", d_model=16, use_tau=False)).eval()
+    x = torch.randn(3, 40, 36)
+    x2 = x.clone()
+    x2[..., 24:] += 10.0
+    with torch.no_grad():
+        torch.testing.assert_close(model(x)[0], model(x2)[0])
