@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.persistent import NativeResult, PersistentBackend
+from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem
 
@@ -94,11 +94,7 @@ class OsqpPersistent(PersistentBackend):
         status = str(r.info.status)
         ok = r.info.status_val == osqp.SolverStatus.OSQP_SOLVED
         if not ok:
-            low = status.lower()
-            reason = (
-                "infeasible" if "infeasible" in low else "max_iter" if "max" in low else f"failed: {status}"
-            )
-            return NativeResult(None, False, reason, int(r.info.iter))
+            return NativeResult(None, False, failure_reason(status, max_iter_marker="max"), int(r.info.iter))
         m_eq, m_in = self._m_eq, self._m_in
         z_box = np.zeros(self._n)
         z_box[self._bounded] = r.y[m_eq + m_in :]

@@ -41,6 +41,16 @@ class NativeResult:
     z_box: np.ndarray | None = None
 
 
+def failure_reason(status: object, max_iter_marker: str = "max_iter") -> str:
+    """Short reason for a native status that is not "solved": infeasible, max_iter or failed: <status>."""
+    low = str(status).lower()
+    if "infeasible" in low:
+        return "infeasible"
+    if max_iter_marker in low:
+        return "max_iter"
+    return f"failed: {status}"
+
+
 class PersistentBackend:
     """Common machinery; see module doc."""
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from solvers.base import layout_key
-from solvers.persistent import NativeResult, PersistentBackend
+from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem
 
@@ -84,15 +84,7 @@ class PiqpPersistent(PersistentBackend):
         r = self._solver.result
         iters = int(r.info.iter)
         if status != piqp.Status.PIQP_SOLVED:
-            low = str(status).lower()
-            reason = (
-                "infeasible"
-                if "infeasible" in low
-                else "max_iter"
-                if "max_iter" in low
-                else f"failed: {status}"
-            )
-            return NativeResult(None, False, reason, iters)
+            return NativeResult(None, False, failure_reason(status), iters)
         z = np.zeros(self._m_in)
         z[self._rows] = np.asarray(r.z_u) - np.asarray(r.z_l)
         return NativeResult(

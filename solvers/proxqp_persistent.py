@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from solvers.persistent import NativeResult, PersistentBackend
+from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from taslel_bench.interfaces import QPProblem
 
 DEFAULT_SETTINGS: dict[str, Any] = {
@@ -90,15 +90,7 @@ class ProxqpPersistent(PersistentBackend):
             status, iters, retried = r.info.status, iters + int(r.info.iter), True
             self.cold_retries += 1
         if status != proxqp.QPSolverOutput.PROXQP_SOLVED:
-            low = str(status).lower()
-            reason = (
-                "infeasible"
-                if "infeasible" in low
-                else "max_iter"
-                if "max_iter" in low
-                else f"failed: {status}"
-            )
-            return NativeResult(None, False, reason, iters)
+            return NativeResult(None, False, failure_reason(status), iters)
         z = np.array(r.z)
         return NativeResult(
             np.array(r.x), True, str(status) + (" (cold retry)" if retried else ""), iters,
