@@ -21,16 +21,9 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from taslel_bench.api import compose
 from taslel_bench.constraints import TickInputs
 from taslel_bench.run import Built
-
-
-def _compose(overrides: list[str]):
-    from hydra import compose, initialize_config_dir
-
-    conf = str(Path(__file__).resolve().parent.parent / "conf")
-    with initialize_config_dir(config_dir=conf, version_base="1.3"):
-        return compose(config_name="config", overrides=overrides)
 
 
 def _median_us(fn, n: int = 2000) -> float:
@@ -84,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
         (f"filter + {s}", [f"solver={s}"]) for s in args.solvers.split(",") if s
     ]
     for label, extra in configs:
-        cfg = _compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
+        cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
         built = Built(cfg)
         res = built.episode.run()
         n = res.trace.n

@@ -1,0 +1,60 @@
+"""The core's services for axis packages (``scenarios/``, ``solvers/``, ``estimators/``).
+
+Axis packages import :mod:`taslel_bench.interfaces` for types and this module for the few core services
+they need beyond them (e.g. data collection with the safety filter in the loop). Everything here is built
+from the project's Hydra config, so a solver or filter setting means the same thing in a data-collection
+run as in a benchmark run.
+
+    cfg = api.compose(["solver=daqp_persistent"])
+    safety_filter = api.build_safety_filter(cfg)          # SafetyFilter with cfg.solver's backend
+    controller = api.build_controller(cfg)                # NominalController (trot, IK, joint PD)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from taslel_bench.constraints import TickInputs
+from taslel_bench.controller import NominalController
+from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.model import A1Model
+from taslel_bench.run import build_controller, filter_settings
+from taslel_bench.safety_filter import FilterResult, SafetyFilter
+
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+
+__all__ = [
+    "A1Model",
+    "FilterResult",
+    "NominalController",
+    "SafetyFilter",
+    "TickInputs",
+    "build_controller",
+    "build_safety_filter",
+    "compose",
+]
+
+
+def compose(overrides: Sequence[str] = ()) -> DictConfig:
+    """The project's config (``conf/config.yaml``) with Hydra overrides, outside a Hydra app."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return hydra_compose(config_name="config", overrides=list(overrides))
+
+
+def build_safety_filter(cfg: DictConfig, profile: ClearanceProfile | None = None) -> SafetyFilter:
+    """The ID-CBF-QP filter configured by ``cfg.filter``/``cfg.robot`` with the backend ``cfg.solver``.
+
+    ``profile``: swing-foot clearance profile for the ECBF (None: no ECBF rows). Per tick:
+    ``safety_filter.filter(TickInputs(model, v, in_stance, mu, swing_phase, swing_phase_rate), u_nom)``
+    with ``model`` an :class:`A1Model` updated at the plant state (see :mod:`taslel_bench.episode`)."""
+    fs = filter_settings(cfg)
+    if not fs.enabled:
+        raise ValueError("build_safety_filter: cfg.filter.enabled is false")
+    return SafetyFilter(fs, instantiate(cfg.solver), profile)
