@@ -15,6 +15,7 @@ bounds the torque error by ||u - u*||_2 <= sqrt(2 g).
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -53,14 +54,19 @@ class Residuals:
 
 
 def primal_residual(problem: QPProblem, x: np.ndarray) -> float:
-    """Largest violation of A x = b, G x <= h and lb <= x <= ub."""
-    r = 0.0
+    """Largest violation of A x = b, G x <= h and lb <= x <= ub (nan if any is nan)."""
+    worst = []
     if problem.A.shape[0]:
-        r = float(np.abs(problem.A @ x - problem.b).max())
+        e = problem.A @ x
+        e -= problem.b
+        worst += [e.max(), -e.min()]
     if problem.G.shape[0]:
-        r = max(r, float((problem.G @ x - problem.h).max()))
-    r = max(r, float((problem.lb - x).max()), float((x - problem.ub).max()))
-    return float("nan") if np.isnan(r) else r
+        g = problem.G @ x
+        g -= problem.h
+        worst.append(g.max())
+    worst += [(problem.lb - x).max(), (x - problem.ub).max()]
+    r = max(0.0, *worst)
+    return float("nan") if any(v != v for v in worst) else float(r)
 
 
 def residuals(
@@ -102,7 +108,7 @@ def verdict(res: Residuals | None, tol: Tolerances) -> str:
     """``"solved"`` if every available residual is within tolerance, else a short reason."""
     if res is None:
         return SOLVED
-    if not np.isfinite(res.primal) or res.primal > tol.primal:
+    if not math.isfinite(res.primal) or res.primal > tol.primal:
         return f"inaccurate: primal residual {res.primal:.1e} > {tol.primal:.0e}"
     if not np.isnan(res.dual) and not res.dual <= tol.dual:
         return f"inaccurate: dual residual {res.dual:.1e} > {tol.dual:.0e}"

@@ -64,6 +64,8 @@ class PersistentBackend:
         self.tol = Tolerances(**dict(check or {}))
         self.warm_start = bool(warm_start)
         self._key: tuple | None = None
+        self._masks: tuple | None = None  # pattern masks of the last layout key (see _layout_key)
+        self._masks_key: tuple = ()
         self.setups = 0  # how many times the solver was (re)built -- for tests and reports
 
     # ------------------------------------------------------------------ to implement
@@ -77,8 +79,16 @@ class PersistentBackend:
         raise NotImplementedError
 
     def _layout_key(self, problem: QPProblem) -> tuple:
-        """What forces a new setup (override to add solver-specific reasons)."""
-        return layout_key(problem)
+        """What forces a new setup (override to add solver-specific reasons).
+
+        The pattern masks are constant for a layout (:class:`QPProblem` contract), so their bytes are read
+        once per mask object (the objects are kept alive, so ``is`` cannot match a different, new mask);
+        the finiteness of the bounds is read every call."""
+        masks = (problem.P_pattern, problem.A_pattern, problem.G_pattern)
+        if self._masks is None or any(a is not b for a, b in zip(masks, self._masks)):
+            self._masks = masks
+            self._masks_key = layout_key(problem)[:6]
+        return self._masks_key + (np.isfinite(problem.lb).tobytes(), np.isfinite(problem.ub).tobytes())
 
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         """Gather this tick's values into the backend's own buffers (harness overhead, not timed); on a

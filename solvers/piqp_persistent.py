@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from solvers.base import layout_key
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem
@@ -46,7 +45,7 @@ class PiqpPersistent(PersistentBackend):
 
     def _layout_key(self, problem: QPProblem) -> tuple:
         inert = ~np.any(problem.G != 0.0, axis=1) & (problem.h >= 0.0)
-        return layout_key(problem) + (inert.tobytes(),)
+        return super()._layout_key(problem) + (inert.tobytes(),)
 
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         if fresh:

@@ -53,14 +53,16 @@ def part_costs(built: Built) -> dict[str, float]:
         "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
         "controller": _median_us(ctrl),
         "pinocchio_update": _median_us(lambda: e.model.update(q, v)),
-        "contact_read": _median_us(lambda: e.contacts.read(d)),
+        "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
     }
     if built.filter is not None:
         gs = e.controller.gait_state(t[0])
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
-        costs["qp_solve"] = _median_us(lambda: built.backend.solve(built.filter.problem), 500)
+        f = built.filter
+        backend_qp = f.condensed if f.condensed is not None else f.problem  # what the backend is given
+        costs["qp_solve"] = _median_us(lambda: built.backend.solve(backend_qp), 500)
     return costs
 
 
@@ -68,13 +70,17 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=5.0, help="walking time per episode [s]")
     ap.add_argument("--solvers", default="daqp,osqp_persistent,osqp", help="comma-separated solver options")
+    ap.add_argument("--formulations", default="full,condensed",
+                    help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
     args = ap.parse_args(argv)
     rows = []
     load_before = os.getloadavg()[0]
     configs = [("nominal only", ["filter.enabled=false"])] + [
-        (f"filter + {s}", [f"solver={s}"]) for s in args.solvers.split(",") if s
+        (f"filter ({form}) + {s}", [f"solver={s}", f"filter.formulation={form}"])
+        for s in args.solvers.split(",") if s
+        for form in args.formulations.split(",") if form
     ]
     for label, extra in configs:
         cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])

@@ -54,6 +54,8 @@ class StateBridge:
         self.joint_dadr = np.array(dadr)  # core joint i -> MuJoCo qvel index
         self.actuator_ids = np.array(act)  # core joint i -> MuJoCo actuator index
         self.nu = mj_model.nu
+        self._quat_trunk_from_world = np.zeros(4)  # scratch for v_pin
+        self._vel_in_trunk = np.zeros(3)
 
     # --- MuJoCo -> Pinocchio -------------------------------------------------------------------------
     def q_pin(self, qpos: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -70,8 +72,9 @@ class StateBridge:
         """Pinocchio velocity (18) from MuJoCo ``qvel``: trunk linear velocity rotated into trunk axes."""
         out = np.empty(robot.NV) if out is None else out
         a, d = self.free_qadr, self.free_dadr
-        rot_world_from_trunk = _quat_wxyz_to_matrix(qpos[a + 3 : a + 7])
-        out[:3] = rot_world_from_trunk.T @ qvel[d : d + 3]
+        mujoco.mju_negQuat(self._quat_trunk_from_world, qpos[a + 3 : a + 7])  # inverse rotation
+        mujoco.mju_rotVecQuat(self._vel_in_trunk, qvel[d : d + 3], self._quat_trunk_from_world)
+        out[:3] = self._vel_in_trunk
         out[3:6] = qvel[d + 3 : d + 6]
         out[6:] = qvel[self.joint_dadr]
         return out

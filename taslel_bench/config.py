@@ -9,7 +9,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from taslel_bench.safety_filter import FALLBACKS, REGULARIZATION_TARGETS
+from taslel_bench.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 
 STANCE_SOURCES = ("schedule", "contact")
 MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
@@ -76,6 +76,8 @@ def validate(cfg: DictConfig) -> None:
            f"valid: {', '.join(FALLBACKS)}")
     _check(cfg.filter.regularization_target in REGULARIZATION_TARGETS, f"{f}.regularization_target",
            cfg.filter.regularization_target, f"valid: {', '.join(REGULARIZATION_TARGETS)}")
+    _check(cfg.filter.get("formulation", "full") in FORMULATIONS, f"{f}.formulation", cfg.filter.get("formulation"),
+           f"valid: {', '.join(FORMULATIONS)}")
     _check(cfg.filter.stance_source in STANCE_SOURCES, f"{f}.stance_source", cfg.filter.stance_source,
            f"valid: {', '.join(STANCE_SOURCES)}")
     r = "robot"

@@ -23,6 +23,11 @@ class NominalController:
     ``q_des`` comes from IK of the gait's foot targets; ``qdot_des`` is its time derivative by a central
     difference over ``fd_dt_s`` (the IK is smooth within a gait phase). Set ``fd_dt_s`` to the control
     period: the IK at t + h is then reused as the IK at t - h of the next tick.
+
+    The references are open loop and periodic in the gait time (period T). When T and the walking start
+    are whole numbers of ``fd_dt_s`` (the default 0.4 s and 0.5 s at 1 kHz), the references of each tick of
+    the first period are kept in a table and looked up afterwards: the tick then costs only the PD law.
+    Looked-up values equal a fresh computation to float rounding (tested).
     """
 
     def __init__(
@@ -44,12 +49,33 @@ class NominalController:
         self._tmp = np.zeros(robot.N_JOINTS)
         self._cache_t: float = float("nan")
         self._cache_list: list[float] = []
+        # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
+        n_period = gait.period_s / fd_dt_s
+        self._period_ticks = int(round(n_period)) if abs(n_period - round(n_period)) < 1e-9 else 0
+        self._table = np.zeros((max(self._period_ticks, 1), 2, robot.N_JOINTS))
+        self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
+        self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
 
     def gait_time(self, t: float) -> float:
         """Time since walking started [s] (negative while standing)."""
         return t - self.stand_duration_s
 
     def gait_state(self, t: float) -> GaitState:
+        """Gait schedule at episode time ``t`` [s] (from the per-period table when on the tick grid; its
+        arrays are then shared and read-only)."""
+        if self._period_ticks:
+            x = self.gait_time(t) / self.fd_dt_s
+            j = round(x)
+            if j >= 0 and abs(x - j) < 1e-6:
+                row = j % self._period_ticks
+                gs = self._gait_table[row]
+                if gs is None:
+                    # exact gait time of the row: t - stand_duration would put a switch tick a rounding
+                    # error before the switch (phase 0.9999999999999998 instead of 0)
+                    gs = self._gait_table[row] = self.gait.state(row * self.fd_dt_s)
+                    gs.in_stance.flags.writeable = False
+                    gs.swing_phase.flags.writeable = False
+                return gs
         return self.gait.state(self.gait_time(t))
 
     def desired_joints(self, t: float) -> np.ndarray:
@@ -61,6 +87,34 @@ class NominalController:
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray) -> np.ndarray:
         """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]."""
+        self.update_references(t)
+        u = self._u
+        np.subtract(self.q_des, q_joints, out=u)
+        u *= self.gains.kp
+        np.subtract(self.qd_des, qd_joints, out=self._tmp)
+        self._tmp *= self.gains.kd
+        u += self._tmp
+        np.clip(u, -self.torque_limit_nm, self.torque_limit_nm, out=u)
+        return u.copy()
+
+    def update_references(self, t: float) -> None:
+        """Set ``q_des`` [rad] and ``qd_des`` [rad/s] for episode time ``t`` [s] (table lookup once walking
+        has gone one tick past its start, see class doc)."""
+        if self._period_ticks:
+            x = self.gait_time(t) / self.fd_dt_s
+            j = round(x)
+            if j >= 1 and abs(x - j) < 1e-6:
+                row = j % self._period_ticks
+                if self._table_filled[row]:
+                    self.q_des[:], self.qd_des[:] = self._table[row]
+                    return
+                self._compute_references(t)
+                self._table[row, 0], self._table[row, 1] = self.q_des, self.qd_des
+                self._table_filled[row] = True
+                return
+        self._compute_references(t)
+
+    def _compute_references(self, t: float) -> None:
         h = 0.5 * self.fd_dt_s
         t_minus = round(t - h, 9)
         # q_des(t - h) was this controller's q_des(t + h) one tick ago when ticks are fd_dt_s apart.
@@ -71,15 +125,6 @@ class NominalController:
         self.qd_des[:] = after
         self.qd_des -= before
         self.qd_des *= 1.0 / self.fd_dt_s
-        u = self._u
-        np.subtract(self.q_des, q_joints, out=u)
-        u *= self.gains.kp
-        np.subtract(self.qd_des, qd_joints, out=self._tmp)
-        self._tmp *= self.gains.kd
-        u += self._tmp
-        np.minimum(u, self.torque_limit_nm, out=u)
-        np.maximum(u, -self.torque_limit_nm, out=u)
-        return u.copy()
 
     def stand_configuration(self) -> np.ndarray:
         """Joint angles [rad] of the initial stand (nominal feet under the hips)."""

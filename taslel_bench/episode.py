@@ -84,7 +84,6 @@ class Episode:
         self.physics_per_tick = int(round(settings.control_dt_s / settings.physics_dt_s))
         self.n_ticks = int(round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s))
         self.trunk_body = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
-        self.foot_sites = [mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SITE, f) for f in robot.FOOT_FRAMES]
         # --- QP recording hook (record.qps, taslel_bench.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
 
@@ -104,7 +103,8 @@ class Episode:
 
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         s, m, d, br = self.s, self.m, self.d, self.bridge
-        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None)
+        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
+                             nsensordata=self.m.nsensordata)
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
@@ -115,6 +115,7 @@ class Episode:
         qdj = np.zeros(robot.N_JOINTS)
         tau_prev = np.zeros(robot.N_JOINTS)
         need_model = self.filter is not None
+        ecbf = self.filter.ecbf if self.filter is not None else None
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
         t0_plant = d.time
@@ -148,13 +149,14 @@ class Episode:
                     br.ctrl_mj(u, d.ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)
                     mujoco.mj_step(m, d)
-                self.contacts.read(d)
+                if self.stance_from_contact:  # next tick's stance set
+                    self.contacts.read(d)
+                else:
+                    self.contacts.check_non_foot_contact(d)
                 tau_prev[:] = u
                 tick_s = time.perf_counter() - tick0
                 t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
-                trace.record(k, t, d, br, self.trunk_body, self.foot_sites, gs, in_stance, u_nom, u, fres,
-                             self.contacts, est.mu, true_mu, tick_s, profile,
-                             self.filter.ecbf if (self.filter is not None) else None)
+                trace.record(k, t, d, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s, ecbf)
                 # --- termination checks (plant state after the tick) ---
                 # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
                 vel_sq, pos_sq = float(d.qvel @ d.qvel), float(d.qpos @ d.qpos)
@@ -181,6 +183,7 @@ class Episode:
             res.status = "error"
             res.message = f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
+        trace.finalize(br, self.contacts, profile)
         res.n_ticks = trace.n
         res.wall_time_s = time.perf_counter() - wall0
         return res

@@ -95,13 +95,14 @@ _CONTACT_SENSOR_INTPRM = (3, 3, 1)
 
 def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
     """Per foot: a contact sensor (number of contacts, net force in world axes exerted *by* the foot on
-    what it touches) and the foot site's linear and angular velocity in world axes — read in one slice
-    of ``sensordata`` instead of looping over ``data.contact``. Requires a site named like the foot."""
+    what it touches) and the foot site's position, linear and angular velocity in world axes — read in one
+    slice of ``sensordata`` instead of looping over ``data.contact``. Requires a site named like the foot."""
     for foot in robot.FOOT_FRAMES:
         sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
         sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
-        for kind, typ in (("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+        for kind, typ in (("pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+                          ("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
                           ("angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL)):
             spec.add_sensor(name=f"{foot}_{kind}", type=typ, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=foot)
 
@@ -207,7 +208,7 @@ def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list
 
 
 class FootContactReader:
-    """Plant-side contact quantities of the four feet after a step, from the foot contact sensors.
+    """Plant-side contact quantities of the four feet after a step, from the foot sensors.
 
     ``forces_in_world`` (4, 3): net contact force **on** each foot [N], world axes (0 without contact) —
     the constraint forces MuJoCo applied in the last physics step. ``in_contact`` (4,) bool.
@@ -215,39 +216,69 @@ class FootContactReader:
     ``data.contact`` only when the contact count exceeds the feet's).
     ``slip_velocity_in_world`` (4, 2): horizontal velocity [m/s] of the sphere's lowest point (the contact
     point on flat ground): v_centre + omega x (-r z) — the centre of a rolling, non-slipping foot moves.
-    Velocities are the sensors' values, i.e. at the start of the last physics step.
+    ``foot_pos_in_world`` (4, 3): foot-sphere centres [m].
+    Positions and velocities are the sensors' values, i.e. at the start of the last physics step.
+
+    :meth:`read` fills these from one ``data``; :meth:`from_sensor_log` computes the same quantities for a
+    whole log of ``sensordata`` rows at once (the episode trace records raw rows in the control loop).
     """
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model
         self.foot_geoms = foot_geom_ids(model)
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_contact") for f in robot.FOOT_FRAMES]
-        if min(ids) < 0:
-            raise ValueError("plant model has no foot contact sensors; build it with plant.add_foot_contact_sensors")
-        adr = model.sensor_adr[ids]
-        self._rows = adr[:, None] + np.arange(4)  # (found, fx, fy, fz) per foot
-        lin = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_linvel") for f in robot.FOOT_FRAMES]
-        ang = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_angvel") for f in robot.FOOT_FRAMES]
-        self._lin_rows = model.sensor_adr[lin][:, None] + np.arange(2)  # vx, vy
-        self._ang_rows = model.sensor_adr[ang][:, None] + np.array([1, 0])  # wy, wx
+
+        def sensor_adr(kind: str) -> np.ndarray:
+            ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_{kind}") for f in robot.FOOT_FRAMES]
+            if min(ids) < 0:
+                raise ValueError(
+                    f"plant model has no foot {kind} sensors; build it with plant.add_foot_contact_sensors"
+                )
+            return model.sensor_adr[ids]
+
+        adr = sensor_adr("contact")
+        self._found_rows = adr.copy()  # number of contacts per foot
+        self._force_rows = adr[:, None] + np.arange(1, 4)  # fx, fy, fz (by the foot)
+        self._pos_rows = sensor_adr("pos")[:, None] + np.arange(3)
+        self._lin_rows = sensor_adr("linvel")[:, None] + np.arange(2)  # vx, vy
+        self._ang_rows = sensor_adr("angvel")[:, None] + np.array([1, 0])  # wy, wx
         self._radius_sign = robot.FOOT_RADIUS_M * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
-        self.slip_velocity_in_world = np.zeros((robot.N_LEGS, 2))
         self._is_foot = np.zeros(model.ngeom, bool)
         self._is_foot[self.foot_geoms] = True
         robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
         self.forces_in_world = np.zeros((robot.N_LEGS, 3))
         self.in_contact = np.zeros(robot.N_LEGS, bool)
+        self.slip_velocity_in_world = np.zeros((robot.N_LEGS, 2))
+        self.foot_pos_in_world = np.zeros((robot.N_LEGS, 3))
         self.non_foot_contact = False
 
     def read(self, data: mujoco.MjData) -> None:
-        block = data.sensordata[self._rows]
-        found = block[:, 0]
-        np.negative(block[:, 1:], out=self.forces_in_world)  # sensor: force by the foot; we want on it
+        """All quantities from ``data`` after a step."""
+        sd = data.sensordata
+        found = sd[self._found_rows]
+        np.negative(sd[self._force_rows], out=self.forces_in_world)  # sensor: force by the foot; we want on it
         np.greater(found, 0.0, out=self.in_contact)
-        np.multiply(data.sensordata[self._ang_rows], self._radius_sign, out=self.slip_velocity_in_world)
-        self.slip_velocity_in_world += data.sensordata[self._lin_rows]
+        np.multiply(sd[self._ang_rows], self._radius_sign, out=self.slip_velocity_in_world)
+        self.slip_velocity_in_world += sd[self._lin_rows]
+        self.foot_pos_in_world[:] = sd[self._pos_rows]
         self.non_foot_contact = bool(data.ncon > found.sum()) and self._other_contact(data)
+
+    def check_non_foot_contact(self, data: mujoco.MjData) -> bool:
+        """Only ``non_foot_contact`` (cheap unless there are more contacts than foot contacts)."""
+        self.non_foot_contact = bool(data.ncon > data.sensordata[self._found_rows].sum()) and self._other_contact(
+            data
+        )
+        return self.non_foot_contact
+
+    def from_sensor_log(self, sensors: np.ndarray) -> dict[str, np.ndarray]:
+        """(n, nsensordata) rows -> ``forces_in_world`` (n, 4, 3), ``in_contact`` (n, 4),
+        ``slip_velocity_in_world`` (n, 4, 2), ``foot_pos_in_world`` (n, 4, 3); same definitions as :meth:`read`."""
+        return {
+            "forces_in_world": -sensors[:, self._force_rows],
+            "in_contact": sensors[:, self._found_rows] > 0.0,
+            "slip_velocity_in_world": sensors[:, self._lin_rows] + sensors[:, self._ang_rows] * self._radius_sign,
+            "foot_pos_in_world": sensors[:, self._pos_rows],
+        }
 
     def _other_contact(self, data: mujoco.MjData) -> bool:
         geom = data.contact.geom

@@ -75,6 +75,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         ecbf_alpha2=float(f.ecbf.alpha2),
         fallback=str(f.fallback),
         stance_source=str(f.stance_source),
+        formulation=str(f.get("formulation", "full")),
     )
 
 

@@ -13,6 +13,14 @@ positive definite for the solvers. Regularising towards zero biases u by eps * (
 to ~4 N·m at eps = 1e-5 on swing legs (measured: swing-joint accelerations reach 1e3 rad/s²). The default
 target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one 30x30 solve per tick): when
 no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives the textbook form.
+
+Formulation (``formulation``): ``full`` (default, the paper's) hands the backend the QP in X = (vdot, u,
+lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one LU of
+the (vdot, lambda) columns of the equality rows gives (vdot, lambda) = z0 - Z u, so the backend sees a
+12-variable QP in u (P = I + eps Z'Z, the G rows and the torque bounds), and (vdot, lambda) is recovered
+from its u. Both have the same minimiser (tested to 1e-6 N·m); the full QP is still written every tick
+(``problem``, what ``record.qps`` saves). ``condensed`` exists because the backend's cost grows with the
+rows and variables it sees.
 """
 
 from __future__ import annotations
@@ -42,6 +50,7 @@ from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSo
 
 FALLBACKS = ("nominal", "hold_last")
 REGULARIZATION_TARGETS = ("nominal", "zero")
+FORMULATIONS = ("full", "condensed")
 
 
 @dataclass(frozen=True)
@@ -57,6 +66,7 @@ class FilterSettings:
     ecbf_alpha2: float = 20.0  # [1/s]
     fallback: str = "nominal"  # on QP failure: pass u_nom ("nominal") or the last filtered u ("hold_last")
     stance_source: str = "schedule"  # "schedule" (gait) or "contact" (plant contact flags)
+    formulation: str = "full"  # "full" (backend sees X = (vdot, u, lambda)) or "condensed" (u only)
 
 
 @dataclass
@@ -83,6 +93,8 @@ class SafetyFilter:
                 f"filter.regularization_target={settings.regularization_target!r}; "
                 f"valid: {', '.join(REGULARIZATION_TARGETS)}"
             )
+        if settings.formulation not in FORMULATIONS:
+            raise ValueError(f"filter.formulation={settings.formulation!r}; valid: {', '.join(FORMULATIONS)}")
         self.settings = settings
         self.backend = backend
         self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
@@ -105,6 +117,9 @@ class SafetyFilter:
             fam.init(self.problem)
         self._A_free = np.zeros((m_eq, NV + NL), order="F")  # columns of (vdot, lambda): determined by u
         self._last_u: np.ndarray | None = None
+        self.condensed: QPProblem | None = None
+        if settings.formulation == "condensed":
+            self._allocate_condensed(m_eq, m_in)
 
     def _allocate(self, m_eq: int, m_in: int) -> QPProblem:
         s = self.settings
@@ -137,6 +152,61 @@ class SafetyFilter:
             row_labels=labels,
         )
 
+    def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
+        s, nu = self.settings, robot.N_JOINTS
+        self._rhs = np.zeros((m_eq, 1 + nu), order="F")  # [b, A_u] -> LU solve -> [z0, Z]
+        self._G_free = np.zeros((m_in, NV + NL))  # G columns of (vdot, lambda)
+        self._x_full = np.zeros(N_VARS)
+        self.condensed = QPProblem(
+            P=np.eye(nu),
+            q=np.zeros(nu),
+            A=np.zeros((0, nu)),
+            b=np.zeros(0),
+            G=np.zeros((m_in, nu)),
+            h=np.zeros(m_in),
+            lb=np.full(nu, -s.torque_limit_nm),
+            ub=np.full(nu, s.torque_limit_nm),
+            P_pattern=np.ones((nu, nu), bool),
+            A_pattern=np.zeros((0, nu), bool),
+            G_pattern=np.ones((m_in, nu), bool),
+            layout={"u": slice(0, nu)},
+            row_labels=list(self.problem.row_labels),
+        )
+
+    def _condense(self, qp: QPProblem, u_nom: np.ndarray) -> bool:
+        """Write :attr:`condensed` from the full ``qp``: (vdot, lambda) = z0 - Z u from the equality rows.
+        Returns False if the (vdot, lambda) block is singular."""
+        A_free, rhs, c = self._A_free, self._rhs, self.condensed
+        A_free[:, :NV] = qp.A[:, VDOT]
+        A_free[:, NV:] = qp.A[:, LAM]
+        rhs[:, 0] = qp.b
+        rhs[:, 1:] = qp.A[:, U]
+        _, _, sol, info = lapack.dgesv(A_free, rhs, overwrite_a=1, overwrite_b=1)
+        if info != 0:
+            return False
+        z0, Z = sol[:, 0], sol[:, 1:]  # (vdot, lambda) = z0 - Z u
+        self._z0, self._Z = z0, Z
+        G_free = self._G_free
+        G_free[:, :NV] = qp.G[:, VDOT]
+        G_free[:, NV:] = qp.G[:, LAM]
+        np.matmul(G_free, Z, out=c.G)
+        np.subtract(qp.G[:, U], c.G, out=c.G)
+        np.matmul(G_free, z0, out=c.h)
+        np.subtract(qp.h, c.h, out=c.h)
+        eps = self.settings.regularization
+        np.matmul(Z.T, Z, out=c.P)
+        c.P *= eps
+        c.P.flat[:: robot.N_JOINTS + 1] += 1.0
+        # q = -u_nom - eps Z'(z0 - z_target); z_target = z0 - Z u_nom ("nominal") or 0 ("zero")
+        if self.settings.regularization_target == "nominal":
+            np.matmul(c.P, u_nom, out=c.q)
+            np.negative(c.q, out=c.q)
+        else:
+            np.matmul(z0, Z, out=c.q)
+            c.q *= -eps
+            c.q -= u_nom
+        return True
+
     def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
         """Write this tick's QP (in place) and return it."""
         qp = self.problem
@@ -145,7 +215,9 @@ class SafetyFilter:
             fam.write(qp, inputs)
         for fam in self.ineq_families:
             fam.write(qp, inputs)
-        if self.settings.regularization_target == "nominal":
+        if self.condensed is not None:
+            self._condensed_ok = self._condense(qp, u_nom)
+        elif self.settings.regularization_target == "nominal":
             self._regularize_towards_nominal(qp, u_nom)
         return qp
 
@@ -170,11 +242,21 @@ class SafetyFilter:
         qp = self.build(inputs, u_nom)
         build_s = time.perf_counter() - t0
         try:
-            sol = self.backend.solve(qp)
+            if self.condensed is None:
+                sol = self.backend.solve(qp)
+            elif self._condensed_ok:
+                sol = self.backend.solve(self.condensed)
+            else:
+                sol = QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
         except Exception as exc:  # a backend bug must not end the episode: record it
             sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
         if sol.ok:
             x = sol.x
+            if self.condensed is not None:  # recover (vdot, lambda) = z0 - Z u
+                x = self._x_full
+                x[U] = sol.x
+                z = self._z0 - self._Z @ sol.x
+                x[VDOT], x[LAM] = z[:NV], z[NV:]
             u = np.clip(x[U], -self.settings.torque_limit_nm, self.settings.torque_limit_nm)
             self._last_u = u
             return FilterResult(u, x[LAM].copy(), x[VDOT].copy(), sol.status, False, build_s, sol)

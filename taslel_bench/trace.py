@@ -4,6 +4,10 @@ Every plant quantity is read from MuJoCo after the tick's physics steps: the sta
 velocity, joints) is the one after the tick; foot positions, contact forces and contact-point velocities
 are those MuJoCo computed in the tick's last physics step (its starting state, 1 physics step earlier).
 Frames in the column names: ``_w`` = world axes, joint vectors in core order.
+
+In the control loop :meth:`EpisodeTrace.record` only copies raw rows (``qpos``, ``qvel``, ``sensordata``,
+the controller's and filter's vectors); :meth:`EpisodeTrace.finalize` derives the named quantities for all
+ticks at once after the episode (vectorised: the same definitions, a fraction of the per-tick cost).
 """
 
 from __future__ import annotations
@@ -18,28 +22,26 @@ QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (fail
 
 
 class EpisodeTrace:
-    """Arrays of length ``capacity``; ``n`` ticks are valid."""
+    """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`)."""
 
-    def __init__(self, capacity: int, filter_on: bool) -> None:
+    def __init__(self, capacity: int, filter_on: bool, nq: int = robot.NQ, nv: int = robot.NV,
+                 nsensordata: int = 0) -> None:  # fmt: skip
         c, nl = capacity, robot.N_LEGS
         self.n = 0
         self.filter_on = filter_on
+        self.finalized = False
+        # --- raw rows written in the loop
         self.t_s = np.zeros(c)
-        self.base_pos_w = np.zeros((c, 3))  # [m] trunk origin
-        self.base_quat_wxyz = np.zeros((c, 4))
-        self.base_linvel_w = np.zeros((c, 3))  # [m/s]
-        self.q = np.zeros((c, 12))  # [rad]
-        self.qd = np.zeros((c, 12))  # [rad/s]
+        self.qpos_mj = np.zeros((c, nq))  # MuJoCo qpos / qvel / sensordata after the tick
+        self.qvel_mj = np.zeros((c, nv))
+        self.sensordata_mj = np.zeros((c, nsensordata))
         self.u_nom = np.zeros((c, 12))  # [N·m]
         self.u = np.zeros((c, 12))  # [N·m] applied
         self.gait_phase = np.zeros(c)
         self.in_stance = np.zeros((c, nl), bool)  # stance set used by the filter
         self.swing_phase = np.zeros((c, nl))
-        self.foot_pos_w = np.zeros((c, nl, 3))  # [m] foot-sphere centres
-        self.grf_plant_w = np.zeros((c, nl, 3))  # [N] contact force on each foot
-        self.in_contact = np.zeros((c, nl), bool)
-        self.slip_w = np.zeros((c, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
         self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
+        self._grf_filter_flat = self.grf_filter_w.reshape(c, 3 * nl)
         self.qp_status = np.full(c, -1, np.int8)
         self.qp_fallback = np.zeros(c, bool)
         self.qp_build_us = np.full(c, np.nan)
@@ -47,53 +49,80 @@ class EpisodeTrace:
         self.qp_iterations = np.full(c, -1, np.int32)
         self.barrier_h_m = np.full((c, nl), np.nan)  # ECBF h per foot (nan in stance / no ECBF)
         self.barrier_he_mps = np.full((c, nl), np.nan)
-        self.clearance_m = np.full((c, nl), np.nan)  # swing foot bottom - z(s) [m] (nan in stance)
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.tick_us = np.zeros(c)
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
+        # --- derived by finalize() (empty until then)
+        self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
+        self.base_quat_wxyz = np.zeros((0, 4))
+        self.base_linvel_w = np.zeros((0, 3))  # [m/s]
+        self.q = np.zeros((0, 12))  # [rad]
+        self.qd = np.zeros((0, 12))  # [rad/s]
+        self.foot_pos_w = np.zeros((0, nl, 3))  # [m] foot-sphere centres
+        self.grf_plant_w = np.zeros((0, nl, 3))  # [N] contact force on each foot
+        self.in_contact = np.zeros((0, nl), bool)
+        self.slip_w = np.zeros((0, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
+        self.clearance_m = np.zeros((0, nl))  # swing foot bottom - z(s) [m] (nan in stance)
 
-    def record(self, k, t, d, br: StateBridge, trunk, foot_sites, gs, in_stance, u_nom, u, fres, contacts,
-               mu_hat, mu_true, tick_s, profile, ecbf) -> None:
+    def record(self, k, t, d, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s, ecbf) -> None:
+        """Copy tick ``k``'s raw rows (plant state after the tick, controller and filter outputs)."""
         self.t_s[k] = t
-        a = br.free_qadr  # trunk pose from qpos: the state after the tick, like q and qd
-        self.base_pos_w[k] = d.qpos[a : a + 3]
-        self.base_quat_wxyz[k] = d.qpos[a + 3 : a + 7]
-        self.base_linvel_w[k] = d.qvel[br.free_dadr : br.free_dadr + 3]
-        self.q[k] = d.qpos[br.joint_qadr]
-        self.qd[k] = d.qvel[br.joint_dadr]
+        self.qpos_mj[k] = d.qpos
+        self.qvel_mj[k] = d.qvel
+        self.sensordata_mj[k] = d.sensordata
         self.u_nom[k] = u_nom
         self.u[k] = u
         self.gait_phase[k] = gs.phi
         self.in_stance[k] = in_stance
         self.swing_phase[k] = gs.swing_phase
-        self.foot_pos_w[k] = d.site_xpos[foot_sites]
-        self.grf_plant_w[k] = contacts.forces_in_world
-        self.in_contact[k] = contacts.in_contact
-        self.slip_w[k] = contacts.slip_velocity_in_world
         self.mu_hat[k] = mu_hat
         self.mu_true[k] = mu_true
         self.tick_us[k] = tick_s * 1e6
-        if profile is not None:
-            for i in range(robot.N_LEGS):
-                if not in_stance[i]:
-                    z = profile(float(gs.swing_phase[i]))[0]
-                    self.clearance_m[k, i] = d.site_xpos[foot_sites[i], 2] - robot.FOOT_RADIUS_M - z
         if fres is not None:
-            self.grf_filter_w[k] = fres.lam.reshape(robot.N_LEGS, 3)
-            self.qp_status[k] = 0 if not fres.used_fallback else 1
-            self.qp_fallback[k] = fres.used_fallback
-            self.qp_build_us[k] = fres.build_time_s * 1e6
-            if fres.solve is not None:
-                self.qp_solve_us[k] = fres.solve.solve_time_s * 1e6
-                if fres.solve.iterations is not None:
-                    self.qp_iterations[k] = fres.solve.iterations
+            self._grf_filter_flat[k] = fres.lam
             if fres.used_fallback:
+                self.qp_status[k] = 1
+                self.qp_fallback[k] = True
                 self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
+            else:
+                self.qp_status[k] = 0
+            self.qp_build_us[k] = fres.build_time_s * 1e6
+            sol = fres.solve
+            if sol is not None:
+                self.qp_solve_us[k] = sol.solve_time_s * 1e6
+                if sol.iterations is not None:
+                    self.qp_iterations[k] = sol.iterations
             if ecbf is not None:
                 self.barrier_h_m[k] = ecbf.h
                 self.barrier_he_mps[k] = ecbf.h_e
         self.n = k + 1
+
+    def finalize(self, br: StateBridge, contacts, profile) -> None:
+        """Derive the named plant quantities of the ``n`` recorded ticks (idempotent).
+
+        ``contacts``: the episode's :class:`taslel_bench.plant.FootContactReader` (sensor layout);
+        ``profile``: the scenario's clearance profile or None (then ``clearance_m`` is all nan)."""
+        if self.finalized:
+            return
+        n, a, dv = self.n, br.free_qadr, br.free_dadr
+        qpos, qvel = self.qpos_mj[:n], self.qvel_mj[:n]
+        self.base_pos_w = qpos[:, a : a + 3].copy()
+        self.base_quat_wxyz = qpos[:, a + 3 : a + 7].copy()
+        self.base_linvel_w = qvel[:, dv : dv + 3].copy()
+        self.q = qpos[:, br.joint_qadr]
+        self.qd = qvel[:, br.joint_dadr]
+        plant_side = contacts.from_sensor_log(self.sensordata_mj[:n])
+        self.foot_pos_w = plant_side["foot_pos_in_world"]
+        self.grf_plant_w = plant_side["forces_in_world"]
+        self.in_contact = plant_side["in_contact"]
+        self.slip_w = plant_side["slip_velocity_in_world"]
+        self.clearance_m = np.full((n, robot.N_LEGS), np.nan)
+        if profile is not None and n:
+            swing = ~self.in_stance[:n]
+            z_obstacle = profile.evaluate(self.swing_phase[:n][swing])[0]
+            self.clearance_m[swing] = self.foot_pos_w[..., 2][swing] - robot.FOOT_RADIUS_M - z_obstacle
+        self.finalized = True
 
     # ------------------------------------------------------------------------------------------ derived
     def base_rpy(self) -> np.ndarray:

@@ -37,6 +37,18 @@ class TightReference:
         return {"name": self.name}
 
 
+class ActiveSetReference(TightReference):
+    """quadprog (dual active set, exact up to rounding) -- to compare two formulations to 1e-6."""
+
+    name = "quadprog"
+
+    def solve(self, p):
+        t0 = time.perf_counter()
+        x = qpsolvers.solve_qp(p.P, p.q, p.G, p.h, p.A if p.A.size else None, p.b if p.b.size else None,
+                               p.lb, p.ub, solver="quadprog")
+        return QPSolution(x, "solved" if x is not None else "infeasible", time.perf_counter() - t0)
+
+
 class Broken:
     name = "broken"
 
@@ -222,3 +234,28 @@ def test_zero_regularization_target_is_biased(states):
                      TightReference())
     du = [np.abs(f.filter(inputs_for(pm, s, 10.0), s[3]).u - s[3]).max() for s in st]
     assert max(du) > 1e-2
+
+
+@pytest.mark.parametrize("target", ["nominal", "zero"])
+def test_condensed_formulation_has_the_same_minimiser(states, target):
+    """formulation=condensed (equalities eliminated, backend sees u only) returns the full QP's solution,
+    with binding friction and ECBF rows, for both regularisation targets."""
+    st, pm = states
+    kw = dict(regularization=1e-4, regularization_target=target)
+    full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), BUMP)
+    cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), BUMP)
+    assert cond.condensed.n == robot.N_JOINTS and cond.condensed.A.shape[0] == 0
+    moved = 0
+    for s in st:
+        for mu in (0.05, 1.0):
+            a, b = full.filter(inputs_for(pm, s, mu), s[3]), cond.filter(inputs_for(pm, s, mu), s[3])
+            assert a.status == b.status == "solved"
+            assert np.abs(a.u - b.u).max() < 1e-6
+            assert np.abs(a.lam - b.lam).max() < 1e-5 and np.abs(a.vdot - b.vdot).max() < 1e-4
+            moved += int(np.abs(a.u - s[3]).max() > 1e-3)
+    assert moved >= 3, "the comparison must include ticks where constraints change u"
+
+
+def test_bad_formulation_name():
+    with pytest.raises(ValueError, match="valid: full, condensed"):
+        SafetyFilter(FilterSettings(formulation="sparse"), TightReference())

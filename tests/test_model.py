@@ -156,6 +156,8 @@ def test_foot_contact_sensors_match_contact_forces(setup):
     br.qpos_mj(q, d.qpos)
     reader = plant.FootContactReader(m)
     feet = plant.foot_geom_ids(m)
+    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in robot.FOOT_FRAMES]
+    log, per_tick = [], []
     checked = 0
     for k in range(1500):
         br.ctrl_mj(ctl.compute(k * 1e-3, d.qpos[br.joint_qadr], d.qvel[br.joint_dadr]), d.ctrl)
@@ -172,7 +174,37 @@ def test_foot_contact_sensors_match_contact_forces(setup):
                 ref[leg] += f_world if d.contact.geom[i, 1] == g else 0.0
                 ref[leg] -= f_world if d.contact.geom[i, 0] == g else 0.0
         assert np.allclose(reader.forces_in_world, ref, atol=1e-9)
+        # position sensor = site position MuJoCo computed in the same step
+        assert np.allclose(reader.foot_pos_in_world, d.site_xpos[sites], atol=1e-12)
         checked += int(reader.in_contact.sum())
+        log.append(d.sensordata.copy())
+        per_tick.append((reader.forces_in_world.copy(), reader.in_contact.copy(),
+                         reader.slip_velocity_in_world.copy(), reader.foot_pos_in_world.copy()))
     assert checked > 20
+    # the episode trace's vectorised path gives what read() gives tick by tick
+    whole = reader.from_sensor_log(np.array(log))
+    for key, j in (("forces_in_world", 0), ("in_contact", 1), ("slip_velocity_in_world", 2), ("foot_pos_in_world", 3)):
+        assert np.array_equal(whole[key], np.array([row[j] for row in per_tick])), key
     # standing still, the feet carry the weight
     assert reader.non_foot_contact is False
+
+
+def test_controller_reference_table_matches_fresh_computation():
+    """The per-period tables of q_des/qd_des and gait state return what a fresh computation gives."""
+    from taslel_bench.controller import NominalController, PDGains
+    from taslel_bench.gait import GaitParams
+
+    tab = NominalController(GaitParams(), PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)
+    fresh = NominalController(GaitParams(), PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)
+    fresh._period_ticks = 0  # disables the tables
+    assert tab._period_ticks == 400
+    rng = np.random.default_rng(3)
+    for k in range(2000):  # stand, first period (fills the tables), then 3 periods of look-ups
+        t = k * 1e-3
+        q, qd = rng.normal(size=12), rng.normal(size=12)
+        assert np.abs(tab.compute(t, q, qd) - fresh.compute(t, q, qd)).max() < 1e-9
+        assert np.abs(tab.qd_des - fresh.qd_des).max() < 1e-9
+        if k >= 500:
+            gs, ref = tab.gait_state(t), fresh.gait.state(((k - 500) % 400) * 1e-3)
+            assert np.array_equal(gs.in_stance, ref.in_stance) and np.allclose(gs.swing_phase, ref.swing_phase)
+    assert tab._table_filled.all()
