@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from importlib import metadata
 
@@ -80,6 +81,7 @@ def checked(
     iterations: int | None = None,
     setup_time_s: float = 0.0,
     overhead_s: float = 0.0,
+    primal: float | None = None,
 ) -> BackendSolution:
     """Turn a native result into a :class:`BackendSolution`, checking it against the original problem.
 
@@ -91,11 +93,11 @@ def checked(
             None, native_status or "failed", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
     x = np.array(x, dtype=float, copy=True)
-    if not np.isfinite(x.sum()):
+    if not math.isfinite(x.sum()):
         return BackendSolution(
             None, "non-finite solution", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
-    res = residuals_at_level(problem, x, y, z, z_box, tol.level)
+    res = residuals_at_level(problem, x, y, z, z_box, tol.level, primal)
     status = verdict(res, tol)
     return BackendSolution(
         x, status, solve_time_s, iterations, setup_time_s, overhead_s, native_status, res, y, z, z_box

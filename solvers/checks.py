@@ -95,12 +95,14 @@ def residuals(
     return Residuals(rp, rd, float(abs(gap)))
 
 
-def residuals_at_level(problem: QPProblem, x: np.ndarray, y, z, z_box, level: str) -> Residuals | None:
-    """:func:`residuals` with only what ``level`` asks for (None for level "none")."""
+def residuals_at_level(problem: QPProblem, x: np.ndarray, y, z, z_box, level: str,
+                       primal: float | None = None) -> Residuals | None:  # fmt: skip
+    """:func:`residuals` with only what ``level`` asks for (None for level "none"). ``primal``: the primal
+    residual already computed by the backend on an exact copy of the problem's rows (saves the work)."""
     if level == "none":
         return None
     if level == "primal":
-        return Residuals(primal_residual(problem, x), float("nan"), float("nan"))
+        return Residuals(primal_residual(problem, x) if primal is None else primal, float("nan"), float("nan"))
     return residuals(problem, x, y, z, z_box)
 
 

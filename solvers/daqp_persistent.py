@@ -42,12 +42,23 @@ class DaqpPersistent(PersistentBackend):
             self._bl[n : n + m_in] = -DAQP_INF
             self._sense = np.zeros(n + m_in + m_eq, dtype=c_int)
             self._sense[n + m_in :] = EQUALITY
+            self._y = np.empty(n + m_in + m_eq)  # scratch: (x, G x, A x)
         self._M[:m_in], self._M[m_in:] = problem.G, problem.A
         self._H, self._f = problem.P.copy(), problem.q.copy()
         np.minimum(problem.ub, DAQP_INF, out=self._bu[:n])
         np.maximum(problem.lb, -DAQP_INF, out=self._bl[:n])
         self._bu[n : n + m_in] = problem.h
         self._bu[n + m_in :] = self._bl[n + m_in :] = problem.b
+
+    def _primal_residual(self, x: np.ndarray | None) -> float | None:
+        """Largest violation of ``blower <= (x, G x, A x) <= bupper``: the problem's bounds and rows as
+        copied this tick (infinite bounds as +-1e30), one matrix product."""
+        n = self._dims[0]
+        y = self._y
+        y[:n] = x
+        np.matmul(self._M, x, out=y[n:])
+        r = max((y - self._bu).max(), (self._bl - y).max(), 0.0)
+        return float(r) if r == r else float("nan")
 
     def _setup(self, problem: QPProblem) -> None:
         import daqp
@@ -68,8 +79,7 @@ class DaqpPersistent(PersistentBackend):
             reason = {-1: "infeasible", -4: "max_iter"}.get(int(exitflag), f"failed: exitflag {exitflag}")
             return NativeResult(None, False, reason, iters)
         n, m_in, _ = self._dims
-        lam = np.asarray(info["lam"])
+        lam = info["lam"]  # a new array per solve (as is x): views are safe
         return NativeResult(
-            np.array(x), True, f"exitflag {exitflag}", iters,
-            y=lam[n + m_in :].copy(), z=lam[n : n + m_in].copy(), z_box=lam[:n].copy(),
+            x, True, f"exitflag {exitflag}", iters, y=lam[n + m_in :], z=lam[n : n + m_in], z_box=lam[:n]
         )  # fmt: skip

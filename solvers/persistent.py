@@ -97,6 +97,11 @@ class PersistentBackend:
     def _forget(self) -> None:
         """Drop the native solver object."""
 
+    def _primal_residual(self, x: np.ndarray | None) -> float | None:
+        """The primal residual of ``x`` from the backend's own copy of this tick's rows, if it keeps one
+        that is cheaper to check than the :class:`QPProblem` (None: :mod:`solvers.checks` computes it)."""
+        return None
+
     # ------------------------------------------------------------------ protocol
     def reset(self) -> None:
         self._forget()
@@ -137,9 +142,10 @@ class PersistentBackend:
         except Exception as exc:  # a native failure must not end the episode  # noqa: BLE001
             self.reset()
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+        primal = self._primal_residual(res.x) if (res.ok and self.tol.level == "primal") else None
         out = checked(
             problem, res.x, res.ok, res.status, self.tol, t3 - t1, y=res.y, z=res.z, z_box=res.z_box,
-            iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0,
+            iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0, primal=primal,
         )  # fmt: skip
         if not out.ok:  # never warm start from a failed (possibly NaN) iterate: set up afresh next tick
             self.reset()

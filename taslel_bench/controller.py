@@ -94,7 +94,8 @@ class NominalController:
         np.subtract(self.qd_des, qd_joints, out=self._tmp)
         self._tmp *= self.gains.kd
         u += self._tmp
-        np.clip(u, -self.torque_limit_nm, self.torque_limit_nm, out=u)
+        np.minimum(u, self.torque_limit_nm, out=u)  # (np.clip costs several times more on 12 entries)
+        np.maximum(u, -self.torque_limit_nm, out=u)
         return u.copy()
 
     def update_references(self, t: float) -> None:

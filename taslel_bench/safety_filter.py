@@ -257,7 +257,8 @@ class SafetyFilter:
                 x[U] = sol.x
                 z = self._z0 - self._Z @ sol.x
                 x[VDOT], x[LAM] = z[:NV], z[NV:]
-            u = np.clip(x[U], -self.settings.torque_limit_nm, self.settings.torque_limit_nm)
+            u = np.minimum(x[U], self.settings.torque_limit_nm)  # the QP's bounds hold to solver tolerance
+            np.maximum(u, -self.settings.torque_limit_nm, out=u)
             self._last_u = u
             return FilterResult(u, x[LAM].copy(), x[VDOT].copy(), sol.status, False, build_s, sol)
         if self.settings.fallback == "hold_last" and self._last_u is not None:
