@@ -66,7 +66,7 @@ def primal_residual(problem: QPProblem, x: np.ndarray) -> float:
         worst.append(g.max())
     worst += [(problem.lb - x).max(), (x - problem.ub).max()]
     r = max(0.0, *worst)
-    return float("nan") if any(v != v for v in worst) else float(r)
+    return float("nan") if any(math.isnan(v) for v in worst) else float(r)
 
 
 def residuals(

@@ -58,7 +58,7 @@ class DaqpPersistent(PersistentBackend):
         y[:n] = x
         np.matmul(self._M, x, out=y[n:])
         r = max((y - self._bu).max(), (self._bl - y).max(), 0.0)
-        return float(r) if r == r else float("nan")
+        return float(r)  # nan if x had a nan (max() propagates it from the first operand)
 
     def _setup(self, problem: QPProblem) -> None:
         import daqp

@@ -54,6 +54,9 @@ class StateBridge:
         self.joint_dadr = np.array(dadr)  # core joint i -> MuJoCo qvel index
         self.actuator_ids = np.array(act)  # core joint i -> MuJoCo actuator index
         self.nu = mj_model.nu
+        a, d = self.free_qadr, self.free_dadr
+        self._q_pin_from_qpos = np.concatenate([np.arange(a, a + 3), [a + 4, a + 5, a + 6, a + 3], self.joint_qadr])
+        self._v_pin_from_qvel = np.concatenate([np.arange(d, d + 6), self.joint_dadr])
         self._quat_trunk_from_world = np.zeros(4)  # scratch for v_pin
         self._vel_in_trunk = np.zeros(3)
 
@@ -61,22 +64,17 @@ class StateBridge:
     def q_pin(self, qpos: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Pinocchio configuration (19) from MuJoCo ``qpos``."""
         out = np.empty(robot.NQ) if out is None else out
-        a = self.free_qadr
-        out[:3] = qpos[a : a + 3]
-        out[3:6] = qpos[a + 4 : a + 7]  # x, y, z
-        out[6] = qpos[a + 3]  # w
-        out[7:] = qpos[self.joint_qadr]
+        np.take(qpos, self._q_pin_from_qpos, out=out)  # position, quaternion x y z w, joints in core order
         return out
 
     def v_pin(self, qpos: np.ndarray, qvel: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Pinocchio velocity (18) from MuJoCo ``qvel``: trunk linear velocity rotated into trunk axes."""
         out = np.empty(robot.NV) if out is None else out
         a, d = self.free_qadr, self.free_dadr
+        np.take(qvel, self._v_pin_from_qvel, out=out)  # angular velocity and joints are already right
         mujoco.mju_negQuat(self._quat_trunk_from_world, qpos[a + 3 : a + 7])  # inverse rotation
         mujoco.mju_rotVecQuat(self._vel_in_trunk, qvel[d : d + 3], self._quat_trunk_from_world)
         out[:3] = self._vel_in_trunk
-        out[3:6] = qvel[d + 3 : d + 6]
-        out[6:] = qvel[self.joint_dadr]
         return out
 
     # --- Pinocchio -> MuJoCo -------------------------------------------------------------------------

@@ -119,23 +119,24 @@ class Episode:
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
         t0_plant = d.time
+        qpos, qvel, ctrl, sensordata = d.qpos, d.qvel, d.ctrl, d.sensordata  # views, valid for the episode
         wall0 = time.perf_counter()
         k = 0
         try:
             for k in range(self.n_ticks):
                 tick0 = time.perf_counter()
                 t = k * s.control_dt_s
-                qj[:] = d.qpos[br.joint_qadr]
-                qdj[:] = d.qvel[br.joint_dadr]
-                trunk_xy = d.qpos[br.free_qadr : br.free_qadr + 2]
+                qj[:] = qpos[br.joint_qadr]
+                qdj[:] = qvel[br.joint_dadr]
+                trunk_xy = qpos[br.free_qadr : br.free_qadr + 2]
                 true_mu = self.scenario.friction_at(trunk_xy)
                 est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu))
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
                 if need_model and t >= s.filter_start_s:
-                    br.q_pin(d.qpos, q)
-                    br.v_pin(d.qpos, d.qvel, v)
+                    br.q_pin(qpos, q)
+                    br.v_pin(qpos, qvel, v)
                     self.model.update(q, v)
                     inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
                     fres = self.filter.filter(inputs, u_nom)
@@ -146,7 +147,7 @@ class Episode:
                     fres = None
                     u = u_nom
                 for _ in range(self.physics_per_tick):
-                    br.ctrl_mj(u, d.ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
+                    br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)
                     mujoco.mj_step(m, d)
                 if self.stance_from_contact:  # next tick's stance set
@@ -156,10 +157,11 @@ class Episode:
                 tau_prev[:] = u
                 tick_s = time.perf_counter() - tick0
                 t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
-                trace.record(k, t, d, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s, ecbf)
+                trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s,
+                             ecbf)
                 # --- termination checks (plant state after the tick) ---
                 # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
-                vel_sq, pos_sq = float(d.qvel @ d.qvel), float(d.qpos @ d.qpos)
+                vel_sq, pos_sq = float(qvel @ qvel), float(qpos @ qpos)
                 # MuJoCo resets the data (time -> 0) on a NaN/huge qpos, qvel or qacc: catch that cheaply
                 unstable = d.time < t_end_of_tick
                 if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:

@@ -58,11 +58,12 @@ class A1Model:
         self.M[:] = pin.crba(m, d, q)  # upper triangle only: mirror it
         self.M[self._lower] = self.M.T[self._lower]
         self.h[:] = pin.nonLinearEffects(m, d, q, v)
+        oMf, pos, jac, jdotv = d.oMf, self.foot_pos_in_world, self.foot_jac_in_world, self.foot_jdotv_in_world
         for i, fid in enumerate(self.foot_frame_ids):
-            self.foot_pos_in_world[i] = d.oMf[fid].translation
-            self.foot_vel_in_world[i] = pin.getFrameVelocity(m, d, fid, _LWA).linear
-            self.foot_jac_in_world[i] = pin.getFrameJacobian(m, d, fid, _LWA)[:3]
-            self.foot_jdotv_in_world[i] = pin.getFrameClassicalAcceleration(m, d, fid, _LWA).linear
+            pos[i] = oMf[fid].translation
+            jac[i] = pin.getFrameJacobian(m, d, fid, _LWA)[:3]
+            jdotv[i] = pin.getFrameClassicalAcceleration(m, d, fid, _LWA).linear
+        np.matmul(jac, v, out=self.foot_vel_in_world)  # foot-centre velocity J v (one product for 4 feet)
 
     def neutral_q(self) -> np.ndarray:
         return pin.neutral(self.model)

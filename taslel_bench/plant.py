@@ -251,6 +251,8 @@ class FootContactReader:
         self.slip_velocity_in_world = np.zeros((robot.N_LEGS, 2))
         self.foot_pos_in_world = np.zeros((robot.N_LEGS, 3))
         self.non_foot_contact = False
+        self._data: mujoco.MjData | None = None
+        self._sensordata = np.zeros(0)
 
     def read(self, data: mujoco.MjData) -> None:
         """All quantities from ``data`` after a step."""
@@ -265,9 +267,10 @@ class FootContactReader:
 
     def check_non_foot_contact(self, data: mujoco.MjData) -> bool:
         """Only ``non_foot_contact`` (cheap unless there are more contacts than foot contacts)."""
-        self.non_foot_contact = bool(data.ncon > data.sensordata[self._found_rows].sum()) and self._other_contact(
-            data
-        )
+        if data is not self._data:  # keep the sensordata view of this data (a new wrapper per attribute read)
+            self._data, self._sensordata = data, data.sensordata
+        n_found = self._sensordata[self._found_rows].sum()
+        self.non_foot_contact = bool(data.ncon > n_found) and self._other_contact(data)
         return self.non_foot_contact
 
     def from_sensor_log(self, sensors: np.ndarray) -> dict[str, np.ndarray]:

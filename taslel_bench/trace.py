@@ -65,12 +65,14 @@ class EpisodeTrace:
         self.slip_w = np.zeros((0, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
         self.clearance_m = np.zeros((0, nl))  # swing foot bottom - z(s) [m] (nan in stance)
 
-    def record(self, k, t, d, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s, ecbf) -> None:
-        """Copy tick ``k``'s raw rows (plant state after the tick, controller and filter outputs)."""
+    def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
+               ecbf) -> None:  # fmt: skip
+        """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
+        outputs)."""
         self.t_s[k] = t
-        self.qpos_mj[k] = d.qpos
-        self.qvel_mj[k] = d.qvel
-        self.sensordata_mj[k] = d.sensordata
+        self.qpos_mj[k] = qpos
+        self.qvel_mj[k] = qvel
+        self.sensordata_mj[k] = sensordata
         self.u_nom[k] = u_nom
         self.u[k] = u
         self.gait_phase[k] = gs.phi

@@ -241,7 +241,7 @@ def test_condensed_formulation_has_the_same_minimiser(states, target):
     """formulation=condensed (equalities eliminated, backend sees u only) returns the full QP's solution,
     with binding friction and ECBF rows, for both regularisation targets."""
     st, pm = states
-    kw = dict(regularization=1e-4, regularization_target=target)
+    kw = {"regularization": 1e-4, "regularization_target": target}
     full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), BUMP)
     cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), BUMP)
     assert cond.condensed.n == robot.N_JOINTS and cond.condensed.A.shape[0] == 0
