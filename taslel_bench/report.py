@@ -20,7 +20,25 @@ from taslel_bench.machine import machine_info
 from taslel_bench.sweep import SUMMARY_TABLE, aggregate
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
-GROUP = ["scenario", "solver", "estimator"]
+GROUP = ["scenario", "solver", "filter_formulation", "estimator"]
+OPTIONAL_GROUP = ("filter_formulation",)  # a table column only when the sweep varies it
+
+
+def group_columns(frame: pd.DataFrame) -> list[str]:
+    """The columns that tell the rows of a sweep apart (optional ones only when they vary)."""
+    def varies(c: str) -> bool:  # among runs that have the setting at all ("none": filter off)
+        return frame.loc[frame[c] != "none", c].nunique() > 1
+
+    return [c for c in GROUP if c in frame.columns and (c not in OPTIONAL_GROUP or varies(c))]
+
+
+def solver_label(row: pd.Series | dict, frame: pd.DataFrame) -> str:
+    """The backend, with the filter formulation when the sweep compares formulations (they hand the
+    backend different QPs, so their solve times are separate distributions)."""
+    solver = str(row.get("solver", ""))
+    if "filter_formulation" in group_columns(frame) and isinstance(row.get("filter_formulation"), str):
+        return f"{solver} ({row['filter_formulation']})"
+    return solver
 
 
 def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT_US) -> float:
@@ -51,7 +69,7 @@ def solve_times(sweep_dir: Path, frame: pd.DataFrame) -> dict[str, np.ndarray]:
         steps = sweep_dir / row["run_dir"] / recording.STEPS
         if steps.is_file():
             t = pd.read_parquet(steps, columns=["qp_solve_us"])["qp_solve_us"].to_numpy()
-            out.setdefault(str(row["solver"]), []).append(t[np.isfinite(t)])
+            out.setdefault(solver_label(row, frame), []).append(t[np.isfinite(t)])
     return {k: np.concatenate(v) for k, v in out.items() if v}
 
 
@@ -60,10 +78,11 @@ def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
     shgeom = {s: shifted_geometric_mean(t) for s, t in times.items()}
     best = min(shgeom.values()) if shgeom else float("nan")
     rows = []
-    for keys, g in frame.groupby([c for c in GROUP if c in frame.columns], dropna=False):
+    cols = group_columns(frame)
+    for keys, g in frame.groupby(cols, dropna=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
-        row = dict(zip([c for c in GROUP if c in frame.columns], keys))
-        solver = str(row.get("solver", ""))
+        row = dict(zip(cols, keys))
+        solver = solver_label(row, frame)
         row.update({
             "runs": len(g),
             "errors": int((g["status"] == "error").sum()),

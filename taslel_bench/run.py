@@ -175,6 +175,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "solver": choices.get("solver", "") if built.backend is not None else "none",
         "estimator": choices.get("estimator", getattr(built.estimator, "name", "")),
         "filter_enabled": built.filter is not None,
+        "filter_formulation": built.filter.settings.formulation if built.filter is not None else "none",
         "seed": int(cfg.seed),
         "duration_s": float(cfg.duration),
         "control_rate_hz": float(cfg.control_rate_hz),
