@@ -2,9 +2,9 @@
 
     python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp_persistent] [--scenario obstacle]
 
-Prints, for the nominal-only loop and for the filter with each solver: median tick time, real-time
-factor, and the median cost of each part measured in isolation on states of the same episode. The
-machine is shared (2 cores): runs are interleaved in one process and reported side by side.
+Prints, for the nominal-only loop and for the filter with each solver and formulation: median tick time,
+real-time factor, the median cost of each part of the tick measured inside the loop, and the same parts
+measured in isolation on the episode's final state. Runs share one process and are reported side by side.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from rich.table import Table
 from taslel_bench.api import compose
 from taslel_bench.constraints import TickInputs
 from taslel_bench.run import Built
+from taslel_bench.trace import TICK_PARTS
 
 
 def _median_us(fn, n: int = 2000) -> float:
@@ -86,17 +87,25 @@ def main(argv: list[str] | None = None) -> None:
         cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
         built = Built(cfg)
         res = built.episode.run()
-        n = res.trace.n
+        tr, n = res.trace, res.trace.n
         rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
-        rows.append((label, float(np.median(res.trace.tick_us[:n])), rtf, res.status, res.fell, part_costs(built)))
+        in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
+        if built.filter is None:
+            del in_loop["model"], in_loop["filter"]
+        rows.append((label, float(np.median(tr.tick_us[:n])), rtf, res.status, res.fell, in_loop, part_costs(built)))
+
+    def fmt(parts: dict[str, float]) -> str:
+        return ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
+
+    cols = ("loop", "tick µs (median)", "real-time factor", "status", "fell", "in the loop µs (median)",
+            "isolated µs (median)")  # fmt: skip
     table = Table(title=f"tick cost, {args.scenario}, {args.duration} s walk, 1 kHz control "
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
-    for col in ("loop", "tick µs (median)", "real-time factor", "status", "fell", "parts µs (median, isolated)"):
+    for col in cols:
         table.add_column(col)
-    for label, tick, rtf, status, fell, parts in rows:
-        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell),
-                      ", ".join(f"{k} {v:.1f}" for k, v in parts.items()))
-    Console(width=200).print(table)
+    for label, tick, rtf, status, fell, in_loop, isolated in rows:
+        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), fmt(in_loop), fmt(isolated))
+    Console(width=220).print(table)
     if args.out is not None:
         from taslel_bench.recording import atomic_write
         from taslel_bench.report import machine_info
@@ -104,25 +113,28 @@ def main(argv: list[str] | None = None) -> None:
         info = machine_info()
         lines = [
             "# Control-tick cost\n",
-            f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --scenario "
-            f"{args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n",
+            f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
+            f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n",
             f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
             f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
             f"Packages: {info['packages']}\n",
-            "Tick = wall time of one 1 kHz control tick (state read, controller, Pinocchio, QP build + solve, "
-            "physics step, recording), median over the episode; real-time factor = simulated / wall time of "
-            "the episode; parts = median of each part timed alone on the final state (2000 calls). Other "
-            "processes on the machine inflate all numbers alike.\n",
-            "| loop | tick µs (median) | real-time factor | status | fell | parts µs (median) |",
-            "|---|---|---|---|---|---|",
+            "Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
+            "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
+            "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "
+            "fall checks). In the loop = median of each part of the tick timed inside the episode "
+            "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
+            "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
+            "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
+            "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+            "Other processes on the machine inflate all numbers alike.\n",
+            "| " + " | ".join(cols) + " |",
+            "|" + "---|" * len(cols),
         ]
-        for label, tick, rtf, status, fell, parts in rows:
-            lines.append(f"| {label} | {tick:.1f} | {rtf:.1f}x | {status} | {fell} | "
-                         + ", ".join(f"{k} {v:.1f}" for k, v in parts.items()) + " |")
+        for label, tick, rtf, status, fell, in_loop, isolated in rows:
+            lines.append(f"| {label} | {tick:.1f} | {rtf:.1f}x | {status} | {fell} | {fmt(in_loop)} | {fmt(isolated)} |")
         args.out.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.out, lambda p: p.write_text("\n".join(lines) + "\n"))
         print(f"wrote {args.out}")
-
 
 if __name__ == "__main__":
     main()

@@ -134,10 +134,12 @@ class Episode:
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+                tick1 = tick2 = time.perf_counter()
                 if need_model and t >= s.filter_start_s:
                     br.q_pin(qpos, q)
                     br.v_pin(qpos, qvel, v)
                     self.model.update(q, v)
+                    tick2 = time.perf_counter()
                     inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
                     fres = self.filter.filter(inputs, u_nom)
                     u = fres.u
@@ -146,6 +148,7 @@ class Episode:
                 else:
                     fres = None
                     u = u_nom
+                tick3 = time.perf_counter()
                 for _ in range(self.physics_per_tick):
                     br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)
@@ -155,7 +158,9 @@ class Episode:
                 else:
                     self.contacts.check_non_foot_contact(d)
                 tau_prev[:] = u
-                tick_s = time.perf_counter() - tick0
+                tick4 = time.perf_counter()
+                trace.tick_parts_us[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
+                tick_s = tick4 - tick0
                 t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
                 trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s,
                              ecbf)

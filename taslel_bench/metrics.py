@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from taslel_bench.episode import EpisodeResult
+from taslel_bench.trace import TICK_PARTS
 
 MIN_NORMAL_FORCE_N = 1.0  # [N] contacts below this are ignored in force ratios and GRF errors
 
@@ -35,6 +36,8 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float) 
         "tick_us_median": _median(tr.tick_us[:n]),
         "tick_us_p99": _pct(tr.tick_us[:n], 99),
     }
+    for j, part in enumerate(TICK_PARTS):  # where the tick's time goes, measured inside the loop
+        out[f"tick_{part}_us_median"] = _median(tr.tick_parts_us[:n, j])
     out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
     out.update(filter_metrics(res))
     out.update(contact_metrics(res, control_dt_s))

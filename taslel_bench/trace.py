@@ -18,6 +18,7 @@ import pandas as pd
 from taslel_bench import robot
 from taslel_bench.bridge import StateBridge
 
+TICK_PARTS = ("controller", "model", "filter", "physics")
 QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
 
 
@@ -52,6 +53,9 @@ class EpisodeTrace:
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.tick_us = np.zeros(c)
+        # wall time of the tick's parts [s until finalize(), then µs]: state read + estimator + controller,
+        # controller model (bridge + Pinocchio), filter (QP build + solve + fallback), physics (+ contact check)
+        self.tick_parts_us = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
         # --- derived by finalize() (empty until then)
         self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
@@ -108,6 +112,7 @@ class EpisodeTrace:
         if self.finalized:
             return
         n, a, dv = self.n, br.free_qadr, br.free_dadr
+        self.tick_parts_us[:n] *= 1e6
         qpos, qvel = self.qpos_mj[:n], self.qvel_mj[:n]
         self.base_pos_w = qpos[:, a : a + 3].copy()
         self.base_quat_wxyz = qpos[:, a + 3 : a + 7].copy()
@@ -174,5 +179,7 @@ class EpisodeTrace:
         cols["mu_hat"] = self.mu_hat[:n]
         cols["mu_true"] = self.mu_true[:n]
         cols["tick_us"] = self.tick_us[:n]
+        for j, part in enumerate(TICK_PARTS):
+            cols[f"tick_{part}_us"] = self.tick_parts_us[:n, j]
         return pd.DataFrame(cols)
 
