@@ -134,7 +134,7 @@ class Episode:
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
-                tick1 = tick2 = time.perf_counter()
+                tick1 = tick2 = tick3 = time.perf_counter()
                 if need_model and t >= s.filter_start_s:
                     br.q_pin(qpos, q)
                     br.v_pin(qpos, qvel, v)
@@ -145,10 +145,10 @@ class Episode:
                     u = fres.u
                     if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
                         self.qp_recorder.on_tick(k, t, self.filter.problem, fres)
+                    tick3 = time.perf_counter()
                 else:
                     fres = None
                     u = u_nom
-                tick3 = time.perf_counter()
                 for _ in range(self.physics_per_tick):
                     br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)

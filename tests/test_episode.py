@@ -33,6 +33,8 @@ def test_short_walk_writes_run_folder(tmp_path):
     assert len(steps) == summary["ticks"] == 1500  # 0.5 s stand + 1.0 s walk at 1 kHz
     assert steps["t_s"].dtype == np.float64 and steps["FL_stance"].dtype == bool
     assert np.allclose(np.diff(steps["t_s"]), 1e-3)
+    # nominal only: no model or filter work in the tick
+    assert (steps["tick_model_us"] == 0).all() and (steps["tick_filter_us"] == 0).all()
 
 
 def test_rerun_skips_completed_and_force_reruns(tmp_path):
@@ -92,6 +94,12 @@ def test_filter_in_the_loop_short(tmp_path):
     assert summary["status"] == "ok" and not summary["fell"]
     assert summary["qp_failed_rate"] == 0.0 and summary["qp_solves"] == summary["ticks"]
     assert summary["grf_mae_z_n"] < 3.0
+    # the tick's parts, timed in the loop, add up to the tick; the filter part contains build + solve
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    parts = steps[["tick_controller_us", "tick_model_us", "tick_filter_us", "tick_physics_us"]].to_numpy()
+    assert np.all(parts > 0.0)
+    assert np.allclose(parts.sum(axis=1), steps["tick_us"], rtol=1e-9, atol=1e-6)
+    assert np.all(steps["tick_filter_us"] >= steps["qp_build_us"] + steps["qp_solve_us"] - 1e-6)
 
 
 @pytest.mark.parametrize(
