@@ -61,8 +61,7 @@ def part_costs(built: Built) -> dict[str, float]:
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
-        f = built.filter
-        backend_qp = f.condensed if f.condensed is not None else f.problem  # what the backend is given
+        backend_qp = built.filter.backend_problem
         costs["qp_solve"] = _median_us(lambda: built.backend.solve(backend_qp), 500)
     return costs
 

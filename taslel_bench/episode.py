@@ -144,7 +144,7 @@ class Episode:
                     fres = self.filter.filter(inputs, u_nom)
                     u = fres.u
                     if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
-                        self.qp_recorder.on_tick(k, t, self.filter.problem, fres)
+                        self.qp_recorder.on_tick(k, t, self.filter.backend_problem, fres)
                     tick3 = time.perf_counter()
                 else:
                     fres = None

@@ -152,6 +152,11 @@ class SafetyFilter:
             row_labels=labels,
         )
 
+    @property
+    def backend_problem(self) -> QPProblem:
+        """The QP the backend is given: :attr:`condensed` (formulation "condensed") or :attr:`problem`."""
+        return self.condensed if self.condensed is not None else self.problem
+
     def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
         s, nu = self.settings, robot.N_JOINTS
         self._rhs = np.zeros((m_eq, 1 + nu), order="F")  # [b, A_u] -> LU solve -> [z0, Z]

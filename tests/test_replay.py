@@ -175,3 +175,19 @@ def test_cli_multirun_over_solvers(tmp_path):
     text = (tmp_path / "report.md").read_text()
     assert "| daqp |" in text and "| piqp |" in text
     assert "piqp / high_accuracy / warm: unavailable: the solver ignores initial guesses" in text
+
+
+def test_record_condensed_formulation_stores_what_the_backend_solved(tmp_path):
+    """filter.formulation=condensed: the recorded QP is the 12-variable one the backend got, with its u."""
+    cfg = compose_cfg(["scenario=obstacle", "duration=0.1", "progress=false", "record.mcap=false",
+                       "record.qps=true", "record.qps_every=100", "filter.formulation=condensed"])  # fmt: skip
+    run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp_persistent"})
+    qs = qpset.load(tmp_path / qpset.FILENAME)
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    u_cols = [c for c in steps.columns if c.startswith("u_") and not c.startswith("u_nom")]
+    assert len(qs) == 6
+    for i in range(len(qs)):
+        p, x = qs.problem(i), qs.x_used_of(i)
+        assert p.n == 12 and p.A.shape == (0, 12) and p.G.shape == (24, 12)
+        assert (p.G @ x - p.h).max() < 1e-6
+        np.testing.assert_allclose(x, steps.loc[int(qs.tick[i]), u_cols].to_numpy(float), atol=1e-9)
