@@ -25,6 +25,16 @@ def random_state(pm: A1Model, rng: np.random.Generator) -> tuple[np.ndarray, np.
     return q, rng.normal(0.0, 2.0, robot.NV)
 
 
+def same_random_state(m, d, br: StateBridge, pm: A1Model, rng: np.random.Generator):
+    """A random state set in both MuJoCo (forward dynamics run) and the model (updated); returns (q, v)."""
+    q, v = random_state(pm, rng)
+    br.qpos_mj(q, d.qpos)
+    br.qvel_mj(q, v, d.qvel)
+    mujoco.mj_forward(m, d)
+    pm.update(q, v)
+    return q, v
+
+
 def velocity_map(br: StateBridge, q: np.ndarray) -> np.ndarray:
     """T with qvel_mujoco = T v_pinocchio (linear part rotated, joints permuted)."""
     T = np.zeros((robot.NV, robot.NV))
@@ -40,11 +50,7 @@ def test_mass_bias_feet_match_mujoco(setup):
     rng = np.random.default_rng(0)
     worst = {"M": 0.0, "h": 0.0, "pos": 0.0, "jac": 0.0}
     for _ in range(20):
-        q, v = random_state(pm, rng)
-        br.qpos_mj(q, d.qpos)
-        br.qvel_mj(q, v, d.qvel)
-        mujoco.mj_forward(m, d)
-        pm.update(q, v)
+        q, v = same_random_state(m, d, br, pm, rng)
         T = velocity_map(br, q)
         M_mj = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M_mj)  # MuJoCo 4 signature
@@ -93,11 +99,7 @@ def test_foot_velocity_matches_mujoco(setup):
     rng = np.random.default_rng(2)
     res = np.zeros(6)
     for _ in range(10):
-        q, v = random_state(pm, rng)
-        br.qpos_mj(q, d.qpos)
-        br.qvel_mj(q, v, d.qvel)
-        mujoco.mj_forward(m, d)
-        pm.update(q, v)
+        q, v = same_random_state(m, d, br, pm, rng)
         for i, foot in enumerate(robot.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, sid, res, 0)  # world axes, [ang, lin]
