@@ -9,6 +9,14 @@ as ``Proprioception.tau_joints``) are sampled; windows of ``WINDOW_STEPS`` sampl
 from the training ranges, ``shifted`` from :data:`SHIFTED_RANGES`). A fall (trunk below 0.15 m or tilted
 more than ~53 deg) ends the episode; windows ending later than ``fall_margin_s`` before the fall are
 dropped. Episodes run in parallel processes; the throughput is printed in env-steps/s (physics steps).
+
+With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
+the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
+in the loop, built through the core's façade :mod:`taslel_bench.api` from the project config
+(``--filter-overrides``, e.g. ``solver=daqp_persistent``); the filter assumes the true floor friction, and
+the features then hold the *filtered* torque, as the episode runner feeds estimators. Which episodes were
+filtered is saved per episode (``filtered``) and per window (``window_filtered``) and counted in the
+manifest.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ from estimators.randomisation import (
     draw,
     ranges_dict,
 )
-from taslel_bench import bridge, controller, gait, plant, robot
+from taslel_bench import api, bridge, controller, gait, plant, robot
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -49,6 +57,7 @@ class EpisodeConfig:
     fall_height_m: float = 0.15  # [m] trunk origin height below which the robot has fallen
     fall_upz: float = 0.6  # [-] trunk z axis . world z below which the robot has fallen
     fall_margin_s: float = 0.3  # [s] windows must end this long before a fall
+    filter_overrides: tuple[str, ...] = ()  # Hydra overrides of the project config for the safety filter
 
 
 @dataclass
@@ -58,6 +67,9 @@ class EpisodeResult:
     fall_time_s: float  # [s] nan if it did not fall
     steps: int  # physics steps simulated
     params: EpisodeParams
+    filtered: bool = False  # the safety filter was in the loop
+    filter_failures: int = 0  # ticks on which the filter's QP failed (fallback torque used)
+    wall_s: float = 0.0  # [s] wall time of the episode
 
 
 _WORKER: dict[str, object] = {}
@@ -70,8 +82,18 @@ def _worker_model() -> tuple[mujoco.MjModel, bridge.StateBridge, PlantRandomiser
     return _WORKER["model"], _WORKER["bridge"], _WORKER["rand"]  # type: ignore[return-value]
 
 
-def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> EpisodeResult:
-    """Simulate one episode and cut its windows (see the module docstring)."""
+def _worker_filter(overrides: tuple[str, ...]) -> api.SafetyFilter:
+    """A fresh safety filter (one instance per episode), config composed once per worker process."""
+    key = ("filter_cfg", overrides)
+    if key not in _WORKER:
+        _WORKER[key] = api.compose(list(overrides))
+    return api.build_safety_filter(_WORKER[key])  # type: ignore[arg-type]
+
+
+def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False) -> EpisodeResult:
+    """Simulate one episode and cut its windows (see the module docstring); ``filtered``: run the safety
+    filter (mu = the true floor friction) between the nominal controller and the plant."""
+    wall0 = time.perf_counter()
     m, br, rand = _worker_model()
     rand.apply(p)
     m.opt.timestep = cfg.timestep_s
@@ -86,6 +108,11 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> Episo
     d.qpos[a + 3 : a + 7] = [1.0, 0.0, 0.0, 0.0]
     d.qpos[br.joint_qadr] = ctl.stand_configuration()
     mujoco.mj_forward(m, d)
+    sf = _worker_filter(cfg.filter_overrides) if filtered else None
+    model = api.A1Model() if filtered else None
+    q_pin = np.zeros(robot.NQ)
+    v_pin = np.zeros(robot.NV)
+    failures = 0
 
     n_steps = int(round(cfg.duration_s / cfg.timestep_s))
     every = int(round(WINDOW_DT_S / cfg.timestep_s))
@@ -104,6 +131,15 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> Episo
                 fall_t = t
                 break
         u = ctl.compute(t, qj, qd)
+        if sf is not None:  # as taslel_bench.episode feeds the filter each tick
+            gs = ctl.gait_state(t)
+            br.q_pin(d.qpos, q_pin)
+            br.v_pin(d.qpos, d.qvel, v_pin)
+            model.update(q_pin, v_pin)  # type: ignore[union-attr]
+            inputs = api.TickInputs(model, v_pin, gs.in_stance, p.friction, gs.swing_phase, gs.swing_phase_rate)
+            fres = sf.filter(inputs, u)
+            failures += int(fres.used_fallback)
+            u = fres.u
         br.ctrl_mj(u, d.ctrl)
         tau_prev = u
         mujoco.mj_step(m, d)
@@ -117,10 +153,11 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig()) -> Episo
         if starts
         else np.zeros((0, WINDOW_STEPS, N_FEATURES), np.float32)
     )
-    return EpisodeResult(w, not np.isnan(fall_t), fall_t, k + 1, p)
+    return EpisodeResult(w, not np.isnan(fall_t), fall_t, k + 1, p, filtered, failures,
+                         time.perf_counter() - wall0)
 
 
-def _run(args: tuple[EpisodeParams, EpisodeConfig]) -> EpisodeResult:
+def _run(args: tuple[EpisodeParams, EpisodeConfig, bool]) -> EpisodeResult:
     return run_episode(*args)
 
 
@@ -142,14 +179,19 @@ def collect(
     seed: int = 0,
     workers: int = 2,
     cfg: EpisodeConfig = EpisodeConfig(),
+    filter_fraction: float = 0.0,
 ) -> dict[str, object]:
-    """Run all splits, write ``<split>.npz`` (X, y, episode, params) and ``manifest.json`` into ``out_dir``."""
+    """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
+    ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
+    safety filter in the loop (drawn per episode from a stream independent of the plant draws)."""
+    if not 0.0 <= filter_fraction <= 1.0:
+        raise ValueError(f"filter_fraction must be in [0, 1], got {filter_fraction!r}")
     valid = {"train", "val", "test", "shifted"}
     if bad := set(counts) - valid:
         raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
     out_dir.mkdir(parents=True, exist_ok=True)
     root = np.random.SeedSequence(seed)
-    jobs: list[tuple[str, EpisodeParams]] = []
+    jobs: list[tuple[str, EpisodeParams, bool]] = []
     for split_ss, split in zip(root.spawn(len(valid)), ("train", "val", "test", "shifted")):
         n = counts.get(split, 0)
         for ep_ss in split_ss.spawn(n):
@@ -157,14 +199,22 @@ def collect(
             ep_seed = int(ep_ss.generate_state(1)[0])
             shifted = split == "shifted"
             p = draw(rng, SHIFTED_RANGES if shifted else TRAIN_RANGES, ep_seed, symmetric_com=not shifted)
-            jobs.append((split, p))
+            # separate stream: the plant draws of a seed are the same for every filter_fraction
+            filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
+            jobs.append((split, p, bool(filt_rng.random() < filter_fraction)))
 
     t0 = time.perf_counter()
-    ctx = mp.get_context("fork")
-    with ctx.Pool(workers) as pool:
-        results = pool.map(_run, [(p, cfg) for _, p in jobs], chunksize=4)
+    args = [(p, cfg, f) for _, p, f in jobs]
+    if workers <= 1:
+        results = [_run(a) for a in args]
+    else:
+        ctx = mp.get_context("fork")
+        with ctx.Pool(workers) as pool:
+            results = pool.map(_run, args, chunksize=4)
     wall = time.perf_counter() - t0
     total_steps = sum(r.steps for r in results)
+    filt = [r for r in results if r.filtered]
+    nom = [r for r in results if not r.filtered]
 
     manifest: dict[str, object] = {
         "seed": seed,
@@ -180,10 +230,23 @@ def collect(
         "env_steps": total_steps,
         "env_steps_per_s": total_steps / wall,
         "paper_env_steps_per_s": PAPER_STEPS_PER_S,
+        "filter_fraction": filter_fraction,
+        "filter_overrides": list(cfg.filter_overrides),
+        "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
+                       "floor friction; tau features = filtered torque",
+        # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
+        "episode_wall_s_mean": {
+            "nominal": float(np.mean([r.wall_s for r in nom])) if nom else None,
+            "filtered": float(np.mean([r.wall_s for r in filt])) if filt else None,
+        },
+        "env_steps_per_s_per_worker": {
+            "nominal": sum(r.steps for r in nom) / sum(r.wall_s for r in nom) if nom else None,
+            "filtered": sum(r.steps for r in filt) / sum(r.wall_s for r in filt) if filt else None,
+        },
         "splits": {},
     }
     for split in ("train", "val", "test", "shifted"):
-        rs = [r for (s, _), r in zip(jobs, results) if s == split]
+        rs = [r for (s, _, _), r in zip(jobs, results) if s == split]
         if not rs:
             continue
         X = np.concatenate([r.windows for r in rs]).astype(np.float32)
@@ -193,6 +256,8 @@ def collect(
         np.savez_compressed(
             out_dir / f"{split}.npz", X=X, y=y, episode=ep, params=params,
             param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
+            filtered=np.array([r.filtered for r in rs]),
+            window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
         )
         fell = [r for r in rs if r.fell]
         manifest["splits"][split] = {  # type: ignore[index]
@@ -202,6 +267,10 @@ def collect(
             "episodes_fallen_without_windows": sum(1 for r in fell if len(r.windows) == 0),
             "fallen_friction": sorted(round(r.params.friction, 3) for r in fell),
             "env_steps": sum(r.steps for r in rs),
+            "episodes_filtered": sum(r.filtered for r in rs),
+            "windows_filtered": sum(len(r.windows) for r in rs if r.filtered),
+            "episodes_fallen_filtered": sum(1 for r in fell if r.filtered),
+            "filter_fallback_ticks": sum(r.filter_failures for r in rs),
         }
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return manifest
@@ -218,17 +287,27 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--duration", type=float, default=EpisodeConfig.duration_s, help="episode length [s]")
     ap.add_argument("--stride", type=int, default=EpisodeConfig.stride, help="window stride [samples]")
+    ap.add_argument("--filter-fraction", type=float, default=0.0,
+                    help="fraction of episodes run with the safety filter in the loop (mu = true friction)")
+    ap.add_argument("--filter-overrides", nargs="*", default=[],
+                    help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
     a = ap.parse_args(argv)
-    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride)
+    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
-    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg)
+    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction)
     rate = man["env_steps_per_s"]
     print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "
           f"{rate / PAPER_STEPS_PER_S:.2f}x")
+    per = man["env_steps_per_s_per_worker"]  # type: ignore[index]
+    for kind in ("nominal", "filtered"):
+        if per[kind]:
+            print(f"  {kind:8s} episodes: {per[kind]:,.0f} env-steps/s per worker, "
+                  f"{man['episode_wall_s_mean'][kind]:.2f} s per episode")  # type: ignore[index]
     for split, info in man["splits"].items():  # type: ignore[union-attr]
-        print(f"  {split:8s} {info['episodes']:5d} episodes {info['windows']:7d} windows "
-              f"fallen {info['episodes_fallen']}")
+        print(f"  {split:8s} {info['episodes']:5d} episodes ({info['episodes_filtered']} filtered) "
+              f"{info['windows']:7d} windows fallen {info['episodes_fallen']} "
+              f"(filtered {info['episodes_fallen_filtered']}), filter fallback ticks {info['filter_fallback_ticks']}")
     print(f"wrote {a.out}/{{train,val,test,shifted}}.npz and manifest.json")
 
 

@@ -35,12 +35,27 @@ RESULTS_DIR = Path(__file__).resolve().parents[1] / "results" / "estimators"
 @torch.no_grad()
 def predict(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """(mean [-], sigma [-]) for windows X (N, 40, 36)."""
-    means, sigmas = [], []
+    mean, sigma, _ = predict_all(model, X, batch)
+    return mean, sigma
+
+
+@torch.no_grad()
+def predict_all(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(mean [-], sigma [-], lower quantile [-] or None) for windows X (N, 40, 36)."""
+    means, sigmas, lowers = [], [], []
     for i in range(0, len(X), batch):
-        m, lv = model(torch.from_numpy(X[i : i + batch]))
+        m, lv, lo = model.predict(torch.from_numpy(X[i : i + batch]))
         means.append(m.numpy())
         sigmas.append(torch.exp(0.5 * lv).numpy())
-    return np.concatenate(means), np.concatenate(sigmas)
+        if lo is not None:
+            lowers.append(lo.numpy())
+    return np.concatenate(means), np.concatenate(sigmas), (np.concatenate(lowers) if lowers else None)
+
+
+def window_filtered(data_dir: Path, split: str) -> np.ndarray | None:
+    """Per-window flag "collected with the safety filter in the loop" (None for collections without it)."""
+    with np.load(Path(data_dir) / f"{split}.npz") as f:
+        return f["window_filtered"].astype(bool) if "window_filtered" in f.files else None
 
 
 @torch.no_grad()
@@ -108,6 +123,7 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
     if not FIXTURE.is_file():
         make_fixture(data_dir)
     splits = {s: load_split(data_dir, s) for s in ("test", "shifted")}
+    flags = {s: window_filtered(data_dir, s) for s in splits}
     splits_val = load_split(data_dir, "val")[:2]
     y_train_mean = float(load_split(data_dir, "train")[1].mean())
     rows: list[dict[str, object]] = []
@@ -125,19 +141,46 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
         n_params = parameter_count(model)
         panels = {}
         recorded: dict[str, object] = {}
+        q = float(meta["model"].get("lower_quantile", 0.0))
         for split, (X, y, _) in splits.items():
-            mean, sigma = predict(model, X)
+            mean, sigma, lower = predict_all(model, X)
             panels[split] = (y, mean, sigma)
-            for label, est in [("mean", mean)] + [(f"mean-{k:g}sigma", np.maximum(mean - k * sigma, 0.05)) for k in ks]:
+            ests = [("mean", mean)] + [(f"mean-{k:g}sigma", np.maximum(mean - k * sigma, 0.05)) for k in ks]
+            if lower is not None:
+                ests.append((f"lower(q={q:g})", np.maximum(lower, 0.05)))
+            for label, est in ests:
                 m = regression_metrics(y, est, sigma)
                 rows.append({"variant": variant, "split": split, "estimate": label, "params": n_params,
                              "latency_ms": lat * 1e3, **m})
                 recorded[f"{split}/{label}"] = {key: m[key] for key in
                                                 ("mae", "rmse", "r2", "bias", "overestimate_rate",
                                                  "within_1sigma", "within_2sigma")}
+            wf = flags.get(split)
+            if wf is not None and 0 < wf.sum() < len(wf):  # nominal-controller vs filter-in-the-loop windows
+                for sub, sel in (("nominal", ~wf), ("filtered", wf)):
+                    for label, est in ests:
+                        if label != "mean" and not label.startswith("lower"):
+                            continue
+                        m = regression_metrics(y[sel], est[sel], sigma[sel])
+                        rows.append({"variant": variant, "split": f"{split}[{sub}]", "estimate": label,
+                                     "params": n_params, "latency_ms": lat * 1e3, **m})
+                        recorded[f"{split}[{sub}]/{label}"] = {key: m[key] for key in
+                                                               ("mae", "bias", "overestimate_rate")}
         fx = fixture_mae(model)
         k_val = select_k(model, *splits_val)
         recorded["k_val_over_5pct"] = k_val
+        # validation metrics of the deployable bounds (the only split used to choose a bound)
+        mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
+        cands = {} if k_val is None else {f"gaussian k={k_val:g}": np.maximum(mean_val - k_val * sigma_val, 0.05)}
+        if lower_val is not None:
+            cands["quantile k=0"] = np.maximum(lower_val, 0.05)
+        recorded["val_bounds"] = {}
+        for label, est in cands.items():
+            mv = regression_metrics(splits_val[1], est)
+            recorded["val_bounds"][label] = {"mae": mv["mae"], "overestimate_rate": mv["overestimate_rate"]}
+        ok = {lb: v for lb, v in recorded["val_bounds"].items() if v["overestimate_rate"] <= 0.05}
+        recorded["val_bound_choice"] = min(ok, key=lambda lb: ok[lb]["mae"]) if ok else None
+        print(f"{variant}: validation bounds {recorded['val_bounds']} -> {recorded['val_bound_choice']}")
         print(f"{variant}: smallest k with validation over-estimation <= 5 %: {k_val}")
         meta["metrics"] = {**recorded, "latency_ms_batch1_1thread": lat * 1e3, "parameters": n_params,
                            "fixture": FIXTURE.name, "fixture_mae": fx}
@@ -171,7 +214,7 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
     head = ["variant", "params", "train wall [s]", "train CPU [s]", "latency [ms]", "test MAE", "test RMSE",
             "test R²", "test bias", "test over", "shifted MAE", "shifted RMSE", "shifted bias", "shifted over"]
     head += [f"shifted over (k={k:g})" for k in ks] + [f"shifted MAE (k={k:g})" for k in ks]
-    head += ["test within 1σ / 2σ", "k for ≤5 % over on val"]
+    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted over"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def get(v: str, split: str, est: str, col: str) -> float:
@@ -193,6 +236,9 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
         cells += [f"{get(v, 'shifted', f'mean-{k:g}sigma', 'mae'):.3f}" for k in ks]
         cells += [f"{get(v, 'test', 'mean', 'within_1sigma'):.2f} / {get(v, 'test', 'mean', 'within_2sigma'):.2f}"]
         cells += [str(r.get("k_val"))]
+        lo = [e for e in df[(df.variant == v) & (df.split == "shifted")].estimate if str(e).startswith("lower")]  # type: ignore[attr-defined]
+        cells += [f"{get(v, 'test', lo[0], 'mae'):.3f} / {get(v, 'shifted', lo[0], 'mae'):.3f} / "
+                  f"{100 * get(v, 'shifted', lo[0], 'overestimate_rate'):.1f} % ({lo[0]})" if lo else "—"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -235,8 +281,16 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         f"**{manifest['env_steps_per_s']:,.0f} env-steps/s** (paper: 100,000 steps/s, Isaac Gym, 4096 A1s, "
         f"RTX 3080) — one env step = one 1 ms MuJoCo step plus the Python nominal controller.",
         "- Splits by episode: " + ", ".join(
-            f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell)"
+            f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell"
+            + (f"; {i['episodes_filtered']} episodes with the safety filter in the loop" if "episodes_filtered" in i else "")
+            + ")"
             for s, i in manifest["splits"].items()) + ".",
+        *([f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
+           f"(ID-CBF-QP through `taslel_bench.api`, mu = true floor friction, features hold the filtered torque); "
+           f"per worker: nominal episodes {manifest['env_steps_per_s_per_worker']['nominal'] or 0:,.0f} env-steps/s, "
+           f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
+           "`test[nominal]` / `test[filtered]` split the test windows by how they were collected."]
+          if manifest.get("filter_fraction") else []),
         f"- Training ranges: `{json.dumps(manifest['train_ranges'])}`",
         f"- Shifted ranges (outside training in every plant quantity): `{json.dumps(manifest['shifted_ranges'])}`"
         " (CoM shift: magnitude, random sign).",

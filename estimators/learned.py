@@ -6,6 +6,8 @@ each sample instant, as in :mod:`estimators.collect`). Until the buffer is full 
 with ``ready=False``; afterwards, at each new sample it runs the model once (``torch.no_grad``, one CPU
 thread by default) and holds the result between samples. The reported ``mu`` is the conservative bound
 ``max(mu_min, mean - conservative_k * sigma)``; ``sigma`` is the model's predicted standard deviation.
+With ``bound="quantile"`` (models trained with a lower-quantile head, ``model.lower_quantile > 0``) it is
+``max(mu_min, lower - conservative_k * sigma)`` instead.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class LearnedEstimator:
         conservative_k: float = 1.0,
         mu_min: float = 0.05,
         threads: int | None = 1,
+        bound: str = "gaussian",
     ) -> None:
         """``variant`` names the shipped checkpoint used when ``checkpoint`` is None; ``prior_mu`` [-] is
         returned until the window is full; ``conservative_k`` [-] sigmas are subtracted from the mean;
@@ -43,6 +46,8 @@ class LearnedEstimator:
             raise ValueError(f"prior_mu must be positive and finite, got {prior_mu!r}")
         if conservative_k < 0:
             raise ValueError(f"conservative_k must be >= 0, got {conservative_k!r}")
+        if bound not in ("gaussian", "quantile"):
+            raise ValueError(f"unknown bound {bound!r}; valid choices: gaussian, quantile")
         if threads is not None:
             torch.set_num_threads(int(threads))
         self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
@@ -50,6 +55,9 @@ class LearnedEstimator:
             raise ValueError(
                 f"checkpoint {checkpoint!r} holds a {self.meta['model']['variant']!r} model, not {variant!r}"
             )
+        if bound == "quantile" and not float(self.meta["model"].get("lower_quantile", 0.0)) > 0:
+            raise ValueError(f"bound='quantile' needs a checkpoint with a lower-quantile head ({checkpoint or variant})")
+        self.bound = bound
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
         self._buf = np.zeros((WINDOW_STEPS, N_FEATURES), np.float32)
@@ -61,7 +69,7 @@ class LearnedEstimator:
         self._count = 0  # samples taken this episode
         self._next_t = 0.0  # [s] next sample instant
         self._last = FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
-        self.mean, self.sigma = float("nan"), float("nan")  # last raw model output
+        self.mean, self.sigma, self.lower = float("nan"), float("nan"), float("nan")  # last raw model output
 
     def step(self, obs: Proprioception) -> FrictionEstimate:
         if obs.t_s + 1e-9 < self._next_t:
@@ -79,8 +87,11 @@ class LearnedEstimator:
         start = self._count % WINDOW_STEPS  # oldest sample in the ring
         self._x[0] = torch.from_numpy(np.roll(self._buf, -start, axis=0))
         with torch.no_grad():
-            mean, log_var = self.model(self._x)
+            mean, log_var, lower = self.model.predict(self._x)
         self.mean = float(mean[0])
         self.sigma = float(torch.exp(0.5 * log_var[0]))
-        mu = max(self.mu_min, self.mean - self.k * self.sigma)
+        if lower is not None:
+            self.lower = float(lower[0])
+        base = self.lower if self.bound == "quantile" else self.mean
+        mu = max(self.mu_min, base - self.k * self.sigma)
         return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)

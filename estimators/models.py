@@ -2,7 +2,9 @@
 
 Every model maps raw windows ``x`` (B, T=40, 36) — q [rad], qdot [rad/s], tau [N·m] per step, core joint
 order — to a Gaussian over the friction coefficient: ``(mean, log_var)`` each (B,), in physical units
-([-] and log [-]^2). Feature and label normalisation statistics are buffers of the model, so a saved
+([-] and log [-]^2). With ``lower_quantile = q > 0`` the head has a third output, a lower-quantile estimate
+``lower = mean - softplus(.) * y_std`` (never above the mean), trained with the pinball loss at level q
+(:meth:`FrictionModel.predict` returns it; ``forward`` keeps returning ``(mean, log_var)``). Feature and label normalisation statistics are buffers of the model, so a saved
 ``state_dict`` is self-contained.
 
 Tokenisation for the transformers (paper, "Network Architecture", ViT-like):
@@ -46,6 +48,7 @@ class ModelConfig:
     mlp_hidden: list[int] = field(default_factory=lambda: [256, 256])
     window_steps: int = WINDOW_STEPS
     use_tau: bool = True  # False: torque features are zeroed after normalisation (q, qdot only)
+    lower_quantile: float = 0.0  # > 0: extra head for this quantile of mu given the window (pinball loss)
 
     def validate(self) -> ModelConfig:
         for name, value, valid in (
@@ -55,9 +58,16 @@ class ModelConfig:
         ):
             if value not in valid:
                 raise ValueError(f"unknown {name} {value!r}; valid choices: {', '.join(valid)}")
+        if not 0.0 <= self.lower_quantile < 0.5:
+            raise ValueError(f"lower_quantile must be in [0, 0.5), got {self.lower_quantile!r}")
         if self.variant != "mlp" and self.d_model % self.n_heads:
             raise ValueError(f"d_model={self.d_model} is not divisible by n_heads={self.n_heads}")
         return self
+
+    @property
+    def n_outputs(self) -> int:
+        """Head outputs: normalised mean, log-variance (and the lower-quantile offset)."""
+        return 3 if self.lower_quantile > 0 else 2
 
     @property
     def n_tokens(self) -> int:
@@ -119,6 +129,12 @@ class FrictionModel(nn.Module):
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2]) each (B,)."""
+        mean, log_var, _ = self.predict(x)
+        return mean, log_var
+
+    def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,).
+        The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
         if x.ndim != 3 or x.shape[-1] != N_FEATURES or x.shape[1] != self.cfg.window_steps:
             raise ValueError(
                 f"expected windows (B, {self.cfg.window_steps}, {N_FEATURES}), got {tuple(x.shape)}"
@@ -129,7 +145,10 @@ class FrictionModel(nn.Module):
         out = self.encode(z)
         mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
         log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
-        return mean, log_var
+        lower = None
+        if out.shape[1] > 2:
+            lower = mean.detach() - F.softplus(out[:, 2]) * self.norm.y_std
+        return mean, log_var, lower
 
 
 class MLPModel(FrictionModel):
@@ -142,7 +161,7 @@ class MLPModel(FrictionModel):
         for h in cfg.mlp_hidden:
             layers += [nn.Linear(width, h), nn.GELU(), nn.Dropout(cfg.dropout)]
             width = h
-        layers.append(nn.Linear(width, 2))
+        layers.append(nn.Linear(width, cfg.n_outputs))
         self.net = nn.Sequential(*layers)
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
@@ -210,7 +229,7 @@ class TransformerModel(FrictionModel):
         self.cls = nn.Parameter(torch.zeros(1, 1, d)) if cfg.pooling == "cls" else None
         self.blocks = nn.ModuleList(Block(cfg) for _ in range(cfg.n_layers))
         self.ln = nn.LayerNorm(d)
-        self.head = nn.Linear(d, 2)
+        self.head = nn.Linear(d, cfg.n_outputs)
 
     def tokens(self, x: torch.Tensor) -> torch.Tensor:
         """(B, T, 36) normalised -> (B, n_tokens, d) with position embeddings (time-major order)."""

@@ -33,6 +33,7 @@ from estimators.models import (
 )
 
 LOSSES = ("mae+nll", "nll", "mae")
+SCHEDULES = ("plateau", "cosine_time")
 
 DEFAULTS: dict[str, object] = {
     "estimator": "linformer",
@@ -47,6 +48,11 @@ DEFAULTS: dict[str, object] = {
     "lr": 1e-3,
     "weight_decay": 1e-4,
     "loss": "mae+nll",
+    # learning-rate schedule: "plateau" (halve when val_mae stalls) or "cosine_time" (cosine decay to
+    # lr_min_factor x lr over the wall-clock budget trainer.max_minutes, updated every step)
+    "schedule": "plateau",
+    "lr_min_factor": 0.02,
+    "quantile_weight": 1.0,  # weight of the pinball loss of the lower-quantile head (model.lower_quantile > 0)
     # training-time augmentation: per-window torque scale ~ log-uniform(range) (payload / motor strength
     # change the torque readings), and Gaussian noise of noise_std x the feature's std on every feature
     "augment": {"tau_scale": [1.0, 1.0], "noise_std": 0.0},
@@ -60,6 +66,13 @@ VARIANT_DEFAULTS: dict[str, dict[str, object]] = {
     "linformer": {"model": {"variant": "linformer", "tokens": "joint", "d_model": 32, "n_layers": 2,
                             "n_heads": 2, "linformer_k": 32}},
 }
+
+
+def pinball(pred: torch.Tensor, y: torch.Tensor, q: float) -> torch.Tensor:
+    """Mean pinball (quantile) loss at level q: minimised by the q-quantile of y; for q < 0.5 an
+    over-estimate costs (1 - q) / q times more than an under-estimate of the same size."""
+    e = y - pred
+    return torch.maximum(q * e, (q - 1.0) * e).mean()
 
 
 def gaussian_nll(mean: torch.Tensor, log_var: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -77,10 +90,13 @@ class FrictionTask(L.LightningModule):
 
     def __init__(self, model_cfg: dict[str, object], lr: float = 1e-3, weight_decay: float = 1e-4,
                  loss: str = "mae+nll", tau_scale: tuple[float, float] = (1.0, 1.0),
-                 noise_std: float = 0.0) -> None:
+                 noise_std: float = 0.0, schedule: str = "plateau", max_minutes: float = 13.0,
+                 lr_min_factor: float = 0.02, quantile_weight: float = 1.0) -> None:
         super().__init__()
         if loss not in LOSSES:
             raise ValueError(f"unknown loss {loss!r}; valid choices: {', '.join(LOSSES)}")
+        if schedule not in SCHEDULES:
+            raise ValueError(f"unknown schedule {schedule!r}; valid choices: {', '.join(SCHEDULES)}")
         self.save_hyperparameters()
         self.model: FrictionModel = build_model(ModelConfig(**model_cfg))
 
@@ -101,7 +117,7 @@ class FrictionTask(L.LightningModule):
         x, y = batch
         if stage == "train":
             x = self.augment(x)
-        mean, log_var = self.model(x)
+        mean, log_var, lower = self.model.predict(x)
         mae = (mean - y).abs().mean()
         if self.hparams.loss == "mae":
             loss = mae
@@ -109,6 +125,12 @@ class FrictionTask(L.LightningModule):
             loss = gaussian_nll(mean, log_var, y)
         else:
             loss = mae + 0.1 * gaussian_nll(mean.detach(), log_var, y)
+        if lower is not None:
+            q = float(self.model.cfg.lower_quantile)
+            ql = pinball(lower, y, q)
+            loss = loss + self.hparams.quantile_weight * ql
+            self.log(f"{stage}_pinball", ql, on_epoch=True, on_step=False)
+            self.log(f"{stage}_lower_over", ((lower - y) > 0.05).float().mean(), on_epoch=True, on_step=False)
         self.log(f"{stage}_loss", loss, prog_bar=stage == "train", on_epoch=True, on_step=False)
         self.log(f"{stage}_mae", mae, prog_bar=True, on_epoch=True, on_step=False)
         return loss
@@ -124,6 +146,17 @@ class FrictionTask(L.LightningModule):
 
     def configure_optimizers(self) -> dict[str, object]:
         opt = torch.optim.AdamW(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        if self.hparams.schedule == "cosine_time":
+            budget = 60.0 * float(self.hparams.max_minutes)
+            lo = float(self.hparams.lr_min_factor)
+            t0 = time.perf_counter()
+
+            def factor(_: int) -> float:
+                frac = min(1.0, (time.perf_counter() - t0) / budget)
+                return lo + (1.0 - lo) * 0.5 * (1.0 + math.cos(math.pi * frac))
+
+            sched = torch.optim.lr_scheduler.LambdaLR(opt, factor)
+            return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=3)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": "val_mae"}}
 
@@ -146,7 +179,8 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     dm.setup("fit")
     task = FrictionTask(
         OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss,  # type: ignore[arg-type]
-        tuple(cfg.augment.tau_scale), float(cfg.augment.noise_std),
+        tuple(cfg.augment.tau_scale), float(cfg.augment.noise_std), str(cfg.schedule),
+        float(cfg.trainer.max_minutes), float(cfg.lr_min_factor), float(cfg.quantile_weight),
     )
     task.model.norm.fit(*dm.tensors["train"])
     run_dir = Path(cfg.runs_dir) / str(cfg.name or cfg.estimator)

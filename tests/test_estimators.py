@@ -88,6 +88,29 @@ def test_collect_short_episode() -> None:
     assert np.isfinite(r.windows).all()
 
 
+def test_collect_with_filter_in_the_loop(tmp_path: Path) -> None:
+    """Filter-in-the-loop episodes run through taslel_bench.api, change the torques the windows hold, and
+    are flagged per episode and per window; the plant draws do not depend on filter_fraction."""
+    from estimators.collect import EpisodeConfig, collect, run_episode
+    from estimators.randomisation import TRAIN_RANGES, draw
+
+    p = draw(np.random.default_rng(1), TRAIN_RANGES, seed=1)
+    cfg = EpisodeConfig(duration_s=1.6, stride=2)
+    nominal, filtered = run_episode(p, cfg), run_episode(p, cfg, filtered=True)
+    assert filtered.filtered and not nominal.filtered and not filtered.fell
+    assert filtered.windows.shape == nominal.windows.shape
+    assert not np.allclose(filtered.windows[..., 24:], nominal.windows[..., 24:])
+
+    cfg = EpisodeConfig(duration_s=1.4, stride=8)
+    man = collect(tmp_path / "a", {"train": 3}, seed=2, workers=1, cfg=cfg, filter_fraction=1.0)
+    assert man["splits"]["train"]["episodes_filtered"] == 3  # type: ignore[index]
+    collect(tmp_path / "b", {"train": 3}, seed=2, workers=1, cfg=cfg, filter_fraction=0.0)
+    with np.load(tmp_path / "a" / "train.npz") as a, np.load(tmp_path / "b" / "train.npz") as b:
+        assert a["filtered"].all() and a["window_filtered"].all() and not b["filtered"].any()
+        np.testing.assert_array_equal(a["params"], b["params"])
+        np.testing.assert_array_equal(a["X"][..., :24].shape, b["X"][..., :24].shape)
+
+
 # ------------------------------------------------------------------------------------------- torch
 
 
@@ -133,6 +156,35 @@ def test_fast_dev_run_training(tmp_path: Path) -> None:
     assert float(task.model.norm.y_mean) == pytest.approx(float(arrays["train"][1].mean()), rel=1e-5)
 
 
+def test_lower_quantile_head_and_time_cosine_schedule(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("lightning")
+    from estimators.data import WindowDataModule
+    from estimators.models import ModelConfig, build_model
+    from estimators.train import make_config, pinball, train
+
+    for variant in ("mlp", "linformer"):
+        model = build_model(ModelConfig(variant=variant, tokens="step", d_model=16, linformer_k=8,
+                                        mlp_hidden=[8], lower_quantile=0.1))
+        mean, log_var, lower = model.predict(torch.randn(4, 40, 36))
+        assert lower is not None and lower.shape == (4,) and (lower <= mean).all()
+        assert model(torch.randn(4, 40, 36))[0].shape == (4,)
+    assert build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).predict(torch.randn(2, 40, 36))[2] is None
+    with pytest.raises(ValueError, match="lower_quantile"):
+        ModelConfig(lower_quantile=0.7).validate()
+    # pinball at q = 0.1: an over-estimate by 1 costs 0.9, an under-estimate by 1 costs 0.1
+    y = torch.zeros(1)
+    assert float(pinball(torch.ones(1), y, 0.1)) == pytest.approx(0.9)
+    assert float(pinball(-torch.ones(1), y, 0.1)) == pytest.approx(0.1)
+
+    arrays = {s: _tiny_data(32, i) for i, s in enumerate(("train", "val", "test"))}
+    cfg = make_config(["estimator=linformer", f"runs_dir={tmp_path}", "trainer.fast_dev_run=true",
+                       "model.tokens=step", "model.d_model=16", "model.linformer_k=8", "threads=1",
+                       "model.lower_quantile=0.1", "schedule=cosine_time"])
+    _, record = train(cfg, datamodule=WindowDataModule(arrays=arrays, batch_size=16))
+    assert record["global_steps"] == 1
+
+
 def test_checkpoint_round_trip(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
     from estimators.checkpoint import load_checkpoint, save_checkpoint
@@ -175,6 +227,12 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
         LearnedEstimator("gru")
     with pytest.raises(ValueError, match="holds a 'mlp' model"):
         LearnedEstimator("linformer", checkpoint=tmp_path / "m")
+    with pytest.raises(ValueError, match="lower-quantile head"):
+        LearnedEstimator("mlp", checkpoint=tmp_path / "m", bound="quantile")
+    save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8], lower_quantile=0.1)).eval(), tmp_path / "q")
+    est = LearnedEstimator("mlp", checkpoint=tmp_path / "q", conservative_k=0.0, bound="quantile", threads=None)
+    outs = [est.step(_obs(k * dt, rng=rng)) for k in range(ticks_to_full + 1)]
+    assert outs[-1].ready and outs[-1].mu == pytest.approx(max(0.05, est.lower)) and est.lower <= est.mean
 
 
 @pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
@@ -219,8 +277,8 @@ def test_inloop_window_matches_collected_window(tmp_path: Path) -> None:
     save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).eval(), tmp_path / "m")
     est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", threads=None)
     seen: list[torch.Tensor] = []
-    model = est.model
-    est.model = lambda x: (seen.append(x.clone()), model(x))[1]  # type: ignore[assignment]
+    predict = est.model.predict
+    est.model.predict = lambda x: (seen.append(x.clone()), predict(x))[1]  # type: ignore[method-assign]
     run(est, 0.6, 0.6, t_switch_s=10.0, duration_s=1.2)
     collected = run_episode(nominal_params(0.6), EpisodeConfig(duration_s=1.2, first_window_s=0.0, stride=1))
     assert len(seen) == 1 and collected.windows.shape[0] == 1
