@@ -132,8 +132,39 @@ def main(argv: list[str] | None = None) -> None:
         for label, tick, rtf, status, fell, in_loop, isolated in rows:
             lines.append(f"| {label} | {tick:.1f} | {rtf:.1f}x | {status} | {fell} | {fmt(in_loop)} | {fmt(isolated)} |")
         args.out.parent.mkdir(parents=True, exist_ok=True)
+        figure = args.out.with_suffix(".png")
+        lines += ["", f"![tick parts in the loop]({figure.name})"]
+        atomic_write(figure, lambda p: _plot_parts(rows, args.scenario, p))
         atomic_write(args.out, lambda p: p.write_text("\n".join(lines) + "\n"))
-        print(f"wrote {args.out}")
+        print(f"wrote {args.out}, {figure}")
+
+
+def _plot_parts(rows: list, scenario: str, path: Path) -> None:
+    """Stacked bars: the median in-loop cost of each tick part per loop, real-time factor on top."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 0.6 * len(rows) + 2.0))
+    labels = [r[0] for r in rows]
+    left = np.zeros(len(rows))
+    for part in TICK_PARTS:
+        widths = np.array([r[5].get(part, 0.0) for r in rows])
+        ax.barh(labels, widths, left=left, label=part)
+        left += widths
+    for i, r in enumerate(rows):
+        ax.text(left[i] + 3, i, f"{r[2]:.1f}x real time", va="center", fontsize=8)
+    ax.axvline(100.0, color="k", lw=0.8, ls="--")
+    ax.text(100.0, -0.45, " 100 µs: 10x real time", fontsize=8, va="top")
+    ax.invert_yaxis()
+    ax.set_xlabel("median wall time per 1 kHz tick, timed inside the loop [µs]")
+    ax.set_title(f"where the control tick's time goes ({scenario})")
+    ax.set_xlim(0, max(left.max() * 1.35, 120))
+    ax.legend(ncol=len(TICK_PARTS), loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=120)
+    plt.close(fig)
 
 if __name__ == "__main__":
     main()
