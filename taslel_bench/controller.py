@@ -55,6 +55,8 @@ class NominalController:
         self._table = np.zeros((max(self._period_ticks, 1), 2, robot.N_JOINTS))
         self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
         self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
+        self._stand_q: np.ndarray | None = None  # q_des while standing (the same IK every tick)
+        self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
 
     def gait_time(self, t: float) -> float:
         """Time since walking started [s] (negative while standing)."""
@@ -63,7 +65,7 @@ class NominalController:
     def gait_state(self, t: float) -> GaitState:
         """Gait schedule at episode time ``t`` [s] (from the per-period table when on the tick grid; its
         arrays are then shared and read-only)."""
-        if self._period_ticks:
+        if self._period_ticks and self.use_tables:
             x = self.gait_time(t) / self.fd_dt_s
             j = round(x)
             if j >= 0 and abs(x - j) < 1e-6:
@@ -101,6 +103,16 @@ class NominalController:
     def update_references(self, t: float) -> None:
         """Set ``q_des`` [rad] and ``qd_des`` [rad/s] for episode time ``t`` [s] (table lookup once walking
         has gone one tick past its start, see class doc)."""
+        if not self.use_tables:
+            self._compute_references(t)
+            return
+        if self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0:  # standing: constant references
+            if self._stand_q is None:
+                self._compute_references(t)
+                self._stand_q = self.q_des.copy()
+            self.q_des[:] = self._stand_q
+            self.qd_des[:] = 0.0
+            return
         if self._period_ticks:
             x = self.gait_time(t) / self.fd_dt_s
             j = round(x)

@@ -209,7 +209,7 @@ def test_controller_reference_table_matches_fresh_computation():
 
     tab = NominalController(GaitParams(), PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)
     fresh = NominalController(GaitParams(), PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)
-    fresh._period_ticks = 0  # disables the tables
+    fresh.use_tables = False
     assert tab._period_ticks == 400
     rng = np.random.default_rng(3)
     for k in range(2000):  # stand, first period (fills the tables), then 3 periods of look-ups
@@ -219,5 +219,7 @@ def test_controller_reference_table_matches_fresh_computation():
         assert np.abs(tab.qd_des - fresh.qd_des).max() < 1e-9
         if k >= 500:
             gs, ref = tab.gait_state(t), fresh.gait.state(((k - 500) % 400) * 1e-3)
+            dphi = abs(fresh.gait_state(t).phi - gs.phi)  # the table's exact grid time vs t - 0.5 s, rounded
+            assert min(dphi, 1.0 - dphi) < 1e-9
             assert np.array_equal(gs.in_stance, ref.in_stance) and np.allclose(gs.swing_phase, ref.swing_phase)
     assert tab._table_filled.all()
