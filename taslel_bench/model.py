@@ -46,18 +46,18 @@ class A1Model:
         self.foot_vel_in_world = np.zeros((robot.N_LEGS, 3))
         self.foot_jac_in_world = np.zeros((robot.N_LEGS, 3, nv))
         self.foot_jdotv_in_world = np.zeros((robot.N_LEGS, 3))
-        self._a0 = np.zeros(nv)
         self._lower = np.tril_indices(nv, -1)
 
     def update(self, q: np.ndarray, v: np.ndarray) -> None:
         """Compute all per-tick terms at (q, v) (Pinocchio conventions, see module doc)."""
         m, d = self.model, self.data
-        pin.forwardKinematics(m, d, q, v, self._a0)
+        # one pass: kinematics at (q, v) with zero joint acceleration (so frame accelerations are J̇v),
+        # joint Jacobians, M (upper triangle), nonlinear effects
+        pin.computeAllTerms(m, d, q, v)
         pin.updateFramePlacements(m, d)
-        pin.computeJointJacobians(m, d, q)
-        self.M[:] = pin.crba(m, d, q)  # upper triangle only: mirror it
-        self.M[self._lower] = self.M.T[self._lower]
-        self.h[:] = pin.nonLinearEffects(m, d, q, v)
+        self.M[:] = d.M
+        self.M[self._lower] = self.M.T[self._lower]  # mirror the upper triangle
+        self.h[:] = d.nle
         oMf, pos, jac, jdotv = d.oMf, self.foot_pos_in_world, self.foot_jac_in_world, self.foot_jdotv_in_world
         for i, fid in enumerate(self.foot_frame_ids):
             pos[i] = oMf[fid].translation
