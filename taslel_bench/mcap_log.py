@@ -12,7 +12,7 @@ from mcap.writer import Writer
 
 from taslel_bench import robot
 from taslel_bench.recording import atomic_write
-from taslel_bench.trace import EpisodeTrace
+from taslel_bench.trace import TICK_PARTS, EpisodeTrace
 
 _NUM = {"type": "number"}
 _ARR = {"type": "array", "items": {"type": ["number", "null"]}}
@@ -32,6 +32,7 @@ CHANNELS: dict[str, dict[str, dict]] = {
     },
     "/qp": {"status": {"type": "integer"}, "fallback": {"type": "boolean"}, "solve_us": _NUM, "build_us": _NUM,
             "iterations": {"type": "integer"}},
+    "/tick": {"tick_us": _NUM, **{f"{part}_us": _NUM for part in TICK_PARTS}},
     "/barrier": {"foot": {"type": "array"}, "h_m": _ARR, "h_e_mps": _ARR, "clearance_m": _ARR},
     "/friction": {"mu_hat": _NUM, "mu_true": _NUM},
     "/events": {"t_s": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
@@ -81,6 +82,8 @@ def _write(path: Path, tr: EpisodeTrace, events: list[dict], summary: dict) -> N
             put("/barrier", t, {"foot": legs, "h_m": _clean(tr.barrier_h_m[k]), "h_e_mps": _clean(tr.barrier_he_mps[k]),
                                 "clearance_m": _clean(tr.clearance_m[k])})
             put("/friction", t, {"mu_hat": float(tr.mu_hat[k]), "mu_true": float(tr.mu_true[k])})
+            put("/tick", t, {"tick_us": float(tr.tick_us[k]),
+                             **{f"{part}_us": float(v) for part, v in zip(TICK_PARTS, tr.tick_parts_us[k])}})
         t_end = float(tr.t_s[n - 1]) if n else 0.0
         end = {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}
         for e in [*events, end]:
