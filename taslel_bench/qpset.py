@@ -1,8 +1,8 @@
 """QP test sets: the filter's QPs recorded from real runs, as the backend received them (one ``.npz``).
 
 A set holds one or more *groups*; a group is one QP layout (shapes, sparsity masks, row labels) with its
-constant parts (P, lb, ub, masks) stored once and, per QP, only what changes: q, b, h and the values of A
-and G on their masks, the solution the run used (``x_used``, NaN when the filter fell back), a reference
+constant parts (lb, ub, masks) stored once and, per QP, only what changes: the values of P, A and G on
+their masks, q, b, h, the solution the run used (``x_used``, NaN when the filter fell back), a reference
 solution (``x_ref``, NaN until computed), and which constraints were active at ``x_used`` (G rows and
 bounds within :data:`ACTIVE_TOL`). Per QP, in recorded order: the run it came from (an index into
 ``meta["runs"]``: scenario, solver, seed ...), its control tick, tick time [s], the filter status, the
@@ -29,10 +29,11 @@ import numpy as np
 
 from taslel_bench.interfaces import QPProblem
 
-FORMAT = "taslel_bench.qpset/2"
+FORMAT = "taslel_bench.qpset/3"  # /3: P per QP (the condensed filter's P changes every tick)
+READS = ("taslel_bench.qpset/2", FORMAT)  # /2 files: P constant per group
 FILENAME = "qps.npz"  # in a run folder
 ACTIVE_TOL = 1e-7  # a G row / bound is active at x when within this of its limit
-PER_QP = ("q", "b", "h", "A_values", "G_values", "x_used", "x_ref", "active_rows", "active_bounds")
+PER_QP = ("q", "b", "h", "P_values", "A_values", "G_values", "x_used", "x_ref", "active_rows", "active_bounds")
 COLUMNS = ("group", "run", "tick", "t_s", "status", "build_time_s", "solve_time_s")
 
 
@@ -40,7 +41,7 @@ COLUMNS = ("group", "run", "tick", "t_s", "status", "build_time_s", "solve_time_
 class Group:
     """One layout: constants once, per-QP values stacked along axis 0 (``members``: their global indices)."""
 
-    P: np.ndarray
+    P: np.ndarray  # (n, n) P of the group's first QP (each QP's own values: P_values)
     lb: np.ndarray
     ub: np.ndarray
     P_pattern: np.ndarray
@@ -51,6 +52,7 @@ class Group:
     q: np.ndarray  # (k, n)
     b: np.ndarray  # (k, m_eq)
     h: np.ndarray  # (k, m_in)
+    P_values: np.ndarray  # (k, P_pattern.sum())
     A_values: np.ndarray  # (k, A_pattern.sum())
     G_values: np.ndarray  # (k, G_pattern.sum())
     x_used: np.ndarray  # (k, n) solution the run used (NaN rows: the filter fell back)
@@ -74,15 +76,16 @@ class Group:
             )  # fmt: skip
         w = self._work
         w.q[:], w.b[:], w.h[:] = self.q[j], self.b[j], self.h[j]
+        w.P[self.P_pattern] = self.P_values[j]
         w.A[self.A_pattern] = self.A_values[j]
         w.G[self.G_pattern] = self.G_values[j]
         return w.copy() if copy else w
 
 
 def layout_key(P, lb, ub, P_pattern, A_pattern, G_pattern, row_labels) -> tuple:
-    """What two QPs must share to live in one group."""
+    """What two QPs must share to live in one group (P's values may differ: they are stored per QP)."""
     return (
-        P.shape, A_pattern.shape, G_pattern.shape, P.tobytes(), lb.tobytes(), ub.tobytes(),
+        P.shape, A_pattern.shape, G_pattern.shape, lb.tobytes(), ub.tobytes(),
         P_pattern.tobytes(), A_pattern.tobytes(), G_pattern.tobytes(), tuple(row_labels),
     )  # fmt: skip
 
@@ -204,7 +207,7 @@ class _Builder:
         P, lb, ub = self.const[:3]
         return (
             p.P.shape == P.shape and p.A.shape[0] == self.const[4].shape[0] and p.G.shape[0] == self.const[5].shape[0]
-            and np.array_equal(p.P, P) and np.array_equal(p.lb, lb) and np.array_equal(p.ub, ub)
+            and np.array_equal(p.lb, lb) and np.array_equal(p.ub, ub)
         )  # fmt: skip
 
     def group(self) -> Group:
@@ -251,6 +254,7 @@ class QPRecorder:
         c["q"].append(problem.q.copy())
         c["b"].append(problem.b.copy())
         c["h"].append(problem.h.copy())
+        c["P_values"].append(problem.P[problem.P_pattern])
         c["A_values"].append(problem.A[problem.A_pattern])
         c["G_values"].append(problem.G[problem.G_pattern])
         c["x_used"].append(nan if x_used is None else np.array(x_used, float))
@@ -318,14 +322,17 @@ def save(path: Path | str, qs: QPSet) -> None:
 def load(path: Path | str) -> QPSet:
     """Read a set written by :func:`save`."""
     with np.load(path, allow_pickle=False) as d:
-        if "format" not in d or str(d["format"]) != FORMAT:
+        if "format" not in d or str(d["format"]) not in READS:
             raise ValueError(f"{path}: not a {FORMAT} file")
         groups = []
         for gi in range(int(d["n_groups"])):
             pre = f"g{gi}__"
             layout = {k: slice(a, b) for k, (a, b) in json.loads(str(d[pre + "layout"])).items()}
             consts = [d[pre + k].copy() for k in ("P", "lb", "ub", "P_pattern", "A_pattern", "G_pattern")]
-            per = {k: d[pre + k].copy() for k in (*PER_QP, "members")}
+            per = {k: d[pre + k].copy() for k in (*PER_QP, "members") if pre + k in d}
+            if "P_values" not in per:  # format /2: one P per group
+                P, mask = consts[0], consts[3]
+                per["P_values"] = np.tile(P[mask], (per["members"].size, 1))
             groups.append(Group(*consts, layout, [str(s) for s in d[pre + "row_labels"]], **per))
         return QPSet(
             groups, d["group"].copy(), d["index"].copy(), d["run"].copy(), d["tick"].copy(), d["t_s"].copy(),

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import qpsolvers
 
 from taslel_bench import qpset, replay
 from taslel_bench.interfaces import QPSolution
@@ -185,9 +186,15 @@ def test_record_condensed_formulation_stores_what_the_backend_solved(tmp_path):
     qs = qpset.load(tmp_path / qpset.FILENAME)
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     u_cols = [c for c in steps.columns if c.startswith("u_") and not c.startswith("u_nom")]
-    assert len(qs) == 6
+    assert len(qs) == 6 and len(qs.groups) == 1  # P changes every tick but is stored per QP, not per layout
+    Ps = []
     for i in range(len(qs)):
         p, x = qs.problem(i), qs.x_used_of(i)
         assert p.n == 12 and p.A.shape == (0, 12) and p.G.shape == (24, 12)
         assert (p.G @ x - p.h).max() < 1e-6
         np.testing.assert_allclose(x, steps.loc[int(qs.tick[i]), u_cols].to_numpy(float), atol=1e-9)
+        # the stored QP (with its own P) has the recorded u as its minimiser
+        x_qp = qpsolvers.solve_qp(p.P, p.q, p.G, p.h, lb=p.lb, ub=p.ub, solver="quadprog")
+        np.testing.assert_allclose(x_qp, x, atol=1e-6)
+        Ps.append(p.P.copy())
+    assert not np.allclose(Ps[1], Ps[-1])
