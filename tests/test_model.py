@@ -99,7 +99,7 @@ def test_foot_velocity_matches_mujoco(setup):
     rng = np.random.default_rng(2)
     res = np.zeros(6)
     for _ in range(10):
-        q, v = same_random_state(m, d, br, pm, rng)
+        same_random_state(m, d, br, pm, rng)
         for i, foot in enumerate(robot.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, sid, res, 0)  # world axes, [ang, lin]

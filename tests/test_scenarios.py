@@ -39,6 +39,7 @@ def test_push_moves_the_trunk_sideways(tmp_path):
     quiet = run(compose_cfg(base), tmp_path / "quiet")
     pushed = run(compose_cfg([*base, "scenario=push", "scenario.pushes=[{t_s: 0.8, force_n: [0, 80, 0], duration_s: 0.1}]"]),
                  tmp_path / "pushed")
+    assert quiet["status"] == pushed["status"] == "ok"
     vy_quiet = pd.read_parquet(tmp_path / "quiet" / "steps.parquet")["base_vy_w_mps"].abs().max()
     vy_pushed = pd.read_parquet(tmp_path / "pushed" / "steps.parquet")["base_vy_w_mps"].max()
     # 8 N·s on a 13.7 kg robot: up to ~0.58 m/s if nothing resisted; the legs resist part of it
