@@ -16,6 +16,7 @@ from taslel_bench import recording
 
 SUMMARY_TABLE = "summary.parquet"
 AXES = ("scenario", "solver", "estimator", "seed")
+OVERRIDE_COLUMNS = {"filter.formulation": "filter_formulation"}  # swept override -> summary column
 
 
 def run_folders(sweep_dir: Path) -> list[Path]:
@@ -34,7 +35,8 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
             item = line.strip().lstrip("- ").strip()
             if "=" in item:
                 key, value = item.split("=", 1)
-                if key in AXES:
+                key = OVERRIDE_COLUMNS.get(key, key)
+                if key in AXES or key in OVERRIDE_COLUMNS.values():
                     row[key] = int(value) if key == "seed" and value.isdigit() else value
     tb = run_dir / "traceback.txt"
     if tb.is_file():

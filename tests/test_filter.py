@@ -259,3 +259,16 @@ def test_condensed_formulation_has_the_same_minimiser(states, target):
 def test_bad_formulation_name():
     with pytest.raises(ValueError, match="valid: full, condensed"):
         SafetyFilter(FilterSettings(formulation="sparse"), TightReference())
+
+
+def test_api_builds_the_configured_filter(states):
+    """taslel_bench.api (what axis packages use): the filter from the project config, with its backend."""
+    from taslel_bench import api
+
+    st, pm = states
+    f = api.build_safety_filter(api.compose(["solver=quadprog", "filter.formulation=condensed"]), BUMP)
+    assert f.settings.formulation == "condensed" and f.ecbf is not None
+    res = f.filter(inputs_for(pm, st[0], 0.3), st[0][3])
+    assert res.status == "solved" and res.u.shape == (12,)
+    with pytest.raises(ValueError, match="filter.enabled is false"):
+        api.build_safety_filter(api.compose(["filter.enabled=false"]))
