@@ -13,8 +13,11 @@ dropped. Episodes run in parallel processes; the throughput is printed in env-st
 With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
 the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
 in the loop, built through the core's façade :mod:`taslel_bench.api` from the project config
-(``--filter-overrides``, e.g. ``solver=daqp_persistent``); the filter assumes the true floor friction, and
-the features then hold the *filtered* torque, as the episode runner feeds estimators. Which episodes were
+(``--filter-overrides``, e.g. ``solver=daqp_persistent``); the features then hold the *filtered* torque, as
+the episode runner feeds estimators. The filter's friction is the true floor friction times a factor drawn
+per episode from ``--filter-mu-scale lo hi`` (default 1 1): in the loop the filter gets an estimate, not
+the truth, and a model that only learned the filter's clipping at the true mu would read its own estimate
+back. Which episodes were
 filtered is saved per episode (``filtered``) and per window (``window_filtered``) and counted in the
 manifest.
 """
@@ -69,6 +72,7 @@ class EpisodeResult:
     params: EpisodeParams
     filtered: bool = False  # the safety filter was in the loop
     filter_failures: int = 0  # ticks on which the filter's QP failed (fallback torque used)
+    filter_mu: float = float("nan")  # [-] friction the filter assumed (nan: no filter)
     wall_s: float = 0.0  # [s] wall time of the episode
 
 
@@ -90,9 +94,11 @@ def _worker_filter(overrides: tuple[str, ...]) -> api.SafetyFilter:
     return api.build_safety_filter(_WORKER[key])  # type: ignore[arg-type]
 
 
-def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False) -> EpisodeResult:
+def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
+                filter_mu_scale: float = 1.0) -> EpisodeResult:
     """Simulate one episode and cut its windows (see the module docstring); ``filtered``: run the safety
-    filter (mu = the true floor friction) between the nominal controller and the plant."""
+    filter (mu = ``filter_mu_scale`` x the true floor friction) between the nominal controller and the
+    plant."""
     wall0 = time.perf_counter()
     m, br, rand = _worker_model()
     rand.apply(p)
@@ -113,6 +119,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     q_pin = np.zeros(robot.NQ)
     v_pin = np.zeros(robot.NV)
     failures = 0
+    filter_mu = p.friction * filter_mu_scale if filtered else float("nan")
 
     n_steps = int(round(cfg.duration_s / cfg.timestep_s))
     every = int(round(WINDOW_DT_S / cfg.timestep_s))
@@ -136,7 +143,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
             br.q_pin(d.qpos, q_pin)
             br.v_pin(d.qpos, d.qvel, v_pin)
             model.update(q_pin, v_pin)  # type: ignore[union-attr]
-            inputs = api.TickInputs(model, v_pin, gs.in_stance, p.friction, gs.swing_phase, gs.swing_phase_rate)
+            inputs = api.TickInputs(model, v_pin, gs.in_stance, filter_mu, gs.swing_phase, gs.swing_phase_rate)
             fres = sf.filter(inputs, u)
             failures += int(fres.used_fallback)
             u = fres.u
@@ -153,11 +160,11 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
         if starts
         else np.zeros((0, WINDOW_STEPS, N_FEATURES), np.float32)
     )
-    return EpisodeResult(w, not np.isnan(fall_t), fall_t, k + 1, p, filtered, failures,
+    return EpisodeResult(w, not np.isnan(fall_t), fall_t, k + 1, p, filtered, failures, filter_mu,
                          time.perf_counter() - wall0)
 
 
-def _run(args: tuple[EpisodeParams, EpisodeConfig, bool]) -> EpisodeResult:
+def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float]) -> EpisodeResult:
     return run_episode(*args)
 
 
@@ -180,18 +187,23 @@ def collect(
     workers: int = 2,
     cfg: EpisodeConfig = EpisodeConfig(),
     filter_fraction: float = 0.0,
+    filter_mu_scale: tuple[float, float] = (1.0, 1.0),
 ) -> dict[str, object]:
     """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
-    safety filter in the loop (drawn per episode from a stream independent of the plant draws)."""
+    safety filter in the loop (drawn per episode from a stream independent of the plant draws);
+    ``filter_mu_scale`` (lo, hi) [-]: the filter's friction is the true one times U(lo, hi), same stream."""
     if not 0.0 <= filter_fraction <= 1.0:
         raise ValueError(f"filter_fraction must be in [0, 1], got {filter_fraction!r}")
+    lo_s, hi_s = (float(v) for v in filter_mu_scale)
+    if not 0.0 < lo_s <= hi_s:
+        raise ValueError(f"filter_mu_scale must be (lo, hi) with 0 < lo <= hi, got {filter_mu_scale!r}")
     valid = {"train", "val", "test", "shifted"}
     if bad := set(counts) - valid:
         raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
     out_dir.mkdir(parents=True, exist_ok=True)
     root = np.random.SeedSequence(seed)
-    jobs: list[tuple[str, EpisodeParams, bool]] = []
+    jobs: list[tuple[str, EpisodeParams, bool, float]] = []
     for split_ss, split in zip(root.spawn(len(valid)), ("train", "val", "test", "shifted")):
         n = counts.get(split, 0)
         for ep_ss in split_ss.spawn(n):
@@ -201,16 +213,29 @@ def collect(
             p = draw(rng, SHIFTED_RANGES if shifted else TRAIN_RANGES, ep_seed, symmetric_com=not shifted)
             # separate stream: the plant draws of a seed are the same for every filter_fraction
             filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
-            jobs.append((split, p, bool(filt_rng.random() < filter_fraction)))
+            filtered = bool(filt_rng.random() < filter_fraction)
+            jobs.append((split, p, filtered, float(filt_rng.uniform(lo_s, hi_s))))
 
     t0 = time.perf_counter()
-    args = [(p, cfg, f) for _, p, f in jobs]
+    args = [(p, cfg, f, s) for _, p, f, s in jobs]
+    results: list[EpisodeResult] = []
+    every = max(1, len(args) // 20)
+
+    def progress(r: EpisodeResult) -> None:
+        results.append(r)
+        if len(results) % every == 0 or len(results) == len(args):
+            el = time.perf_counter() - t0
+            print(f"  {len(results)}/{len(args)} episodes, {el:.0f} s, "
+                  f"eta {el / len(results) * (len(args) - len(results)):.0f} s", flush=True)
+
     if workers <= 1:
-        results = [_run(a) for a in args]
+        for a in args:
+            progress(_run(a))
     else:
         ctx = mp.get_context("fork")
         with ctx.Pool(workers) as pool:
-            results = pool.map(_run, args, chunksize=4)
+            for r in pool.imap(_run, args, chunksize=2):  # imap keeps the job order
+                progress(r)
     wall = time.perf_counter() - t0
     total_steps = sum(r.steps for r in results)
     filt = [r for r in results if r.filtered]
@@ -232,8 +257,9 @@ def collect(
         "paper_env_steps_per_s": PAPER_STEPS_PER_S,
         "filter_fraction": filter_fraction,
         "filter_overrides": list(cfg.filter_overrides),
+        "filter_mu_scale": [lo_s, hi_s],
         "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
-                       "floor friction; tau features = filtered torque",
+                       "floor friction x U(filter_mu_scale); tau features = filtered torque",
         # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
         "episode_wall_s_mean": {
             "nominal": float(np.mean([r.wall_s for r in nom])) if nom else None,
@@ -246,7 +272,7 @@ def collect(
         "splits": {},
     }
     for split in ("train", "val", "test", "shifted"):
-        rs = [r for (s, _, _), r in zip(jobs, results) if s == split]
+        rs = [r for (s, _, _, _), r in zip(jobs, results) if s == split]
         if not rs:
             continue
         X = np.concatenate([r.windows for r in rs]).astype(np.float32)
@@ -256,7 +282,7 @@ def collect(
         np.savez_compressed(
             out_dir / f"{split}.npz", X=X, y=y, episode=ep, params=params,
             param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
-            filtered=np.array([r.filtered for r in rs]),
+            filtered=np.array([r.filtered for r in rs]), filter_mu=np.array([r.filter_mu for r in rs]),
             window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
         )
         fell = [r for r in rs if r.fell]
@@ -289,12 +315,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--stride", type=int, default=EpisodeConfig.stride, help="window stride [samples]")
     ap.add_argument("--filter-fraction", type=float, default=0.0,
                     help="fraction of episodes run with the safety filter in the loop (mu = true friction)")
+    ap.add_argument("--filter-mu-scale", type=float, nargs=2, default=[1.0, 1.0], metavar=("LO", "HI"),
+                    help="filter's mu = true friction x U(LO, HI), per filtered episode")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
     a = ap.parse_args(argv)
     cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
-    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction)
+    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
+                  filter_mu_scale=tuple(a.filter_mu_scale))
     rate = man["env_steps_per_s"]
     print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "

@@ -7,7 +7,10 @@ with ``ready=False``; afterwards, at each new sample it runs the model once (``t
 thread by default) and holds the result between samples. The reported ``mu`` is the conservative bound
 ``max(mu_min, mean - conservative_k * sigma)``; ``sigma`` is the model's predicted standard deviation.
 With ``bound="quantile"`` (models trained with a lower-quantile head, ``model.lower_quantile > 0``) it is
-``max(mu_min, lower - conservative_k * sigma)`` instead.
+``max(mu_min, lower - conservative_k * sigma)`` instead. With ``hold_min_samples = n > 1`` the reported
+``mu`` is the smallest bound of the last n model outputs: a drop in friction shows at once, a rise only
+after n x 0.03 s (the window right after a drop still holds high-friction samples, and an over-estimate
+lets the filter ask for more tangential force than the ground holds).
 """
 
 from __future__ import annotations
@@ -36,10 +39,12 @@ class LearnedEstimator:
         mu_min: float = 0.05,
         threads: int | None = 1,
         bound: str = "gaussian",
+        hold_min_samples: int = 1,
     ) -> None:
         """``variant`` names the shipped checkpoint used when ``checkpoint`` is None; ``prior_mu`` [-] is
         returned until the window is full; ``conservative_k`` [-] sigmas are subtracted from the mean;
-        ``mu_min`` [-] floors the result; ``threads`` sets ``torch.set_num_threads`` (None: leave it)."""
+        ``mu_min`` [-] floors the result; ``threads`` sets ``torch.set_num_threads`` (None: leave it);
+        ``hold_min_samples`` [samples of 0.03 s]: report the minimum bound of the last that many outputs."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
         if not (prior_mu > 0 and math.isfinite(prior_mu)):
@@ -48,6 +53,8 @@ class LearnedEstimator:
             raise ValueError(f"conservative_k must be >= 0, got {conservative_k!r}")
         if bound not in ("gaussian", "quantile"):
             raise ValueError(f"unknown bound {bound!r}; valid choices: gaussian, quantile")
+        if int(hold_min_samples) != hold_min_samples or hold_min_samples < 1:
+            raise ValueError(f"hold_min_samples must be an integer >= 1, got {hold_min_samples!r}")
         if threads is not None:
             torch.set_num_threads(int(threads))
         self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
@@ -60,6 +67,7 @@ class LearnedEstimator:
         self.bound = bound
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
+        self._hold = np.full(int(hold_min_samples), np.inf)  # ring of the last bounds [-]
         self._buf = np.zeros((WINDOW_STEPS, N_FEATURES), np.float32)
         self._x = torch.zeros(1, WINDOW_STEPS, N_FEATURES)
         self.reset()
@@ -67,6 +75,8 @@ class LearnedEstimator:
     def reset(self) -> None:
         """Empty the window; the next estimates are the prior."""
         self._count = 0  # samples taken this episode
+        self._n_out = 0  # model outputs this episode
+        self._hold[:] = np.inf
         self._next_t = 0.0  # [s] next sample instant
         self._last = FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         self.mean, self.sigma, self.lower = float("nan"), float("nan"), float("nan")  # last raw model output
@@ -93,5 +103,7 @@ class LearnedEstimator:
         if lower is not None:
             self.lower = float(lower[0])
         base = self.lower if self.bound == "quantile" else self.mean
-        mu = max(self.mu_min, base - self.k * self.sigma)
+        self._hold[self._n_out % len(self._hold)] = max(self.mu_min, base - self.k * self.sigma)
+        self._n_out += 1
+        mu = float(self._hold.min())
         return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)

@@ -235,6 +235,24 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
     assert outs[-1].ready and outs[-1].mu == pytest.approx(max(0.05, est.lower)) and est.lower <= est.mean
 
 
+def test_hold_min_drops_at_once_and_rises_late(tmp_path: Path) -> None:
+    """hold_min_samples = n reports the smallest bound of the last n model outputs."""
+    torch = pytest.importorskip("torch")
+    from estimators.checkpoint import save_checkpoint
+    from estimators.learned import LearnedEstimator
+    from estimators.models import ModelConfig, build_model
+
+    save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).eval(), tmp_path / "m")
+    est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", conservative_k=0.0, threads=None, hold_min_samples=3)
+    reported = []
+    for m in (0.9, 0.4, 0.8, 0.8, 0.8, 0.7):  # drive the hold with known model outputs (sigma = 1)
+        est.model.predict = lambda x, m=m: (torch.tensor([m]), torch.zeros(1), None)  # type: ignore[method-assign]
+        reported.append(est._estimate().mu)
+    assert reported == pytest.approx([0.9, 0.4, 0.4, 0.4, 0.8, 0.7])
+    with pytest.raises(ValueError, match="hold_min_samples"):
+        LearnedEstimator("mlp", checkpoint=tmp_path / "m", hold_min_samples=0)
+
+
 @pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
 def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     pytest.importorskip("torch")
