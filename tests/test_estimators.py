@@ -102,11 +102,15 @@ def test_collect_with_filter_in_the_loop(tmp_path: Path) -> None:
     assert not np.allclose(filtered.windows[..., 24:], nominal.windows[..., 24:])
 
     cfg = EpisodeConfig(duration_s=1.4, stride=8)
-    man = collect(tmp_path / "a", {"train": 3}, seed=2, workers=1, cfg=cfg, filter_fraction=1.0)
+    man = collect(tmp_path / "a", {"train": 3}, seed=2, workers=1, cfg=cfg, filter_fraction=1.0,
+                  filter_mu_scale=(0.5, 0.9))
     assert man["splits"]["train"]["episodes_filtered"] == 3  # type: ignore[index]
     collect(tmp_path / "b", {"train": 3}, seed=2, workers=1, cfg=cfg, filter_fraction=0.0)
     with np.load(tmp_path / "a" / "train.npz") as a, np.load(tmp_path / "b" / "train.npz") as b:
         assert a["filtered"].all() and a["window_filtered"].all() and not b["filtered"].any()
+        friction = a["params"][:, list(a["param_columns"]).index("friction")]
+        assert np.all((a["filter_mu"] >= 0.5 * friction) & (a["filter_mu"] <= 0.9 * friction))
+        assert np.isnan(b["filter_mu"]).all()
         np.testing.assert_array_equal(a["params"], b["params"])
         np.testing.assert_array_equal(a["X"][..., :24].shape, b["X"][..., :24].shape)
 
