@@ -22,9 +22,18 @@ def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"collections must have distinct seeds, got {seeds}")
     parts: dict[str, list[np.ndarray]] = {"X": [], "y": [], "episode": [], "params": [], "fell": []}
+    optional = ("filtered", "window_filtered", "filter_mu")  # per-episode / per-window filter flags
+    have = []
+    for d in [base, *extras]:
+        with np.load(d / "train.npz") as f:
+            have.append(set(f.files))
+    keep = [k for k in optional if all(k in h for h in have)]
+    parts.update({k: [] for k in keep})
     offset = 0
     for d in [base, *extras]:
         with np.load(d / "train.npz") as f:
+            for k in keep:
+                parts[k].append(f[k])
             parts["X"].append(f["X"])
             parts["y"].append(f["y"])
             parts["episode"].append(f["episode"] + offset)
@@ -46,8 +55,10 @@ def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
     man["env_steps_per_s"] = man["env_steps"] / man["wall_time_s"]
     train = dict(man["splits"]["train"])
     for m in manifests[1:]:
-        for k in ("episodes", "windows", "episodes_fallen", "env_steps"):
-            train[k] += m["splits"]["train"][k]
+        for k in ("episodes", "windows", "episodes_fallen", "env_steps", "episodes_filtered", "windows_filtered",
+                  "episodes_fallen_filtered", "filter_fallback_ticks"):
+            if k in train and k in m["splits"]["train"]:
+                train[k] += m["splits"]["train"][k]
     man["splits"] = {**man["splits"], "train": train}
     (out / "manifest.json").write_text(json.dumps(man, indent=2))
     return man

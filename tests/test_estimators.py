@@ -115,6 +115,26 @@ def test_collect_with_filter_in_the_loop(tmp_path: Path) -> None:
         np.testing.assert_array_equal(a["X"][..., :24].shape, b["X"][..., :24].shape)
 
 
+
+def test_merge_concatenates_training_splits(tmp_path: Path) -> None:
+    """merge: training windows and filter flags of both collections, unique episode ids, the base's
+    other splits linked; equal seeds are refused."""
+    from estimators.collect import EpisodeConfig, collect
+    from estimators.merge import merge
+
+    cfg = EpisodeConfig(duration_s=1.6, stride=4)
+    collect(tmp_path / "a", {"train": 2, "test": 1}, seed=3, workers=1, cfg=cfg, filter_fraction=0.5)
+    collect(tmp_path / "b", {"train": 2}, seed=4, workers=1, cfg=cfg, filter_fraction=0.5)
+    man = merge(tmp_path / "m", tmp_path / "a", [tmp_path / "b"])
+    assert man["splits"]["train"]["episodes"] == 4  # type: ignore[index]
+    with np.load(tmp_path / "m" / "train.npz") as m, np.load(tmp_path / "a" / "train.npz") as a:
+        assert len(np.unique(m["episode"])) == 4 and len(m["filtered"]) == 4 and len(m["filter_mu"]) == 4
+        assert len(m["window_filtered"]) == len(m["X"]) == 2 * len(a["X"])
+        np.testing.assert_array_equal(m["X"][: len(a["X"])], a["X"])
+    assert (tmp_path / "m" / "test.npz").resolve() == (tmp_path / "a" / "test.npz").resolve()
+    with pytest.raises(ValueError, match="distinct seeds"):
+        merge(tmp_path / "m2", tmp_path / "a", [tmp_path / "a"])
+
 # ------------------------------------------------------------------------------------------- torch
 
 
