@@ -112,8 +112,8 @@ def verdict(res: Residuals | None, tol: Tolerances) -> str:
         return SOLVED
     if not math.isfinite(res.primal) or res.primal > tol.primal:
         return f"inaccurate: primal residual {res.primal:.1e} > {tol.primal:.0e}"
-    if not np.isnan(res.dual) and not res.dual <= tol.dual:
+    if not math.isnan(res.dual) and not res.dual <= tol.dual:
         return f"inaccurate: dual residual {res.dual:.1e} > {tol.dual:.0e}"
-    if not np.isnan(res.gap) and not res.gap <= tol.gap:
+    if not math.isnan(res.gap) and not res.gap <= tol.gap:
         return f"inaccurate: duality gap {res.gap:.1e} > {tol.gap:.0e}"
     return SOLVED

@@ -13,7 +13,9 @@ from ctypes import c_int
 from typing import Any
 
 import numpy as np
+from numba import njit
 
+from solvers.base import layout_key
 from solvers.persistent import NativeResult, PersistentBackend
 from taslel_bench.interfaces import QPProblem
 
@@ -33,6 +35,15 @@ class DaqpPersistent(PersistentBackend):
     def _forget(self) -> None:
         self._model = None
 
+    def _layout_key(self, problem: QPProblem) -> tuple:
+        """Shapes and patterns only: DAQP takes infinite bounds as +-DAQP_INF, so which bounds are finite
+        does not change its layout."""
+        masks = (problem.P_pattern, problem.A_pattern, problem.G_pattern)
+        if self._masks is None or any(a is not b for a, b in zip(masks, self._masks)):
+            self._masks = masks
+            self._masks_key = layout_key(problem)[:6]
+        return self._masks_key
+
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         n, m_in, m_eq = problem.n, problem.G.shape[0], problem.A.shape[0]
         if fresh:
@@ -42,23 +53,14 @@ class DaqpPersistent(PersistentBackend):
             self._bl[n : n + m_in] = -DAQP_INF
             self._sense = np.zeros(n + m_in + m_eq, dtype=c_int)
             self._sense[n + m_in :] = EQUALITY
-            self._y = np.empty(n + m_in + m_eq)  # scratch: (x, G x, A x)
-        self._M[:m_in], self._M[m_in:] = problem.G, problem.A
-        self._H, self._f = problem.P.copy(), problem.q.copy()
-        np.minimum(problem.ub, DAQP_INF, out=self._bu[:n])
-        np.maximum(problem.lb, -DAQP_INF, out=self._bl[:n])
-        self._bu[n : n + m_in] = problem.h
-        self._bu[n + m_in :] = self._bl[n + m_in :] = problem.b
+            self._H, self._f = np.zeros((n, n)), np.zeros(n)
+        _gather(problem.P, problem.q, problem.G, problem.h, problem.A, problem.b, problem.lb, problem.ub,
+                self._H, self._f, self._M, self._bu, self._bl)  # fmt: skip
 
     def _primal_residual(self, x: np.ndarray | None) -> float | None:
         """Largest violation of ``blower <= (x, G x, A x) <= bupper``: the problem's bounds and rows as
-        copied this tick (infinite bounds as +-1e30), one matrix product."""
-        n = self._dims[0]
-        y = self._y
-        y[:n] = x
-        np.matmul(self._M, x, out=y[n:])
-        r = max((y - self._bu).max(), (self._bl - y).max(), 0.0)
-        return float(r)  # nan if x had a nan (max() propagates it from the first operand)
+        copied this tick (infinite bounds as +-1e30); nan if x holds a nan."""
+        return float(_primal(self._M, x, self._bu, self._bl))
 
     def _setup(self, problem: QPProblem) -> None:
         import daqp
@@ -83,3 +85,39 @@ class DaqpPersistent(PersistentBackend):
         return NativeResult(
             x, True, f"exitflag {exitflag}", iters, y=lam[n + m_in :], z=lam[n : n + m_in], z_box=lam[:n]
         )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _gather(P, q, G, h, A, b, lb, ub, H, f, M, bu, bl):  # pragma: no cover - compiled
+    """Copy a :class:`QPProblem`'s values into DAQP's layout: H = P, f = q, M = [G; A], bounds
+    (lb, ub) clamped to +-DAQP_INF, then h (upper only) and b (both sides)."""
+    n, m_in = P.shape[0], G.shape[0]
+    H[:, :] = P
+    f[:] = q
+    M[:m_in] = G
+    M[m_in:] = A
+    for i in range(n):
+        bu[i] = min(ub[i], DAQP_INF)
+        bl[i] = max(lb[i], -DAQP_INF)
+    bu[n : n + m_in] = h
+    bu[n + m_in :] = b
+    bl[n + m_in :] = b
+
+
+@njit(cache=True, nogil=True)
+def _primal(M, x, bu, bl):  # pragma: no cover - compiled
+    """max(0, x - bu, bl - x, M x - bu, bl - M x) over the (x, rows) layout of :func:`_gather`; nan if
+    x or a product holds a nan."""
+    n = x.shape[0]
+    worst = 0.0
+    for i in range(n + M.shape[0]):
+        if i < n:
+            y = x[i]
+        else:
+            y = 0.0
+            for j in range(n):
+                y += M[i - n, j] * x[j]
+        if np.isnan(y):
+            return np.nan
+        worst = max(worst, y - bu[i], bl[i] - y)
+    return worst

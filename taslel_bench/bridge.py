@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench import robot
+from taslel_bench.jit import kernel
 
 
 def _quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -77,6 +78,11 @@ class StateBridge:
         out[:3] = self._vel_in_trunk
         return out
 
+    def state_pin(self, qpos: np.ndarray, qvel: np.ndarray, q_out: np.ndarray, v_out: np.ndarray) -> None:
+        """:meth:`q_pin` and :meth:`v_pin` in one compiled call (the control tick's state read); the joint
+        angles [rad] and velocities [rad/s] in core order are then ``q_out[7:]`` and ``v_out[6:]``."""
+        _state_pin(qpos, qvel, self._q_pin_from_qpos, self._v_pin_from_qvel, self.free_qadr + 3, q_out, v_out)
+
     # --- Pinocchio -> MuJoCo -------------------------------------------------------------------------
     def qpos_mj(self, q: np.ndarray, qpos: np.ndarray) -> np.ndarray:
         """Write a Pinocchio configuration into MuJoCo ``qpos`` (in place) and return it."""
@@ -104,3 +110,20 @@ class StateBridge:
     def joint_vector(self, mj_vec: np.ndarray, by: str = "dof") -> np.ndarray:
         """Reorder a per-joint MuJoCo vector (indexed by qvel address) into core order."""
         return mj_vec[self.joint_dadr if by == "dof" else self.actuator_ids]
+
+
+@kernel
+def _state_pin(qpos, qvel, q_from_qpos, v_from_qvel, quat_adr, q, v):
+    """q = qpos[q_from_qpos]; v = qvel[v_from_qvel] with v[:3] (world axes in MuJoCo) rotated into trunk
+    axes by the inverse of the trunk quaternion qpos[quat_adr : quat_adr + 4] (w, x, y, z)."""
+    for i in range(q.shape[0]):
+        q[i] = qpos[q_from_qpos[i]]
+    for i in range(v.shape[0]):
+        v[i] = qvel[v_from_qvel[i]]
+    w, x, y, z = qpos[quat_adr], qpos[quat_adr + 1], qpos[quat_adr + 2], qpos[quat_adr + 3]
+    nrm = w * w + x * x + y * y + z * z  # MuJoCo keeps it ~1; divide so the result is a pure rotation
+    vx, vy, vz = v[0], v[1], v[2]
+    # R' v_world with R the rotation matrix of (w, x, y, z) / |.|
+    v[0] = ((1 - 2 * (y * y + z * z) / nrm) * vx + 2 * (x * y + w * z) / nrm * vy + 2 * (x * z - w * y) / nrm * vz)
+    v[1] = (2 * (x * y - w * z) / nrm * vx + (1 - 2 * (x * x + z * z) / nrm) * vy + 2 * (y * z + w * x) / nrm * vz)
+    v[2] = (2 * (x * z + w * y) / nrm * vx + 2 * (y * z - w * x) / nrm * vy + (1 - 2 * (x * x + y * y) / nrm) * vz)

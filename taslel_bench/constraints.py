@@ -19,6 +19,7 @@ import numpy as np
 
 from taslel_bench import robot
 from taslel_bench.interfaces import ClearanceProfile, QPProblem
+from taslel_bench.jit import kernel
 from taslel_bench.model import A1Model
 
 NV, NU, NL = robot.NV, robot.N_JOINTS, 3 * robot.N_LEGS
@@ -67,11 +68,8 @@ class EquationsOfMotion(EqualityFamily):
         qp.A[self.start + 6 : self.start + NV, U] = -np.eye(NU)
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        r0, m = self.start, x.model
-        qp.A[r0 : r0 + NV, VDOT] = m.M
-        # columns of lambda_i: -J_i' (world-axes force at the foot centre -> generalised force)
-        np.negative(m.foot_jac_in_world.reshape(NL, NV).T, out=qp.A[r0 : r0 + NV, LAM])
-        np.negative(m.h, out=qp.b[r0 : r0 + NV])
+        m = x.model
+        _eom_rows(qp.A, qp.b, self.start, m.M, m.foot_jac_in_world, m.h)
 
 
 class ContactOrSwing(EqualityFamily):
@@ -90,25 +88,10 @@ class ContactOrSwing(EqualityFamily):
             mask[rows, VDOT] = True
             mask[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = np.eye(3, dtype=bool)
 
-    def init(self, qp: QPProblem) -> None:
-        self._diag = (np.arange(self.start, self.start + NL), np.arange(LAM.start, LAM.stop))
-        self._stance_rows = np.zeros(NL)  # 1.0 on the rows of stance feet
-        self._neg_stance_rows = np.zeros(NL)
-        self._key = b""
-
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        key = x.in_stance.tobytes()
-        if key != self._key:  # contact mode changed: new row selectors, lambda_i = 0 rows for swing feet
-            self._stance_rows[:] = np.repeat(x.in_stance, 3)
-            np.negative(self._stance_rows, out=self._neg_stance_rows)
-            qp.A[self._diag] = 1.0 - self._stance_rows
-            self._key = key
-        rows = slice(self.start, self.start + NL)
-        np.multiply(x.model.foot_jac_in_world.reshape(NL, NV), self._stance_rows[:, None], out=qp.A[rows, VDOT])
-        rhs = x.model.foot_jdotv_in_world.reshape(NL)
-        if self.velocity_gain:
-            rhs = rhs + self.velocity_gain * x.model.foot_vel_in_world.reshape(NL)
-        np.multiply(rhs, self._neg_stance_rows, out=qp.b[rows])
+        m = x.model
+        _contact_rows(qp.A, qp.b, self.start, m.foot_jac_in_world, m.foot_jdotv_in_world, m.foot_vel_in_world,
+                      x.in_stance, self.velocity_gain)  # fmt: skip
 
 
 class FrictionCone:
@@ -186,46 +169,85 @@ class SwingClearanceECBF:
         return [f"{leg}_clearance" for leg in robot.LEGS]
 
     def init(self, qp: QPProblem) -> None:
-        self._active = [True] * robot.N_LEGS  # forces the first write of every row
         c = np.asarray(self.profile.coeffs, float)
         k = np.arange(len(c))
-        self._c = c.tolist()
-        self._c1 = (c[1:] * k[1:]).tolist()  # dz/ds coefficients
-        self._c2 = (c[2:] * k[2:] * k[1:-1]).tolist()  # d²z/ds² coefficients
-        for i in range(robot.N_LEGS):
-            self._deactivate(qp, i)
-
-    def _deactivate(self, qp: QPProblem, i: int) -> None:
-        if self._active[i]:
-            qp.G[self.start + i, VDOT] = 0.0
-            qp.h[self.start + i] = INACTIVE_RHS
-            self._active[i] = False
-        self.h[i] = self.h_e[i] = np.nan
-
-    @staticmethod
-    def _horner(coeffs: list[float], s: float) -> float:
-        acc = 0.0
-        for c in reversed(coeffs):
-            acc = acc * s + c
-        return acc
+        self._c = c
+        self._c1 = c[1:] * k[1:]  # dz/ds coefficients
+        self._c2 = c[2:] * k[2:] * k[1:-1]  # d²z/ds² coefficients
+        qp.G[self.start : self.start + robot.N_LEGS] = 0.0
+        qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        # Scalar code per swing foot: cheaper than numpy on 4-vectors in the 1 kHz loop.
-        m, a1, a2 = x.model, self.alpha1, self.alpha2
-        sdot = x.swing_phase_rate
-        stance = x.in_stance.tolist()
-        phases = x.swing_phase.tolist()
-        for i in range(robot.N_LEGS):
-            if stance[i]:
-                self._deactivate(qp, i)
-                continue
-            s = phases[i]
-            z, dz, ddz = self._horner(self._c, s), self._horner(self._c1, s), self._horner(self._c2, s)
-            h = float(m.foot_pos_in_world[i, 2]) - robot.FOOT_RADIUS_M - z
-            hdot = float(m.foot_vel_in_world[i, 2]) - dz * sdot
-            h_e = hdot + a1 * h
-            r = self.start + i
-            np.negative(m.foot_jac_in_world[i, 2], out=qp.G[r, VDOT])
-            qp.h[r] = a2 * h_e + float(m.foot_jdotv_in_world[i, 2]) - ddz * sdot * sdot + a1 * hdot
-            self.h[i], self.h_e[i] = h, h_e
-            self._active[i] = True
+        m = x.model
+        _ecbf_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
+                   m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, self._c, self._c1,
+                   self._c2, self.alpha1, self.alpha2, robot.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+
+
+# --------------------------------------------------------------------------------- compiled row writers
+# Column blocks of X are fixed (VDOT, U, LAM above); each kernel writes one family's rows in place.
+
+
+@kernel
+def _eom_rows(A, b, r0, M, foot_jac, h):
+    """Rows r0 .. r0 + NV of ``M vdot - B u - sum_i J_i' lambda_i = -h`` (the constant -B block is
+    written once by :meth:`EquationsOfMotion.init`)."""
+    nv, lam0 = M.shape[0], NV + NU
+    for r in range(nv):
+        for c in range(nv):
+            A[r0 + r, c] = M[r, c]
+        for i in range(foot_jac.shape[0]):
+            for k in range(3):
+                A[r0 + r, lam0 + 3 * i + k] = -foot_jac[i, k, r]
+        b[r0 + r] = -h[r]
+
+
+@kernel
+def _contact_rows(A, b, r0, foot_jac, foot_jdotv, foot_vel, in_stance, velocity_gain):
+    """Per foot i, rows r0 + 3i .. r0 + 3i + 3: stance -> J_i vdot = -(J̇_i v + k_v J_i v);
+    swing -> lambda_i = 0."""
+    nv, lam0 = foot_jac.shape[2], NV + NU
+    for i in range(foot_jac.shape[0]):
+        stance = in_stance[i]
+        for k in range(3):
+            r = r0 + 3 * i + k
+            for c in range(nv):
+                A[r, c] = foot_jac[i, k, c] if stance else 0.0
+            A[r, lam0 + 3 * i + k] = 0.0 if stance else 1.0
+            b[r] = -(foot_jdotv[i, k] + velocity_gain * foot_vel[i, k]) if stance else 0.0
+
+
+@kernel
+def _horner(coeffs, s):
+    acc = 0.0
+    for j in range(coeffs.shape[0] - 1, -1, -1):
+        acc = acc * s + coeffs[j]
+    return acc
+
+
+@kernel
+def _ecbf_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_stance, swing_phase, sdot, c, c1, c2,
+               alpha1, alpha2, foot_radius, h_out, he_out):  # fmt: skip
+    """Row r0 + i per foot (see :class:`SwingClearanceECBF`): swing -> -J_z vdot <= a2 h_e + (J̇v)_z
+    - z'' sdot² + a1 hdot, with h, h_e written to ``h_out``, ``he_out``; stance -> 0 <= INACTIVE_RHS
+    and nan barrier values."""
+    nv = foot_jac.shape[2]
+    for i in range(foot_jac.shape[0]):
+        r = r0 + i
+        if in_stance[i]:
+            for col in range(nv):
+                G[r, col] = 0.0
+            hvec[r] = INACTIVE_RHS
+            h_out[i] = np.nan
+            he_out[i] = np.nan
+            continue
+        s = swing_phase[i]
+        dz, ddz = _horner(c1, s), _horner(c2, s)
+        h = foot_pos[i, 2] - foot_radius - _horner(c, s)
+        hdot = foot_vel[i, 2] - dz * sdot
+        h_e = hdot + alpha1 * h
+        for col in range(nv):
+            G[r, col] = -foot_jac[i, 2, col]
+        hvec[r] = alpha2 * h_e + foot_jdotv[i, 2] - ddz * sdot * sdot + alpha1 * hdot
+        h_out[i] = h
+        he_out[i] = h_e

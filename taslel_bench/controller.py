@@ -8,6 +8,7 @@ import numpy as np
 
 from taslel_bench import robot
 from taslel_bench.gait import GaitParams, GaitState, TrotGait
+from taslel_bench.jit import kernel
 from taslel_bench.kinematics import legs_ik, legs_ik_list
 
 
@@ -45,8 +46,6 @@ class NominalController:
         self.fd_dt_s = fd_dt_s
         self.q_des = np.zeros(robot.N_JOINTS)
         self.qd_des = np.zeros(robot.N_JOINTS)
-        self._u = np.zeros(robot.N_JOINTS)
-        self._tmp = np.zeros(robot.N_JOINTS)
         self._cache_t: float = float("nan")
         self._cache_list: list[float] = []
         # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
@@ -56,6 +55,7 @@ class NominalController:
         self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
         self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
         self._stand_q: np.ndarray | None = None  # q_des while standing (the same IK every tick)
+        self._stand_state: GaitState | None = None  # gait state while standing (all feet in stance)
         self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
 
     def gait_time(self, t: float) -> float:
@@ -65,6 +65,12 @@ class NominalController:
     def gait_state(self, t: float) -> GaitState:
         """Gait schedule at episode time ``t`` [s] (from the per-period table when on the tick grid; its
         arrays are then shared and read-only)."""
+        if self.use_tables and t < self.stand_duration_s:  # standing: one constant state
+            if self._stand_state is None:
+                self._stand_state = self.gait.state(self.gait_time(t))
+                self._stand_state.in_stance.flags.writeable = False
+                self._stand_state.swing_phase.flags.writeable = False
+            return self._stand_state
         if self._period_ticks and self.use_tables:
             x = self.gait_time(t) / self.fd_dt_s
             j = round(x)
@@ -90,15 +96,9 @@ class NominalController:
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray) -> np.ndarray:
         """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]."""
         self.update_references(t)
-        u = self._u
-        np.subtract(self.q_des, q_joints, out=u)
-        u *= self.gains.kp
-        np.subtract(self.qd_des, qd_joints, out=self._tmp)
-        self._tmp *= self.gains.kd
-        u += self._tmp
-        np.minimum(u, self.torque_limit_nm, out=u)  # (np.clip costs several times more on 12 entries)
-        np.maximum(u, -self.torque_limit_nm, out=u)
-        return u.copy()
+        u = np.empty(robot.N_JOINTS)
+        _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
+        return u
 
     def update_references(self, t: float) -> None:
         """Set ``q_des`` [rad] and ``qd_des`` [rad/s] for episode time ``t`` [s] (table lookup once walking
@@ -142,3 +142,10 @@ class NominalController:
     def stand_configuration(self) -> np.ndarray:
         """Joint angles [rad] of the initial stand (nominal feet under the hips)."""
         return legs_ik(self.gait.nominal_foot_in_hip)
+
+
+@kernel
+def _pd(q_des, qd_des, q, qd, kp, kd, limit, u):
+    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m]."""
+    for j in range(u.shape[0]):
+        u[j] = min(max(kp * (q_des[j] - q[j]) + kd * (qd_des[j] - qd[j]), -limit), limit)

@@ -101,6 +101,24 @@ class Episode:
         self.bridge.qvel_mj(q, v, d.qvel)
         mujoco.mj_forward(self.m, d)
 
+    def _warm_up(self, q: np.ndarray, v: np.ndarray) -> float:
+        """Run the tick's compiled kernels once on the initial state, before the episode clock starts (the
+        first call of a kernel in a process loads or compiles it). Returns the time it took [s]."""
+        t0 = time.perf_counter()
+        self.bridge.state_pin(self.d.qpos, self.d.qvel, q, v)
+        if self.filter is not None:
+            self.model.update(q, v)
+            # the gait's state arrays are read-only (a type of their own for the compiler), the plant's
+            # contact flags (filter.stance_source=contact) writable: warm both
+            for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
+                gs = self.controller.gait_state(t)
+                u_nom = self.controller.compute(t, q[7:], v[6:])
+                stance = gs.in_stance.copy() if writable else gs.in_stance
+                inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
+                self.filter.filter(inputs, u_nom)
+            self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
+        return time.perf_counter() - t0
+
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         s, m, d, br = self.s, self.m, self.d, self.bridge
         trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
@@ -109,12 +127,12 @@ class Episode:
         self.initial_state()
         self.estimator.reset()
         profile = self.scenario.clearance_profile()
-        q = np.zeros(robot.NQ)
-        v = np.zeros(robot.NV)
-        qj = np.zeros(robot.N_JOINTS)
-        qdj = np.zeros(robot.N_JOINTS)
+        q = np.zeros(robot.NQ)  # Pinocchio configuration, read from the plant every tick
+        v = np.zeros(robot.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
+        qj, qdj = q[7:], v[6:]  # views: joint angles [rad] and velocities [rad/s], core order
         tau_prev = np.zeros(robot.N_JOINTS)
         need_model = self.filter is not None
+        res.extras["warmup_s"] = self._warm_up(q, v)
         ecbf = self.filter.ecbf if self.filter is not None else None
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
@@ -126,8 +144,7 @@ class Episode:
             for k in range(self.n_ticks):
                 tick0 = time.perf_counter()
                 t = k * s.control_dt_s
-                qj[:] = qpos[br.joint_qadr]
-                qdj[:] = qvel[br.joint_dadr]
+                br.state_pin(qpos, qvel, q, v)  # also fills qj, qdj
                 trunk_xy = qpos[br.free_qadr : br.free_qadr + 2]
                 true_mu = self.scenario.friction_at(trunk_xy)
                 est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu))
@@ -136,8 +153,6 @@ class Episode:
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
                 tick1 = tick2 = tick3 = time.perf_counter()
                 if need_model and t >= s.filter_start_s:
-                    br.q_pin(qpos, q)
-                    br.v_pin(qpos, qvel, v)
                     self.model.update(q, v)
                     tick2 = time.perf_counter()
                     inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)

@@ -15,8 +15,8 @@ import numpy as np
 import pinocchio as pin
 
 from taslel_bench import robot
+from taslel_bench.jit import kernel
 
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 class A1Model:
@@ -46,24 +46,74 @@ class A1Model:
         self.foot_vel_in_world = np.zeros((robot.N_LEGS, 3))
         self.foot_jac_in_world = np.zeros((robot.N_LEGS, 3, nv))
         self.foot_jdotv_in_world = np.zeros((robot.N_LEGS, 3))
-        self._lower = np.tril_indices(nv, -1)
+        # velocity columns that move foot i: the free flyer's 6 and the leg's 3 (Pinocchio's support)
+        cols = []
+        for fid in self.foot_frame_ids:
+            support = self.model.supports[self.model.frames[fid].parentJoint][1:]
+            cols.append([self.model.joints[j].idx_v + k for j in support for k in range(self.model.joints[j].nv)])
+        self._foot_cols = np.array(cols, dtype=np.int64)  # (4, 9)
 
     def update(self, q: np.ndarray, v: np.ndarray) -> None:
         """Compute all per-tick terms at (q, v) (Pinocchio conventions, see module doc)."""
         m, d = self.model, self.data
-        # one pass: kinematics at (q, v) with zero joint acceleration (so frame accelerations are J̇v),
-        # joint Jacobians, M (upper triangle), nonlinear effects
+        # kinematics at (q, v), joint Jacobians data.J (world frame), M (upper triangle), nonlinear effects;
+        # then data.dJ, the time derivative of data.J, for the feet's J̇v
         pin.computeAllTerms(m, d, q, v)
-        pin.updateFramePlacements(m, d)
-        self.M[:] = d.M
-        self.M[self._lower] = self.M.T[self._lower]  # mirror the upper triangle
-        self.h[:] = d.nle
-        oMf, pos, jac, jdotv = d.oMf, self.foot_pos_in_world, self.foot_jac_in_world, self.foot_jdotv_in_world
-        for i, fid in enumerate(self.foot_frame_ids):
-            pos[i] = oMf[fid].translation
-            jac[i] = pin.getFrameJacobian(m, d, fid, _LWA)[:3]
-            jdotv[i] = pin.getFrameClassicalAcceleration(m, d, fid, _LWA).linear
-        np.matmul(jac, v, out=self.foot_vel_in_world)  # foot-centre velocity J v (one product for 4 feet)
+        pin.computeJointJacobiansTimeVariation(m, d, q, v)
+        place, (f0, f1, f2, f3) = pin.updateFramePlacement, self.foot_frame_ids
+        _dynamics_and_foot_terms(
+            d.M, d.nle, d.J, d.dJ, v, self._foot_cols,
+            place(m, d, f0).translation, place(m, d, f1).translation,
+            place(m, d, f2).translation, place(m, d, f3).translation,
+            self.M, self.h, self.foot_pos_in_world, self.foot_jac_in_world, self.foot_vel_in_world,
+            self.foot_jdotv_in_world,
+        )  # fmt: skip
 
     def neutral_q(self) -> np.ndarray:
         return pin.neutral(self.model)
+
+
+@kernel
+def _dynamics_and_foot_terms(M_upper, nle, J_world, dJ_world, v, foot_cols, p0, p1, p2, p3,
+                             M, h, foot_pos, foot_jac, foot_vel, foot_jdotv):  # fmt: skip
+    """M = the symmetric matrix of Pinocchio's upper triangle ``M_upper``; h = ``nle``; per foot i with
+    centre p_i [m] (``p0`` .. ``p3``, world):
+
+    * J_p = J_lin + omega x p, the translational Jacobian (world axes) from the joint Jacobians
+      ``J_world`` (6 x nv, Pinocchio ``data.J``: linear rows = velocity of the body point at the world
+      origin, angular rows = angular velocity, world axes), on the columns ``foot_cols[i]`` that move the
+      foot, 0 elsewhere;
+    * v_p = J_p v [m/s];
+    * J̇_p v = J̇_lin v + (J̇_ang v) x p + omega x v_p [m/s²], the classical acceleration at vdot = 0, from
+      ``dJ_world`` (Pinocchio ``data.dJ``, the time derivative of ``data.J``) and omega = J_ang v.
+    """
+    n = M.shape[0]
+    for r in range(n):
+        for c in range(r, n):
+            M[r, c] = M_upper[r, c]
+            M[c, r] = M_upper[r, c]
+        h[r] = nle[r]
+    foot_jac[:] = 0.0
+    for i in range(foot_cols.shape[0]):
+        p = p0 if i == 0 else p1 if i == 1 else p2 if i == 2 else p3
+        px, py, pz = p[0], p[1], p[2]
+        foot_pos[i, 0], foot_pos[i, 1], foot_pos[i, 2] = px, py, pz
+        vx = vy = vz = 0.0  # v_p
+        wx = wy = wz = 0.0  # omega
+        ax = ay = az = 0.0  # J̇_lin v
+        bx = by = bz = 0.0  # J̇_ang v
+        for c in foot_cols[i]:
+            ox, oy, oz = J_world[3, c], J_world[4, c], J_world[5, c]
+            jx = J_world[0, c] + oy * pz - oz * py
+            jy = J_world[1, c] + oz * px - ox * pz
+            jz = J_world[2, c] + ox * py - oy * px
+            foot_jac[i, 0, c], foot_jac[i, 1, c], foot_jac[i, 2, c] = jx, jy, jz
+            vc = v[c]
+            vx, vy, vz = vx + jx * vc, vy + jy * vc, vz + jz * vc
+            wx, wy, wz = wx + ox * vc, wy + oy * vc, wz + oz * vc
+            ax, ay, az = ax + dJ_world[0, c] * vc, ay + dJ_world[1, c] * vc, az + dJ_world[2, c] * vc
+            bx, by, bz = bx + dJ_world[3, c] * vc, by + dJ_world[4, c] * vc, bz + dJ_world[5, c] * vc
+        foot_vel[i, 0], foot_vel[i, 1], foot_vel[i, 2] = vx, vy, vz
+        foot_jdotv[i, 0] = ax + (by * pz - bz * py) + (wy * vz - wz * vy)
+        foot_jdotv[i, 1] = ay + (bz * px - bx * pz) + (wz * vx - wx * vz)
+        foot_jdotv[i, 2] = az + (bx * py - by * px) + (wx * vy - wy * vx)

@@ -29,13 +29,13 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import lapack
 
 from taslel_bench import robot
 from taslel_bench.constraints import (
     LAM,
     N_VARS,
     NL,
+    NU,
     NV,
     VDOT,
     ContactOrSwing,
@@ -46,7 +46,9 @@ from taslel_bench.constraints import (
     TickInputs,
     U,
 )
+from taslel_bench.equality_solve import FreeBlockSolver, solve_free
 from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution
+from taslel_bench.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
 REGULARIZATION_TARGETS = ("nominal", "zero")
@@ -115,7 +117,10 @@ class SafetyFilter:
         self.problem = self._allocate(m_eq, m_in)
         for fam in [*self.eq_families, *self.ineq_families]:
             fam.init(self.problem)
-        self._A_free = np.zeros((m_eq, NV + NL), order="F")  # columns of (vdot, lambda): determined by u
+        self._solver1 = FreeBlockSolver(1, self.eq_families[0].start, self.eq_families[1].start)
+        self._solver13 = FreeBlockSolver(1 + robot.N_JOINTS, self.eq_families[0].start, self.eq_families[1].start)
+        self._rhs1 = np.zeros((m_eq, 1))  # scratch: b - A_u u_nom -> (vdot_nom, lambda_nom)
+        self._rhs = np.zeros((m_eq, 1 + robot.N_JOINTS))  # condensed: [b, A_u] -> LU solve -> [z0, Z]
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -159,9 +164,6 @@ class SafetyFilter:
 
     def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
         s, nu = self.settings, robot.N_JOINTS
-        self._rhs = np.zeros((m_eq, 1 + nu), order="F")  # [b, A_u] -> LU solve -> [z0, Z]
-        self._G_free = np.zeros((m_in, NV + NL))  # G columns of (vdot, lambda)
-        self._x_full = np.zeros(N_VARS)
         self.condensed = QPProblem(
             P=np.eye(nu),
             q=np.zeros(nu),
@@ -181,36 +183,11 @@ class SafetyFilter:
     def _condense(self, qp: QPProblem, u_nom: np.ndarray) -> bool:
         """Write :attr:`condensed` from the full ``qp``: (vdot, lambda) = z0 - Z u from the equality rows.
         Returns False if the (vdot, lambda) block is singular."""
-        A_free, rhs, c = self._A_free, self._rhs, self.condensed
-        A_free[:, :NV] = qp.A[:, VDOT]
-        A_free[:, NV:] = qp.A[:, LAM]
-        rhs[:, 0] = qp.b
-        rhs[:, 1:] = qp.A[:, U]
-        _, _, sol, info = lapack.dgesv(A_free, rhs, overwrite_a=1, overwrite_b=1)
-        if info != 0:
-            return False
-        z0, Z = sol[:, 0], sol[:, 1:]  # (vdot, lambda) = z0 - Z u
-        self._z0, self._Z = z0, Z
-        G_free = self._G_free
-        G_free[:, :NV] = qp.G[:, VDOT]
-        G_free[:, NV:] = qp.G[:, LAM]
-        np.matmul(G_free, Z, out=c.G)
-        np.subtract(qp.G[:, U], c.G, out=c.G)
-        np.matmul(G_free, z0, out=c.h)
-        np.subtract(qp.h, c.h, out=c.h)
-        eps = self.settings.regularization
-        np.matmul(Z.T, Z, out=c.P)
-        c.P *= eps
-        c.P.flat[:: robot.N_JOINTS + 1] += 1.0
-        # q = -u_nom - eps Z'(z0 - z_target); z_target = z0 - Z u_nom ("nominal") or 0 ("zero")
-        if self.settings.regularization_target == "nominal":
-            np.matmul(c.P, u_nom, out=c.q)
-            np.negative(c.q, out=c.q)
-        else:
-            np.matmul(z0, Z, out=c.q)
-            c.q *= -eps
-            c.q -= u_nom
-        return True
+        c = self.condensed
+        sv = self._solver13
+        return _condense(qp.A, qp.b, qp.G, qp.h, u_nom, self.settings.regularization,
+                         self.settings.regularization_target == "nominal", sv.rows, sv.workspace, self._rhs,
+                         c.P, c.q, c.G, c.h)  # fmt: skip
 
     def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
         """Write this tick's QP (in place) and return it."""
@@ -227,19 +204,15 @@ class SafetyFilter:
         return qp
 
     def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
-        """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom."""
-        A_free = self._A_free  # Fortran-ordered scratch: LAPACK factorises it in place
-        A_free[:, :NV] = qp.A[:, VDOT]
-        A_free[:, NV:] = qp.A[:, LAM]
-        rhs = qp.b - qp.A[:, U] @ u_nom
-        _, _, z, info = lapack.dgesv(A_free, rhs, overwrite_a=1, overwrite_b=1)
-        if info != 0:  # singular contact Jacobian: fall back to the zero target this tick
-            qp.q[VDOT] = 0.0
-            qp.q[LAM] = 0.0
-            return
-        eps = self.settings.regularization
-        np.multiply(z[:NV], -eps, out=qp.q[VDOT])
-        np.multiply(z[NV:], -eps, out=qp.q[LAM])
+        """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom (zero target
+        this tick if the contact Jacobian makes the (vdot, lambda) block singular)."""
+        sv = self._solver1
+        _nominal_target(qp.A, qp.b, u_nom, self.settings.regularization, sv.rows, sv.workspace, self._rhs1, qp.q)
+
+    def reset(self) -> None:
+        """Forget the backend's warm start and the last filtered u (a new episode)."""
+        self.backend.reset()
+        self._last_u = None
 
     def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
         """Build, solve, and apply the failure policy. Never raises for solver failures."""
@@ -256,19 +229,99 @@ class SafetyFilter:
         except Exception as exc:  # a backend bug must not end the episode: record it
             sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
         if sol.ok:
-            x = sol.x
-            if self.condensed is not None:  # recover (vdot, lambda) = z0 - Z u
-                x = self._x_full
-                x[U] = sol.x
-                z = self._z0 - self._Z @ sol.x
-                x[VDOT], x[LAM] = z[:NV], z[NV:]
-            u = np.minimum(x[U], self.settings.torque_limit_nm)  # the QP's bounds hold to solver tolerance
-            np.maximum(u, -self.settings.torque_limit_nm, out=u)
+            u, lam, vdot = np.empty(robot.N_JOINTS), np.empty(NL), np.empty(NV)
+            # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
+            # hold to solver tolerance)
+            _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
+                            vdot)  # fmt: skip
             self._last_u = u
-            return FilterResult(u, x[LAM].copy(), x[VDOT].copy(), sol.status, False, build_s, sol)
+            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol)
         if self.settings.fallback == "hold_last" and self._last_u is not None:
             u = self._last_u.copy()
         else:
             u = u_nom.copy()
         status = sol.status if sol.status != "solved" else "non-finite solution"
         return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
+
+
+# ----------------------------------------------------------------------------------- compiled kernels
+# The equality rows A X = b determine (vdot, lambda) from u: (vdot, lambda) = A_free^-1 (b - A_u u), with
+# A_free the (vdot, lambda) columns of A (:mod:`taslel_bench.equality_solve`).
+
+
+@kernel
+def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
+    """q[vdot, lambda] = -eps (vdot_nom, lambda_nom) with (vdot_nom, lambda_nom) = A_free^-1 (b - A_u u_nom);
+    0 if A_free is singular."""
+    for r in range(A.shape[0]):
+        acc = b[r]
+        for j in range(NU):
+            acc -= A[r, NV + j] * u_nom[j]
+        rhs[r, 0] = acc
+    ok = solve_free(A, rhs, rows, ws)
+    for c in range(NV):
+        q[c] = -eps * rhs[c, 0] if ok else 0.0
+    for c in range(NL):
+        q[NV + NU + c] = -eps * rhs[NV + c, 0] if ok else 0.0
+
+
+@kernel
+def _condense(A, b, G, h, u_nom, eps, nominal_target, rows, ws, rhs, Pc, qc, Gc, hc):
+    """The 12-variable QP in u with (vdot, lambda) = z0 - Z u eliminated ([z0, Z] = A_free^-1 [b, A_u],
+    kept in ``rhs``): Gc = G_u - G_free Z, hc = h - G_free z0, Pc = I + eps Z'Z, and qc = -Pc u_nom
+    (target (vdot_nom, lambda_nom)) or -u_nom - eps Z'z0 (target 0). False if A_free is singular."""
+    m_eq, nz = A.shape[0], NV + NL
+    for r in range(m_eq):
+        rhs[r, 0] = b[r]
+        for j in range(NU):
+            rhs[r, 1 + j] = A[r, NV + j]
+    if not solve_free(A, rhs, rows, ws):
+        return False
+    for r in range(G.shape[0]):  # G rows are sparse (3 lambda entries, or a vdot row): skip zeros
+        acc_h = h[r]
+        for j in range(NU):
+            Gc[r, j] = G[r, NV + j]
+        for k in range(nz):
+            g = G[r, k] if k < NV else G[r, NU + k]
+            if g != 0.0:
+                acc_h -= g * rhs[k, 0]
+                for j in range(NU):
+                    Gc[r, j] -= g * rhs[k, 1 + j]
+        hc[r] = acc_h
+    for i in range(NU):
+        for j in range(i, NU):
+            acc = 0.0
+            for k in range(nz):
+                acc += rhs[k, 1 + i] * rhs[k, 1 + j]
+            Pc[i, j] = eps * acc + (1.0 if i == j else 0.0)
+            Pc[j, i] = Pc[i, j]
+    for i in range(NU):
+        acc = 0.0
+        if nominal_target:
+            for j in range(NU):
+                acc -= Pc[i, j] * u_nom[j]
+        else:
+            acc = -u_nom[i]
+            for k in range(nz):
+                acc -= eps * rhs[k, 1 + i] * rhs[k, 0]
+        qc[i] = acc
+    return True
+
+
+@kernel
+def _split_solution(x, condensed, rhs, torque_limit, u, lam, vdot):
+    """(u, lambda, vdot) of a backend's solution ``x``: the blocks of X, or for the condensed QP u = x and
+    (vdot, lambda) = z0 - Z u from ``rhs`` = [z0, Z]; u clipped to +-torque_limit."""
+    for j in range(NU):
+        u[j] = min(max(x[j] if condensed else x[NV + j], -torque_limit), torque_limit)
+    for k in range(NV + NL):
+        if condensed:
+            z = rhs[k, 0]
+            for j in range(NU):
+                z -= rhs[k, 1 + j] * x[j]
+        else:
+            z = x[k] if k < NV else x[NU + k]
+        if k < NV:
+            vdot[k] = z
+        else:
+            lam[k - NV] = z

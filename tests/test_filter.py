@@ -272,3 +272,43 @@ def test_api_builds_the_configured_filter(states):
     assert res.status == "solved" and res.u.shape == (12,)
     with pytest.raises(ValueError, match="filter.enabled is false"):
         api.build_safety_filter(api.compose(["filter.enabled=false"]))
+
+
+def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
+    """The leg-by-leg elimination of the (vdot, lambda) block and the dense pivoted LU give the same
+    [z0, Z] on walking states (stance and swing feet, 13 right-hand sides), and a stretched stance leg (a
+    singular leg block) falls back to the dense LU instead of failing."""
+    from taslel_bench.equality_solve import FreeBlockSolver, solve_dense, solve_tree
+
+    sts, pm = states
+    filt = SafetyFilter(FilterSettings(), TightReference())
+    qp = filt.problem
+    sv = FreeBlockSolver(13, filt.eq_families[0].start, filt.eq_families[1].start)
+    K, piv, W, V, S, T, pivS, A_free, piv_dense = sv.workspace
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for st in sts:
+        filt.build(inputs_for(pm, st, 0.6), st[3])
+        rhs = rng.normal(size=(qp.A.shape[0], 13))
+        tree, dense = rhs.copy(), rhs.copy()
+        assert solve_tree(qp.A, tree, 0, robot.NV, K, piv, W, V, S, T, pivS)
+        assert solve_dense(qp.A, dense, A_free, piv_dense)
+        worst = max(worst, np.abs(tree - dense).max() / np.abs(dense).max())
+        A_free_np = np.hstack([qp.A[:, VDOT], qp.A[:, LAM]])
+        np.testing.assert_allclose(A_free_np @ tree, rhs, atol=1e-9 * np.abs(rhs).max() * 1e3)
+    assert worst < 1e-10
+    # a singular leg block: foot 0 in stance with a zero Jacobian on its own joints
+    A = qp.A.copy()
+    A[:] = 0.0
+    A[: robot.NV, : robot.NV] = np.eye(robot.NV)
+    A[robot.NV : robot.NV + 3, :3] = np.eye(3)  # foot 0's contact rows use only base columns
+    for i in range(1, 4):
+        A[robot.NV + 3 * i : robot.NV + 3 * i + 3, 30 + 3 * i : 33 + 3 * i] = np.eye(3)  # swing feet
+    A[:3, 30:33] = -np.eye(3)
+    rhs = rng.normal(size=(qp.A.shape[0], 1))
+    assert not solve_tree(A, rhs.copy(), 0, robot.NV, K, piv, W, V, S, T, pivS)
+    from taslel_bench.equality_solve import solve_free
+
+    y = rhs.copy()
+    assert solve_free(A, y, sv.rows, sv.workspace)
+    np.testing.assert_allclose(np.hstack([A[:, VDOT], A[:, LAM]]) @ y, rhs, atol=1e-12)

@@ -92,6 +92,28 @@ def test_foot_jdotv_matches_finite_differences(setup):
         assert np.abs(fd - jdotv).max() < 1e-4 * max(1.0, np.abs(jdotv).max())
 
 
+def test_foot_terms_match_pinocchio_frame_api(setup):
+    """The compiled foot terms (from data.J, data.dJ and the frame placements) equal Pinocchio's own frame
+    algorithms: getFrameJacobian and getFrameClassicalAcceleration in LOCAL_WORLD_ALIGNED at the foot."""
+    _, _, _, pm = setup
+    rng = np.random.default_rng(7)
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    for _ in range(5):
+        q, v = random_state(pm, rng)
+        pm.update(q, v)
+        md = pm.model.createData()
+        pin.computeJointJacobians(pm.model, md, q)
+        pin.forwardKinematics(pm.model, md, q, v, np.zeros(robot.NV))
+        pin.updateFramePlacements(pm.model, md)
+        for i, fid in enumerate(pm.foot_frame_ids):
+            jac = pin.getFrameJacobian(pm.model, md, fid, lwa)[:3]
+            acc = pin.getFrameClassicalAcceleration(pm.model, md, fid, lwa).linear
+            np.testing.assert_allclose(pm.foot_pos_in_world[i], md.oMf[fid].translation, atol=1e-14)
+            np.testing.assert_allclose(pm.foot_jac_in_world[i], jac, atol=1e-13)
+            np.testing.assert_allclose(pm.foot_jdotv_in_world[i], acc, atol=1e-11)
+            np.testing.assert_allclose(pm.foot_vel_in_world[i], jac @ v, atol=1e-12)
+
+
 def test_foot_velocity_matches_mujoco(setup):
     """Foot-centre velocities (world axes) against MuJoCo's site velocity at the same state, through the
     bridge (independent of the model's Jacobians)."""
@@ -115,6 +137,9 @@ def test_bridge_round_trip(setup):
     br.qvel_mj(q, v, qvel)
     assert np.allclose(br.q_pin(qpos), q, atol=1e-15)
     assert np.allclose(br.v_pin(qpos, qvel), v, atol=1e-12)
+    q2, v2 = np.zeros(robot.NQ), np.zeros(robot.NV)
+    br.state_pin(qpos, qvel, q2, v2)  # the compiled tick read: same conversion
+    assert np.allclose(q2, q, atol=1e-15) and np.allclose(v2, v, atol=1e-12)
     # leg order: core joint 0 is FL_hip, which MuJoCo (URDF order FR, FL, ...) stores at index 3
     assert br.joint_qadr[0] == 7 + 3
     ctrl = np.zeros(m.nu)
