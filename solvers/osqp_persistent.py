@@ -15,33 +15,58 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem
 
 # Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
-# Measured on 1500 consecutive episode QPs: eps_abs 1e-6 -> max |du| 2e-5 N·m (polishing changes nothing
-# but costs ~25 % time); 1e-7 -> 2e-6 N·m at about the same speed; 1e-5 -> 56 answers rejected by the check.
+# Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
+# * condensed QPs (12 variables in u, no equality rows, P ~ I: well scaled): eps_abs 1e-6 without Ruiz
+#   scaling, rho adapted every 25 iterations -> max |du| 1e-6 N·m in 35 iterations, 28 % less time than
+#   eps_abs 1e-7 with scaling (7e-8 N·m); no answer rejected by the KKT check;
+# * full QPs (42 variables, 30 equality rows, 1e-5 regularisation on vdot and lambda): the weak curvature
+#   turns residuals into torque error -- eps_abs 1e-6 -> 3.5e-3 N·m, 1e-7 -> 3e-4, 1e-8 (with scaling)
+#   -> 5e-5 N·m at +5 % time. Hence ``settings_with_equalities``, merged over ``settings`` for problems
+#   with equality rows.
+# Polishing is off: it factorises a new KKT per solve and prints to stdout when no constraint is active.
 # Termination is tested every 5 iterations instead of 25 (fewer wasted iterations when warm started).
 DEFAULT_SETTINGS: dict[str, Any] = {
-    "eps_abs": 1e-7,
+    "eps_abs": 1e-6,
     "eps_rel": 0.0,
+    "scaling": 0,
+    "adaptive_rho_interval": 25,
     "polishing": False,
     "check_termination": 5,
     "max_iter": 20000,
     "verbose": False,
 }
+DEFAULT_SETTINGS_WITH_EQUALITIES: dict[str, Any] = {"eps_abs": 1e-8, "scaling": 10}
 
 
 class OsqpPersistent(PersistentBackend):
     name = "osqp_persistent"
     package = "osqp"
 
-    def __init__(self, settings: dict[str, Any] | None = None, **kwargs: Any) -> None:
+    def __init__(self, settings: dict[str, Any] | None = None,
+                 settings_with_equalities: dict[str, Any] | None = None, **kwargs: Any) -> None:  # fmt: skip
         super().__init__({**DEFAULT_SETTINGS, **dict(settings or {})}, **kwargs)
         self.settings["warm_starting"] = self.warm_start  # off: every solve starts from zero
+        self.settings_with_equalities = dict(
+            DEFAULT_SETTINGS_WITH_EQUALITIES if settings_with_equalities is None else settings_with_equalities
+        )
         self._solver = None
+
+    def settings_for(self, problem: QPProblem) -> dict[str, Any]:
+        """The OSQP settings used for ``problem``: ``settings``, with ``settings_with_equalities`` merged
+        over them when it has equality rows."""
+        if problem.A.shape[0]:
+            return {**self.settings, **self.settings_with_equalities}
+        return dict(self.settings)
+
+    def describe(self) -> dict[str, object]:
+        return {**super().describe(), "settings_with_equalities": dict(self.settings_with_equalities)}
 
     def _forget(self) -> None:
         self._solver = None
@@ -58,23 +83,14 @@ class OsqpPersistent(PersistentBackend):
         eye_rows = np.eye(n, dtype=bool)[self._bounded]
         self._P_pat = PatternCSC(problem.P_pattern | problem.P_pattern.T, upper_only=True)
         self._C_pat = PatternCSC(np.vstack([problem.A_pattern, problem.G_pattern, eye_rows]))
-        self._C = np.zeros(self._C_pat.shape)
-        self._C[m_eq + m_in :] = np.eye(n)[self._bounded]
-        m = self._C.shape[0]
-        self._l, self._u = np.empty(m), np.empty(m)
-        self._l[m_eq : m_eq + m_in] = -np.inf
+        m = self._C_pat.shape[0]
+        self._Px, self._Cx = np.zeros(self._P_pat.nnz), np.zeros(self._C_pat.nnz)
+        self._q, self._l, self._u = np.zeros(n), np.empty(m), np.empty(m)
 
     def _gather(self, problem: QPProblem) -> None:
-        m_eq, m_in = self._m_eq, self._m_in
-        self._C[:m_eq] = problem.A
-        self._C[m_eq : m_eq + m_in] = problem.G
-        self._Px = self._P_pat.values(problem.P)
-        self._Cx = self._C_pat.values(self._C)
-        self._q = problem.q.copy()
-        self._l[:m_eq] = self._u[:m_eq] = problem.b
-        self._u[m_eq : m_eq + m_in] = problem.h
-        self._l[m_eq + m_in :] = problem.lb[self._bounded]
-        self._u[m_eq + m_in :] = problem.ub[self._bounded]
+        p = problem
+        _gather(p.P, p.q, p.A, p.b, p.G, p.h, p.lb, p.ub, self._bounded, self._P_pat.rows, self._P_pat.cols,
+                self._C_pat.rows, self._C_pat.cols, self._Px, self._Cx, self._q, self._l, self._u)  # fmt: skip
 
     def _setup(self, problem: QPProblem) -> None:
         import osqp
@@ -82,7 +98,7 @@ class OsqpPersistent(PersistentBackend):
         P = sp.csc_matrix((self._Px, self._P_pat.indices, self._P_pat.indptr), shape=self._P_pat.shape)
         C = sp.csc_matrix((self._Cx, self._C_pat.indices, self._C_pat.indptr), shape=self._C_pat.shape)
         self._solver = osqp.OSQP()
-        self._solver.setup(P, self._q, C, self._l, self._u, **self.settings)
+        self._solver.setup(P, self._q, C, self._l, self._u, **self.settings_for(problem))
 
     def _update(self, problem: QPProblem) -> None:
         self._solver.update(q=self._q, l=self._l, u=self._u, Px=self._Px, Ax=self._Cx)
@@ -102,3 +118,22 @@ class OsqpPersistent(PersistentBackend):
             np.array(r.x), True, status, int(r.info.iter),
             y=np.array(r.y[:m_eq]), z=np.array(r.y[m_eq : m_eq + m_in]), z_box=z_box,
         )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _gather(P, q, A, b, G, h, lb, ub, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l, u):  # pragma: no cover
+    """OSQP's data in the fixed CSC orders: P's upper triangle, C = [A; G; unit rows of the bounded
+    variables]; l <= C x <= u with (b, b), (-inf, h), (lb, ub)."""
+    m_eq, m_in = A.shape[0], G.shape[0]
+    for k in range(Px.shape[0]):
+        Px[k] = P[P_rows[k], P_cols[k]]
+    for k in range(Cx.shape[0]):
+        r, c = C_rows[k], C_cols[k]
+        Cx[k] = A[r, c] if r < m_eq else (G[r - m_eq, c] if r < m_eq + m_in else 1.0)
+    q_out[:] = q
+    for r in range(m_eq):
+        l[r] = u[r] = b[r]
+    for r in range(m_in):
+        l[m_eq + r], u[m_eq + r] = -np.inf, h[r]
+    for i in range(bounded.shape[0]):
+        l[m_eq + m_in + i], u[m_eq + m_in + i] = lb[bounded[i]], ub[bounded[i]]

@@ -138,6 +138,7 @@ class Episode:
         vmax_sq = s.max_speed**2
         t0_plant = d.time
         qpos, qvel, ctrl, sensordata = d.qpos, d.qvel, d.ctrl, d.sensordata  # views, valid for the episode
+        xpos, xmat, trunk = d.xpos, d.xmat, self.trunk_body
         wall0 = time.perf_counter()
         k = 0
         try:
@@ -187,8 +188,8 @@ class Episode:
                 if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:
                     res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
                     break
-                z = d.xpos[self.trunk_body, 2]
-                cos_tilt = d.xmat[self.trunk_body, 8]  # world-z component of the trunk z axis
+                z = xpos[trunk, 2]
+                cos_tilt = xmat[trunk, 8]  # world-z component of the trunk z axis
                 reason = ""
                 if z < s.fall_height_m:
                     reason = f"trunk height {z:.3f} m < {s.fall_height_m} m"

@@ -74,8 +74,8 @@ class QPSolution:
 
     @property
     def ok(self) -> bool:
-        # a finite sum <=> all entries finite (an overflowing sum of finite entries also reads as not ok)
-        return self.status == SOLVED and self.x is not None and math.isfinite(self.x.sum())
+        # a finite x'x <=> all entries finite (entries beyond ~1e154, which overflow it, also read as not ok)
+        return self.status == SOLVED and self.x is not None and math.isfinite(self.x @ self.x)
 
 
 @runtime_checkable

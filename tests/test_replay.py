@@ -143,7 +143,8 @@ def test_replaying_twice_gives_the_same_tables(runs_set, tmp_path):
     for k in range(2):
         frame = replay.replay(runs_set, ["osqp", "proxqp"], ["cold", "persistent"],
                               {"default": {"all": {"settings": {}, "check": {"level": "none"}},
-                                           "osqp_persistent": {"settings": {"eps_abs": 1e-3, "eps_rel": 1e-3}},
+                                           "osqp_persistent": {"settings": {"eps_abs": 1e-3, "eps_rel": 1e-3},
+                                                               "settings_with_equalities": {}},
                                            "proxqp_persistent": {"settings": {"eps_abs": 1e-5,
                                                                               "check_duality_gap": False}}},
                                **HIGH}, 2, TOL, max_qps=15)  # fmt: skip

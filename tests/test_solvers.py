@@ -6,6 +6,9 @@ The fixture holds 100 QPs of a 2 s closed-loop trot with the filter's mu = 0.3 (
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -209,3 +212,27 @@ def test_persistent_backend_copies_its_data(qps):
     p.q[:] = 0.0  # overwrite in place, then solve the original values again via a fresh copy
     again = backend.solve(qps.problems[0])
     assert np.max(np.abs(first.x - again.x)[p.layout["u"]]) <= 1e-4
+
+
+def test_compiled_residuals_equal_an_independent_numpy_computation():
+    """solvers.checks (compiled, used by every backend) against taslel_bench.replay.kkt_residuals (plain
+    numpy, written separately) on recorded filter QPs with perturbed answers and duals, including a zero
+    G row, infinite bounds and a NaN."""
+    from taslel_bench.qpset import load
+    from taslel_bench.replay import kkt_residuals
+
+    qs = load(Path(__file__).parent / "data" / "qps_episode.npz")
+    rng = np.random.default_rng(5)
+    for i in range(0, len(qs), max(1, len(qs) // 25)):
+        p = qs.problem(i)
+        x = qs.x_ref_of(i) + rng.normal(0, 1e-3, p.n)
+        y, z = rng.normal(size=p.A.shape[0]), np.abs(rng.normal(size=p.G.shape[0]))
+        z_box = rng.normal(size=p.n) * (rng.random(p.n) < 0.3)
+        z_box[~np.isfinite(p.lb) & (z_box < 0)] = 0.0
+        z_box[~np.isfinite(p.ub) & (z_box > 0)] = 0.0
+        got = residuals(p, x, y, z, z_box)
+        want = kkt_residuals(p, x, y, z, z_box)
+        np.testing.assert_allclose((got.primal, got.dual, got.gap), want, rtol=1e-9, atol=1e-9)
+        assert residuals(p, x).primal == pytest.approx(want[0], rel=1e-12, abs=1e-12)
+    x[0] = np.nan
+    assert math.isnan(residuals(p, x).primal) and math.isnan(residuals(p, x, y, z, z_box).dual)
