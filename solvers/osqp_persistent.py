@@ -1,7 +1,12 @@
 """Persistent OSQP: one ``osqp.OSQP`` per layout, values updated in the fixed pattern order, warm started.
 
 Constraint rows passed to OSQP (l <= C x <= u): the equalities (l = u = b), the inequalities
-(l = -inf, u = h), then one unit row per variable with a finite bound (l = lb, u = ub). P is passed as its
+(l = -inf, u = h) except vacuous ones, then one unit row per variable with a finite bound (l = lb, u = ub).
+Vacuous rows -- identically zero with h >= 0, such as the inactive friction rows of a swing foot and the
+inactive ECBF rows of stance feet -- are left out (``drop_vacuous_rows``): with the condensed
+formulation's dense pattern they are half of G, and leaving them out cuts OSQP's time per iteration about
+2.5x (measured: 177 -> 68 µs per QP, same iterations and answers). The sparsity pattern of the kept rows is
+part of the layout: a change (e.g. standing -> walking) sets OSQP up again. P is passed as its
 upper triangle. The CSC structures come from the problem's constant masks (:mod:`solvers.sparse`), so
 ``update(Px=..., Ax=...)`` can send all values in one go every tick.
 
@@ -50,8 +55,12 @@ class OsqpPersistent(PersistentBackend):
     package = "osqp"
 
     def __init__(self, settings: dict[str, Any] | None = None,
-                 settings_with_equalities: dict[str, Any] | None = None, **kwargs: Any) -> None:  # fmt: skip
+                 settings_with_equalities: dict[str, Any] | None = None, drop_vacuous_rows: bool = True,
+                 **kwargs: Any) -> None:  # fmt: skip
         super().__init__({**DEFAULT_SETTINGS, **dict(settings or {})}, **kwargs)
+        self.drop_vacuous_rows = bool(drop_vacuous_rows)
+        self._kept_patterns: dict[bytes, tuple] = {}  # vacuous-row mask -> pattern of the kept G rows
+        self._vac_bytes = self._g_rows_of = b""
         self.settings["warm_starting"] = self.warm_start  # off: every solve starts from zero
         self.settings_with_equalities = dict(
             DEFAULT_SETTINGS_WITH_EQUALITIES if settings_with_equalities is None else settings_with_equalities
@@ -66,7 +75,24 @@ class OsqpPersistent(PersistentBackend):
         return dict(self.settings)
 
     def describe(self) -> dict[str, object]:
-        return {**super().describe(), "settings_with_equalities": dict(self.settings_with_equalities)}
+        return {**super().describe(), "settings_with_equalities": dict(self.settings_with_equalities),
+                "drop_vacuous_rows": self.drop_vacuous_rows}  # fmt: skip
+
+    def _layout_key(self, problem: QPProblem) -> tuple:
+        """The base layout plus the sparsity pattern of the G rows passed to OSQP (vacuous ones left out):
+        with the condensed formulation's dense G the same for every stance set with the same number of
+        vacuous rows, so a stance change keeps the solver and its warm start."""
+        key = super()._layout_key(problem)
+        if not self.drop_vacuous_rows:
+            return key
+        vac = self._vac_bytes = self.vacuous_rows(problem).tobytes()
+        pattern = self._kept_patterns.get(vac)
+        if pattern is None:
+            if len(self._kept_patterns) > 64:
+                self._kept_patterns.clear()
+            kept = problem.G_pattern[~self._vacuous]
+            pattern = self._kept_patterns[vac] = (kept.shape, kept.tobytes())
+        return key + pattern
 
     def _forget(self) -> None:
         self._solver = None
@@ -74,23 +100,31 @@ class OsqpPersistent(PersistentBackend):
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         if fresh:
             self._structures(problem)
+        elif self.drop_vacuous_rows and self._vac_bytes != self._g_rows_of:  # same pattern, other rows
+            self._g_rows = np.flatnonzero(~self._vacuous)
+            self._g_rows_of = self._vac_bytes
         self._gather(problem)
 
     def _structures(self, problem: QPProblem) -> None:
-        n, m_eq, m_in = problem.n, problem.A.shape[0], problem.G.shape[0]
-        self._n, self._m_eq, self._m_in = n, m_eq, m_in
+        n, m_eq = problem.n, problem.A.shape[0]
+        vacuous = self.vacuous_rows(problem) if self.drop_vacuous_rows else np.zeros(problem.G.shape[0], bool)
+        self._g_rows = np.flatnonzero(~vacuous)  # G rows passed to OSQP
+        self._g_rows_of = vacuous.tobytes()
+        m_in = self._g_rows.shape[0]
+        self._n, self._m_eq, self._m_in, self._m_in_all = n, m_eq, m_in, problem.G.shape[0]
         self._bounded = np.flatnonzero(np.isfinite(problem.lb) | np.isfinite(problem.ub))
         eye_rows = np.eye(n, dtype=bool)[self._bounded]
         self._P_pat = PatternCSC(problem.P_pattern | problem.P_pattern.T, upper_only=True)
-        self._C_pat = PatternCSC(np.vstack([problem.A_pattern, problem.G_pattern, eye_rows]))
+        self._C_pat = PatternCSC(np.vstack([problem.A_pattern, problem.G_pattern[self._g_rows], eye_rows]))
         m = self._C_pat.shape[0]
         self._Px, self._Cx = np.zeros(self._P_pat.nnz), np.zeros(self._C_pat.nnz)
         self._q, self._l, self._u = np.zeros(n), np.empty(m), np.empty(m)
 
     def _gather(self, problem: QPProblem) -> None:
         p = problem
-        _gather(p.P, p.q, p.A, p.b, p.G, p.h, p.lb, p.ub, self._bounded, self._P_pat.rows, self._P_pat.cols,
-                self._C_pat.rows, self._C_pat.cols, self._Px, self._Cx, self._q, self._l, self._u)  # fmt: skip
+        _gather(p.P, p.q, p.A, p.b, p.G, p.h, p.lb, p.ub, self._g_rows, self._bounded, self._P_pat.rows,
+                self._P_pat.cols, self._C_pat.rows, self._C_pat.cols, self._Px, self._Cx, self._q, self._l,
+                self._u)  # fmt: skip
 
     def _setup(self, problem: QPProblem) -> None:
         import osqp
@@ -112,28 +146,28 @@ class OsqpPersistent(PersistentBackend):
         if not ok:
             return NativeResult(None, False, failure_reason(status, max_iter_marker="max"), int(r.info.iter))
         m_eq, m_in = self._m_eq, self._m_in
-        z_box = np.zeros(self._n)
+        z_box, z = np.zeros(self._n), np.zeros(self._m_in_all)  # left-out rows: multiplier 0
         z_box[self._bounded] = r.y[m_eq + m_in :]
-        return NativeResult(
-            np.array(r.x), True, status, int(r.info.iter),
-            y=np.array(r.y[:m_eq]), z=np.array(r.y[m_eq : m_eq + m_in]), z_box=z_box,
-        )  # fmt: skip
+        z[self._g_rows] = r.y[m_eq : m_eq + m_in]
+        return NativeResult(np.array(r.x), True, status, int(r.info.iter), y=np.array(r.y[:m_eq]), z=z,
+                            z_box=z_box)  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
-def _gather(P, q, A, b, G, h, lb, ub, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l, u):  # pragma: no cover
-    """OSQP's data in the fixed CSC orders: P's upper triangle, C = [A; G; unit rows of the bounded
-    variables]; l <= C x <= u with (b, b), (-inf, h), (lb, ub)."""
-    m_eq, m_in = A.shape[0], G.shape[0]
+def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l,
+            u):  # pragma: no cover - compiled  # fmt: skip
+    """OSQP's data in the fixed CSC orders: P's upper triangle, C = [A; G[g_rows]; unit rows of the
+    bounded variables]; l <= C x <= u with (b, b), (-inf, h), (lb, ub)."""
+    m_eq, m_in = A.shape[0], g_rows.shape[0]
     for k in range(Px.shape[0]):
         Px[k] = P[P_rows[k], P_cols[k]]
     for k in range(Cx.shape[0]):
         r, c = C_rows[k], C_cols[k]
-        Cx[k] = A[r, c] if r < m_eq else (G[r - m_eq, c] if r < m_eq + m_in else 1.0)
+        Cx[k] = A[r, c] if r < m_eq else (G[g_rows[r - m_eq], c] if r < m_eq + m_in else 1.0)
     q_out[:] = q
     for r in range(m_eq):
         l[r] = u[r] = b[r]
     for r in range(m_in):
-        l[m_eq + r], u[m_eq + r] = -np.inf, h[r]
+        l[m_eq + r], u[m_eq + r] = -np.inf, h[g_rows[r]]
     for i in range(bounded.shape[0]):
         l[m_eq + m_in + i], u[m_eq + m_in + i] = lb[bounded[i]], ub[bounded[i]]

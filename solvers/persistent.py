@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from solvers.base import BackendSolution, checked, invalid_data, layout_key, package_version
 from solvers.checks import Tolerances
@@ -90,6 +91,14 @@ class PersistentBackend:
             self._masks_key = layout_key(problem)[:6]
         return self._masks_key + (np.isfinite(problem.lb).tobytes(), np.isfinite(problem.ub).tobytes())
 
+    def vacuous_rows(self, problem: QPProblem) -> np.ndarray:
+        """Mask of the G rows that constrain nothing: identically zero with h >= 0 (the inactive friction
+        rows of a swing foot, the inactive ECBF rows of stance feet). The array is reused: copy to keep."""
+        if getattr(self, "_vacuous", None) is None or self._vacuous.shape[0] != problem.G.shape[0]:
+            self._vacuous = np.zeros(problem.G.shape[0], bool)
+        _vacuous_rows(problem.G, problem.h, self._vacuous)
+        return self._vacuous
+
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         """Gather this tick's values into the backend's own buffers (harness overhead, not timed); on a
         ``fresh`` layout, build those buffers first."""
@@ -151,3 +160,15 @@ class PersistentBackend:
             self.reset()
         out.overhead_s += time.perf_counter() - t3
         return out
+
+
+@njit(cache=True, nogil=True)
+def _vacuous_rows(G, h, out):  # pragma: no cover - compiled
+    """out[r] = G row r is identically zero and 0 <= h[r]."""
+    for r in range(G.shape[0]):
+        zero = h[r] >= 0.0
+        for j in range(G.shape[1]):
+            if not zero:
+                break
+            zero = G[r, j] == 0.0
+        out[r] = zero

@@ -44,13 +44,12 @@ class PiqpPersistent(PersistentBackend):
         self._solver = None
 
     def _layout_key(self, problem: QPProblem) -> tuple:
-        inert = ~np.any(problem.G != 0.0, axis=1) & (problem.h >= 0.0)
-        return super()._layout_key(problem) + (inert.tobytes(),)
+        return super()._layout_key(problem) + (self.vacuous_rows(problem).tobytes(),)
 
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         if fresh:
             self._m_in = problem.G.shape[0]
-            self._rows = np.flatnonzero(np.any(problem.G != 0.0, axis=1) | (problem.h < 0.0))
+            self._rows = np.flatnonzero(~self.vacuous_rows(problem))
             self._hl = np.full(self._rows.size, -np.inf)
             if self.backend == "sparse":
                 self._pats = [PatternCSC(problem.P_pattern | problem.P_pattern.T, upper_only=True),

@@ -312,3 +312,25 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
     y = rhs.copy()
     assert solve_free(A, y, sv.rows, sv.workspace)
     np.testing.assert_allclose(np.hstack([A[:, VDOT], A[:, LAM]]) @ y, rhs, atol=1e-12)
+
+
+def test_persistent_osqp_leaves_out_vacuous_rows_and_keeps_its_setup(states):
+    """On condensed filter QPs of a walk (stance changes included) the persistent OSQP, which leaves the
+    identically-zero G rows out, gives DAQP's u to 1e-5 N·m, reports zero multipliers for the left-out rows
+    and is set up once: the kept rows' pattern does not change with the stance set."""
+    from solvers.registry import make_backend
+
+    sts, pm = states
+    osqp_b, daqp_b = make_backend("osqp_persistent"), make_backend("daqp_persistent")
+    f = SafetyFilter(FilterSettings(formulation="condensed"), TightReference(), BUMP)
+    stance_sets = set()
+    for st in sts:
+        f.build(inputs_for(pm, st, 0.5), st[3])
+        qp = f.condensed
+        a, b = osqp_b.solve(qp), daqp_b.solve(qp)
+        assert a.ok and b.ok, (a.status, b.status)
+        assert np.abs(a.x - b.x).max() <= 1e-5
+        vacuous = ~qp.G.any(axis=1)
+        assert vacuous.sum() >= 4 and np.all(a.z[vacuous] == 0.0)
+        stance_sets.add(st[2].in_stance.tobytes())
+    assert len(stance_sets) >= 2 and osqp_b.setups == 1
