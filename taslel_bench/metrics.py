@@ -32,6 +32,8 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float) 
         "ticks": int(n),
         "sim_time_s": float(n * control_dt_s),
         "wall_time_s": float(res.wall_time_s),
+        # compiled kernels loaded (or compiled) before the episode clock starts; not in wall_time_s
+        "warmup_s": float(res.extras.get("warmup_s", math.nan)),
         "real_time_factor": float(n * control_dt_s / res.wall_time_s) if res.wall_time_s > 0 else math.nan,
         "tick_us_median": _median(tr.tick_us[:n]),
         "tick_us_p99": _pct(tr.tick_us[:n], 99),

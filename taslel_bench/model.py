@@ -18,7 +18,6 @@ from taslel_bench import robot
 from taslel_bench.jit import kernel
 
 
-
 class A1Model:
     """Pinocchio model + data and the per-tick dynamics terms.
 
