@@ -6,6 +6,7 @@ each config group (``{"scenario": "flat", "solver": "daqp", ...}``).
 
 from __future__ import annotations
 
+import math
 import sys
 import traceback
 from pathlib import Path
@@ -176,6 +177,9 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "estimator": choices.get("estimator", getattr(built.estimator, "name", "")),
         "filter_enabled": built.filter is not None,
         "filter_formulation": built.filter.settings.formulation if built.filter is not None else "none",
+        "filter_contact_velocity_gain": (  # [1/s] k_v of the stance-contact rows (nan: filter off)
+            float(built.filter.settings.contact_velocity_gain) if built.filter is not None else math.nan
+        ),
         "seed": int(cfg.seed),
         "duration_s": float(cfg.duration),
         "control_rate_hz": float(cfg.control_rate_hz),

@@ -16,7 +16,10 @@ from taslel_bench import recording
 
 SUMMARY_TABLE = "summary.parquet"
 AXES = ("scenario", "solver", "estimator", "seed")
-OVERRIDE_COLUMNS = {"filter.formulation": "filter_formulation"}  # swept override -> summary column
+# swept override -> summary column (and its type, for the rows of crashed jobs)
+OVERRIDE_COLUMNS = {"filter.formulation": "filter_formulation",
+                    "filter.contact_velocity_gain": "filter_contact_velocity_gain"}  # fmt: skip
+NUMERIC_COLUMNS = ("seed", "filter_contact_velocity_gain")
 
 
 def run_folders(sweep_dir: Path) -> list[Path]:
@@ -37,11 +40,21 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
                 key, value = item.split("=", 1)
                 key = OVERRIDE_COLUMNS.get(key, key)
                 if key in AXES or key in OVERRIDE_COLUMNS.values():
-                    row[key] = int(value) if key == "seed" and value.isdigit() else value
+                    row[key] = _typed(key, value)
     tb = run_dir / "traceback.txt"
     if tb.is_file():
         row["message"] = tb.read_text().strip().splitlines()[-1]
     return row
+
+
+def _typed(column: str, value: str) -> Any:
+    """An override's value as its summary column holds it (numbers for numeric columns)."""
+    if column not in NUMERIC_COLUMNS:
+        return value
+    try:
+        return int(value) if column == "seed" else float(value)
+    except ValueError:
+        return value
 
 
 def aggregate(sweep_dir: Path) -> pd.DataFrame:

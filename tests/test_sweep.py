@@ -113,3 +113,21 @@ def test_multirun_with_a_failing_job_records_it_and_finishes_the_others(tmp_path
     assert sorted(table["status"]) == ["error", "ok"]
     assert "controller.kp" in table.loc[table["status"] == "error", "message"].iloc[0]
     assert "sweep progress: 2 runs complete" in out.stdout or "sweep progress: 1 runs complete" in out.stdout
+
+
+def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
+    """A sweep over filter.contact_velocity_gain: the gain becomes a float column and a row key of the
+    report (also for a crashed job, read from its overrides), and the paper table keeps k_v = 0 rows."""
+    for gain in (0.0, 50.0):
+        run(compose_cfg(["duration=0.3", "progress=false", f"filter.contact_velocity_gain={gain}"]),
+            tmp_path / f"gain={gain}", {"scenario": "flat", "solver": "daqp", "estimator": "oracle"})
+    crashed = tmp_path / "gain=100" / ".hydra"
+    crashed.mkdir(parents=True)
+    (crashed / "config.yaml").write_text("seed: 0\n")
+    (crashed / "overrides.yaml").write_text("- filter.contact_velocity_gain=100\n- scenario=flat\n")
+    frame = aggregate(tmp_path)
+    assert sorted(frame["filter_contact_velocity_gain"]) == [0.0, 50.0, 100.0]
+    report = write_report(tmp_path, frame).read_text()
+    assert "| scenario | solver | filter_contact_velocity_gain | estimator |" in report
+    assert "| flat | daqp | 50 | oracle | 1 | 0 |" in report
+    assert "`filter.contact_velocity_gain=0` (the paper's contact constraint) only" in report
