@@ -72,28 +72,42 @@ def latency_s(model: FrictionModel, runs: int = 200) -> float:
     return float(np.median(times))
 
 
-def select_k(model: FrictionModel, X: np.ndarray, y: np.ndarray, max_rate: float = 0.05) -> float | None:
-    """Smallest k of :data:`K_SWEEP` whose bound max(0.05, mean - k sigma) over-estimates (> truth + 0.05)
-    at most ``max_rate`` of the windows of (X, y) — meant for the validation split, not a test split."""
-    mean, sigma = predict(model, X)
+def select_k(model: FrictionModel, X: np.ndarray, y: np.ndarray, max_rate: float = 0.05,
+             base: str = "mean") -> float | None:
+    """Smallest k of :data:`K_SWEEP` whose bound max(0.05, b - k sigma) over-estimates (> truth + 0.05)
+    at most ``max_rate`` of the windows of (X, y), with b the mean (``base="mean"``) or the lower-quantile
+    head (``base="lower"``) — meant for the validation split, not a test split."""
+    mean, sigma, lower = predict_all(model, X)
+    b = mean if base == "mean" else lower
+    if b is None:
+        return None
     for k in K_SWEEP:
-        if regression_metrics(y, np.maximum(mean - k * sigma, 0.05))["overestimate_rate"] <= max_rate:
+        if regression_metrics(y, np.maximum(b - k * sigma, 0.05))["overestimate_rate"] <= max_rate:
             return k
     return None
 
 
 def make_fixture(data_dir: Path, n: int = 64, seed: int = 123) -> None:
-    """Write ``n`` windows drawn (fixed seed) from the test split to the committed fixture."""
+    """Write ``n`` windows drawn (fixed seed) from the test split to the committed fixture, with their
+    "collected with the safety filter in the loop" flags when the collection has them."""
     X, y, ep = load_split(data_dir, "test")
     idx = np.sort(np.random.default_rng(seed).choice(len(y), n, replace=False))
-    np.savez_compressed(FIXTURE, X=X[idx], y=y[idx], episode=ep[idx])
+    wf = window_filtered(data_dir, "test")
+    extra = {} if wf is None else {"window_filtered": wf[idx]}
+    np.savez_compressed(FIXTURE, X=X[idx], y=y[idx], episode=ep[idx], **extra)
 
 
-def fixture_mae(model: FrictionModel) -> float:
-    """MAE of the raw mean on the committed fixture."""
+def fixture_mae(model: FrictionModel, subset: str | None = None) -> float:
+    """MAE of the raw mean on the committed fixture; ``subset="filtered"`` / ``"nominal"``: only its
+    windows collected with / without the safety filter in the loop (nan if the fixture has no flags)."""
     with np.load(FIXTURE) as f:
-        mean, _ = predict(model, f["X"].astype(np.float32))
-        return float(np.abs(mean - f["y"]).mean())
+        sel = np.ones(len(f["y"]), bool)
+        if subset is not None:
+            if "window_filtered" not in f.files:
+                return float("nan")
+            sel = f["window_filtered"].astype(bool) == (subset == "filtered")
+        mean, _ = predict(model, f["X"][sel].astype(np.float32))
+        return float(np.abs(mean - f["y"][sel]).mean())
 
 
 def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], k: float) -> None:
@@ -142,12 +156,40 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
         panels = {}
         recorded: dict[str, object] = {}
         q = float(meta["model"].get("lower_quantile", 0.0))
+        # bound choice on the validation split only: the candidates' (base, k), the lowest validation MAE
+        # among those with <= 5 % over-estimation
+        k_val = select_k(model, *splits_val)
+        k_val_q = select_k(model, *splits_val, base="lower")
+        recorded["k_val_over_5pct"] = k_val
+        recorded["k_val_over_5pct_quantile"] = k_val_q
+        cand_spec: dict[str, tuple[str, float]] = {} if k_val is None else {f"gaussian k={k_val:g}": ("mean", k_val)}
+        if q > 0:
+            cand_spec["quantile k=0"] = ("lower", 0.0)
+            if k_val_q:  # the lower quantile alone over-estimates > 5 % of validation windows
+                cand_spec[f"quantile k={k_val_q:g}"] = ("lower", k_val_q)
+
+        def bound(spec: tuple[str, float], mean: np.ndarray, sigma: np.ndarray, lower: np.ndarray | None) -> np.ndarray:
+            b = mean if spec[0] == "mean" else lower
+            return np.maximum(b - spec[1] * sigma, 0.05)  # type: ignore[operator]
+
+        mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
+        recorded["val_bounds"] = {}
+        for label, spec in cand_spec.items():
+            mv = regression_metrics(splits_val[1], bound(spec, mean_val, sigma_val, lower_val))
+            recorded["val_bounds"][label] = {"mae": mv["mae"], "overestimate_rate": mv["overestimate_rate"]}
+        ok = {lb: v for lb, v in recorded["val_bounds"].items() if v["overestimate_rate"] <= 0.05}
+        choice = min(ok, key=lambda lb: ok[lb]["mae"]) if ok else None
+        recorded["val_bound_choice"] = choice
+        print(f"{variant}: validation bounds {recorded['val_bounds']} -> {choice}")
+        print(f"{variant}: smallest k with validation over-estimation <= 5 %: mean {k_val}, lower quantile {k_val_q}")
         for split, (X, y, _) in splits.items():
             mean, sigma, lower = predict_all(model, X)
             panels[split] = (y, mean, sigma)
             ests = [("mean", mean)] + [(f"mean-{k:g}sigma", np.maximum(mean - k * sigma, 0.05)) for k in ks]
             if lower is not None:
                 ests.append((f"lower(q={q:g})", np.maximum(lower, 0.05)))
+            if choice is not None:
+                ests.append((f"chosen({choice})", bound(cand_spec[choice], mean, sigma, lower)))
             for label, est in ests:
                 m = regression_metrics(y, est, sigma)
                 rows.append({"variant": variant, "split": split, "estimate": label, "params": n_params,
@@ -159,7 +201,7 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
             if wf is not None and 0 < wf.sum() < len(wf):  # nominal-controller vs filter-in-the-loop windows
                 for sub, sel in (("nominal", ~wf), ("filtered", wf)):
                     for label, est in ests:
-                        if label != "mean" and not label.startswith("lower"):
+                        if label != "mean" and not label.startswith(("lower", "chosen")):
                             continue
                         m = regression_metrics(y[sel], est[sel], sigma[sel])
                         rows.append({"variant": variant, "split": f"{split}[{sub}]", "estimate": label,
@@ -167,23 +209,10 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
                         recorded[f"{split}[{sub}]/{label}"] = {key: m[key] for key in
                                                                ("mae", "bias", "overestimate_rate")}
         fx = fixture_mae(model)
-        k_val = select_k(model, *splits_val)
-        recorded["k_val_over_5pct"] = k_val
-        # validation metrics of the deployable bounds (the only split used to choose a bound)
-        mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
-        cands = {} if k_val is None else {f"gaussian k={k_val:g}": np.maximum(mean_val - k_val * sigma_val, 0.05)}
-        if lower_val is not None:
-            cands["quantile k=0"] = np.maximum(lower_val, 0.05)
-        recorded["val_bounds"] = {}
-        for label, est in cands.items():
-            mv = regression_metrics(splits_val[1], est)
-            recorded["val_bounds"][label] = {"mae": mv["mae"], "overestimate_rate": mv["overestimate_rate"]}
-        ok = {lb: v for lb, v in recorded["val_bounds"].items() if v["overestimate_rate"] <= 0.05}
-        recorded["val_bound_choice"] = min(ok, key=lambda lb: ok[lb]["mae"]) if ok else None
-        print(f"{variant}: validation bounds {recorded['val_bounds']} -> {recorded['val_bound_choice']}")
-        print(f"{variant}: smallest k with validation over-estimation <= 5 %: {k_val}")
         meta["metrics"] = {**recorded, "latency_ms_batch1_1thread": lat * 1e3, "parameters": n_params,
-                           "fixture": FIXTURE.name, "fixture_mae": fx}
+                           "fixture": FIXTURE.name, "fixture_mae": fx,
+                           "fixture_mae_filtered": fixture_mae(model, "filtered"),
+                           "fixture_mae_nominal": fixture_mae(model, "nominal")}
         checkpoint_paths(name)[1].write_text(json.dumps(meta, indent=2))
         scatter_png(out_dir / f"regression_{variant}.png", variant, panels, ks[0])
         for split, (y, mean, sigma) in panels.items():
@@ -214,7 +243,8 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
     head = ["variant", "params", "train wall [s]", "train CPU [s]", "latency [ms]", "test MAE", "test RMSE",
             "test R²", "test bias", "test over", "shifted MAE", "shifted RMSE", "shifted bias", "shifted over"]
     head += [f"shifted over (k={k:g})" for k in ks] + [f"shifted MAE (k={k:g})" for k in ks]
-    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted over"]
+    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted over",
+             "bound chosen on val: test MAE / test over / shifted MAE / shifted over"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def get(v: str, split: str, est: str, col: str) -> float:
@@ -239,7 +269,29 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
         lo = [e for e in df[(df.variant == v) & (df.split == "shifted")].estimate if str(e).startswith("lower")]  # type: ignore[attr-defined]
         cells += [f"{get(v, 'test', lo[0], 'mae'):.3f} / {get(v, 'shifted', lo[0], 'mae'):.3f} / "
                   f"{100 * get(v, 'shifted', lo[0], 'overestimate_rate'):.1f} % ({lo[0]})" if lo else "—"]
+        ch = [e for e in df[(df.variant == v) & (df.split == "shifted")].estimate if str(e).startswith("chosen")]  # type: ignore[attr-defined]
+        cells += [f"{get(v, 'test', ch[0], 'mae'):.3f} / {100 * get(v, 'test', ch[0], 'overestimate_rate'):.1f} % / "
+                  f"{get(v, 'shifted', ch[0], 'mae'):.3f} / {100 * get(v, 'shifted', ch[0], 'overestimate_rate'):.1f} % "
+                  f"({ch[0][7:-1]})" if ch else "none ≤ 5 % on val"]
         lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def subset_table(df: object, names: list[str]) -> list[str]:
+    """Per variant and estimate: MAE / over-estimation rate on the nominal and filtered windows of each split."""
+    subs = [f"{s}[{k}]" for s in ("test", "shifted") for k in ("nominal", "filtered")]
+    if not any(df.split.isin(subs)):  # type: ignore[attr-defined]
+        return ["(the collection has no filtered / nominal split)"]
+    lines = ["| variant | estimate | " + " | ".join(f"{s} MAE / over" for s in subs) + " |",
+             "|" + "---|" * (2 + len(subs))]
+    for v in names:
+        d = df[df.variant == v]  # type: ignore[attr-defined]
+        for est in dict.fromkeys(d[d.split.isin(subs)].estimate):
+            cells = []
+            for s in subs:
+                sel = d[(d.split == s) & (d.estimate == est)]
+                cells.append(f"{sel.mae.iloc[0]:.3f} / {100 * sel.overestimate_rate.iloc[0]:.1f} %" if len(sel) else "—")
+            lines.append(f"| {v} | {est} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -279,14 +331,17 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         f"- Collection (`python -m estimators.collect`): {manifest['env_steps']:,} env steps in "
         f"{manifest['wall_time_s']:.0f} s with {manifest['workers']} processes = "
         f"**{manifest['env_steps_per_s']:,.0f} env-steps/s** (paper: 100,000 steps/s, Isaac Gym, 4096 A1s, "
-        f"RTX 3080) — one env step = one 1 ms MuJoCo step plus the Python nominal controller.",
+        f"RTX 3080) — one env step = one 1 ms MuJoCo step plus the Python nominal controller (and, in "
+        "filtered episodes, the ID-CBF-QP safety filter).",
         "- Splits by episode: " + ", ".join(
             f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell"
             + (f"; {i['episodes_filtered']} episodes with the safety filter in the loop" if "episodes_filtered" in i else "")
             + ")"
             for s, i in manifest["splits"].items()) + ".",
         *([f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
-           f"(ID-CBF-QP through `taslel_bench.api`, mu = true floor friction, features hold the filtered torque); "
+           f"(ID-CBF-QP through `taslel_bench.api`, the filter's mu = true floor friction x "
+           f"U({manifest.get('filter_mu_scale', [1, 1])[0]:g}, {manifest.get('filter_mu_scale', [1, 1])[1]:g}) per episode, "
+           "features hold the filtered torque); "
            f"per worker: nominal episodes {manifest['env_steps_per_s_per_worker']['nominal'] or 0:,.0f} env-steps/s, "
            f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
            "`test[nominal]` / `test[filtered]` split the test windows by how they were collected."]
@@ -306,6 +361,14 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "within 1σ / 2σ: fraction of |error of the mean| <= 1 / 2 predicted sigma (calibrated: 0.68 / 0.95).",
         "",
         *summary_table(df, names, ks, train_rec),
+        "",
+        "## Nominal-controller vs filter-in-the-loop windows",
+        "",
+        "The same metrics on the windows of episodes collected under the nominal controller only and of "
+        "episodes with the safety filter in the loop (`test[nominal]`, `test[filtered]`, ...), for the raw "
+        "mean and the lower-quantile head (where the model has one).",
+        "",
+        *subset_table(df, names),
         "",
         "## Conservative bound trade-off",
         "",

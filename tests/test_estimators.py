@@ -277,7 +277,9 @@ def test_hold_min_drops_at_once_and_rises_late(tmp_path: Path) -> None:
         LearnedEstimator("mlp", checkpoint=tmp_path / "m", hold_min_samples=0)
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
+@pytest.mark.parametrize(
+    "variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau", "linformer_step"]
+)
 def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     pytest.importorskip("torch")
     from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint
@@ -291,9 +293,16 @@ def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     assert fixture_mae(model) == pytest.approx(recorded, abs=2e-3)
     # the fixture is a sample of the test split: its MAE is of the order of the recorded test MAE
     assert recorded < 3 * meta["metrics"]["test/mean"]["mae"] + 0.02
+    # its windows collected with the safety filter in the loop, and the others, separately
+    for subset in ("filtered", "nominal"):
+        rec = meta["metrics"].get(f"fixture_mae_{subset}")
+        if rec is not None and np.isfinite(rec):
+            assert fixture_mae(model, subset) == pytest.approx(rec, abs=2e-3)
 
 
-@pytest.mark.parametrize("variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau"])
+@pytest.mark.parametrize(
+    "variant", ["mlp", "attention", "linformer", "attention_step", "attention_step_notau", "linformer_step"]
+)
 def test_learned_configs_instantiate(variant: str) -> None:
     pytest.importorskip("torch")
     from hydra.utils import instantiate
