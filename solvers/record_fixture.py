@@ -9,8 +9,10 @@ pyramid rows bind) and the paper's 8 cm clearance bump z(s) = 0.08 * 16 s²(1 - 
 swing). Every tick's QP is copied; ``--count`` of them are kept: the ticks where ECBF rows, friction rows
 or torque limits bind first (spread over the episode), then evenly spaced others.
 
-This script is the one place in ``solvers/`` that drives the core (plant, model, controller, filter);
-the backends themselves only use :mod:`taslel_bench.interfaces`.
+This script is the one place in ``solvers/`` that drives a closed loop; it does so through the core's
+façade for axis packages (:mod:`taslel_bench.api`: config, controller, filter, model, state bridge) and the
+plant builder, and stores the set with the core's QP-set tools. The backends only use
+:mod:`taslel_bench.interfaces`.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from solvers.fixture import DEFAULT_PATH, save
 from solvers.reference import reference_backend
-from taslel_bench.interfaces import QPProblem
+from taslel_bench.interfaces import ClearanceProfile, QPProblem
 from taslel_bench.qpset import active_sets, binding_tags
 
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
@@ -30,46 +32,43 @@ BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 
 
 
 def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProblem], np.ndarray]:
-    """Run the closed loop for ``seconds`` at 1 kHz; return every tick's QP (copies) and solution x."""
+    """Run the closed loop for ``seconds`` at 1 kHz; return every tick's QP (copies) and solution x.
+
+    The filter is the project's (``conf/filter``) with the tight reference backend (``solver=reference``)
+    unless ``backend`` is given."""
     import mujoco
-    import pinocchio as pin
 
-    from taslel_bench import plant, robot
-    from taslel_bench.bridge import StateBridge
-    from taslel_bench.constraints import TickInputs, U
-    from taslel_bench.controller import NominalController, PDGains
-    from taslel_bench.gait import GaitParams
-    from taslel_bench.interfaces import ClearanceProfile
-    from taslel_bench.model import A1Model
-    from taslel_bench.safety_filter import FilterSettings, SafetyFilter
+    from taslel_bench import api, plant, robot
 
-    backend = backend or reference_backend()
+    cfg = api.compose(["solver=reference"])
+    sf = api.build_safety_filter(cfg, ClearanceProfile(BUMP))
+    if backend is not None:
+        sf.backend = backend
     m = plant.build_plant()
     d = mujoco.MjData(m)
-    bridge, model = StateBridge(m), A1Model()
-    ctl = NominalController(GaitParams(), PDGains())
-    q0 = pin.neutral(model.model)
-    q0[2] = 0.27 + robot.FOOT_RADIUS_M
+    bridge, model = api.StateBridge(m), api.A1Model()
+    ctl = api.build_controller(cfg)
+    q0 = model.neutral_q()
+    q0[2] = ctl.gait.p.stand_height_m + robot.FOOT_RADIUS_M
     q0[7:] = ctl.stand_configuration()
     bridge.qpos_mj(q0, d.qpos)
     mujoco.mj_forward(m, d)
-    settings = FilterSettings()
-    sf = SafetyFilter(settings, backend, ClearanceProfile(BUMP))
+    limit = sf.settings.torque_limit_nm
+    q, v = np.zeros(robot.NQ), np.zeros(robot.NV)
     qps, xs = [], []
     for k in range(round(seconds * 1000)):
         t = k * 1e-3
-        u_nom = ctl.compute(t, d.qpos[bridge.joint_qadr], d.qvel[bridge.joint_dadr])
-        v = bridge.v_pin(d.qpos, d.qvel)
-        model.update(bridge.q_pin(d.qpos), v)
+        bridge.state_pin(d.qpos, d.qvel, q, v)
+        u_nom = ctl.compute(t, q[7:], v[6:])
+        model.update(q, v)
         gs = ctl.gait_state(t)
-        qp = sf.build(TickInputs(model, v, gs.in_stance, mu, gs.swing_phase, gs.swing_phase_rate), u_nom)
+        qp = sf.build(api.TickInputs(model, v, gs.in_stance, mu, gs.swing_phase, gs.swing_phase_rate), u_nom)
         qps.append(qp.copy())
-        sol = backend.solve(qp)
+        sol = sf.backend.solve(qp)
         if not sol.ok:
             raise RuntimeError(f"reference failed at tick {k}: {sol.status}")
         xs.append(sol.x.copy())
-        u = np.clip(sol.x[U], -settings.torque_limit_nm, settings.torque_limit_nm)
-        bridge.ctrl_mj(u, d.ctrl)
+        bridge.ctrl_mj(np.clip(sol.x[qp.layout["u"]], -limit, limit), d.ctrl)
         mujoco.mj_step(m, d)
     return qps, np.array(xs)
 

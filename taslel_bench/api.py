@@ -8,6 +8,7 @@ run as in a benchmark run.
     cfg = api.compose(["solver=daqp_persistent"])
     safety_filter = api.build_safety_filter(cfg)          # SafetyFilter with cfg.solver's backend
     controller = api.build_controller(cfg)                # NominalController (trot, IK, joint PD)
+    bridge, model = api.StateBridge(mj_model), api.A1Model()  # plant state -> the controller's model
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
+from taslel_bench.bridge import StateBridge
 from taslel_bench.constraints import TickInputs
 from taslel_bench.controller import NominalController
 from taslel_bench.interfaces import ClearanceProfile
@@ -32,6 +34,7 @@ __all__ = [
     "FilterResult",
     "NominalController",
     "SafetyFilter",
+    "StateBridge",
     "TickInputs",
     "build_controller",
     "build_safety_filter",
