@@ -29,6 +29,7 @@ from taslel_bench.machine import machine_info
 FIXTURE = CHECKPOINT_DIR / "heldout64.npz"
 K_SWEEP = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # conservative-bound sigmas for the trade-off table
 K_ROWS: list[dict[str, object]] = []  # filled by evaluate(), written by write_report()
+JSON_PATHS: dict[str, Path] = {}  # variant name -> its checkpoint's .json (shipped name or a given path)
 RESULTS_DIR = Path(__file__).resolve().parents[1] / "results" / "estimators"
 
 
@@ -151,6 +152,7 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
             continue
         model, meta = load_checkpoint(name)
         variant = checkpoint_paths(name)[0].stem
+        JSON_PATHS[variant] = checkpoint_paths(name)[1]
         lat = latency_s(model, latency_runs)
         n_params = parameter_count(model)
         panels = {}
@@ -304,7 +306,7 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
     names = [n for n in dict.fromkeys(df.variant) if not n.startswith("constant")]
     train_rec = {}
     for v in names:
-        js = checkpoint_paths(v)[1]
+        js = JSON_PATHS.get(v, checkpoint_paths(v)[1])
         if js.is_file():
             full = json.loads(js.read_text())
             train_rec[v] = {**full.get("training", {}),
