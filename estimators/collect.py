@@ -45,7 +45,7 @@ from estimators.randomisation import (
     draw,
     ranges_dict,
 )
-from taslel_bench import api, bridge, controller, gait, plant, robot
+from taslel_bench import api, plant, robot
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -79,10 +79,10 @@ class EpisodeResult:
 _WORKER: dict[str, object] = {}
 
 
-def _worker_model() -> tuple[mujoco.MjModel, bridge.StateBridge, PlantRandomiser]:
+def _worker_model() -> tuple[mujoco.MjModel, api.StateBridge, PlantRandomiser]:
     if "model" not in _WORKER:
         m = plant.build_plant(plant.PlantOptions())
-        _WORKER.update(model=m, bridge=bridge.StateBridge(m), rand=PlantRandomiser(m))
+        _WORKER.update(model=m, bridge=api.StateBridge(m), rand=PlantRandomiser(m))
     return _WORKER["model"], _WORKER["bridge"], _WORKER["rand"]  # type: ignore[return-value]
 
 
@@ -103,9 +103,9 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     m, br, rand = _worker_model()
     rand.apply(p)
     m.opt.timestep = cfg.timestep_s
-    gp = gait.GaitParams(period_s=p.period_s, swing_height_m=p.swing_height_m, speed_mps=p.speed_mps)
-    gains = controller.PDGains(kp=100.0 * p.kp_scale, kd=3.0 * p.kd_scale)
-    ctl = controller.NominalController(
+    gp = api.GaitParams(period_s=p.period_s, swing_height_m=p.swing_height_m, speed_mps=p.speed_mps)
+    gains = api.PDGains(kp=100.0 * p.kp_scale, kd=3.0 * p.kd_scale)
+    ctl = api.NominalController(
         gp, gains, stand_duration_s=cfg.stand_duration_s, fd_dt_s=cfg.timestep_s
     )
     d = mujoco.MjData(m)

@@ -21,7 +21,7 @@ from estimators.checkpoint import checkpoint_paths
 from estimators.collect import _worker_model
 from estimators.learned import LearnedEstimator
 from estimators.randomisation import EpisodeParams
-from taslel_bench import controller, gait, robot
+from taslel_bench import api, robot
 from taslel_bench.interfaces import Proprioception
 
 RESULTS_DIR = Path(__file__).resolve().parents[1] / "results" / "estimators"
@@ -39,8 +39,8 @@ def run(est: LearnedEstimator, mu_a: float, mu_b: float, t_switch_s: float, dura
     m, br, rand = _worker_model()
     rand.apply(nominal_params(mu_a, trunk_mass_scale))
     p = nominal_params(mu_a)
-    ctl = controller.NominalController(gait.GaitParams(period_s=p.period_s, speed_mps=p.speed_mps),
-                                       controller.PDGains())
+    ctl = api.NominalController(api.GaitParams(period_s=p.period_s, speed_mps=p.speed_mps),
+                                       api.PDGains())
     d = mujoco.MjData(m)
     a = br.free_qadr
     d.qpos[a : a + 3] = [0.0, 0.0, 0.27 + robot.FOOT_RADIUS_M]

@@ -8,6 +8,7 @@ run as in a benchmark run.
     cfg = api.compose(["solver=daqp_persistent"])
     safety_filter = api.build_safety_filter(cfg)          # SafetyFilter with cfg.solver's backend
     controller = api.build_controller(cfg)                # NominalController (trot, IK, joint PD)
+    controller = api.NominalController(api.GaitParams(speed_mps=0.3), api.PDGains())  # or set by hand
     bridge, model = api.StateBridge(mj_model), api.A1Model()  # plant state -> the controller's model
 """
 
@@ -21,7 +22,8 @@ from omegaconf import DictConfig
 
 from taslel_bench.bridge import StateBridge
 from taslel_bench.constraints import TickInputs
-from taslel_bench.controller import NominalController
+from taslel_bench.controller import NominalController, PDGains
+from taslel_bench.gait import GaitParams
 from taslel_bench.interfaces import ClearanceProfile
 from taslel_bench.model import A1Model
 from taslel_bench.run import build_controller, filter_settings
@@ -32,7 +34,9 @@ CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 __all__ = [
     "A1Model",
     "FilterResult",
+    "GaitParams",
     "NominalController",
+    "PDGains",
     "SafetyFilter",
     "StateBridge",
     "TickInputs",
