@@ -334,3 +334,22 @@ def test_persistent_osqp_leaves_out_vacuous_rows_and_keeps_its_setup(states):
         assert vacuous.sum() >= 4 and np.all(a.z[vacuous] == 0.0)
         stance_sets.add(st[2].in_stance.tobytes())
     assert len(stance_sets) >= 2 and osqp_b.setups == 1
+
+
+@pytest.mark.parametrize("formulation", ["full", "condensed"])
+def test_contact_velocity_gain_brakes_stance_feet(states, formulation):
+    """filter.contact_velocity_gain k_v: at the solution a stance foot's centre accelerates as
+    J vdot + J̇v = -k_v J v (both formulations), and the equations of motion still hold."""
+    st, pm = states
+    kv = 50.0
+    f = SafetyFilter(FilterSettings(contact_velocity_gain=kv, formulation=formulation), TightReference(), BUMP)
+    for s in st:
+        res = f.filter(inputs_for(pm, s, 0.6), s[3])
+        assert res.status == "solved"
+        for i in range(4):
+            if s[2].in_stance[i]:
+                acc = pm.foot_jac_in_world[i] @ res.vdot + pm.foot_jdotv_in_world[i]
+                np.testing.assert_allclose(acc, -kv * pm.foot_vel_in_world[i], atol=1e-6)
+        lam = res.lam.reshape(4, 3)
+        tau = np.concatenate([np.zeros(6), res.u]) + sum(pm.foot_jac_in_world[i].T @ lam[i] for i in range(4))
+        assert np.abs(pm.M @ res.vdot + pm.h - tau).max() <= 1e-6
