@@ -1,5 +1,5 @@
 """Constraint families of the ID-CBF-QP. Each is a small object owning a block of rows that it (re)writes
-every tick in place; none allocates per tick.
+every tick in place, through a compiled kernel (bottom of this module); none allocates per tick.
 
 Decision variables X = (vdot [18], u [12], lambda [12]):
   * vdot: generalised acceleration in Pinocchio's convention (trunk-frame linear/angular, joints);

@@ -11,16 +11,20 @@ the failure policy. Build time and solve time are measured separately.
 Regularisation: the equality constraints determine (vdot, lambda) uniquely from u, so eps only makes P
 positive definite for the solvers. Regularising towards zero biases u by eps * (B'vdot + D'lambda) — up
 to ~4 N·m at eps = 1e-5 on swing legs (measured: swing-joint accelerations reach 1e3 rad/s²). The default
-target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one 30x30 solve per tick): when
+target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one solve of the equality rows per tick): when
 no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives the textbook form.
 
 Formulation (``formulation``): ``full`` (default, the paper's) hands the backend the QP in X = (vdot, u,
-lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one LU of
-the (vdot, lambda) columns of the equality rows gives (vdot, lambda) = z0 - Z u, so the backend sees a
-12-variable QP in u (P = I + eps Z'Z, the G rows and the torque bounds), and (vdot, lambda) is recovered
-from its u. Both have the same minimiser (tested to 1e-6 N·m); the full QP is still written every tick
-(``problem``, what ``record.qps`` saves). ``condensed`` exists because the backend's cost grows with the
-rows and variables it sees.
+lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one solve
+with the (vdot, lambda) columns of the equality rows (:mod:`taslel_bench.equality_solve`, leg by leg)
+gives (vdot, lambda) = z0 - Z u, so the backend sees a 12-variable QP in u (P = I + eps Z'Z, the G rows
+and the torque bounds), and (vdot, lambda) is recovered from its u. Both have the same minimiser (tested
+to 1e-6 N·m); the full QP is still written every tick (``problem``); ``record.qps`` saves the one the
+backend got. ``condensed`` exists because the backend's cost grows with the rows and variables it sees:
+it is the faster formulation for every backend (``results/bench/tick.md``).
+
+The numeric work of a tick (rows, equality solve, condensation, splitting the answer) runs in compiled
+kernels (:mod:`taslel_bench.jit`) at the end of this module and in :mod:`taslel_bench.constraints`.
 """
 
 from __future__ import annotations
