@@ -81,7 +81,6 @@ def checked(
     iterations: int | None = None,
     setup_time_s: float = 0.0,
     overhead_s: float = 0.0,
-    primal: float | None = None,
 ) -> BackendSolution:
     """Turn a native result into a :class:`BackendSolution`, checking it against the original problem.
 
@@ -97,7 +96,7 @@ def checked(
         return BackendSolution(
             None, "non-finite solution", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
-    res = residuals_at_level(problem, x, y, z, z_box, tol.level, primal)
+    res = residuals_at_level(problem, x, y, z, z_box, tol.level)
     status = verdict(res, tol)
     return BackendSolution(
         x, status, solve_time_s, iterations, setup_time_s, overhead_s, native_status, res, y, z, z_box

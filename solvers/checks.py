@@ -140,14 +140,12 @@ def _kkt(P, q, A, b, G, h, lb, ub, x, y, z, z_box):  # pragma: no cover - compil
     return rp, (np.nan if nan else rd), abs(gap)
 
 
-def residuals_at_level(problem: QPProblem, x: np.ndarray, y, z, z_box, level: str,
-                       primal: float | None = None) -> Residuals | None:  # fmt: skip
-    """:func:`residuals` with only what ``level`` asks for (None for level "none"). ``primal``: the primal
-    residual already computed by the backend on an exact copy of the problem's rows (saves the work)."""
+def residuals_at_level(problem: QPProblem, x: np.ndarray, y, z, z_box, level: str) -> Residuals | None:
+    """:func:`residuals` with only what ``level`` asks for (None for level "none")."""
     if level == "none":
         return None
     if level == "primal":
-        return Residuals(primal_residual(problem, x) if primal is None else primal, float("nan"), float("nan"))
+        return Residuals(primal_residual(problem, x), float("nan"), float("nan"))
     return residuals(problem, x, y, z, z_box)
 
 

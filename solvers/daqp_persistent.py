@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from solvers.base import layout_key
 from solvers.persistent import NativeResult, PersistentBackend
 from taslel_bench.interfaces import QPProblem
 
@@ -38,11 +37,7 @@ class DaqpPersistent(PersistentBackend):
     def _layout_key(self, problem: QPProblem) -> tuple:
         """Shapes and patterns only: DAQP takes infinite bounds as +-DAQP_INF, so which bounds are finite
         does not change its layout."""
-        masks = (problem.P_pattern, problem.A_pattern, problem.G_pattern)
-        if self._masks is None or any(a is not b for a, b in zip(masks, self._masks)):
-            self._masks = masks
-            self._masks_key = layout_key(problem)[:6]
-        return self._masks_key
+        return self._pattern_key(problem)
 
     def _prepare(self, problem: QPProblem, fresh: bool) -> None:
         n, m_in, m_eq = problem.n, problem.G.shape[0], problem.A.shape[0]
@@ -56,11 +51,6 @@ class DaqpPersistent(PersistentBackend):
             self._H, self._f = np.zeros((n, n)), np.zeros(n)
         _gather(problem.P, problem.q, problem.G, problem.h, problem.A, problem.b, problem.lb, problem.ub,
                 self._H, self._f, self._M, self._bu, self._bl)  # fmt: skip
-
-    def _primal_residual(self, x: np.ndarray | None) -> float | None:
-        """Largest violation of ``blower <= (x, G x, A x) <= bupper``: the problem's bounds and rows as
-        copied this tick (infinite bounds as +-1e30); nan if x holds a nan."""
-        return float(_primal(self._M, x, self._bu, self._bl))
 
     def _setup(self, problem: QPProblem) -> None:
         import daqp
@@ -102,22 +92,3 @@ def _gather(P, q, G, h, A, b, lb, ub, H, f, M, bu, bl):  # pragma: no cover - co
     bu[n : n + m_in] = h
     bu[n + m_in :] = b
     bl[n + m_in :] = b
-
-
-@njit(cache=True, nogil=True)
-def _primal(M, x, bu, bl):  # pragma: no cover - compiled
-    """max(0, x - bu, bl - x, M x - bu, bl - M x) over the (x, rows) layout of :func:`_gather`; nan if
-    x or a product holds a nan."""
-    n = x.shape[0]
-    worst = 0.0
-    for i in range(n + M.shape[0]):
-        if i < n:
-            y = x[i]
-        else:
-            y = 0.0
-            for j in range(n):
-                y += M[i - n, j] * x[j]
-        if np.isnan(y):
-            return np.nan
-        worst = max(worst, y - bu[i], bl[i] - y)
-    return worst

@@ -65,8 +65,9 @@ class PersistentBackend:
         self.tol = Tolerances(**dict(check or {}))
         self.warm_start = bool(warm_start)
         self._key: tuple | None = None
-        self._masks: tuple | None = None  # pattern masks of the last layout key (see _layout_key)
+        self._masks: tuple | None = None  # pattern masks of the last layout key (see _pattern_key)
         self._masks_key: tuple = ()
+        self._vacuous: np.ndarray | None = None  # scratch of vacuous_rows
         self.setups = 0  # how many times the solver was (re)built -- for tests and reports
 
     # ------------------------------------------------------------------ to implement
@@ -80,21 +81,25 @@ class PersistentBackend:
         raise NotImplementedError
 
     def _layout_key(self, problem: QPProblem) -> tuple:
-        """What forces a new setup (override to add solver-specific reasons).
+        """What forces a new setup (override to add solver-specific reasons): the shapes and patterns
+        (:meth:`_pattern_key`) and which bounds are finite (read every call)."""
+        bounds = (np.isfinite(problem.lb).tobytes(), np.isfinite(problem.ub).tobytes())
+        return self._pattern_key(problem) + bounds
 
-        The pattern masks are constant for a layout (:class:`QPProblem` contract), so their bytes are read
-        once per mask object (the objects are kept alive, so ``is`` cannot match a different, new mask);
-        the finiteness of the bounds is read every call."""
+    def _pattern_key(self, problem: QPProblem) -> tuple:
+        """Shapes and sparsity patterns. The pattern masks are constant for a layout (:class:`QPProblem`
+        contract), so their bytes are read once per mask object (the objects are kept alive, so ``is``
+        cannot match a different, new mask)."""
         masks = (problem.P_pattern, problem.A_pattern, problem.G_pattern)
         if self._masks is None or any(a is not b for a, b in zip(masks, self._masks)):
             self._masks = masks
             self._masks_key = layout_key(problem)[:6]
-        return self._masks_key + (np.isfinite(problem.lb).tobytes(), np.isfinite(problem.ub).tobytes())
+        return self._masks_key
 
     def vacuous_rows(self, problem: QPProblem) -> np.ndarray:
         """Mask of the G rows that constrain nothing: identically zero with h >= 0 (the inactive friction
         rows of a swing foot, the inactive ECBF rows of stance feet). The array is reused: copy to keep."""
-        if getattr(self, "_vacuous", None) is None or self._vacuous.shape[0] != problem.G.shape[0]:
+        if self._vacuous is None or self._vacuous.shape[0] != problem.G.shape[0]:
             self._vacuous = np.zeros(problem.G.shape[0], bool)
         _vacuous_rows(problem.G, problem.h, self._vacuous)
         return self._vacuous
@@ -105,11 +110,6 @@ class PersistentBackend:
 
     def _forget(self) -> None:
         """Drop the native solver object."""
-
-    def _primal_residual(self, x: np.ndarray | None) -> float | None:
-        """The primal residual of ``x`` from the backend's own copy of this tick's rows, if it keeps one
-        that is cheaper to check than the :class:`QPProblem` (None: :mod:`solvers.checks` computes it)."""
-        return None
 
     # ------------------------------------------------------------------ protocol
     def reset(self) -> None:
@@ -151,10 +151,9 @@ class PersistentBackend:
         except Exception as exc:  # a native failure must not end the episode  # noqa: BLE001
             self.reset()
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
-        primal = self._primal_residual(res.x) if (res.ok and self.tol.level == "primal") else None
         out = checked(
             problem, res.x, res.ok, res.status, self.tol, t3 - t1, y=res.y, z=res.z, z_box=res.z_box,
-            iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0, primal=primal,
+            iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0,
         )  # fmt: skip
         if not out.ok:  # never warm start from a failed (possibly NaN) iterate: set up afresh next tick
             self.reset()

@@ -17,15 +17,15 @@ from taslel_bench import robot
 from taslel_bench.jit import kernel
 
 
+@kernel
 def _quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    w, x, y, z = quat_wxyz
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """Rotation matrix (world from body) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]
+    R = np.empty((3, 3))
+    R[0, 0], R[0, 1], R[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    R[1, 0], R[1, 1], R[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    R[2, 0], R[2, 1], R[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return R
 
 
 class StateBridge:
@@ -120,10 +120,8 @@ def _state_pin(qpos, qvel, q_from_qpos, v_from_qvel, quat_adr, q, v):
         q[i] = qpos[q_from_qpos[i]]
     for i in range(v.shape[0]):
         v[i] = qvel[v_from_qvel[i]]
-    w, x, y, z = qpos[quat_adr], qpos[quat_adr + 1], qpos[quat_adr + 2], qpos[quat_adr + 3]
-    nrm = w * w + x * x + y * y + z * z  # MuJoCo keeps it ~1; divide so the result is a pure rotation
+    quat = qpos[quat_adr : quat_adr + 4]
+    R = _quat_wxyz_to_matrix(quat / np.sqrt(quat @ quat))  # MuJoCo keeps |quat| ~ 1: make R a rotation
     vx, vy, vz = v[0], v[1], v[2]
-    # R' v_world with R the rotation matrix of (w, x, y, z) / |.|
-    v[0] = ((1 - 2 * (y * y + z * z) / nrm) * vx + 2 * (x * y + w * z) / nrm * vy + 2 * (x * z - w * y) / nrm * vz)
-    v[1] = (2 * (x * y - w * z) / nrm * vx + (1 - 2 * (x * x + z * z) / nrm) * vy + 2 * (y * z + w * x) / nrm * vz)
-    v[2] = (2 * (x * z + w * y) / nrm * vx + 2 * (y * z - w * x) / nrm * vy + (1 - 2 * (x * x + y * y) / nrm) * vz)
+    for i in range(3):  # R' v_world
+        v[i] = R[0, i] * vx + R[1, i] * vy + R[2, i] * vz

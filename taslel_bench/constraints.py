@@ -169,11 +169,7 @@ class SwingClearanceECBF:
         return [f"{leg}_clearance" for leg in robot.LEGS]
 
     def init(self, qp: QPProblem) -> None:
-        c = np.asarray(self.profile.coeffs, float)
-        k = np.arange(len(c))
-        self._c = c
-        self._c1 = c[1:] * k[1:]  # dz/ds coefficients
-        self._c2 = c[2:] * k[2:] * k[1:-1]  # d²z/ds² coefficients
+        self._c, self._c1, self._c2 = self.profile.coefficient_arrays()  # z, dz/ds, d²z/ds² (ascending)
         qp.G[self.start : self.start + robot.N_LEGS] = 0.0
         qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
 

@@ -131,6 +131,10 @@ class ClearanceProfile:
         for name, value in (("_k", k), ("_c", c), ("_c1", c1), ("_c2", c2)):
             object.__setattr__(self, name, value)  # frozen dataclass: cached derived arrays
 
+    def coefficient_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The coefficients of z, dz/ds and d²z/ds² (ascending powers, all of length K)."""
+        return self._c, self._c1, self._c2
+
     @property
     def peak_m(self) -> float:
         return float(max(self(s)[0] for s in np.linspace(0.0, 1.0, 201)))

@@ -11,8 +11,9 @@ the failure policy. Build time and solve time are measured separately.
 Regularisation: the equality constraints determine (vdot, lambda) uniquely from u, so eps only makes P
 positive definite for the solvers. Regularising towards zero biases u by eps * (B'vdot + D'lambda) — up
 to ~4 N·m at eps = 1e-5 on swing legs (measured: swing-joint accelerations reach 1e3 rad/s²). The default
-target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one solve of the equality rows per tick): when
-no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives the textbook form.
+target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one solve of the equality rows
+per tick): when no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives
+the textbook form.
 
 Formulation (``formulation``): ``full`` (default, the paper's) hands the backend the QP in X = (vdot, u,
 lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one solve
@@ -121,10 +122,11 @@ class SafetyFilter:
         self.problem = self._allocate(m_eq, m_in)
         for fam in [*self.eq_families, *self.ineq_families]:
             fam.init(self.problem)
-        self._solver1 = FreeBlockSolver(1, self.eq_families[0].start, self.eq_families[1].start)
-        self._solver13 = FreeBlockSolver(1 + robot.N_JOINTS, self.eq_families[0].start, self.eq_families[1].start)
-        self._rhs1 = np.zeros((m_eq, 1))  # scratch: b - A_u u_nom -> (vdot_nom, lambda_nom)
-        self._rhs = np.zeros((m_eq, 1 + robot.N_JOINTS))  # condensed: [b, A_u] -> LU solve -> [z0, Z]
+        # the equality rows solved for (vdot, lambda): condensed -> [z0, Z] from [b, A_u] (13 right-hand
+        # sides); full -> (vdot_nom, lambda_nom) from b - A_u u_nom (1), for the regularisation target
+        n_rhs = 1 + robot.N_JOINTS if settings.formulation == "condensed" else 1
+        self._equalities = FreeBlockSolver(n_rhs, self.eq_families[0].start, self.eq_families[1].start)
+        self._rhs = np.zeros((m_eq, n_rhs))
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -187,8 +189,7 @@ class SafetyFilter:
     def _condense(self, qp: QPProblem, u_nom: np.ndarray) -> bool:
         """Write :attr:`condensed` from the full ``qp``: (vdot, lambda) = z0 - Z u from the equality rows.
         Returns False if the (vdot, lambda) block is singular."""
-        c = self.condensed
-        sv = self._solver13
+        c, sv = self.condensed, self._equalities
         return _condense(qp.A, qp.b, qp.G, qp.h, u_nom, self.settings.regularization,
                          self.settings.regularization_target == "nominal", sv.rows, sv.workspace, self._rhs,
                          c.P, c.q, c.G, c.h)  # fmt: skip
@@ -210,8 +211,8 @@ class SafetyFilter:
     def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
         """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom (zero target
         this tick if the contact Jacobian makes the (vdot, lambda) block singular)."""
-        sv = self._solver1
-        _nominal_target(qp.A, qp.b, u_nom, self.settings.regularization, sv.rows, sv.workspace, self._rhs1, qp.q)
+        sv, eps = self._equalities, self.settings.regularization
+        _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
 
     def reset(self) -> None:
         """Forget the backend's warm start and the last filtered u (a new episode)."""
