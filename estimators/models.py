@@ -25,9 +25,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from estimators.features import N_CHANNELS, N_FEATURES, N_JOINTS, WINDOW_STEPS
+from taslel_bench import robot
 
 VARIANTS = ("mlp", "attention", "linformer")
 TOKENISATIONS = ("joint", "step")
+WINDOW_NORMS = ("none", "tau", "tau_q")
 POOLINGS = ("mean", "cls")
 LOG_VAR_RANGE = (-12.0, 4.0)  # clamp of the normalised log-variance
 
@@ -49,17 +51,25 @@ class ModelConfig:
     window_steps: int = WINDOW_STEPS
     use_tau: bool = True  # False: torque features are zeroed after normalisation (q, qdot only)
     lower_quantile: float = 0.0  # > 0: extra head for this quantile of mu given the window (pinball loss)
+    window_norm: str = "none"  # per-window invariances applied before standardisation (window_features)
+    # True: each step also gets the 4 feet's positions [m] and velocities [m/s] relative to the trunk, in
+    # trunk axes (foot_kinematics, 24 features computed from q and qdot); step tokens and the MLP only
+    kinematic_features: bool = False
 
     def validate(self) -> ModelConfig:
         for name, value, valid in (
             ("variant", self.variant, VARIANTS),
             ("tokens", self.tokens, TOKENISATIONS),
             ("pooling", self.pooling, POOLINGS),
+            ("window_norm", self.window_norm, WINDOW_NORMS),
         ):
             if value not in valid:
                 raise ValueError(f"unknown {name} {value!r}; valid choices: {', '.join(valid)}")
         if not 0.0 <= self.lower_quantile < 0.5:
             raise ValueError(f"lower_quantile must be in [0, 0.5), got {self.lower_quantile!r}")
+        if self.kinematic_features and self.variant != "mlp" and self.tokens == "joint":
+            raise ValueError("kinematic_features needs tokens='step' (or the mlp): foot features are per leg, "
+                             "joint tokens carry (q, qdot, tau) of one joint")
         if self.variant != "mlp" and self.d_model % self.n_heads:
             raise ValueError(f"d_model={self.d_model} is not divisible by n_heads={self.n_heads}")
         return self
@@ -68,6 +78,11 @@ class ModelConfig:
     def n_outputs(self) -> int:
         """Head outputs: normalised mean, log-variance (and the lower-quantile offset)."""
         return 3 if self.lower_quantile > 0 else 2
+
+    @property
+    def n_inputs(self) -> int:
+        """Features per step the encoder sees (36, plus 24 foot features with ``kinematic_features``)."""
+        return N_FEATURES + (N_KIN_FEATURES if self.kinematic_features else 0)
 
     @property
     def n_tokens(self) -> int:
@@ -79,13 +94,71 @@ class ModelConfig:
         return asdict(self)
 
 
+TAU_RMS_FLOOR = 1e-3  # [N·m] floor of the window RMS torque (a window of zero torque stays finite)
+
+
+def window_features(x: torch.Tensor, mode: str) -> torch.Tensor:
+    """Per-window invariances of raw windows (B, T, 36) -> (B, T, 36), before standardisation.
+
+    * ``"none"``: unchanged (q [rad], qdot [rad/s], tau [N·m]).
+    * ``"tau"``: the 12 torques divided by the window's RMS torque over all joints and steps, so tau becomes
+      dimensionless. Friction bounds a *ratio* of forces (tangential / normal); a payload or a weaker motor
+      scales every stance torque of a window together (tau = J^T f), which this removes. The ratio
+      pattern across joints and time is kept.
+    * ``"tau_q"``: as ``"tau"``, and each joint's q minus its window mean [rad] (the posture offset a load
+      causes), keeping the motion within the window.
+    """
+    if mode == "none":
+        return x
+    if mode not in WINDOW_NORMS:
+        raise ValueError(f"unknown window_norm {mode!r}; valid choices: {', '.join(WINDOW_NORMS)}")
+    q, qd, tau = x[..., :12], x[..., 12:24], x[..., 24:]
+    rms = tau.pow(2).mean(dim=(1, 2), keepdim=True).sqrt().clamp_min(TAU_RMS_FLOOR)
+    if mode == "tau_q":
+        q = q - q.mean(dim=1, keepdim=True)
+    return torch.cat([q, qd, tau / rms], dim=-1)
+
+
+N_KIN_FEATURES = 24  # foot positions (4 x 3) and velocities (4 x 3)
+_HIPS = torch.tensor(robot.HIP_POSITIONS_IN_TRUNK, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
+_SIDES = torch.tensor(robot.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
+
+
+def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
+    """Raw windows (B, T, 36) -> (B, T, 24): ``[p_foot (4 x 3) [m], v_foot (4 x 3) [m/s]]``, legs FL, FR, RL,
+    RR, foot-sphere centres relative to the trunk origin, in trunk axes; v_foot = J_leg(q) qdot (the foot's
+    velocity relative to the trunk, not in the world). Same chain as :func:`taslel_bench.kinematics.leg_fk`.
+    A stance foot that holds has v_foot = -(v_trunk + omega x p_foot); feet of one stance pair that disagree
+    beyond the rotation term are slipping, whatever the payload or motor strength."""
+    l1, l2, l3 = robot.HIP_OFFSET_Y_M, robot.THIGH_LENGTH_M, robot.CALF_LENGTH_M
+    b, t, _ = x.shape
+    q = x[..., :12].reshape(b, t, 4, 3)
+    qd = x[..., 12:24].reshape(b, t, 4, 3)
+    q1, q2, q3 = q.unbind(-1)
+    d1, d2, d3 = qd.unbind(-1)
+    s1, c1, s2, c2 = torch.sin(q1), torch.cos(q1), torch.sin(q2), torch.cos(q2)
+    s23, c23 = torch.sin(q2 + q3), torch.cos(q2 + q3)
+    y0 = _SIDES.to(x) * l1
+    px = -l2 * s2 - l3 * s23
+    zp = -l2 * c2 - l3 * c23
+    py = c1 * y0 - s1 * zp
+    pz = s1 * y0 + c1 * zp
+    vx = zp * d2 - l3 * c23 * d3
+    vzp = -px * d2 + l3 * s23 * d3
+    vy = -pz * d1 - s1 * vzp
+    vz = py * d1 + c1 * vzp
+    p = torch.stack([px, py, pz], -1) + _HIPS.to(x)
+    v = torch.stack([vx, vy, vz], -1)
+    return torch.cat([p.reshape(b, t, 12), v.reshape(b, t, 12)], dim=-1)
+
+
 class Normaliser(nn.Module):
     """Per-feature standardisation of x and of the label; statistics are buffers (saved with the model)."""
 
-    def __init__(self) -> None:
+    def __init__(self, n_features: int = N_FEATURES) -> None:
         super().__init__()
-        self.register_buffer("x_mean", torch.zeros(N_FEATURES))
-        self.register_buffer("x_std", torch.ones(N_FEATURES))
+        self.register_buffer("x_mean", torch.zeros(n_features))
+        self.register_buffer("x_std", torch.ones(n_features))
         self.register_buffer("y_mean", torch.tensor(0.0))
         self.register_buffer("y_std", torch.tensor(1.0))
         # added to the predicted log-variance: log of the variance scale fitted on validation data
@@ -93,7 +166,8 @@ class Normaliser(nn.Module):
 
     @torch.no_grad()
     def fit(self, x: torch.Tensor, y: torch.Tensor) -> None:
-        """Set statistics from training windows (N, T, 36) and labels (N,)."""
+        """Set statistics from training windows (N, T, 36) and labels (N,); ``x`` as the encoder sees it
+        (after :func:`window_features`, see :meth:`FrictionModel.fit_normaliser`)."""
         flat = x.reshape(-1, x.shape[-1]).double()
         self.x_mean.copy_(flat.mean(0).float())
         self.x_std.copy_(flat.std(0).clamp_min(1e-6).float())
@@ -122,10 +196,21 @@ class FrictionModel(nn.Module):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         self.cfg = cfg.validate()
-        self.norm = Normaliser()
+        self.norm = Normaliser(cfg.n_inputs)
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    @torch.no_grad()
+    def fit_normaliser(self, x: torch.Tensor, y: torch.Tensor, batch: int = 8192) -> None:
+        """Standardisation statistics from raw training windows (N, T, 36) and labels (N,)."""
+        feats = torch.cat([self.features(x[i : i + batch]) for i in range(0, len(x), batch)])
+        self.norm.fit(feats, y)
+
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """Raw windows (B, T, 36) -> what is standardised and encoded (B, T, n_inputs)."""
+        f = window_features(x, self.cfg.window_norm)
+        return torch.cat([f, foot_kinematics(x)], dim=-1) if self.cfg.kinematic_features else f
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2]) each (B,)."""
@@ -139,9 +224,9 @@ class FrictionModel(nn.Module):
             raise ValueError(
                 f"expected windows (B, {self.cfg.window_steps}, {N_FEATURES}), got {tuple(x.shape)}"
             )
-        z = (x - self.norm.x_mean) / self.norm.x_std
+        z = (self.features(x) - self.norm.x_mean) / self.norm.x_std
         if not self.cfg.use_tau:
-            z = torch.cat([z[..., :24], torch.zeros_like(z[..., 24:])], dim=-1)
+            z = torch.cat([z[..., :24], torch.zeros_like(z[..., 24:N_FEATURES]), z[..., N_FEATURES:]], dim=-1)
         out = self.encode(z)
         mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
         log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
@@ -157,7 +242,7 @@ class MLPModel(FrictionModel):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__(cfg)
         layers: list[nn.Module] = []
-        width = cfg.window_steps * N_FEATURES
+        width = cfg.window_steps * cfg.n_inputs
         for h in cfg.mlp_hidden:
             layers += [nn.Linear(width, h), nn.GELU(), nn.Dropout(cfg.dropout)]
             width = h
@@ -221,7 +306,7 @@ class TransformerModel(FrictionModel):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__(cfg)
         d, t = cfg.d_model, cfg.window_steps
-        in_dim = N_CHANNELS if cfg.tokens == "joint" else N_FEATURES
+        in_dim = N_CHANNELS if cfg.tokens == "joint" else cfg.n_inputs
         self.embed = nn.Linear(in_dim, d)
         self.pos_time = nn.Parameter(torch.randn(t, 1, d) * 0.02)  # (T, 1, d)
         n_space = N_JOINTS if cfg.tokens == "joint" else 1

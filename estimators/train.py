@@ -99,6 +99,7 @@ class FrictionTask(L.LightningModule):
             raise ValueError(f"unknown schedule {schedule!r}; valid choices: {', '.join(SCHEDULES)}")
         self.save_hyperparameters()
         self.model: FrictionModel = build_model(ModelConfig(**model_cfg))
+        self.raw_x_std = torch.ones(36)  # [raw units] per-feature std of the training windows (set by train())
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.model(x)
@@ -109,8 +110,8 @@ class FrictionTask(L.LightningModule):
         if hi > lo:
             log_s = torch.empty(x.shape[0], 1, 1, device=x.device).uniform_(math.log(lo), math.log(hi))
             x = torch.cat([x[..., :24], x[..., 24:] * torch.exp(log_s)], dim=-1)
-        if self.hparams.noise_std > 0:
-            x = x + torch.randn_like(x) * self.hparams.noise_std * self.model.norm.x_std
+        if self.hparams.noise_std > 0:  # in raw units: noise_std x each raw feature's training std
+            x = x + torch.randn_like(x) * self.hparams.noise_std * self.raw_x_std
         return x
 
     def _loss(self, batch: tuple[torch.Tensor, torch.Tensor], stage: str) -> torch.Tensor:
@@ -182,7 +183,8 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
         tuple(cfg.augment.tau_scale), float(cfg.augment.noise_std), str(cfg.schedule),
         float(cfg.trainer.max_minutes), float(cfg.lr_min_factor), float(cfg.quantile_weight),
     )
-    task.model.norm.fit(*dm.tensors["train"])
+    task.model.fit_normaliser(*dm.tensors["train"])
+    task.raw_x_std = dm.tensors["train"][0].reshape(-1, dm.tensors["train"][0].shape[-1]).std(0).clamp_min(1e-6)
     run_dir = Path(cfg.runs_dir) / str(cfg.name or cfg.estimator)
     tcfg = cfg.trainer
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", monitor="val_mae", mode="min", save_top_k=1)

@@ -346,3 +346,44 @@ def test_model_without_tau_ignores_torques() -> None:
     x2[..., 24:] += 10.0
     with torch.no_grad():
         torch.testing.assert_close(model(x)[0], model(x2)[0])
+
+
+def test_foot_kinematics_match_leg_fk_and_its_finite_difference() -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.models import foot_kinematics
+    from taslel_bench import kinematics, robot
+
+    rng = np.random.default_rng(4)
+    q, qd = rng.uniform(-1.0, 1.0, 12), rng.normal(size=12)
+    x = torch.from_numpy(np.concatenate([q, qd, np.zeros(12)])[None, None]).double()
+    out = foot_kinematics(x)[0, 0].numpy()
+    h = 1e-6
+    for leg in range(4):
+        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], robot.LEG_SIDE[leg]
+        p = kinematics.leg_fk(ql, side) + robot.HIP_POSITIONS_IN_TRUNK[leg]
+        v = (kinematics.leg_fk(ql + h * dl, side) - kinematics.leg_fk(ql - h * dl, side)) / (2 * h)
+        np.testing.assert_allclose(out[3 * leg : 3 * leg + 3], p, atol=1e-6)
+        np.testing.assert_allclose(out[12 + 3 * leg : 15 + 3 * leg], v, atol=1e-6)
+
+
+def test_window_norm_removes_torque_scale_and_kinematic_features_shape() -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.models import ModelConfig, build_model, window_features
+
+    x = torch.randn(3, 40, 36)
+    x2 = x.clone()
+    x2[..., 24:] *= 1.7  # a payload / motor-strength change scales every torque of the window
+    torch.testing.assert_close(window_features(x, "tau"), window_features(x2, "tau"))
+    assert not torch.allclose(window_features(x, "none"), window_features(x2, "none"))
+    xq = x.clone()
+    xq[..., :12] += 0.1  # posture offset
+    torch.testing.assert_close(window_features(x, "tau_q"), window_features(xq, "tau_q"))
+    with pytest.raises(ValueError, match="valid choices: none, tau, tau_q"):
+        window_features(x, "per_joint")
+    for variant in ("mlp", "attention"):
+        cfg = ModelConfig(variant=variant, tokens="step", d_model=16, mlp_hidden=[8], kinematic_features=True)
+        model = build_model(cfg)
+        assert cfg.n_inputs == 60 and model.norm.x_mean.shape == (60,)
+        assert model(x)[0].shape == (3,)
+    with pytest.raises(ValueError, match="kinematic_features needs tokens='step'"):
+        ModelConfig(variant="linformer", tokens="joint", kinematic_features=True).validate()
