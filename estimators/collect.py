@@ -38,12 +38,13 @@ import numpy as np
 
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
 from estimators.randomisation import (
-    SHIFTED_RANGES,
+    PLANT_FACTORS,
     TRAIN_RANGES,
     EpisodeParams,
     PlantRandomiser,
     draw,
     ranges_dict,
+    shifted_ranges,
 )
 from taslel_bench import api, plant, robot
 
@@ -188,11 +189,17 @@ def collect(
     cfg: EpisodeConfig = EpisodeConfig(),
     filter_fraction: float = 0.0,
     filter_mu_scale: tuple[float, float] = (1.0, 1.0),
+    plant_beta: float = 1.0,
+    shift_factors: tuple[str, ...] = PLANT_FACTORS,
 ) -> dict[str, object]:
     """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
     safety filter in the loop (drawn per episode from a stream independent of the plant draws);
-    ``filter_mu_scale`` (lo, hi) [-]: the filter's friction is the true one times U(lo, hi), same stream."""
+    ``filter_mu_scale`` (lo, hi) [-]: the filter's friction is the true one times U(lo, hi), same stream;
+    ``plant_beta``: shape of the plant-factor draws of the train / val / test splits
+    (:func:`estimators.randomisation.draw`; the shifted split is always uniform); ``shift_factors``: the
+    plant factors the shifted split moves outside the training ranges (default all,
+    :func:`estimators.randomisation.shifted_ranges`)."""
     if not 0.0 <= filter_fraction <= 1.0:
         raise ValueError(f"filter_fraction must be in [0, 1], got {filter_fraction!r}")
     lo_s, hi_s = (float(v) for v in filter_mu_scale)
@@ -201,6 +208,7 @@ def collect(
     valid = {"train", "val", "test", "shifted"}
     if bad := set(counts) - valid:
         raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
+    shifted_r = shifted_ranges(tuple(shift_factors))
     out_dir.mkdir(parents=True, exist_ok=True)
     root = np.random.SeedSequence(seed)
     jobs: list[tuple[str, EpisodeParams, bool, float]] = []
@@ -210,7 +218,8 @@ def collect(
             rng = np.random.default_rng(ep_ss)
             ep_seed = int(ep_ss.generate_state(1)[0])
             shifted = split == "shifted"
-            p = draw(rng, SHIFTED_RANGES if shifted else TRAIN_RANGES, ep_seed, symmetric_com=not shifted)
+            p = draw(rng, shifted_r if shifted else TRAIN_RANGES, ep_seed, symmetric_com=not shifted,
+                     plant_beta=1.0 if shifted else plant_beta)
             # separate stream: the plant draws of a seed are the same for every filter_fraction
             filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
             filtered = bool(filt_rng.random() < filter_fraction)
@@ -248,7 +257,8 @@ def collect(
         "window": {"steps": WINDOW_STEPS, "dt_s": WINDOW_DT_S, "features": N_FEATURES,
                    "layout": "q[12] rad, qdot[12] rad/s, tau_cmd[12] N·m; legs FL,FR,RL,RR x hip,thigh,calf"},
         "train_ranges": ranges_dict(TRAIN_RANGES),
-        "shifted_ranges": ranges_dict(SHIFTED_RANGES),
+        "shifted_ranges": ranges_dict(shifted_r),
+        "shift_factors": list(shift_factors),
         "shifted_note": "com_shift_xy_m is a magnitude range with random sign in the shifted set",
         "versions": _versions(),
         "wall_time_s": wall,
@@ -258,6 +268,7 @@ def collect(
         "filter_fraction": filter_fraction,
         "filter_overrides": list(cfg.filter_overrides),
         "filter_mu_scale": [lo_s, hi_s],
+        "plant_beta": plant_beta,  # plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform)
         "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
                        "floor friction x U(filter_mu_scale); tau features = filtered torque",
         # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
@@ -317,13 +328,20 @@ def main(argv: list[str] | None = None) -> None:
                     help="fraction of episodes run with the safety filter in the loop (mu = true friction)")
     ap.add_argument("--filter-mu-scale", type=float, nargs=2, default=[1.0, 1.0], metavar=("LO", "HI"),
                     help="filter's mu = true friction x U(LO, HI), per filtered episode")
+    ap.add_argument("--plant-beta", type=float, default=1.0,
+                    help="plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform; < 1 favours "
+                         "the edges and corners of the training ranges)")
+    ap.add_argument("--shift-factors", nargs="+", default=list(PLANT_FACTORS), choices=PLANT_FACTORS,
+                    metavar="FACTOR", help="plant factors the shifted split moves outside the training ranges "
+                    f"(default all: {' '.join(PLANT_FACTORS)})")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
     a = ap.parse_args(argv)
     cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
     man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
-                  filter_mu_scale=tuple(a.filter_mu_scale))
+                  filter_mu_scale=tuple(a.filter_mu_scale), plant_beta=a.plant_beta,
+                  shift_factors=tuple(a.shift_factors))
     rate = man["env_steps_per_s"]
     print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "

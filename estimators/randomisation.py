@@ -9,7 +9,7 @@ offset, more joint damping / friction loss, weaker motors) to test robustness, n
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 
 import mujoco
 import numpy as np
@@ -74,26 +74,54 @@ class EpisodeParams:
         return [f.name for f in fields(EpisodeParams)]
 
 
-def draw(rng: np.random.Generator, ranges: Ranges, seed: int, symmetric_com: bool = True) -> EpisodeParams:
+PLANT_FACTORS = ("trunk_mass_scale", "com_shift_xy_m", "joint_damping", "joint_frictionloss", "motor_strength")
+
+
+def shifted_ranges(factors: tuple[str, ...] | list[str] = PLANT_FACTORS) -> Ranges:
+    """:data:`SHIFTED_RANGES` for the given plant factors, the training ranges for the others (one-factor
+    shifts show which plant change an estimator does not survive). The CoM offset of the shifted split is
+    a magnitude with a random sign, so an unshifted CoM gets the training band as magnitude (0, 0.03)."""
+    if bad := [f for f in factors if f not in PLANT_FACTORS]:
+        raise ValueError(f"unknown plant factor(s) {bad}; valid factors: {', '.join(PLANT_FACTORS)}")
+    if not factors:
+        raise ValueError(f"give at least one plant factor to shift; valid factors: {', '.join(PLANT_FACTORS)}")
+    moved = {f: getattr(SHIFTED_RANGES, f) for f in factors}
+    if "com_shift_xy_m" not in moved:
+        moved["com_shift_xy_m"] = (0.0, TRAIN_RANGES.com_shift_xy_m[1])
+    return replace(TRAIN_RANGES, **moved)
+
+
+def draw(rng: np.random.Generator, ranges: Ranges, seed: int, symmetric_com: bool = True,
+         plant_beta: float = 1.0) -> EpisodeParams:
     """Draw one episode. ``symmetric_com=False`` reads ``com_shift_xy_m`` as a magnitude range and draws
-    the sign (used for the shifted set, whose offsets lie outside the symmetric training band)."""
+    the sign (used for the shifted set, whose offsets lie outside the symmetric training band).
+
+    ``plant_beta`` = a: the :data:`PLANT_FACTORS` are drawn as lo + (hi - lo) x Beta(a, a) instead of
+    uniformly (a = 1, the default, is the uniform draw, unchanged stream). a < 1 puts more episodes near
+    the edges of each range, so corners of the box (heavy trunk *and* weak motors *and* stiff joints),
+    rare under independent uniform draws, are seen in training; the ranges themselves do not change."""
+    if plant_beta <= 0:
+        raise ValueError(f"plant_beta must be > 0, got {plant_beta!r}")
 
     def u(r: Range) -> float:
         return float(rng.uniform(r[0], r[1]))
 
+    def plant(r: Range) -> float:
+        return u(r) if plant_beta == 1.0 else float(r[0] + (r[1] - r[0]) * rng.beta(plant_beta, plant_beta))
+
     if symmetric_com:
-        cx, cy = u(ranges.com_shift_xy_m), u(ranges.com_shift_xy_m)
+        cx, cy = plant(ranges.com_shift_xy_m), plant(ranges.com_shift_xy_m)
     else:
-        cx, cy = (u(ranges.com_shift_xy_m) * float(rng.choice([-1.0, 1.0])) for _ in range(2))
+        cx, cy = (plant(ranges.com_shift_xy_m) * float(rng.choice([-1.0, 1.0])) for _ in range(2))
     return EpisodeParams(
         seed=seed,
         friction=u(ranges.friction),
-        trunk_mass_scale=u(ranges.trunk_mass_scale),
+        trunk_mass_scale=plant(ranges.trunk_mass_scale),
         com_shift_x_m=cx,
         com_shift_y_m=cy,
-        joint_damping=u(ranges.joint_damping),
-        joint_frictionloss=u(ranges.joint_frictionloss),
-        motor_strength=u(ranges.motor_strength),
+        joint_damping=plant(ranges.joint_damping),
+        joint_frictionloss=plant(ranges.joint_frictionloss),
+        motor_strength=plant(ranges.motor_strength),
         kp_scale=u(ranges.kp_scale),
         kd_scale=u(ranges.kd_scale),
         speed_mps=u(ranges.speed_mps),

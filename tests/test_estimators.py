@@ -387,3 +387,27 @@ def test_window_norm_removes_torque_scale_and_kinematic_features_shape() -> None
         assert model(x)[0].shape == (3,)
     with pytest.raises(ValueError, match="kinematic_features needs tokens='step'"):
         ModelConfig(variant="linformer", tokens="joint", kinematic_features=True).validate()
+
+
+def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
+    from estimators.randomisation import PLANT_FACTORS, SHIFTED_RANGES, TRAIN_RANGES, draw, shifted_ranges
+
+    rng_u, rng_b = np.random.default_rng(0), np.random.default_rng(0)
+    uni = [draw(rng_u, TRAIN_RANGES, seed=i) for i in range(2000)]
+    edge = [draw(rng_b, TRAIN_RANGES, seed=i, plant_beta=0.4) for i in range(2000)]
+    lo, hi = TRAIN_RANGES.motor_strength
+    for draws in (uni, edge):
+        assert all(lo <= d.motor_strength <= hi for d in draws)
+    near = lambda ds: np.mean([min(d.motor_strength - lo, hi - d.motor_strength) < 0.1 * (hi - lo) for d in ds])
+    assert near(uni) == pytest.approx(0.2, abs=0.03) and near(edge) > 0.35
+    # friction and operator settings are still uniform
+    assert np.mean([d.friction for d in edge]) == pytest.approx(np.mean(TRAIN_RANGES.friction), abs=0.03)
+    with pytest.raises(ValueError, match="plant_beta must be > 0"):
+        draw(np.random.default_rng(0), TRAIN_RANGES, seed=0, plant_beta=0.0)
+
+    assert shifted_ranges(PLANT_FACTORS) == SHIFTED_RANGES
+    one = shifted_ranges(["motor_strength"])
+    assert one.motor_strength == SHIFTED_RANGES.motor_strength
+    assert one.trunk_mass_scale == TRAIN_RANGES.trunk_mass_scale and one.com_shift_xy_m == (0.0, 0.03)
+    with pytest.raises(ValueError, match="valid factors: trunk_mass_scale"):
+        shifted_ranges(["payload"])
