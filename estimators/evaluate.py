@@ -348,6 +348,11 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
            f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
            "`test[nominal]` / `test[filtered]` split the test windows by how they were collected."]
           if manifest.get("filter_fraction") else []),
+        *([ "- Training split = " + " + ".join(
+            f"{src['train_episodes']} episodes (seed {src['seed']}, plant factors "
+            + ("uniform" if src["plant_beta"] == 1.0 else f"lo + (hi - lo) Beta({src['plant_beta']:g}, {src['plant_beta']:g})")
+            + f", {src['env_steps_per_s']:,.0f} env-steps/s)" for src in manifest["sources"])
+            + "; val / test / shifted: the first collection, uniform draws."] if "sources" in manifest else []),
         f"- Training ranges: `{json.dumps(manifest['train_ranges'])}`",
         f"- Shifted ranges (outside training in every plant quantity): `{json.dumps(manifest['shifted_ranges'])}`"
         " (CoM shift: magnitude, random sign).",

@@ -50,6 +50,12 @@ def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
     man = dict(manifests[0])
     man["merged_from"] = [str(d) for d in [base, *extras]]
     man["merged_seeds"] = seeds
+    # what each collection contributed to the training split (plant draws: uniform or edge-weighted)
+    man["sources"] = [
+        {"dir": str(d), "seed": m["seed"], "train_episodes": m["splits"].get("train", {}).get("episodes", 0),
+         "plant_beta": m.get("plant_beta", 1.0), "env_steps_per_s": m["env_steps_per_s"]}
+        for d, m in zip([base, *extras], manifests)
+    ]
     man["env_steps"] = sum(m["env_steps"] for m in manifests)
     man["wall_time_s"] = sum(m["wall_time_s"] for m in manifests)
     man["env_steps_per_s"] = man["env_steps"] / man["wall_time_s"]

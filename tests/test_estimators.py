@@ -124,9 +124,10 @@ def test_merge_concatenates_training_splits(tmp_path: Path) -> None:
 
     cfg = EpisodeConfig(duration_s=1.6, stride=4)
     collect(tmp_path / "a", {"train": 2, "test": 1}, seed=3, workers=1, cfg=cfg, filter_fraction=0.5)
-    collect(tmp_path / "b", {"train": 2}, seed=4, workers=1, cfg=cfg, filter_fraction=0.5)
+    collect(tmp_path / "b", {"train": 2}, seed=4, workers=1, cfg=cfg, filter_fraction=0.5, plant_beta=0.4)
     man = merge(tmp_path / "m", tmp_path / "a", [tmp_path / "b"])
     assert man["splits"]["train"]["episodes"] == 4  # type: ignore[index]
+    assert [(s["seed"], s["plant_beta"], s["train_episodes"]) for s in man["sources"]] == [(3, 1.0, 2), (4, 0.4, 2)]
     with np.load(tmp_path / "m" / "train.npz") as m, np.load(tmp_path / "a" / "train.npz") as a:
         assert len(np.unique(m["episode"])) == 4 and len(m["filtered"]) == 4 and len(m["filter_mu"]) == 4
         assert len(m["window_filtered"]) == len(m["X"]) == 2 * len(a["X"])
