@@ -55,8 +55,9 @@ def score(est: np.ndarray, y: np.ndarray, wf: np.ndarray) -> dict[str, float]:
     return out
 
 
-def compare(checkpoints: list[str], sets: dict[str, Path]) -> list[dict[str, object]]:
-    """One row per (checkpoint, set, estimate)."""
+def compare(checkpoints: list[str], sets: dict[str, Path],
+            describe: dict[str, str] | None = None) -> list[dict[str, object]]:
+    """One row per (checkpoint, set, estimate); ``describe`` = {checkpoint name: what it is} adds a column."""
     data = {name: load_set(path) for name, path in sets.items()}
     rows: list[dict[str, object]] = []
     for ck in checkpoints:
@@ -67,7 +68,9 @@ def compare(checkpoints: list[str], sets: dict[str, Path]) -> list[dict[str, obj
             for label, est in (("mean", mean), ("lower", lower)):
                 if est is None:
                     continue
-                rows.append({"checkpoint": Path(ck).name, "epochs": training.get("epochs"), "set": name,
+                rows.append({"checkpoint": Path(ck).name, **({"what": describe.get(Path(ck).name, "")} if describe else {}),
+                             "train windows": training.get("train_windows"), "epochs": training.get("epochs"),
+                             "set": name,
                              "estimate": label, **score(np.maximum(est, 0.05) if label == "lower" else est, y, wf)})
     return rows
 
@@ -91,6 +94,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("checkpoints", nargs="+", help="shipped names (attention_step) or paths to .pt/.json")
     ap.add_argument("--set", action="append", required=True, metavar="NAME=PATH",
                     help="a window set: name and a collected .npz (repeatable)")
+    ap.add_argument("--describe", action="append", default=[], metavar="CHECKPOINT=TEXT",
+                    help="what a checkpoint is (a column of the table; repeatable)")
     ap.add_argument("--out", type=Path, default=None, help="markdown file to write")
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args(argv)
@@ -100,8 +105,14 @@ def main(argv: list[str] | None = None) -> None:
         if not sep or not name or not path:
             raise SystemExit(f"--set {item!r}: expected NAME=PATH, e.g. val=/work/data/estimators/val.npz")
         sets[name] = Path(path)
+    describe = {}
+    for item in a.describe:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--describe {item!r}: expected CHECKPOINT=TEXT")
+        describe[Path(name).name] = text
     torch.set_num_threads(a.threads)
-    table = markdown(compare(a.checkpoints, sets))
+    table = markdown(compare(a.checkpoints, sets, describe))
     print(table)
     if a.out is not None:
         cmd = "python -m estimators.compare " + " ".join(shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
@@ -112,7 +123,7 @@ def main(argv: list[str] | None = None) -> None:
             "Raw mean and lower-quantile head (floored at 0.05) of each checkpoint; `over`: estimate > truth + "
             f"{OVERESTIMATE_MARGIN}; `bias[...]`: mean signed error (estimate − truth) in that friction band. "
             "Sets: " + ", ".join(f"`{n}` = `{p}`" for n, p in sets.items()) + ".", "",
-            "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), "",
+            "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), "", "",
         ]
         a.out.parent.mkdir(parents=True, exist_ok=True)
         tmp = a.out.with_suffix(a.out.suffix + ".tmp")

@@ -412,3 +412,26 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
     assert one.trunk_mass_scale == TRAIN_RANGES.trunk_mass_scale and one.com_shift_xy_m == (0.0, 0.03)
     with pytest.raises(ValueError, match="valid factors: trunk_mass_scale"):
         shifted_ranges(["payload"])
+
+
+def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.checkpoint import save_checkpoint
+    from estimators.compare import compare, main, score
+    from estimators.models import ModelConfig, build_model
+
+    err = score(np.array([0.5, 0.2, 1.0]), np.array([0.4, 0.2, 1.2]), np.array([False, False, True]))
+    assert err["mae[all]"] == pytest.approx(0.1) and err["over[all]"] == pytest.approx(1 / 3)
+    assert err["mae[filtered]"] == pytest.approx(0.2) and err["bias[mu>=0.9]"] == pytest.approx(-0.2)
+    model = build_model(ModelConfig(variant="mlp", mlp_hidden=[8], lower_quantile=0.1)).eval()
+    X, y = _tiny_data(12, 5)
+    model.fit_normaliser(torch.from_numpy(X), torch.from_numpy(y))
+    save_checkpoint(model, tmp_path / "tiny", {"training": {"epochs": 3, "train_windows": 12}})
+    np.savez(tmp_path / "w.npz", X=X, y=y, window_filtered=np.arange(12) % 2 == 0)
+    rows = compare([str(tmp_path / "tiny")], {"a": tmp_path / "w.npz"}, {"tiny": "test model"})
+    assert [(r["set"], r["estimate"], r["what"]) for r in rows] == [("a", "mean", "test model"), ("a", "lower", "test model")]
+    assert set(rows[0]) >= {"mae[nominal]", "mae[filtered]", "over[all]"}
+    main([str(tmp_path / "tiny"), "--set", f"a={tmp_path / 'w.npz'}", "--out", str(tmp_path / "r.md"), "--threads", "1"])
+    assert "| tiny |" in (tmp_path / "r.md").read_text()
+    with pytest.raises(SystemExit, match="expected NAME=PATH"):
+        main([str(tmp_path / "tiny"), "--set", "nopath"])
