@@ -435,3 +435,16 @@ def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
     assert "| tiny |" in (tmp_path / "r.md").read_text()
     with pytest.raises(SystemExit, match="expected NAME=PATH"):
         main([str(tmp_path / "tiny"), "--set", "nopath"])
+
+
+@pytest.mark.parametrize("config", ["mlp", "attention_step", "linformer_step", "attention", "linformer"])
+def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> None:
+    """conf/estimator/<config>.yaml deploys the bound that estimators.evaluate chose on the validation split
+    for the checkpoint it loads (metrics.val_bound_choice), so a retrained checkpoint cannot silently keep
+    the previous k."""
+    cfg = OmegaConf.load(CONF / f"{config}.yaml")
+    name = cfg.get("checkpoint") or config
+    meta = json.loads((Path(__file__).resolve().parents[1] / "estimators" / "checkpoints" / f"{name}.json").read_text())
+    choice = meta["metrics"]["val_bound_choice"]  # e.g. "gaussian k=1" / "quantile k=0"
+    kind, k = choice.split(" k=")
+    assert (cfg.bound, float(cfg.conservative_k)) == (kind, float(k)), f"{config}.yaml vs {name}.json: {choice}"
