@@ -11,7 +11,9 @@ Tokenisation for the transformers (paper, "Network Architecture", ViT-like):
 * ``"joint"``: one token per joint per time step (T x 12 = 480 tokens of 3 features q, qdot, tau), with a
   learned temporal embedding (T, d) plus a learned spatial (joint) embedding (12, d);
 * ``"step"``: one token per time step (T = 40 tokens of 36 features) with a learned temporal embedding.
-Pooling is the mean over tokens or a learned CLS token. Linformer projects keys and values along the
+Pooling is the mean over tokens or a learned CLS token. Options tried in the round-3 design study and
+kept (not used by the shipped checkpoints, ``results/estimators/design.md``): ``window_norm`` (per-window
+torque scale removed, :func:`window_features`) and ``kinematic_features`` (:func:`foot_kinematics`). Linformer projects keys and values along the
 sequence from n to ``linformer_k`` with learned (k, n) matrices (Wang et al. 2020), one pair per layer.
 """
 
