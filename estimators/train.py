@@ -23,6 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from estimators.checkpoint import CHECKPOINT_DIR, save_checkpoint
 from estimators.data import WindowDataModule
+from estimators.features import N_FEATURES
 from estimators.models import (
     VARIANTS,
     FrictionModel,
@@ -99,7 +100,7 @@ class FrictionTask(L.LightningModule):
             raise ValueError(f"unknown schedule {schedule!r}; valid choices: {', '.join(SCHEDULES)}")
         self.save_hyperparameters()
         self.model: FrictionModel = build_model(ModelConfig(**model_cfg))
-        self.raw_x_std = torch.ones(36)  # [raw units] per-feature std of the training windows (set by train())
+        self.raw_x_std = torch.ones(N_FEATURES)  # [raw units] per-feature std of the training windows (set by train())
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.model(x)
@@ -184,7 +185,8 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
         float(cfg.trainer.max_minutes), float(cfg.lr_min_factor), float(cfg.quantile_weight),
     )
     task.model.fit_normaliser(*dm.tensors["train"])
-    task.raw_x_std = dm.tensors["train"][0].reshape(-1, dm.tensors["train"][0].shape[-1]).std(0).clamp_min(1e-6)
+    x_train = dm.tensors["train"][0]
+    task.raw_x_std = x_train.reshape(-1, x_train.shape[-1]).std(0).clamp_min(1e-6)
     run_dir = Path(cfg.runs_dir) / str(cfg.name or cfg.estimator)
     tcfg = cfg.trainer
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", monitor="val_mae", mode="min", save_top_k=1)
