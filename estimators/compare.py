@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from estimators.checkpoint import load_checkpoint
-from estimators.evaluate import predict_all
+from estimators.evaluate import markdown_table, predict_all
 from estimators.metrics import OVERESTIMATE_MARGIN
 from taslel_bench.machine import machine_info
 
@@ -75,18 +75,20 @@ def compare(checkpoints: list[str], sets: dict[str, Path],
     return rows
 
 
+def cell(column: str, value: object) -> str:
+    """Table text of one value: over-estimation rates in %, biases signed, other floats with 4 decimals."""
+    if not isinstance(value, float):
+        return str(value)
+    if column.startswith("over"):
+        return f"{100 * value:.1f} %"
+    return f"{value:+.3f}" if column.startswith("bias") else f"{value:.4f}"
+
+
 def markdown(rows: list[dict[str, object]]) -> str:
+    import pandas as pd
+
     cols = list(dict.fromkeys(k for r in rows for k in r))
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for r in rows:
-        cells = []
-        for c in cols:
-            v = r.get(c, "")
-            if isinstance(v, float):
-                v = f"{100 * v:.1f} %" if c.startswith("over") else f"{v:+.3f}" if c.startswith("bias") else f"{v:.4f}"
-            cells.append(str(v))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return markdown_table(pd.DataFrame([{c: cell(c, r.get(c, "")) for c in cols} for r in rows], columns=cols))
 
 
 def main(argv: list[str] | None = None) -> None:
