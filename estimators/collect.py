@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import multiprocessing as mp
 import os
 import platform
@@ -96,10 +97,10 @@ def _worker_filter(overrides: tuple[str, ...]) -> api.SafetyFilter:
 
 
 def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
-                filter_mu_scale: float = 1.0) -> EpisodeResult:
+                filter_mu: float | None = None) -> EpisodeResult:
     """Simulate one episode and cut its windows (see the module docstring); ``filtered``: run the safety
-    filter (mu = ``filter_mu_scale`` x the true floor friction) between the nominal controller and the
-    plant."""
+    filter between the nominal controller and the plant, assuming friction ``filter_mu`` [-] (None: the
+    true floor friction)."""
     wall0 = time.perf_counter()
     m, br, rand = _worker_model()
     rand.apply(p)
@@ -120,7 +121,12 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     q_pin = np.zeros(robot.NQ)
     v_pin = np.zeros(robot.NV)
     failures = 0
-    filter_mu = p.friction * filter_mu_scale if filtered else float("nan")
+    if not filtered:
+        filter_mu = float("nan")
+    elif filter_mu is None:
+        filter_mu = float(p.friction)
+    elif not (math.isfinite(filter_mu) and filter_mu > 0):
+        raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
 
     n_steps = int(round(cfg.duration_s / cfg.timestep_s))
     every = int(round(WINDOW_DT_S / cfg.timestep_s))
@@ -165,7 +171,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
                          time.perf_counter() - wall0)
 
 
-def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float]) -> EpisodeResult:
+def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float | None]) -> EpisodeResult:
     return run_episode(*args)
 
 
@@ -189,6 +195,7 @@ def collect(
     cfg: EpisodeConfig = EpisodeConfig(),
     filter_fraction: float = 0.0,
     filter_mu_scale: tuple[float, float] = (1.0, 1.0),
+    filter_mu_range: tuple[float, float] | None = None,
     plant_beta: float = 1.0,
     shift_factors: tuple[str, ...] = PLANT_FACTORS,
 ) -> dict[str, object]:
@@ -196,6 +203,8 @@ def collect(
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
     safety filter in the loop (drawn per episode from a stream independent of the plant draws);
     ``filter_mu_scale`` (lo, hi) [-]: the filter's friction is the true one times U(lo, hi), same stream;
+    ``filter_mu_range`` (lo, hi) [-]: instead, the filter's friction ~ U(lo, hi) *independent* of the true
+    one (so the filter's mu, given to a model as an input, carries no information on the label by itself);
     ``plant_beta``: shape of the plant-factor draws of the train / val / test splits
     (:func:`estimators.randomisation.draw`; the shifted split is always uniform); ``shift_factors``: the
     plant factors the shifted split moves outside the training ranges (default all,
@@ -205,13 +214,19 @@ def collect(
     lo_s, hi_s = (float(v) for v in filter_mu_scale)
     if not 0.0 < lo_s <= hi_s:
         raise ValueError(f"filter_mu_scale must be (lo, hi) with 0 < lo <= hi, got {filter_mu_scale!r}")
+    if filter_mu_range is not None:
+        lo_r, hi_r = (float(v) for v in filter_mu_range)
+        if not 0.0 < lo_r <= hi_r:
+            raise ValueError(f"filter_mu_range must be (lo, hi) with 0 < lo <= hi, got {filter_mu_range!r}")
+        if (lo_s, hi_s) != (1.0, 1.0):
+            raise ValueError("give filter_mu_scale or filter_mu_range, not both")
     valid = {"train", "val", "test", "shifted"}
     if bad := set(counts) - valid:
         raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
     shifted_r = shifted_ranges(tuple(shift_factors))
     out_dir.mkdir(parents=True, exist_ok=True)
     root = np.random.SeedSequence(seed)
-    jobs: list[tuple[str, EpisodeParams, bool, float]] = []
+    jobs: list[tuple[str, EpisodeParams, bool, float]] = []  # (split, plant, filtered, filter mu [-])
     for split_ss, split in zip(root.spawn(len(valid)), ("train", "val", "test", "shifted")):
         n = counts.get(split, 0)
         for ep_ss in split_ss.spawn(n):
@@ -223,7 +238,12 @@ def collect(
             # separate stream: the plant draws of a seed are the same for every filter_fraction
             filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
             filtered = bool(filt_rng.random() < filter_fraction)
-            jobs.append((split, p, filtered, float(filt_rng.uniform(lo_s, hi_s))))
+            u = float(filt_rng.random())  # one draw, so the stream is the same for both modes
+            if filter_mu_range is None:
+                mu_f = p.friction * (lo_s + (hi_s - lo_s) * u)
+            else:
+                mu_f = lo_r + (hi_r - lo_r) * u
+            jobs.append((split, p, filtered, float(mu_f)))
 
     t0 = time.perf_counter()
     args = [(p, cfg, f, s) for _, p, f, s in jobs]
@@ -267,10 +287,12 @@ def collect(
         "paper_env_steps_per_s": PAPER_STEPS_PER_S,
         "filter_fraction": filter_fraction,
         "filter_overrides": list(cfg.filter_overrides),
-        "filter_mu_scale": [lo_s, hi_s],
+        "filter_mu_scale": None if filter_mu_range is not None else [lo_s, hi_s],
+        "filter_mu_range": None if filter_mu_range is None else [lo_r, hi_r],
         "plant_beta": plant_beta,  # plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform)
         "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
-                       "floor friction x U(filter_mu_scale); tau features = filtered torque",
+                       "floor friction x U(filter_mu_scale), or U(filter_mu_range) independent of the true "
+                       "friction; tau features = filtered torque; the filter's mu per episode: filter_mu",
         # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
         "episode_wall_s_mean": {
             "nominal": float(np.mean([r.wall_s for r in nom])) if nom else None,
@@ -328,6 +350,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="fraction of episodes run with the safety filter in the loop (mu = true friction)")
     ap.add_argument("--filter-mu-scale", type=float, nargs=2, default=[1.0, 1.0], metavar=("LO", "HI"),
                     help="filter's mu = true friction x U(LO, HI), per filtered episode")
+    ap.add_argument("--filter-mu-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="instead of --filter-mu-scale: filter's mu ~ U(LO, HI) independent of the true friction")
     ap.add_argument("--plant-beta", type=float, default=1.0,
                     help="plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform; < 1 favours "
                          "the edges and corners of the training ranges)")
@@ -340,7 +364,9 @@ def main(argv: list[str] | None = None) -> None:
     cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
     man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
-                  filter_mu_scale=tuple(a.filter_mu_scale), plant_beta=a.plant_beta,
+                  filter_mu_scale=tuple(a.filter_mu_scale),
+                  filter_mu_range=None if a.filter_mu_range is None else tuple(a.filter_mu_range),
+                  plant_beta=a.plant_beta,
                   shift_factors=tuple(a.shift_factors))
     rate = man["env_steps_per_s"]
     print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")

@@ -26,6 +26,7 @@ import torch
 
 from estimators.checkpoint import load_checkpoint
 from estimators.evaluate import markdown_table, predict_all
+from estimators.features import with_filter_channels
 from estimators.metrics import OVERESTIMATE_MARGIN
 from taslel_bench.machine import machine_info
 
@@ -33,12 +34,14 @@ LOW_MU, HIGH_MU = 0.4, 0.9  # [-] friction bands for the signed bias columns
 
 
 def load_set(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(X, y, window_filtered) of a collected ``.npz``; window_filtered is all False for nominal-only data."""
+    """(X with the 2 filter features (N, 40, 38), y, window_filtered) of a collected ``.npz``;
+    window_filtered is all False for nominal-only data (models without filter features see X[..., :36])."""
     if not path.is_file():
         raise FileNotFoundError(f"window set {path} not found (write one with `python -m estimators.collect`)")
     with np.load(path) as f:
-        wf = f["window_filtered"] if "window_filtered" in f.files else np.zeros(len(f["y"]), bool)
-        return f["X"].astype(np.float32), f["y"].astype(np.float32), wf.astype(bool)
+        wf = (f["window_filtered"] if "window_filtered" in f.files else np.zeros(len(f["y"]), bool)).astype(bool)
+        mu_w = np.where(wf, f["filter_mu"][f["episode"]], np.nan) if "filter_mu" in f.files else np.full(len(wf), np.nan)
+        return with_filter_channels(f["X"].astype(np.float32), mu_w), f["y"].astype(np.float32), wf
 
 
 def score(est: np.ndarray, y: np.ndarray, wf: np.ndarray) -> dict[str, float]:

@@ -22,6 +22,7 @@ import torch
 
 from estimators.checkpoint import CHECKPOINT_DIR, checkpoint_paths, load_checkpoint
 from estimators.data import load_split
+from estimators.features import N_FEATURES, with_filter_channels
 from estimators.metrics import regression_metrics
 from estimators.models import VARIANTS, FrictionModel, parameter_count
 from taslel_bench.machine import machine_info
@@ -42,7 +43,9 @@ def predict(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.n
 
 @torch.no_grad()
 def predict_all(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """(mean [-], sigma [-], lower quantile [-] or None) for windows X (N, 40, 36)."""
+    """(mean [-], sigma [-], lower quantile [-] or None) for windows X (N, 40, 36 or 38); windows with the
+    filter features (38) serve a model without them too (sliced to ``model.cfg.n_raw``)."""
+    X = X[..., : model.cfg.n_raw]
     means, sigmas, lowers = [], [], []
     for i in range(0, len(X), batch):
         m, lv, lo = model.predict(torch.from_numpy(X[i : i + batch]))
@@ -62,7 +65,7 @@ def window_filtered(data_dir: Path, split: str) -> np.ndarray | None:
 @torch.no_grad()
 def latency_s(model: FrictionModel, runs: int = 200) -> float:
     """Median wall time [s] of one forward pass on one window (batch 1) with the current thread count."""
-    x = torch.randn(1, model.cfg.window_steps, 36)
+    x = torch.randn(1, model.cfg.window_steps, model.cfg.n_raw)
     for _ in range(10):
         model(x)
     times = []
@@ -90,11 +93,15 @@ def select_k(model: FrictionModel, X: np.ndarray, y: np.ndarray, max_rate: float
 
 def make_fixture(data_dir: Path, n: int = 64, seed: int = 123) -> None:
     """Write ``n`` windows drawn (fixed seed) from the test split to the committed fixture, with their
-    "collected with the safety filter in the loop" flags when the collection has them."""
+    "collected with the safety filter in the loop" flags and the filter's mu per window (NaN: no filter)
+    when the collection has them."""
     X, y, ep = load_split(data_dir, "test")
     idx = np.sort(np.random.default_rng(seed).choice(len(y), n, replace=False))
     wf = window_filtered(data_dir, "test")
-    extra = {} if wf is None else {"window_filtered": wf[idx]}
+    extra = {}
+    if wf is not None:
+        mu_w = load_split(data_dir, "test", filter_mu=True)[0][idx, 0, N_FEATURES + 1]
+        extra = {"window_filtered": wf[idx], "filter_mu": np.where(wf[idx], mu_w, np.nan)}
     np.savez_compressed(FIXTURE, X=X[idx], y=y[idx], episode=ep[idx], **extra)
 
 
@@ -107,7 +114,12 @@ def fixture_mae(model: FrictionModel, subset: str | None = None) -> float:
             if "window_filtered" not in f.files:
                 return float("nan")
             sel = f["window_filtered"].astype(bool) == (subset == "filtered")
-        mean, _ = predict(model, f["X"][sel].astype(np.float32))
+        X = f["X"].astype(np.float32)
+        if model.cfg.filter_mu_input:
+            if "filter_mu" not in f.files:
+                raise ValueError(f"{FIXTURE} has no filter_mu record; regenerate it (make_fixture)")
+            X = with_filter_channels(X, f["filter_mu"])
+        mean, _ = predict(model, X[sel])
         return float(np.abs(mean - f["y"][sel]).mean())
 
 
@@ -137,9 +149,10 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
     torch.set_num_threads(1)
     if not FIXTURE.is_file():
         make_fixture(data_dir)
-    splits = {s: load_split(data_dir, s) for s in ("test", "shifted")}
+    # windows with the filter features; predict_all slices them for models that do not read them
+    splits = {s: load_split(data_dir, s, filter_mu=True) for s in ("test", "shifted")}
     flags = {s: window_filtered(data_dir, s) for s in splits}
-    splits_val = load_split(data_dir, "val")[:2]
+    splits_val = load_split(data_dir, "val", filter_mu=True)[:2]
     y_train_mean = float(load_split(data_dir, "train")[1].mean())
     rows: list[dict[str, object]] = []
     for split, (_, y, _) in splits.items():

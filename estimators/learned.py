@@ -10,7 +10,9 @@ With ``bound="quantile"`` (models trained with a lower-quantile head, ``model.lo
 ``max(mu_min, lower - conservative_k * sigma)`` instead. With ``hold_min_samples = n > 1`` the reported
 ``mu`` is the smallest bound of the last n model outputs: a drop in friction shows at once, a rise only
 after n x 0.03 s (the window right after a drop still holds high-friction samples, and an over-estimate
-lets the filter ask for more tangential force than the ground holds).
+lets the filter ask for more tangential force than the ground holds). A checkpoint trained with
+``filter_mu_input`` also reads ``Proprioception.filter_mu`` (the friction the filter assumed on the tick
+that produced ``tau_joints``; NaN without a filter) into every sample.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 import torch
 
 from estimators.checkpoint import load_checkpoint
-from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
+from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_channels, sample_vector
 from estimators.models import VARIANTS
 from taslel_bench.interfaces import FrictionEstimate, Proprioception
 
@@ -68,8 +70,10 @@ class LearnedEstimator:
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
         self._hold = np.full(int(hold_min_samples), np.inf)  # ring of the last bounds [-]
-        self._buf = np.zeros((WINDOW_STEPS, N_FEATURES), np.float32)
-        self._x = torch.zeros(1, WINDOW_STEPS, N_FEATURES)
+        self.filter_mu_input = bool(self.meta["model"].get("filter_mu_input", False))
+        n_raw = self.model.cfg.n_raw  # 36, or 38 with the filter features
+        self._buf = np.zeros((WINDOW_STEPS, n_raw), np.float32)
+        self._x = torch.zeros(1, WINDOW_STEPS, n_raw)
         self.reset()
 
     def reset(self) -> None:
@@ -84,7 +88,10 @@ class LearnedEstimator:
     def step(self, obs: Proprioception) -> FrictionEstimate:
         if obs.t_s + 1e-9 < self._next_t:
             return self._last
-        self._buf[self._count % WINDOW_STEPS] = sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints)
+        row = self._buf[self._count % WINDOW_STEPS]
+        row[:N_FEATURES] = sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints)
+        if self.filter_mu_input:  # what the filter assumed on the tick that produced tau_joints
+            row[N_FEATURES:] = filter_channels(obs.filter_mu)
         self._count += 1
         self._next_t += WINDOW_DT_S
         while self._next_t <= obs.t_s + 1e-9:  # ticks coarser than the sample period: skip instants

@@ -3,6 +3,9 @@
 The first folder (``BASE``) provides val / test / shifted unchanged (symlinked); the training split is the
 concatenation of every folder's ``train.npz`` with episode ids offset so they stay unique. Extra folders
 must come from a different collection seed, so their episodes are new draws, never copies of val/test.
+``--drop-filtered DIR ...`` keeps only the nominal-controller training episodes of those folders (e.g. a
+collection whose filter's mu was tied to the true friction, before training a model that reads the
+filter's mu as an input).
 """
 
 from __future__ import annotations
@@ -14,8 +17,26 @@ from pathlib import Path
 import numpy as np
 
 
-def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
-    """Write ``out/train.npz`` + links to base's other splits + ``manifest.json``; returns the manifest."""
+def _nominal_episodes(f: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The arrays of a training split restricted to its nominal-controller episodes, ids renumbered 0..n-1."""
+    keep_ep = ~np.asarray(f["filtered"], bool)
+    new_id = np.cumsum(keep_ep) - 1
+    keep_w = keep_ep[f["episode"]]
+    out = {k: f[k] for k in f}
+    for k in ("X", "y", "window_filtered"):
+        out[k] = f[k][keep_w]
+    out["episode"] = new_id[f["episode"][keep_w]].astype(f["episode"].dtype)
+    for k in ("params", "fell", "filtered", "filter_mu"):
+        out[k] = f[k][keep_ep]
+    return out
+
+
+def merge(out: Path, base: Path, extras: list[Path], drop_filtered: list[Path] | None = None) -> dict[str, object]:
+    """Write ``out/train.npz`` + links to base's other splits + ``manifest.json``; returns the manifest.
+    ``drop_filtered``: folders (among base and extras) whose filtered training episodes are left out."""
+    drop = {d.resolve() for d in (drop_filtered or [])}
+    if unknown := drop - {d.resolve() for d in [base, *extras]}:
+        raise ValueError(f"--drop-filtered folders {sorted(map(str, unknown))} are not among the merged ones")
     out.mkdir(parents=True, exist_ok=True)
     manifests = [json.loads((d / "manifest.json").read_text()) for d in [base, *extras]]
     seeds = [m["seed"] for m in manifests]
@@ -30,18 +51,27 @@ def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
     keep = [k for k in optional if all(k in h for h in have)]
     parts.update({k: [] for k in keep})
     offset = 0
+    dropped: dict[str, dict[str, int]] = {}
     for d in [base, *extras]:
-        with np.load(d / "train.npz") as f:
-            for k in keep:
-                parts[k].append(f[k])
-            parts["X"].append(f["X"])
-            parts["y"].append(f["y"])
-            parts["episode"].append(f["episode"] + offset)
-            parts["params"].append(f["params"])
-            parts["fell"].append(f["fell"])
-            cols = f["param_columns"]
-            offset += len(f["params"])
-    np.savez_compressed(out / "train.npz", **{k: np.concatenate(v) for k, v in parts.items()}, param_columns=cols)
+        with np.load(d / "train.npz") as fz:
+            f = {k: fz[k] for k in fz.files}
+        if d.resolve() in drop:
+            if "filtered" not in f:
+                raise ValueError(f"{d}/train.npz has no per-episode 'filtered' record to drop by")
+            n_ep, n_w = len(f["params"]), len(f["y"])
+            f = _nominal_episodes(f)
+            dropped[str(d)] = {"episodes": n_ep - len(f["params"]), "windows": n_w - len(f["y"])}
+        for k in keep:
+            parts[k].append(f[k])
+        parts["X"].append(f["X"])
+        parts["y"].append(f["y"])
+        parts["episode"].append(f["episode"] + offset)
+        parts["params"].append(f["params"])
+        parts["fell"].append(f["fell"])
+        cols = f["param_columns"]
+        offset += len(f["params"])
+    merged = {k: np.concatenate(v) for k, v in parts.items()}
+    np.savez_compressed(out / "train.npz", **merged, param_columns=cols)
     for split in ("val", "test", "shifted"):
         link = out / f"{split}.npz"
         if link.is_symlink() or link.exists():
@@ -53,18 +83,29 @@ def merge(out: Path, base: Path, extras: list[Path]) -> dict[str, object]:
     # what each collection contributed to the training split (plant draws: uniform or edge-weighted)
     man["sources"] = [
         {"dir": str(d), "seed": m["seed"], "train_episodes": m["splits"].get("train", {}).get("episodes", 0),
-         "plant_beta": m.get("plant_beta", 1.0), "env_steps_per_s": m["env_steps_per_s"]}
+         "plant_beta": m.get("plant_beta", 1.0), "env_steps_per_s": m["env_steps_per_s"],
+         "filter_fraction": m.get("filter_fraction", 0.0), "filter_mu_scale": m.get("filter_mu_scale"),
+         "filter_mu_range": m.get("filter_mu_range"),
+         "dropped_filtered": dropped.get(str(d), {"episodes": 0, "windows": 0})}
         for d, m in zip([base, *extras], manifests)
     ]
     man["env_steps"] = sum(m["env_steps"] for m in manifests)
     man["wall_time_s"] = sum(m["wall_time_s"] for m in manifests)
     man["env_steps_per_s"] = man["env_steps"] / man["wall_time_s"]
     train = dict(man["splits"]["train"])
-    for m in manifests[1:]:
-        for k in ("episodes", "windows", "episodes_fallen", "env_steps", "episodes_filtered", "windows_filtered",
-                  "episodes_fallen_filtered", "filter_fallback_ticks"):
+    for m in manifests[1:]:  # simulated totals (dropped episodes included: they were run)
+        for k in ("env_steps", "filter_fallback_ticks"):
             if k in train and k in m["splits"]["train"]:
                 train[k] += m["splits"]["train"][k]
+    # what the merged split holds, counted from its arrays
+    fell = merged["fell"].astype(bool)
+    train.update(episodes=len(merged["params"]), windows=len(merged["y"]), episodes_fallen=int(fell.sum()))
+    train.pop("fallen_friction", None)
+    train.pop("episodes_fallen_without_windows", None)
+    if "filtered" in merged:
+        filt = merged["filtered"].astype(bool)
+        train.update(episodes_filtered=int(filt.sum()), windows_filtered=int(merged["window_filtered"].sum()),
+                     episodes_fallen_filtered=int((fell & filt).sum()))
     man["splits"] = {**man["splits"], "train": train}
     (out / "manifest.json").write_text(json.dumps(man, indent=2))
     return man
@@ -75,8 +116,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("base", type=Path)
     ap.add_argument("extras", type=Path, nargs="+")
+    ap.add_argument("--drop-filtered", type=Path, nargs="+", default=[], metavar="DIR",
+                    help="keep only the nominal-controller training episodes of these folders")
     a = ap.parse_args(argv)
-    man = merge(a.out, a.base, a.extras)
+    man = merge(a.out, a.base, a.extras, a.drop_filtered)
     print(f"train: {man['splits']['train']['episodes']} episodes, {man['splits']['train']['windows']} windows -> {a.out}")
 
 

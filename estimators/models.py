@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from estimators.features import N_CHANNELS, N_FEATURES, N_JOINTS, WINDOW_STEPS
+from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
 from taslel_bench import robot
 
 VARIANTS = ("mlp", "attention", "linformer")
@@ -57,6 +57,9 @@ class ModelConfig:
     # True: each step also gets the 4 feet's positions [m] and velocities [m/s] relative to the trunk, in
     # trunk axes (foot_kinematics, 24 features computed from q and qdot); step tokens and the MLP only
     kinematic_features: bool = False
+    # True: the raw windows carry the 2 filter features per step (estimators.features.filter_channels: filter
+    # in the loop, the filter's mu [-]) after the 36; step tokens and the mlp only
+    filter_mu_input: bool = False
 
     def validate(self) -> ModelConfig:
         for name, value, valid in (
@@ -72,6 +75,9 @@ class ModelConfig:
         if self.kinematic_features and self.variant != "mlp" and self.tokens == "joint":
             raise ValueError("kinematic_features needs tokens='step' (or the mlp): foot features are per leg, "
                              "joint tokens carry (q, qdot, tau) of one joint")
+        if self.filter_mu_input and self.variant != "mlp" and self.tokens == "joint":
+            raise ValueError("filter_mu_input needs tokens='step' (or the mlp): joint tokens carry (q, qdot, tau) "
+                             "of one joint")
         if self.variant != "mlp" and self.d_model % self.n_heads:
             raise ValueError(f"d_model={self.d_model} is not divisible by n_heads={self.n_heads}")
         return self
@@ -82,9 +88,15 @@ class ModelConfig:
         return 3 if self.lower_quantile > 0 else 2
 
     @property
+    def n_raw(self) -> int:
+        """Features per step of the raw windows the model takes (36, or 38 with ``filter_mu_input``)."""
+        return N_FEATURES + (N_FILTER_FEATURES if self.filter_mu_input else 0)
+
+    @property
     def n_inputs(self) -> int:
-        """Features per step the encoder sees (36, plus 24 foot features with ``kinematic_features``)."""
-        return N_FEATURES + (N_KIN_FEATURES if self.kinematic_features else 0)
+        """Features per step the encoder sees (36, plus 24 foot features with ``kinematic_features``, plus 2
+        filter features with ``filter_mu_input``)."""
+        return self.n_raw + (N_KIN_FEATURES if self.kinematic_features else 0)
 
     @property
     def n_tokens(self) -> int:
@@ -210,9 +222,15 @@ class FrictionModel(nn.Module):
         self.norm.fit(feats, y)
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
-        """Raw windows (B, T, 36) -> what is standardised and encoded (B, T, n_inputs)."""
-        f = window_features(x, self.cfg.window_norm)
-        return torch.cat([f, foot_kinematics(x)], dim=-1) if self.cfg.kinematic_features else f
+        """Raw windows (B, T, n_raw) -> what is standardised and encoded (B, T, n_inputs):
+        [proprioception (36, after :func:`window_features`), foot kinematics (24, optional), filter (2, optional)]."""
+        prop = x[..., :N_FEATURES]
+        parts = [window_features(prop, self.cfg.window_norm)]
+        if self.cfg.kinematic_features:
+            parts.append(foot_kinematics(prop))
+        if self.cfg.filter_mu_input:
+            parts.append(x[..., N_FEATURES:])
+        return torch.cat(parts, dim=-1) if len(parts) > 1 else parts[0]
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2]) each (B,)."""
@@ -220,11 +238,13 @@ class FrictionModel(nn.Module):
         return mean, log_var
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """``x`` (B, T, 36) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,).
+        """``x`` (B, T, n_raw) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,).
         The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
-        if x.ndim != 3 or x.shape[-1] != N_FEATURES or x.shape[1] != self.cfg.window_steps:
+        if x.ndim != 3 or x.shape[-1] != self.cfg.n_raw or x.shape[1] != self.cfg.window_steps:
+            hint = " (36 proprioception + 2 filter features, see estimators.features.with_filter_channels)" \
+                if self.cfg.filter_mu_input else ""
             raise ValueError(
-                f"expected windows (B, {self.cfg.window_steps}, {N_FEATURES}), got {tuple(x.shape)}"
+                f"expected windows (B, {self.cfg.window_steps}, {self.cfg.n_raw}){hint}, got {tuple(x.shape)}"
             )
         z = (self.features(x) - self.norm.x_mean) / self.norm.x_std
         if not self.cfg.use_tau:

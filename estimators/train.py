@@ -100,17 +100,19 @@ class FrictionTask(L.LightningModule):
             raise ValueError(f"unknown schedule {schedule!r}; valid choices: {', '.join(SCHEDULES)}")
         self.save_hyperparameters()
         self.model: FrictionModel = build_model(ModelConfig(**model_cfg))
-        self.raw_x_std = torch.ones(N_FEATURES)  # [raw units] per-feature std of the training windows (set by train())
+        # [raw units] per-feature std of the training windows (set by train()); 0 for the filter features
+        self.raw_x_std = torch.ones(self.model.cfg.n_raw)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.model(x)
 
     def augment(self, x: torch.Tensor) -> torch.Tensor:
-        """Training-only augmentation of raw windows (B, T, 36): torque scale and feature noise."""
+        """Training-only augmentation of raw windows (B, T, n_raw): torque scale and feature noise (the
+        filter features, what the controller itself asked for, are left exact)."""
         lo, hi = self.hparams.tau_scale
         if hi > lo:
             log_s = torch.empty(x.shape[0], 1, 1, device=x.device).uniform_(math.log(lo), math.log(hi))
-            x = torch.cat([x[..., :24], x[..., 24:] * torch.exp(log_s)], dim=-1)
+            x = torch.cat([x[..., :24], x[..., 24:N_FEATURES] * torch.exp(log_s), x[..., N_FEATURES:]], dim=-1)
         if self.hparams.noise_std > 0:  # in raw units: noise_std x each raw feature's training std
             x = x + torch.randn_like(x) * self.hparams.noise_std * self.raw_x_std
         return x
@@ -177,7 +179,8 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     """Fit, export the best model (if ``cfg.export``) and return (task with best weights, training record)."""
     torch.set_num_threads(int(cfg.threads))
     L.seed_everything(int(cfg.seed), workers=True)
-    dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size))
+    filter_mu = bool(cfg.model.get("filter_mu_input", False))
+    dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size), filter_mu=filter_mu)
     dm.setup("fit")
     task = FrictionTask(
         OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss,  # type: ignore[arg-type]
@@ -187,6 +190,7 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     task.model.fit_normaliser(*dm.tensors["train"])
     x_train = dm.tensors["train"][0]
     task.raw_x_std = x_train.reshape(-1, x_train.shape[-1]).std(0).clamp_min(1e-6)
+    task.raw_x_std[N_FEATURES:] = 0.0  # filter features: no noise
     run_dir = Path(cfg.runs_dir) / str(cfg.name or cfg.estimator)
     tcfg = cfg.trainer
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", monitor="val_mae", mode="min", save_top_k=1)

@@ -131,6 +131,7 @@ class Episode:
         v = np.zeros(robot.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         qj, qdj = q[7:], v[6:]  # views: joint angles [rad] and velocities [rad/s], core order
         tau_prev = np.zeros(robot.N_JOINTS)
+        mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         need_model = self.filter is not None
         res.extras["warmup_s"] = self._warm_up(q, v)
         ecbf = self.filter.ecbf if self.filter is not None else None
@@ -148,7 +149,7 @@ class Episode:
                 br.state_pin(qpos, qvel, q, v)  # also fills qj, qdj
                 trunk_xy = qpos[br.free_qadr : br.free_qadr + 2]
                 true_mu = self.scenario.friction_at(trunk_xy)
-                est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu))
+                est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu, mu_filter_prev))
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
                 in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
@@ -159,12 +160,14 @@ class Episode:
                     inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
                     fres = self.filter.filter(inputs, u_nom)
                     u = fres.u
+                    mu_filter_prev = est.mu
                     if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
                         self.qp_recorder.on_tick(k, t, self.filter.backend_problem, fres)
                     tick3 = time.perf_counter()
                 else:
                     fres = None
                     u = u_nom
+                    mu_filter_prev = math.nan
                 for _ in range(self.physics_per_tick):
                     br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)

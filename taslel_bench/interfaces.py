@@ -175,6 +175,9 @@ class Proprioception:
     qd_joints: np.ndarray  # [rad/s] (12,)
     tau_joints: np.ndarray  # [N·m] (12,) torques applied this tick
     true_friction: float  # [-] ground friction under the robot (oracle / metrics only)
+    # [-] friction the safety filter assumed on the previous tick, the one that produced tau_joints (the
+    # controller knows what it asked for); NaN when no filter was in the loop on that tick
+    filter_mu: float = math.nan
 
 
 @dataclass

@@ -176,3 +176,47 @@ def test_settle_time_after_friction_change():
     assert settle_time(t, mu, hat) == pytest.approx(0.3, abs=0.011)
     assert np.isnan(settle_time(t, np.full_like(t, 0.5), np.full_like(t, 0.5)))
     assert settle_time(t, mu, np.full_like(t, 0.8)) == np.inf
+
+
+class _RecordingEstimator:
+    """A fixed estimate that changes every tick (so a stale value would show) and keeps what it was given."""
+
+    name = "recording"
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[float, float]] = []  # (t [s], obs.filter_mu [-])
+        self.reported: list[float] = []
+
+    def reset(self) -> None:
+        self.seen.clear()
+        self.reported.clear()
+
+    def step(self, obs):
+        from taslel_bench.interfaces import FrictionEstimate
+
+        self.seen.append((obs.t_s, obs.filter_mu))
+        mu = 0.6 + 0.1 * (len(self.seen) % 3)
+        self.reported.append(mu)
+        return FrictionEstimate(mu=mu)
+
+
+@pytest.mark.parametrize("filter_on", [True, False])
+def test_estimator_sees_the_mu_the_filter_used_on_the_previous_tick(filter_on):
+    """Proprioception.filter_mu at tick k is the mu the filter got at tick k - 1 (the tick whose torque
+    tau_joints holds); NaN on the first tick, before filter.start_time and without a filter."""
+    over = ["solver=daqp", "filter.start_time=0.1"] if filter_on else ["filter.enabled=false"]
+    built = Built(compose_cfg(short("duration=0.1", *over)))
+    est = _RecordingEstimator()
+    built.episode.estimator = est
+    res = built.episode.run()
+    assert res.status == "ok"
+    t = np.array([s[0] for s in est.seen])
+    seen = np.array([s[1] for s in est.seen])
+    assert len(seen) > 200 and np.isnan(seen[0])
+    if not filter_on:
+        assert np.isnan(seen).all()
+        return
+    start = 0.1
+    before = t <= start + 1e-9  # tick k sees tick k-1: the first filtered tick (t = 0.1) is seen at 0.101
+    assert np.isnan(seen[before]).all()
+    np.testing.assert_array_equal(seen[~before], np.array(est.reported)[:-1][~before[1:]])

@@ -448,3 +448,131 @@ def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> No
     choice = meta["metrics"]["val_bound_choice"]  # e.g. "gaussian k=1" / "quantile k=0"
     kind, k = choice.split(" k=")
     assert (cfg.bound, float(cfg.conservative_k)) == (kind, float(k)), f"{config}.yaml vs {name}.json: {choice}"
+
+
+# --------------------------------------------------------------------- the filter's mu as an input
+
+
+def test_filter_channels_layout_and_model_input() -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.features import N_FILTER_FEATURES, filter_channels, with_filter_channels
+    from estimators.models import ModelConfig, build_model
+
+    np.testing.assert_allclose(filter_channels(np.array([np.nan, 0.4])), [[0.0, 0.0], [1.0, 0.4]], rtol=1e-6)
+    X = np.zeros((3, WINDOW_STEPS, N_FEATURES), np.float32)
+    W = with_filter_channels(X, np.array([np.nan, 0.3, 1.1]))
+    assert W.shape == (3, WINDOW_STEPS, N_FEATURES + N_FILTER_FEATURES)
+    np.testing.assert_allclose(W[:, 5, N_FEATURES:], [[0, 0], [1, 0.3], [1, 1.1]])
+    per_sample = np.full((3, WINDOW_STEPS), 0.5)
+    assert with_filter_channels(X, per_sample)[..., -1].min() == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="filter_mu must have shape"):
+        with_filter_channels(X, np.zeros(4))
+    for variant in ("mlp", "attention", "linformer"):
+        cfg = ModelConfig(variant=variant, tokens="step", d_model=16, linformer_k=8, mlp_hidden=[8],
+                          filter_mu_input=True)
+        model = build_model(cfg).eval()
+        assert cfg.n_raw == 38 and model(torch.from_numpy(W))[0].shape == (3,)
+        with pytest.raises(ValueError, match="2 filter features"):
+            model(torch.from_numpy(X))
+        # the filter features reach the encoder: changing only the filter's mu changes the estimate
+        W2 = W.copy()
+        W2[..., -1] += 0.5
+        assert not torch.allclose(model(torch.from_numpy(W))[0], model(torch.from_numpy(W2))[0])
+    with pytest.raises(ValueError, match="filter_mu_input needs tokens='step'"):
+        ModelConfig(variant="attention", tokens="joint", filter_mu_input=True).validate()
+
+
+def test_collect_filter_mu_range_is_independent_of_the_truth(tmp_path: Path) -> None:
+    from estimators.collect import EpisodeConfig, collect
+    from estimators.data import load_split
+
+    cfg = EpisodeConfig(duration_s=1.6, stride=4)
+    man = collect(tmp_path / "r", {"train": 4}, seed=2, workers=1, cfg=cfg, filter_fraction=1.0,
+                  filter_mu_range=(0.2, 0.3))
+    assert man["filter_mu_range"] == [0.2, 0.3] and man["filter_mu_scale"] is None
+    with np.load(tmp_path / "r" / "train.npz") as f:
+        friction = f["params"][:, list(f["param_columns"]).index("friction")]
+        assert np.all((f["filter_mu"] >= 0.2) & (f["filter_mu"] <= 0.3))
+        assert friction.max() > 0.35  # drawn from the training range, not tied to the filter's mu
+        mu_ep = f["filter_mu"]
+    X, _, ep = load_split(tmp_path / "r", "train", filter_mu=True)
+    assert len(X) >= 4 and X.shape[-1] == 38 and (X[..., 36] == 1).all()
+    np.testing.assert_allclose(X[:, 0, 37], mu_ep[ep], rtol=1e-6)
+    with pytest.raises(ValueError, match="not both"):
+        collect(tmp_path / "x", {"train": 1}, filter_fraction=1.0, filter_mu_scale=(0.5, 0.9),
+                filter_mu_range=(0.2, 0.3))
+    with pytest.raises(ValueError, match="filter_mu_range must be"):
+        collect(tmp_path / "x", {"train": 1}, filter_fraction=1.0, filter_mu_range=(0.3, 0.2))
+
+
+def test_merge_drops_the_filtered_episodes_of_named_folders(tmp_path: Path) -> None:
+    from estimators.collect import EpisodeConfig, collect
+    from estimators.merge import merge
+
+    cfg = EpisodeConfig(duration_s=1.6, stride=4)
+    collect(tmp_path / "a", {"train": 6, "test": 1}, seed=3, workers=1, cfg=cfg, filter_fraction=0.5,
+            filter_mu_scale=(0.6, 1.1))
+    collect(tmp_path / "b", {"train": 2}, seed=4, workers=1, cfg=cfg, filter_fraction=1.0,
+            filter_mu_range=(0.1, 1.2))
+    with np.load(tmp_path / "a" / "train.npz") as a:
+        a_nominal = ~a["filtered"]
+        a_X_nominal = a["X"][~a["window_filtered"]]
+    assert 0 < a_nominal.sum() < 6 and len(a_X_nominal) > 0
+    man = merge(tmp_path / "m", tmp_path / "a", [tmp_path / "b"], drop_filtered=[tmp_path / "a"])
+    train = man["splits"]["train"]  # type: ignore[index]
+    assert train["episodes"] == a_nominal.sum() + 2 and train["episodes_filtered"] == 2
+    assert man["sources"][0]["dropped_filtered"]["episodes"] == 6 - a_nominal.sum()  # type: ignore[index]
+    assert man["sources"][1]["filter_mu_range"] == [0.1, 1.2]  # type: ignore[index]
+    with np.load(tmp_path / "m" / "train.npz") as m:
+        n_a = len(a_X_nominal)
+        np.testing.assert_array_equal(m["X"][:n_a], a_X_nominal)
+        assert not m["window_filtered"][:n_a].any() and m["window_filtered"][n_a:].all()
+        # episode ids are 0..n-1, every per-episode array has one row per id
+        assert sorted(np.unique(m["episode"])) == list(range(train["episodes"]))
+        assert len(m["params"]) == len(m["filter_mu"]) == len(m["fell"]) == train["episodes"]
+        np.testing.assert_array_equal(m["filtered"][m["episode"]], m["window_filtered"])
+    with pytest.raises(ValueError, match="not among the merged"):
+        merge(tmp_path / "m3", tmp_path / "a", [tmp_path / "b"], drop_filtered=[tmp_path / "zzz"])
+
+
+def test_learned_estimator_feeds_the_filters_mu_and_training_runs(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("lightning")
+    from estimators.checkpoint import save_checkpoint
+    from estimators.data import WindowDataModule
+    from estimators.features import with_filter_channels
+    from estimators.learned import LearnedEstimator
+    from estimators.models import ModelConfig, build_model
+    from estimators.train import make_config, train
+
+    save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8], filter_mu_input=True)).eval(),
+                    tmp_path / "m")
+    est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", threads=None)
+    seen: list[torch.Tensor] = []
+    predict = est.model.predict
+    est.model.predict = lambda x: (seen.append(x.clone()), predict(x))[1]  # type: ignore[method-assign]
+    rng = np.random.default_rng(0)
+    for k in range(WINDOW_STEPS):
+        o = _obs(k * WINDOW_DT_S, rng=rng)
+        o.filter_mu = float("nan") if k < 10 else 0.25 + 0.01 * k
+        est.step(o)
+    assert len(seen) == 1 and seen[0].shape == (1, WINDOW_STEPS, 38)
+    x = seen[0][0].numpy()
+    np.testing.assert_array_equal(x[:10, 36:], 0.0)
+    np.testing.assert_allclose(x[10:, 36], 1.0)
+    np.testing.assert_allclose(x[10:, 37], 0.25 + 0.01 * np.arange(10, WINDOW_STEPS), rtol=1e-6)
+
+    def tiny(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        X, y = _tiny_data(n, seed)
+        return with_filter_channels(X, np.where(np.arange(n) % 2, 0.5, np.nan)), y
+
+    arrays = {s: tiny(32, i) for i, s in enumerate(("train", "val", "test"))}
+    cfg = make_config(["estimator=mlp", f"runs_dir={tmp_path}", "trainer.fast_dev_run=true", "threads=1",
+                       "model.filter_mu_input=true", "augment.noise_std=0.1", "augment.tau_scale=[0.8,1.25]"])
+    task, record = train(cfg, datamodule=WindowDataModule(arrays=arrays, batch_size=16))
+    assert record["global_steps"] == 1 and task.model.cfg.n_raw == 38
+    # augmentation scales the torques and leaves the filter features exact
+    xb = torch.from_numpy(arrays["train"][0][:4])
+    aug = task.augment(xb)
+    torch.testing.assert_close(aug[..., 36:], xb[..., 36:])
+    assert not torch.allclose(aug[..., 24:36], xb[..., 24:36])
