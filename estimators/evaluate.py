@@ -310,6 +310,26 @@ def subset_table(df: object, names: list[str]) -> list[str]:
     return lines
 
 
+def _source_text(src: dict[str, object]) -> str:
+    """One training source of a merged manifest: episodes kept, seed, plant draws, filter draws, throughput."""
+    beta = float(src.get("plant_beta", 1.0))  # type: ignore[arg-type]
+    plant = "uniform" if beta == 1.0 else f"lo + (hi - lo) Beta({beta:g}, {beta:g})"
+    n_dropped = int((src.get("dropped_filtered") or {}).get("episodes", 0))  # type: ignore[union-attr]
+    ff = float(src.get("filter_fraction") or 0.0)  # type: ignore[arg-type]
+    if n_dropped:
+        filt = f"nominal-controller episodes only, its {n_dropped} filtered episodes left out"
+    elif ff == 0.0:
+        filt = "no filter"
+    elif src.get("filter_mu_range"):
+        lo, hi = src["filter_mu_range"]  # type: ignore[misc]
+        filt = f"filter in the loop for {ff:.0%}, its mu ~ U({lo:g}, {hi:g}) independent of the truth"
+    else:
+        lo, hi = src.get("filter_mu_scale") or (1.0, 1.0)  # type: ignore[misc]
+        filt = f"filter in the loop for {ff:.0%}, its mu = truth x U({lo:g}, {hi:g})"
+    return (f"{int(src['train_episodes']) - n_dropped} episodes (seed {src['seed']}, plant factors {plant}, "  # type: ignore[arg-type]
+            f"{filt}, {float(src['env_steps_per_s']):,.0f} env-steps/s)")  # type: ignore[arg-type]
+
+
 def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, ks: list[float]) -> None:
     import pandas as pd
 
@@ -323,7 +343,8 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         if js.is_file():
             full = json.loads(js.read_text())
             train_rec[v] = {**full.get("training", {}),
-                            "k_val": full.get("metrics", {}).get("k_val_over_5pct")}
+                            "k_val": full.get("metrics", {}).get("k_val_over_5pct"),
+                            "filter_mu_input": bool(full.get("model", {}).get("filter_mu_input", False))}
     base = df[df.variant.str.startswith("constant")].set_index("split")["mae"]
     cols = ["variant", "split", "estimate", "mae", "rmse", "r2", "bias", "overestimate_rate",
             "within_1sigma", "within_2sigma"] + [c for c in df.columns if c.startswith("mae_bin")]
@@ -361,10 +382,7 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
            f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
            "`test[nominal]` / `test[filtered]` split the test windows by how they were collected."]
           if manifest.get("filter_fraction") else []),
-        *([ "- Training split = " + " + ".join(
-            f"{src['train_episodes']} episodes (seed {src['seed']}, plant factors "
-            + ("uniform" if src["plant_beta"] == 1.0 else f"lo + (hi - lo) Beta({src['plant_beta']:g}, {src['plant_beta']:g})")
-            + f", {src['env_steps_per_s']:,.0f} env-steps/s)" for src in manifest["sources"])
+        *([ "- Training split = " + " + ".join(_source_text(src) for src in manifest["sources"])
             + "; val / test / shifted: the first collection, uniform draws."] if "sources" in manifest else []),
         f"- Training ranges: `{json.dumps(manifest['train_ranges'])}`",
         f"- Shifted ranges (outside training in every plant quantity): `{json.dumps(manifest['shifted_ranges'])}`"
@@ -381,6 +399,11 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "within 1σ / 2σ: fraction of |error of the mean| <= 1 / 2 predicted sigma (calibrated: 0.68 / 0.95).",
         "",
         *summary_table(df, names, ks, train_rec),
+        "",
+        "Models that also read the filter's mu per sample (`filter_mu_input`: filter in the loop 0/1 and the "
+        "mu it assumed; in the loop `Proprioception.filter_mu`, on the test windows the collection's per-episode "
+        "filter mu): " + (", ".join(f"`{v}`" for v in names if train_rec.get(v, {}).get("filter_mu_input")) or "none")
+        + "; the others read q, qdot, tau only.",
         "",
         "## Nominal-controller vs filter-in-the-loop windows",
         "",

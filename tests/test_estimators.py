@@ -523,6 +523,11 @@ def test_merge_drops_the_filtered_episodes_of_named_folders(tmp_path: Path) -> N
     assert train["episodes"] == a_nominal.sum() + 2 and train["episodes_filtered"] == 2
     assert man["sources"][0]["dropped_filtered"]["episodes"] == 6 - a_nominal.sum()  # type: ignore[index]
     assert man["sources"][1]["filter_mu_range"] == [0.1, 1.2]  # type: ignore[index]
+    from estimators.evaluate import _source_text  # the report's line per training source
+
+    texts = [_source_text(src) for src in man["sources"]]  # type: ignore[union-attr]
+    assert texts[0].startswith(f"{a_nominal.sum()} episodes (seed 3") and "filtered episodes left out" in texts[0]
+    assert texts[1].startswith("2 episodes (seed 4") and "U(0.1, 1.2) independent of the truth" in texts[1]
     with np.load(tmp_path / "m" / "train.npz") as m:
         n_a = len(a_X_nominal)
         np.testing.assert_array_equal(m["X"][:n_a], a_X_nominal)
