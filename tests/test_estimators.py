@@ -581,3 +581,37 @@ def test_learned_estimator_feeds_the_filters_mu_and_training_runs(tmp_path: Path
     aug = task.augment(xb)
     torch.testing.assert_close(aug[..., 36:], xb[..., 36:])
     assert not torch.allclose(aug[..., 24:36], xb[..., 24:36])
+
+
+def test_evaluate_chooses_the_bound_on_the_bound_set(tmp_path: Path) -> None:
+    """--bound-set: every candidate bound's k is the smallest giving <= 5 % over-estimation on that set, and
+    the choice is recorded with the set it was made on."""
+    pytest.importorskip("torch")
+    from estimators.checkpoint import save_checkpoint
+    from estimators.evaluate import K_SWEEP, evaluate
+    from estimators.models import ModelConfig, build_model
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for i, split in enumerate(("train", "val", "test", "shifted")):
+        X, y = _tiny_data(48, i)
+        np.savez(data / f"{split}.npz", X=X, y=y, episode=np.arange(48))
+    Xb, yb = _tiny_data(64, 9)
+    np.savez(tmp_path / "bound_set.npz", X=Xb, y=yb * 0.5, episode=np.arange(64))  # lower truth: a "shift"
+    model = build_model(ModelConfig(variant="mlp", mlp_hidden=[8], lower_quantile=0.1)).eval()
+    import torch
+
+    model.norm.fit(torch.from_numpy(_tiny_data(48, 0)[0]), torch.from_numpy(_tiny_data(48, 0)[1]))
+    save_checkpoint(model, tmp_path / "m")
+    evaluate(data, [str(tmp_path / "m.pt")], [1.0], tmp_path / "out", latency_runs=3,
+             bound_set=tmp_path / "bound_set.npz")
+    rec = json.loads((tmp_path / "m.json").read_text())["metrics"]
+    assert rec["bound_selection"]["set"] == str(tmp_path / "bound_set.npz")
+    for label, v in rec["val_bounds"].items():
+        k = float(label.split("k=")[1])
+        assert k in K_SWEEP
+        if label.startswith("gaussian") or k > 0:  # chosen k: <= 5 % on the bound set
+            assert v["selection_set_overestimate_rate"] <= 0.05
+    choice = rec["val_bound_choice"]
+    if choice is not None:
+        assert rec["val_bounds"][choice]["selection_set_overestimate_rate"] <= 0.05
