@@ -17,9 +17,11 @@ in the loop, built through the core's façade :mod:`taslel_bench.api` from the p
 the episode runner feeds estimators. The filter's friction is the true floor friction times a factor drawn
 per episode from ``--filter-mu-scale lo hi`` (default 1 1): in the loop the filter gets an estimate, not
 the truth, and a model that only learned the filter's clipping at the true mu would read its own estimate
-back. Which episodes were
-filtered is saved per episode (``filtered``) and per window (``window_filtered``) and counted in the
-manifest.
+back. With ``--filter-mu-range lo hi`` the filter's friction is drawn from U(lo, hi) independent of the
+truth instead (for models that read the filter's mu as an input: a mu tied to the truth would hand them the
+label). Which episodes were filtered, and the filter's mu, are saved per episode (``filtered``,
+``filter_mu``) and per window (``window_filtered``) and counted in the manifest. Splits and the manifest are
+written whole and then renamed into place.
 """
 
 from __future__ import annotations
@@ -312,12 +314,14 @@ def collect(
         y = np.concatenate([np.full(len(r.windows), r.params.friction, np.float32) for r in rs])
         ep = np.concatenate([np.full(len(r.windows), i, np.int32) for i, r in enumerate(rs)])
         params = np.array([r.params.as_row() for r in rs], np.float64)
+        tmp = out_dir / f"{split}.tmp.npz"  # written whole, then renamed: never a half-written split
         np.savez_compressed(
-            out_dir / f"{split}.npz", X=X, y=y, episode=ep, params=params,
+            tmp, X=X, y=y, episode=ep, params=params,
             param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
             filtered=np.array([r.filtered for r in rs]), filter_mu=np.array([r.filter_mu for r in rs]),
             window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
         )
+        tmp.replace(out_dir / f"{split}.npz")
         fell = [r for r in rs if r.fell]
         manifest["splits"][split] = {  # type: ignore[index]
             "episodes": len(rs),
@@ -331,7 +335,9 @@ def collect(
             "episodes_fallen_filtered": sum(1 for r in fell if r.filtered),
             "filter_fallback_ticks": sum(r.filter_failures for r in rs),
         }
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    tmp_man = out_dir / "manifest.json.tmp"
+    tmp_man.write_text(json.dumps(manifest, indent=2))
+    tmp_man.replace(out_dir / "manifest.json")
     return manifest
 
 

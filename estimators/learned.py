@@ -70,7 +70,7 @@ class LearnedEstimator:
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
         self._hold = np.full(int(hold_min_samples), np.inf)  # ring of the last bounds [-]
-        self.filter_mu_input = bool(self.meta["model"].get("filter_mu_input", False))
+        self.filter_mu_input = self.model.cfg.filter_mu_input
         n_raw = self.model.cfg.n_raw  # 36, or 38 with the filter features
         self._buf = np.zeros((WINDOW_STEPS, n_raw), np.float32)
         self._x = torch.zeros(1, WINDOW_STEPS, n_raw)

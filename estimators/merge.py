@@ -71,7 +71,9 @@ def merge(out: Path, base: Path, extras: list[Path], drop_filtered: list[Path] |
         cols = f["param_columns"]
         offset += len(f["params"])
     merged = {k: np.concatenate(v) for k, v in parts.items()}
-    np.savez_compressed(out / "train.npz", **merged, param_columns=cols)
+    tmp = out / "train.tmp.npz"  # written whole, then renamed: never a half-written train.npz
+    np.savez_compressed(tmp, **merged, param_columns=cols)
+    tmp.replace(out / "train.npz")
     for split in ("val", "test", "shifted"):
         link = out / f"{split}.npz"
         if link.is_symlink() or link.exists():
@@ -107,7 +109,9 @@ def merge(out: Path, base: Path, extras: list[Path], drop_filtered: list[Path] |
         train.update(episodes_filtered=int(filt.sum()), windows_filtered=int(merged["window_filtered"].sum()),
                      episodes_fallen_filtered=int((fell & filt).sum()))
     man["splits"] = {**man["splits"], "train": train}
-    (out / "manifest.json").write_text(json.dumps(man, indent=2))
+    tmp_man = out / "manifest.json.tmp"
+    tmp_man.write_text(json.dumps(man, indent=2))
+    tmp_man.replace(out / "manifest.json")
     return man
 
 
