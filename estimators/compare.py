@@ -25,23 +25,12 @@ import numpy as np
 import torch
 
 from estimators.checkpoint import load_checkpoint
+from estimators.data import load_windows
 from estimators.evaluate import markdown_table, predict_all
-from estimators.features import with_filter_channels
 from estimators.metrics import OVERESTIMATE_MARGIN
 from taslel_bench.machine import machine_info
 
 LOW_MU, HIGH_MU = 0.4, 0.9  # [-] friction bands for the signed bias columns
-
-
-def load_set(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(X with the 2 filter features (N, 40, 38), y, window_filtered) of a collected ``.npz``;
-    window_filtered is all False for nominal-only data (models without filter features see X[..., :36])."""
-    if not path.is_file():
-        raise FileNotFoundError(f"window set {path} not found (write one with `python -m estimators.collect`)")
-    with np.load(path) as f:
-        wf = (f["window_filtered"] if "window_filtered" in f.files else np.zeros(len(f["y"]), bool)).astype(bool)
-        mu_w = np.where(wf, f["filter_mu"][f["episode"]], np.nan) if "filter_mu" in f.files else np.full(len(wf), np.nan)
-        return with_filter_channels(f["X"].astype(np.float32), mu_w), f["y"].astype(np.float32), wf
 
 
 def score(est: np.ndarray, y: np.ndarray, wf: np.ndarray) -> dict[str, float]:
@@ -61,12 +50,13 @@ def score(est: np.ndarray, y: np.ndarray, wf: np.ndarray) -> dict[str, float]:
 def compare(checkpoints: list[str], sets: dict[str, Path],
             describe: dict[str, str] | None = None) -> list[dict[str, object]]:
     """One row per (checkpoint, set, estimate); ``describe`` = {checkpoint name: what it is} adds a column."""
-    data = {name: load_set(path) for name, path in sets.items()}
+    # windows with the filter features; predict_all slices them for models that do not read them
+    data = {name: load_windows(path, filter_mu=True) for name, path in sets.items()}
     rows: list[dict[str, object]] = []
     for ck in checkpoints:
         model, meta = load_checkpoint(ck)
         training = meta.get("training", {})
-        for name, (X, y, wf) in data.items():
+        for name, (X, y, _, wf) in data.items():
             mean, _, lower = predict_all(model, X)
             for label, est in (("mean", mean), ("lower", lower)):
                 if est is None:

@@ -14,25 +14,40 @@ from estimators.features import with_filter_channels
 SPLITS = ("train", "val", "test", "shifted")
 
 
+def window_filter_mu(f: np.lib.npyio.NpzFile) -> np.ndarray:
+    """Friction the safety filter assumed per window [-] of an open collected ``.npz`` (NaN: no filter in
+    the loop; all NaN for collections without filter records)."""
+    if "filter_mu" not in f.files:
+        return np.full(len(f["y"]), np.nan)
+    return np.where(f["window_filtered"], f["filter_mu"][f["episode"]], np.nan)
+
+
+def load_windows(path: Path | str, filter_mu: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(X (N, 40, 36) float32, y (N,) friction [-], episode (N,) int, window_filtered (N,) bool) of a
+    collected ``.npz`` (any split). ``filter_mu``: X gets the 2 filter features per step (N, 40, 38)
+    (:func:`estimators.features.with_filter_channels`, from :func:`window_filter_mu`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"window set {path} not found (write one with `python -m estimators.collect`)")
+    with np.load(path) as f:
+        X, y = f["X"].astype(np.float32), f["y"].astype(np.float32)
+        # window sets written by hand may have no episode ids: each window is then its own episode
+        ep = f["episode"].astype(np.int64) if "episode" in f.files else np.arange(len(y))
+        wf = f["window_filtered"].astype(bool) if "window_filtered" in f.files else np.zeros(len(y), bool)
+        if filter_mu:
+            X = with_filter_channels(X, window_filter_mu(f))
+    return X, y, ep, wf
+
+
 def load_split(data_dir: Path | str, split: str, filter_mu: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(X (N, 40, 36) float32, y (N,) friction [-], episode (N,) int) of ``<data_dir>/<split>.npz``.
-    ``filter_mu``: X gets the 2 filter features per step (N, 40, 38), from the per-episode ``filter_mu`` the
-    collection saved (:func:`estimators.features.with_filter_channels`; collections without filter
-    records count as unfiltered)."""
+    """(X (N, 40, 36) float32, y (N,) friction [-], episode (N,) int) of ``<data_dir>/<split>.npz``;
+    ``filter_mu``: with the 2 filter features, (N, 40, 38) (:func:`load_windows`)."""
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
     path = Path(data_dir) / f"{split}.npz"
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found; run `python -m estimators.collect --out {data_dir}`")
-    with np.load(path) as f:
-        X, y, ep = f["X"].astype(np.float32), f["y"].astype(np.float32), f["episode"].astype(np.int64)
-        if not filter_mu:
-            return X, y, ep
-        if "filter_mu" in f.files:
-            mu_w = np.where(f["window_filtered"], f["filter_mu"][ep], np.nan)
-        else:
-            mu_w = np.full(len(y), np.nan)
-    return with_filter_channels(X, mu_w), y, ep
+    return load_windows(path, filter_mu)[:3]
 
 
 class WindowDataModule(L.LightningDataModule):

@@ -21,8 +21,8 @@ import numpy as np
 import torch
 
 from estimators.checkpoint import CHECKPOINT_DIR, checkpoint_paths, load_checkpoint
-from estimators.data import load_split
-from estimators.features import N_FEATURES, with_filter_channels
+from estimators.data import load_split, load_windows, window_filter_mu
+from estimators.features import with_filter_channels
 from estimators.metrics import regression_metrics
 from estimators.models import VARIANTS, FrictionModel, parameter_count
 from taslel_bench.machine import machine_info
@@ -100,8 +100,8 @@ def make_fixture(data_dir: Path, n: int = 64, seed: int = 123) -> None:
     wf = window_filtered(data_dir, "test")
     extra = {}
     if wf is not None:
-        mu_w = load_split(data_dir, "test", filter_mu=True)[0][idx, 0, N_FEATURES + 1]
-        extra = {"window_filtered": wf[idx], "filter_mu": np.where(wf[idx], mu_w, np.nan)}
+        with np.load(Path(data_dir) / "test.npz") as f:
+            extra = {"window_filtered": wf[idx], "filter_mu": window_filter_mu(f)[idx]}
     np.savez_compressed(FIXTURE, X=X[idx], y=y[idx], episode=ep[idx], **extra)
 
 
@@ -160,9 +160,7 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
     flags = {s: window_filtered(data_dir, s) for s in splits}
     splits_val = load_split(data_dir, "val", filter_mu=True)[:2]
     if bound_set is not None:
-        from estimators.compare import load_set
-
-        sel_set = load_set(Path(bound_set))[:2]
+        sel_set = load_windows(bound_set, filter_mu=True)[:2]
         BOUND_SELECTION.update(set=str(bound_set), rule="over-estimation <= 5 % on this set, lowest validation MAE")
     else:
         sel_set = splits_val
@@ -203,7 +201,8 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
             return np.maximum(b - spec[1] * sigma, 0.05)  # type: ignore[operator]
 
         mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
-        mean_sel, sigma_sel, lower_sel = predict_all(model, sel_set[0])
+        mean_sel, sigma_sel, lower_sel = (
+            (mean_val, sigma_val, lower_val) if sel_set is splits_val else predict_all(model, sel_set[0]))
         recorded["val_bounds"] = {}
         recorded["bound_selection"] = dict(BOUND_SELECTION)
         for label, spec in cand_spec.items():
