@@ -1,6 +1,9 @@
 """Shipped checkpoints: ``<name>.pt`` (a plain ``state_dict`` of tensors, loaded with
 ``torch.load(weights_only=True)`` — no arbitrary pickle) beside ``<name>.json`` (model config,
-normalisation statistics, training record and recorded metrics)."""
+normalisation statistics, training record and recorded metrics). An ensemble
+(:class:`estimators.models.EnsembleModel`) is one such pair too: its state dict holds every member
+(``members.<i>.*``), its JSON the shared config, ``"ensemble": {"members": n}`` and each member's
+normalisation and training record."""
 
 from __future__ import annotations
 
@@ -9,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from estimators.models import FrictionModel, ModelConfig, build_model
+from estimators.models import EnsembleModel, FrictionModel, ModelConfig, build_model
 
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
 
@@ -24,40 +27,45 @@ def checkpoint_paths(name_or_path: str | Path) -> tuple[Path, Path]:
     return p.with_suffix(".pt"), p.with_suffix(".json")
 
 
-def save_checkpoint(model: FrictionModel, path: str | Path, meta: dict[str, object] | None = None) -> Path:
-    """Write weights and metadata; returns the .pt path. ``meta`` is merged into the JSON."""
+def _normalisation(model: FrictionModel) -> dict[str, object]:
+    n = model.norm
+    return {"x_mean": n.x_mean.tolist(), "x_std": n.x_std.tolist(), "y_mean": float(n.y_mean),
+            "y_std": float(n.y_std), "log_var_offset": float(n.log_var_offset)}
+
+
+def save_checkpoint(model: FrictionModel | EnsembleModel, path: str | Path,
+                    meta: dict[str, object] | None = None) -> Path:
+    """Write weights and a new metadata JSON (``meta`` merged in); returns the .pt path."""
     pt, js = checkpoint_paths(path)
     pt.parent.mkdir(parents=True, exist_ok=True)
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     torch.save(state, pt)
-    n = model.norm
-    info: dict[str, object] = {
-        "model": model.cfg.to_dict(),
-        "normalisation": {
-            "x_mean": n.x_mean.tolist(),
-            "x_std": n.x_std.tolist(),
-            "y_mean": float(n.y_mean),
-            "y_std": float(n.y_std),
-            "log_var_offset": float(n.log_var_offset),
-        },
-    }
-    if js.is_file():  # keep metrics recorded earlier (evaluation) unless overwritten
-        old = json.loads(js.read_text())
-        info = {**old, **info}
-    info.update(meta or {})
+    info: dict[str, object] = {"model": model.cfg.to_dict()}
+    if isinstance(model, EnsembleModel):
+        info["ensemble"] = {"members": len(model.members), "log_var_offset": float(model.log_var_offset)}
+        info["normalisation"] = [_normalisation(m) for m in model.members]  # type: ignore[arg-type]
+    else:
+        info["normalisation"] = _normalisation(model)
+    info.update(meta or {})  # a fresh JSON: metrics recorded for earlier weights do not carry over
     js.write_text(json.dumps(info, indent=2))
     return pt
 
 
-def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel, dict[str, object]]:
-    """Model in eval mode and its metadata. Raises FileNotFoundError naming the shipped checkpoints."""
+def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel | EnsembleModel, dict[str, object]]:
+    """Model (or ensemble) in eval mode and its metadata. Raises FileNotFoundError naming the shipped
+    checkpoints."""
     pt, js = checkpoint_paths(name_or_path)
     if not (pt.is_file() and js.is_file()):
         shipped = sorted(p.stem for p in CHECKPOINT_DIR.glob("*.pt"))
         raise FileNotFoundError(f"checkpoint {pt} / {js} not found; shipped checkpoints: {shipped}")
     meta = json.loads(js.read_text())
-    model = build_model(ModelConfig(**meta["model"]))
     state = torch.load(pt, map_location="cpu", weights_only=True)
+    if "ensemble" in meta:
+        cfg = ModelConfig(**meta["model"])
+        ens = EnsembleModel([build_model(cfg) for _ in range(int(meta["ensemble"]["members"]))])
+        ens.load_state_dict(state)
+        return ens.eval(), meta
+    model = build_model(ModelConfig(**meta["model"]))
     state.setdefault("norm.log_var_offset", torch.tensor(0.0))  # checkpoints from before calibration
     model.load_state_dict(state)
     return model.eval(), meta

@@ -415,7 +415,10 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "`over`: over-estimation rate, estimate > truth + 0.05. `k`: the conservative bound "
         "max(0.05, mean - k sigma) that `LearnedEstimator(conservative_k=k)` reports. Latency: one window, "
         "batch 1, CPU, 1 torch thread, `torch.no_grad`, median of repeated calls after warm-up. Train wall / "
-        "CPU: Lightning `fit` wall-clock and process CPU time (the 2 cores were shared with other jobs). "
+        "CPU: Lightning `fit` wall-clock and process CPU time (the 2 cores were shared with other jobs); for a "
+        "seed ensemble (`members` in the training records, `python -m estimators.train ensemble=n`) the wall "
+        "time of all members trained side by side (one process and core each) and the sum of their CPU times, "
+        "and the latency is that of the whole ensemble. "
         "within 1σ / 2σ: fraction of |error of the mean| <= 1 / 2 predicted sigma (calibrated: 0.68 / 0.95).",
         "",
         *summary_table(df, names, ks, train_rec),
@@ -448,7 +451,7 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "## Training records",
         "",
         "```",
-        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "epochs", "global_steps",
+        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "members", "epochs", "global_steps",
                                               "best_val_mae", "variance_scale_fitted_on_val", "torch_threads",
                                               "note") if r.get(k) is not None}
                     for v, r in train_rec.items()}, indent=1),

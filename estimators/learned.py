@@ -12,7 +12,9 @@ With ``bound="quantile"`` (models trained with a lower-quantile head, ``model.lo
 after n x 0.03 s (the window right after a drop still holds high-friction samples, and an over-estimate
 lets the filter ask for more tangential force than the ground holds). A checkpoint trained with
 ``filter_mu_input`` also reads ``Proprioception.filter_mu`` (the friction the filter assumed on the tick
-that produced ``tau_joints``; NaN without a filter) into every sample.
+that produced ``tau_joints``; NaN without a filter) into every sample. A seed-ensemble checkpoint
+(:class:`estimators.models.EnsembleModel`) runs all its members on each window; ``sigma`` is then the
+ensemble's (members' variances plus their disagreement).
 """
 
 from __future__ import annotations

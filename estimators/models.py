@@ -192,17 +192,20 @@ class Normaliser(nn.Module):
 
 
 @torch.no_grad()
-def calibrate_variance(model: FrictionModel, x: torch.Tensor, y: torch.Tensor, batch: int = 512) -> float:
+def calibrate_variance(model: FrictionModel | EnsembleModel, x: torch.Tensor, y: torch.Tensor,
+                       batch: int = 512) -> float:
     """Scale the predicted variance so the Gaussian NLL on (x, y) is minimal (closed form:
-    s = mean((y - mean)^2 / var)); stores log s in the model and returns s (variance scale)."""
+    s = mean((y - mean)^2 / var)); stores log s in the model (a single model's ``norm.log_var_offset``, an
+    ensemble's own ``log_var_offset``) and returns s (variance scale)."""
     model.eval()
-    model.norm.log_var_offset.zero_()
+    offset = model.log_var_offset if isinstance(model, EnsembleModel) else model.norm.log_var_offset
+    offset.zero_()
     ratios = []
     for i in range(0, len(y), batch):
         mean, log_var = model(x[i : i + batch])
         ratios.append((y[i : i + batch] - mean) ** 2 * torch.exp(-log_var))
     s = float(torch.cat(ratios).mean())
-    model.norm.log_var_offset.fill_(math.log(max(s, 1e-6)))
+    offset.fill_(math.log(max(s, 1e-6)))
     return s
 
 
@@ -360,6 +363,47 @@ class TransformerModel(FrictionModel):
         h = self.ln(h)
         pooled = h[:, 0] if self.cls is not None else h.mean(1)
         return self.head(pooled)
+
+
+class EnsembleModel(nn.Module):
+    """A deep ensemble (Lakshminarayanan et al. 2017) of :class:`FrictionModel` members with one config,
+    trained from different seeds. ``predict`` has the members' signature and units: the mean of the member
+    means; the variance of the mixture, mean of the member variances plus the variance of the member means
+    (so disagreement between members, which grows off the training distribution, widens sigma), times
+    ``exp(log_var_offset)`` (fitted on validation data like a single model's, :func:`calibrate_variance`);
+    the lower quantile, the ensemble mean minus the members' mean (mean - lower) gap."""
+
+    def __init__(self, members: list[FrictionModel]) -> None:
+        super().__init__()
+        if len(members) < 2:
+            raise ValueError(f"an ensemble needs at least 2 members, got {len(members)}")
+        cfgs = {_config_key(m.cfg) for m in members}
+        if len(cfgs) != 1:
+            raise ValueError("ensemble members must share one ModelConfig (they differ only in training seed)")
+        self.cfg = members[0].cfg
+        self.members = nn.ModuleList(members)
+        self.register_buffer("log_var_offset", torch.tensor(0.0))
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mean, log_var, _ = self.predict(x)
+        return mean, log_var
+
+    def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        outs = [m.predict(x) for m in self.members]
+        means = torch.stack([o[0] for o in outs])  # (M, B)
+        var = torch.stack([torch.exp(o[1]) for o in outs]).mean(0) + means.var(0, unbiased=False)
+        mean = means.mean(0)
+        log_var = torch.log(var.clamp_min(1e-12)) + self.log_var_offset
+        lower = None
+        if outs[0][2] is not None:
+            gap = torch.stack([o[0] - o[2] for o in outs]).mean(0)  # type: ignore[operator]
+            lower = mean - gap
+        return mean, log_var, lower
+
+
+def _config_key(cfg: ModelConfig) -> str:
+    """A hashable, order-independent key of a config (for comparing members)."""
+    return repr(sorted(cfg.to_dict().items()))
 
 
 def build_model(cfg: ModelConfig) -> FrictionModel:

@@ -5,12 +5,21 @@ Overrides are OmegaConf dot-list entries on :data:`DEFAULTS` (merged with the va
 The run folder (Lightning checkpoints, CSV log) is ``<runs_dir>/<estimator>``; the best model (lowest
 validation MAE) is exported to ``estimators/checkpoints/<estimator>.pt/.json`` with the training record
 (wall-clock training time, epochs, steps, best validation MAE, threads, versions).
+
+With ``ensemble=n`` (n >= 2) the command trains n members side by side, each in its own process with
+``threads // n`` threads and training seed ``seed + i`` (the same data, config and ``trainer.max_minutes``),
+so the variant's wall-clock training time stays that budget; member 0 prints its progress, the others log
+to ``<runs_dir>/<name>/member<i>.log``. The members are exported to ``<runs_dir>/<name>/members/``; the
+ensemble (:class:`estimators.models.EnsembleModel`, its variance calibrated on the validation split) is
+exported as one checkpoint with the members' training records and the wall time of the whole.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -21,11 +30,12 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint, TQDMProg
 from lightning.pytorch.loggers import CSVLogger
 from omegaconf import DictConfig, OmegaConf
 
-from estimators.checkpoint import CHECKPOINT_DIR, save_checkpoint
-from estimators.data import WindowDataModule
+from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint, save_checkpoint
+from estimators.data import WindowDataModule, load_split
 from estimators.features import N_FEATURES
 from estimators.models import (
     VARIANTS,
+    EnsembleModel,
     FrictionModel,
     ModelConfig,
     build_model,
@@ -45,6 +55,8 @@ DEFAULTS: dict[str, object] = {
     "name": None,  # default: the estimator name
     "seed": 0,
     "threads": 2,
+    "ensemble": 1,  # >= 2: that many members trained side by side (seeds seed..seed+n-1), exported as one
+    "member_of": None,  # set by the ensemble parent for its members: always export (fast_dev_run included)
     "batch_size": 128,
     "lr": 1e-3,
     "weight_decay": 1e-4,
@@ -226,7 +238,7 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
         "versions": {"torch": torch.__version__, "lightning": L.__version__},
         "train_config": OmegaConf.to_container(cfg),
     }
-    if bool(cfg.export) and not bool(tcfg.fast_dev_run):
+    if cfg.member_of is not None or (bool(cfg.export) and not bool(tcfg.fast_dev_run)):
         task.model.eval()
         export_dir = Path(cfg.export_dir) if cfg.export_dir else CHECKPOINT_DIR
         out = save_checkpoint(task.model, export_dir / str(cfg.name or cfg.estimator), {"training": record})
@@ -234,10 +246,84 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     return task, record
 
 
+def member_overrides(cfg: DictConfig, i: int, members_dir: Path) -> list[str]:
+    """Dot-list of ensemble member ``i``: the parent's config with one member, seed ``seed + i``, its share
+    of the threads, exported to ``members_dir`` as ``<name>_m<i>``."""
+    name = str(cfg.name or cfg.estimator)
+    flat = OmegaConf.to_container(cfg)
+    assert isinstance(flat, dict)
+    flat.update(ensemble=1, seed=int(cfg.seed) + i, threads=max(1, int(cfg.threads) // int(cfg.ensemble)),
+                name=f"{name}_m{i}", export_dir=str(members_dir), member_of=name, runs_dir=str(members_dir.parent))
+    return [f"{k}={json.dumps(v) if not isinstance(v, str) else v}" for k, v in _dotted(flat)]
+
+
+def _dotted(d: dict[str, object], prefix: str = "") -> list[tuple[str, object]]:
+    out: list[tuple[str, object]] = []
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            out += _dotted(v, f"{prefix}{k}.")
+        elif not (isinstance(v, dict) or v is None):
+            out.append((f"{prefix}{k}", v))
+    return out
+
+
+def train_ensemble(cfg: DictConfig) -> tuple[EnsembleModel, dict[str, object]]:
+    """Train ``cfg.ensemble`` members side by side (one process each), combine, calibrate on the validation
+    split, export (if ``cfg.export``); returns (ensemble, record). A failed member raises, naming its log."""
+    n = int(cfg.ensemble)
+    name = str(cfg.name or cfg.estimator)
+    run_dir = Path(cfg.runs_dir) / name
+    members_dir = run_dir / "members"
+    members_dir.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    procs, logs = [], []
+    t0 = time.perf_counter()
+    for i in range(n):
+        cmd = [sys.executable, "-m", "estimators.train", *member_overrides(cfg, i, members_dir)]
+        log = run_dir / f"member{i}.log"
+        logs.append(log)
+        out = None if i == 0 else log.open("w")
+        procs.append(subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env))
+        print(f"ensemble member {i}: seed {int(cfg.seed) + i}" + ("" if i == 0 else f", log {log}"))
+    codes = [p.wait() for p in procs]
+    wall = time.perf_counter() - t0
+    bad = [i for i, c in enumerate(codes) if c != 0]
+    if bad:
+        raise RuntimeError(f"ensemble members {bad} failed (exit codes {[codes[i] for i in bad]}); "
+                           f"logs: {[str(logs[i]) for i in bad if i > 0] or 'above'}")
+    loaded = [load_checkpoint(members_dir / f"{name}_m{i}") for i in range(n)]
+    ens = EnsembleModel([m for m, _ in loaded]).eval()  # type: ignore[misc]
+    fast = bool(cfg.trainer.fast_dev_run)
+    x_val, y_val, _ = load_split(cfg.data_dir, "val", bool(cfg.model.get("filter_mu_input", False)))
+    torch.set_num_threads(int(cfg.threads))
+    var_scale = calibrate_variance(ens, torch.from_numpy(x_val), torch.from_numpy(y_val)) if not fast else 1.0
+    recs = [meta["training"] for _, meta in loaded]
+    record: dict[str, object] = {
+        "train_wall_time_s": round(wall, 2),  # all members, side by side, from the first start to the last end
+        "train_cpu_time_s": round(sum(float(r["train_cpu_time_s"]) for r in recs), 2),
+        "members": n,
+        "epochs": [r["epochs"] for r in recs],
+        "best_val_mae": [r["best_val_mae"] for r in recs],
+        "train_windows": recs[0]["train_windows"],
+        "variance_scale_fitted_on_val": var_scale,
+        "parameters": parameter_count(ens),
+        "torch_threads": int(cfg.threads),
+        "member_records": recs,
+        "versions": {"torch": torch.__version__, "lightning": L.__version__},
+        "train_config": OmegaConf.to_container(cfg),
+    }
+    if bool(cfg.export) and not fast:
+        export_dir = Path(cfg.export_dir) if cfg.export_dir else CHECKPOINT_DIR
+        print(f"exported {save_checkpoint(ens, export_dir / name, {'training': record})}")
+    return ens, record
+
+
 def main(argv: list[str] | None = None) -> None:
     cfg = make_config(sys.argv[1:] if argv is None else argv)
     print(OmegaConf.to_yaml(cfg))
-    _, record = train(cfg)
+    if int(cfg.ensemble) < 1:
+        raise ValueError(f"ensemble must be >= 1 (members), got {cfg.ensemble!r}")
+    _, record = train_ensemble(cfg) if int(cfg.ensemble) > 1 else train(cfg)
     print(json.dumps({k: v for k, v in record.items() if k != "train_config"}, indent=2))
 
 

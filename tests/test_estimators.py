@@ -229,6 +229,85 @@ def test_checkpoint_round_trip(tmp_path: Path) -> None:
         load_checkpoint(tmp_path / "missing")
 
 
+def test_ensemble_combines_members_and_round_trips(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    from estimators.checkpoint import load_checkpoint, save_checkpoint
+    from estimators.learned import LearnedEstimator
+    from estimators.models import EnsembleModel, ModelConfig, build_model, calibrate_variance
+
+    cfg = ModelConfig(variant="attention", tokens="step", d_model=16, lower_quantile=0.1)
+    X, y = _tiny_data(24, 5)
+    x = torch.from_numpy(X)
+    members = []
+    for seed in (0, 1, 2):
+        torch.manual_seed(seed)
+        m = build_model(cfg).eval()
+        m.norm.fit(x, torch.from_numpy(y))
+        members.append(m)
+    ens = EnsembleModel(members).eval()
+    with torch.no_grad():
+        outs = [m.predict(x) for m in members]
+        mean, log_var, lower = ens.predict(x)
+    # mixture of Gaussians: mean of means; variance = mean of variances + population variance of the means
+    means = np.stack([o[0].numpy() for o in outs])
+    var = np.stack([np.exp(o[1].numpy()) for o in outs]).mean(0) + means.var(0)
+    np.testing.assert_allclose(mean.numpy(), means.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(np.exp(log_var.numpy()), var, rtol=1e-4)
+    gaps = np.stack([(o[0] - o[2]).numpy() for o in outs]).mean(0)
+    np.testing.assert_allclose(lower.numpy(), means.mean(0) - gaps, rtol=1e-5, atol=1e-6)
+    # calibration scales the ensemble's variance only
+    s = calibrate_variance(ens, x, torch.from_numpy(y))
+    with torch.no_grad():
+        np.testing.assert_allclose(np.exp(ens.predict(x)[1].numpy()), s * var, rtol=1e-4)
+    save_checkpoint(ens, tmp_path / "ens", {"training": {"members": 3}})
+    loaded, meta = load_checkpoint(tmp_path / "ens")
+    assert isinstance(loaded, EnsembleModel) and meta["ensemble"]["members"] == 3
+    assert len(meta["normalisation"]) == 3
+    with torch.no_grad():
+        for a, b in zip(ens.predict(x), loaded.predict(x)):
+            torch.testing.assert_close(a, b)
+    est = LearnedEstimator("attention", checkpoint=tmp_path / "ens", prior_mu=0.5, conservative_k=1.0)
+    for i in range(WINDOW_STEPS):
+        e = est.step(_obs(i * WINDOW_DT_S))
+    assert e.ready and e.sigma > 0
+    # a single model saved over an ensemble's file leaves no ensemble record behind
+    save_checkpoint(members[0], tmp_path / "ens")
+    assert not isinstance(load_checkpoint(tmp_path / "ens")[0], EnsembleModel)
+    with pytest.raises(ValueError, match="at least 2"):
+        EnsembleModel(members[:1])
+    with pytest.raises(ValueError, match="share one ModelConfig"):
+        EnsembleModel([members[0], build_model(ModelConfig(variant="attention", tokens="step", d_model=8))])
+
+
+def test_ensemble_training_runs_members_side_by_side(tmp_path: Path) -> None:
+    pytest.importorskip("lightning")
+    from estimators.models import EnsembleModel
+    from estimators.train import make_config, member_overrides, train_ensemble
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for i, split in enumerate(("train", "val", "test")):
+        X, y = _tiny_data(32, i)
+        np.savez(data / f"{split}.npz", X=X, y=y, episode=np.arange(len(y)))
+    cfg = make_config(["estimator=mlp", f"runs_dir={tmp_path / 'runs'}", f"data_dir={data}", "ensemble=2",
+                       "trainer.fast_dev_run=true", "model.mlp_hidden=[8]", "threads=2", "name=ens",
+                       "augment.tau_scale=[0.8,1.25]"])
+    over = member_overrides(cfg, 1, tmp_path / "runs" / "ens" / "members")
+    assert "seed=1" in over and "threads=1" in over and "ensemble=1" in over and "name=ens_m1" in over
+    assert make_config(over).augment.tau_scale == [0.8, 1.25]  # lists survive the round trip
+    ens, record = train_ensemble(cfg)
+    assert isinstance(ens, EnsembleModel) and len(ens.members) == 2
+    assert record["members"] == 2 and record["epochs"] == [1, 1]
+    assert record["train_wall_time_s"] > 0 and len(record["member_records"]) == 2
+    # members differ (different seeds), so the ensemble has a spread
+    w0, w1 = (next(m.parameters()).detach() for m in ens.members)
+    assert not np.allclose(w0.numpy(), w1.numpy())
+    bad = make_config(["estimator=mlp", f"runs_dir={tmp_path / 'runs'}", f"data_dir={tmp_path / 'nowhere'}",
+                       "ensemble=2", "trainer.fast_dev_run=true", "model.mlp_hidden=[8]", "name=bad"])
+    with pytest.raises(RuntimeError, match="members \\[0, 1\\] failed"):
+        train_ensemble(bad)
+
+
 def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
     pytest.importorskip("torch")
     from estimators.checkpoint import save_checkpoint
