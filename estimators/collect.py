@@ -130,8 +130,8 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
 
-    n_steps = int(round(cfg.duration_s / cfg.timestep_s))
-    every = int(round(WINDOW_DT_S / cfg.timestep_s))
+    n_steps = round(cfg.duration_s / cfg.timestep_s)
+    every = round(WINDOW_DT_S / cfg.timestep_s)
     samples: list[np.ndarray] = []
     fall_t = float("nan")
     tau_prev = np.zeros(robot.N_JOINTS)  # [N·m] torque commanded on the previous tick (0 at t = 0)

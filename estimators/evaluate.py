@@ -382,35 +382,35 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "",
         "## Data",
         "",
-        f"- Collection (`python -m estimators.collect`): {manifest['env_steps']:,} env steps in "
+        (f"- Collection (`python -m estimators.collect`): {manifest['env_steps']:,} env steps in "
         f"{manifest['wall_time_s']:.0f} s with {manifest['workers']} processes = "
         f"**{manifest['env_steps_per_s']:,.0f} env-steps/s** (paper: 100,000 steps/s, Isaac Gym, 4096 A1s, "
         f"RTX 3080) — one env step = one 1 ms MuJoCo step plus the Python nominal controller (and, in "
-        "filtered episodes, the ID-CBF-QP safety filter).",
+        "filtered episodes, the ID-CBF-QP safety filter)."),
         "- Splits by episode: " + ", ".join(
             f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell"
             + (f"; {i['episodes_filtered']} episodes with the safety filter in the loop" if "episodes_filtered" in i else "")
             + ")"
             for s, i in manifest["splits"].items()) + ".",
-        *([f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
+        *([(f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
            f"(ID-CBF-QP through `taslel_bench.api`, the filter's mu = true floor friction x "
            f"U({manifest.get('filter_mu_scale', [1, 1])[0]:g}, {manifest.get('filter_mu_scale', [1, 1])[1]:g}) per episode, "
            "features hold the filtered torque); "
            f"per worker: nominal episodes {manifest['env_steps_per_s_per_worker']['nominal'] or 0:,.0f} env-steps/s, "
            f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
-           "`test[nominal]` / `test[filtered]` split the test windows by how they were collected."]
+           "`test[nominal]` / `test[filtered]` split the test windows by how they were collected.")]
           if manifest.get("filter_fraction") else []),
         *([ "- Training split = " + " + ".join(_source_text(src) for src in manifest["sources"])
             + "; val / test / shifted: the first collection, uniform draws."] if "sources" in manifest else []),
         f"- Training ranges: `{json.dumps(manifest['train_ranges'])}`",
-        f"- Shifted ranges (outside training in every plant quantity): `{json.dumps(manifest['shifted_ranges'])}`"
-        " (CoM shift: magnitude, random sign).",
-        f"- Constant predictor (training mean) MAE: test {base.get('test', float('nan')):.3f}, "
-        f"shifted {base.get('shifted', float('nan')):.3f}.",
+        (f"- Shifted ranges (outside training in every plant quantity): `{json.dumps(manifest['shifted_ranges'])}`"
+        " (CoM shift: magnitude, random sign)."),
+        (f"- Constant predictor (training mean) MAE: test {base.get('test', float('nan')):.3f}, "
+        f"shifted {base.get('shifted', float('nan')):.3f}."),
         "",
         "## Summary",
         "",
-        f"Bound chosen on validation data: {BOUND_SELECTION.get('rule', '')}, on {BOUND_SELECTION.get('set', '')} "
+        (f"Bound chosen on validation data: {BOUND_SELECTION.get('rule', '')}, on {BOUND_SELECTION.get('set', '')} "
         "(columns `k for ≤5 % over on val` and `bound chosen on val` use it; the configs deploy it). "
         "`over`: over-estimation rate, estimate > truth + 0.05. `k`: the conservative bound "
         "max(0.05, mean - k sigma) that `LearnedEstimator(conservative_k=k)` reports. Latency: one window, "
@@ -419,7 +419,7 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "seed ensemble (`members` in the training records, `python -m estimators.train ensemble=n`) the wall "
         "time of all members trained side by side (one process and core each) and the sum of their CPU times, "
         "and the latency is that of the whole ensemble. "
-        "within 1σ / 2σ: fraction of |error of the mean| <= 1 / 2 predicted sigma (calibrated: 0.68 / 0.95).",
+        "within 1σ / 2σ: fraction of |error of the mean| <= 1 / 2 predicted sigma (calibrated: 0.68 / 0.95)."),
         "",
         *summary_table(df, names, ks, train_rec),
         "",
@@ -430,17 +430,17 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "",
         "## Nominal-controller vs filter-in-the-loop windows",
         "",
-        "The same metrics on the windows of episodes collected under the nominal controller only and of "
+        ("The same metrics on the windows of episodes collected under the nominal controller only and of "
         "episodes with the safety filter in the loop (`test[nominal]`, `test[filtered]`, ...), for the raw "
-        "mean and the lower-quantile head (where the model has one).",
+        "mean and the lower-quantile head (where the model has one)."),
         "",
         *subset_table(df, names),
         "",
         "## Conservative bound trade-off",
         "",
-        "Estimate max(0.05, mean - k sigma) for several k (`k_tradeoff.csv`): MAE and over-estimation rate on "
+        ("Estimate max(0.05, mean - k sigma) for several k (`k_tradeoff.csv`): MAE and over-estimation rate on "
         "the in-distribution test set and the shifted set. k is a deployment choice; the configs use "
-        "`conservative_k` from `conf/estimator/<variant>.yaml`.",
+        "`conservative_k` from `conf/estimator/<variant>.yaml`."),
         "",
         k_table,
         "",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 OVERESTIMATE_MARGIN = 0.05  # [-] an estimate above truth + this margin counts as an over-estimate
@@ -22,7 +24,7 @@ def regression_metrics(y: np.ndarray, mu_hat: np.ndarray, sigma: np.ndarray | No
         "bias": float(err.mean()),
         "overestimate_rate": float((err > OVERESTIMATE_MARGIN).mean()),
     }
-    for lo, hi in zip(FRICTION_BINS[:-1], FRICTION_BINS[1:]):
+    for lo, hi in itertools.pairwise(FRICTION_BINS):
         sel = (y >= lo) & (y < hi)
         out[f"mae_bin_{lo:.1f}_{min(hi, 1.2):.1f}"] = float(np.abs(err[sel]).mean()) if sel.any() else float("nan")
     if sigma is not None:

@@ -112,12 +112,12 @@ def main(argv: list[str] | None = None) -> None:
         info = machine_info()
         lines = [
             "# Control-tick cost\n",
-            f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
-            f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n",
-            f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
+            (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
+            f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n"),
+            (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
             f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
-            f"Packages: {info['packages']}\n",
-            "Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
+            f"Packages: {info['packages']}\n"),
+            ("Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
             "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
             "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "
             "fall checks). In the loop = median of each part of the tick timed inside the episode "
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
             "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
             "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
             "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
-            "Other processes on the machine inflate all numbers alike.\n",
+            "Other processes on the machine inflate all numbers alike.\n"),
             "| " + " | ".join(cols) + " |",
             "|" + "---|" * len(cols),
         ]

@@ -50,7 +50,7 @@ class NominalController:
         self._cache_list: list[float] = []
         # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
         n_period = gait.period_s / fd_dt_s
-        self._period_ticks = int(round(n_period)) if abs(n_period - round(n_period)) < 1e-9 else 0
+        self._period_ticks = round(n_period) if abs(n_period - round(n_period)) < 1e-9 else 0
         self._table = np.zeros((max(self._period_ticks, 1), 2, robot.N_JOINTS))
         self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
         self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)

@@ -81,8 +81,8 @@ class Episode:
         self.rng = rng
         self.stance_from_contact = stance_from_contact
         self.contacts = plant.FootContactReader(mj_model)
-        self.physics_per_tick = int(round(settings.control_dt_s / settings.physics_dt_s))
-        self.n_ticks = int(round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s))
+        self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
+        self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         self.trunk_body = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         # --- QP recording hook (record.qps, taslel_bench.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
@@ -205,7 +205,7 @@ class Episode:
                     break
                 if progress is not None and k % 500 == 0:
                     progress(t)
-        except Exception as exc:  # a fault in one run is recorded, never crashes the sweep
+        except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
             res.status = "error"
             res.message = f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()

@@ -59,7 +59,7 @@ def _write(path: Path, tr: EpisodeTrace, events: list[dict], summary: dict) -> N
             ch[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
 
         def put(topic: str, t_s: float, msg: dict) -> None:
-            ns = int(round(t_s * 1e9))
+            ns = round(t_s * 1e9)
             w.add_message(ch[topic], log_time=ns, publish_time=ns, data=json.dumps(msg).encode())
 
         n = tr.n

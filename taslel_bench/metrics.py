@@ -52,7 +52,7 @@ def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[st
     """Distance = world-x displacement of the trunk origin from the start of walking to the last tick;
     mean speed = that distance / walking time; drift = |y| displacement; yaw change in degrees."""
     tr, n = res.trace, res.trace.n
-    k0 = min(int(round(stand_s / dt)), max(n - 1, 0))
+    k0 = min(round(stand_s / dt), max(n - 1, 0))
     if n == 0:
         return {"distance_m": math.nan, "mean_speed_mps": math.nan, "lateral_drift_m": math.nan}
     walk_time = (n - 1 - k0) * dt

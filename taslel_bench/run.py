@@ -203,14 +203,14 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
             from taslel_bench.mcap_log import write_episode_mcap
 
             write_episode_mcap(out_dir / "episode.mcap", res.trace, events, summary)
-        except Exception:  # recording must not lose the run: note it and keep the other files
+        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
             mcap_error = traceback.format_exc()
             summary["mcap_error"] = mcap_error.strip().splitlines()[-1]
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.qpset)
         try:
             qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.run"})
             summary["qps_recorded"] = len(qp_recorder)
-        except Exception:  # recording must not lose the run
+        except Exception:  # noqa: BLE001 - recording must not lose the run
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
     recording.write_parquet(out_dir / recording.STEPS, res.trace.to_frame(dt))
     recording.write_json(out_dir / recording.EVENTS, events)
@@ -250,4 +250,4 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
     return summary
 
 
-__all__ = ["run", "Built", "ConfigError", "FrictionMismatch", "check_friction"]
+__all__ = ["Built", "ConfigError", "FrictionMismatch", "check_friction", "run"]

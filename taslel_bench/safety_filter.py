@@ -231,7 +231,7 @@ class SafetyFilter:
                 sol = self.backend.solve(self.condensed)
             else:
                 sol = QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
-        except Exception as exc:  # a backend bug must not end the episode: record it
+        except Exception as exc:  # noqa: BLE001 - a backend bug must not end the episode: record it
             sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
         if sol.ok:
             u, lam, vdot = np.empty(robot.N_JOINTS), np.empty(NL), np.empty(NV)

@@ -191,7 +191,7 @@ def test_lower_quantile_head_and_time_cosine_schedule(tmp_path: Path) -> None:
     for variant in ("mlp", "linformer"):
         model = build_model(ModelConfig(variant=variant, tokens="step", d_model=16, linformer_k=8,
                                         mlp_hidden=[8], lower_quantile=0.1))
-        mean, log_var, lower = model.predict(torch.randn(4, 40, 36))
+        mean, _log_var, lower = model.predict(torch.randn(4, 40, 36))
         assert lower is not None and lower.shape == (4,) and (lower <= mean).all()
         assert model(torch.randn(4, 40, 36))[0].shape == (4,)
     assert build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).predict(torch.randn(2, 40, 36))[2] is None
@@ -319,7 +319,7 @@ def test_learned_estimator_prior_then_estimates(tmp_path: Path) -> None:
     assert isinstance(est, Estimator)
     rng = np.random.default_rng(0)
     dt = 0.001
-    ticks_to_full = int(round((WINDOW_STEPS - 1) * WINDOW_DT_S / dt))  # the 40th sample is at t = 1.17 s
+    ticks_to_full = round((WINDOW_STEPS - 1) * WINDOW_DT_S / dt)  # the 40th sample is at t = 1.17 s
     outs = [est.step(_obs(k * dt, rng=rng)) for k in range(ticks_to_full + 100)]
     assert all(o.mu == 0.33 and not o.ready for o in outs[:ticks_to_full])
     last = outs[-1]

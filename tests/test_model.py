@@ -129,7 +129,7 @@ def test_foot_velocity_matches_mujoco(setup):
 
 
 def test_bridge_round_trip(setup):
-    m, d, br, pm = setup
+    m, _d, br, pm = setup
     rng = np.random.default_rng(3)
     q, v = random_state(pm, rng)
     qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
@@ -164,7 +164,7 @@ def test_leg_ik_inverts_fk_and_matches_pinocchio(setup):
 
 
 def test_plant_limits_and_friction(setup):
-    m, d, br, _ = setup
+    m, _d, _br, _ = setup
     assert np.allclose(m.actuator_ctrlrange, [[-33.5, 33.5]] * 12)
     assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
     spec = plant.a1_spec(plant.PlantOptions(floor_friction=0.3, timestep_s=0.002))
