@@ -377,8 +377,7 @@ class EnsembleModel(nn.Module):
         super().__init__()
         if len(members) < 2:
             raise ValueError(f"an ensemble needs at least 2 members, got {len(members)}")
-        cfgs = {_config_key(m.cfg) for m in members}
-        if len(cfgs) != 1:
+        if any(m.cfg != members[0].cfg for m in members[1:]):
             raise ValueError("ensemble members must share one ModelConfig (they differ only in training seed)")
         self.cfg = members[0].cfg
         self.members = nn.ModuleList(members)
@@ -399,11 +398,6 @@ class EnsembleModel(nn.Module):
             gap = torch.stack([o[0] - o[2] for o in outs]).mean(0)  # type: ignore[operator]
             lower = mean - gap
         return mean, log_var, lower
-
-
-def _config_key(cfg: ModelConfig) -> str:
-    """A hashable, order-independent key of a config (for comparing members)."""
-    return repr(sorted(cfg.to_dict().items()))
 
 
 def build_model(cfg: ModelConfig) -> FrictionModel:
