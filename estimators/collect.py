@@ -33,7 +33,7 @@ import multiprocessing as mp
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -200,6 +200,7 @@ def collect(
     filter_mu_range: tuple[float, float] | None = None,
     plant_beta: float = 1.0,
     shift_factors: tuple[str, ...] = PLANT_FACTORS,
+    friction_range: tuple[float, float] | None = None,
 ) -> dict[str, object]:
     """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
@@ -210,7 +211,9 @@ def collect(
     ``plant_beta``: shape of the plant-factor draws of the train / val / test splits
     (:func:`estimators.randomisation.draw`; the shifted split is always uniform); ``shift_factors``: the
     plant factors the shifted split moves outside the training ranges (default all,
-    :func:`estimators.randomisation.shifted_ranges`)."""
+    :func:`estimators.randomisation.shifted_ranges`); ``friction_range`` (lo, hi) [-]: draw the floor friction
+    of every split from U(lo, hi) instead of the training range (e.g. low-friction evaluation sets; the same
+    random stream, so only the friction values change)."""
     if not 0.0 <= filter_fraction <= 1.0:
         raise ValueError(f"filter_fraction must be in [0, 1], got {filter_fraction!r}")
     lo_s, hi_s = (float(v) for v in filter_mu_scale)
@@ -226,6 +229,13 @@ def collect(
     if bad := set(counts) - valid:
         raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
     shifted_r = shifted_ranges(tuple(shift_factors))
+    train_r = TRAIN_RANGES
+    if friction_range is not None:
+        lo_f, hi_f = (float(v) for v in friction_range)
+        if not 0.0 < lo_f <= hi_f:
+            raise ValueError(f"friction_range must be (lo, hi) with 0 < lo <= hi, got {friction_range!r}")
+        train_r = replace(TRAIN_RANGES, friction=(lo_f, hi_f))
+        shifted_r = replace(shifted_r, friction=(lo_f, hi_f))
     out_dir.mkdir(parents=True, exist_ok=True)
     root = np.random.SeedSequence(seed)
     jobs: list[tuple[str, EpisodeParams, bool, float]] = []  # (split, plant, filtered, filter mu [-])
@@ -235,7 +245,7 @@ def collect(
             rng = np.random.default_rng(ep_ss)
             ep_seed = int(ep_ss.generate_state(1)[0])
             shifted = split == "shifted"
-            p = draw(rng, shifted_r if shifted else TRAIN_RANGES, ep_seed, symmetric_com=not shifted,
+            p = draw(rng, shifted_r if shifted else train_r, ep_seed, symmetric_com=not shifted,
                      plant_beta=1.0 if shifted else plant_beta)
             # separate stream: the plant draws of a seed are the same for every filter_fraction
             filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
@@ -278,7 +288,7 @@ def collect(
         "episode_config": asdict(cfg),
         "window": {"steps": WINDOW_STEPS, "dt_s": WINDOW_DT_S, "features": N_FEATURES,
                    "layout": "q[12] rad, qdot[12] rad/s, tau_cmd[12] N·m; legs FL,FR,RL,RR x hip,thigh,calf"},
-        "train_ranges": ranges_dict(TRAIN_RANGES),
+        "train_ranges": ranges_dict(train_r),
         "shifted_ranges": ranges_dict(shifted_r),
         "shift_factors": list(shift_factors),
         "shifted_note": "com_shift_xy_m is a magnitude range with random sign in the shifted set",
@@ -291,6 +301,7 @@ def collect(
         "filter_overrides": list(cfg.filter_overrides),
         "filter_mu_scale": None if filter_mu_range is not None else [lo_s, hi_s],
         "filter_mu_range": None if filter_mu_range is None else [lo_r, hi_r],
+        "friction_range": None if friction_range is None else [lo_f, hi_f],  # None: the training range
         "plant_beta": plant_beta,  # plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform)
         "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
                        "floor friction x U(filter_mu_scale), or U(filter_mu_range) independent of the true "
@@ -364,6 +375,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--shift-factors", nargs="+", default=list(PLANT_FACTORS), choices=PLANT_FACTORS,
                     metavar="FACTOR", help="plant factors the shifted split moves outside the training ranges "
                     f"(default all: {' '.join(PLANT_FACTORS)})")
+    ap.add_argument("--friction-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="floor friction ~ U(LO, HI) in every split instead of the training range (evaluation sets)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
     a = ap.parse_args(argv)
@@ -373,7 +386,8 @@ def main(argv: list[str] | None = None) -> None:
                   filter_mu_scale=tuple(a.filter_mu_scale),
                   filter_mu_range=None if a.filter_mu_range is None else tuple(a.filter_mu_range),
                   plant_beta=a.plant_beta,
-                  shift_factors=tuple(a.shift_factors))
+                  shift_factors=tuple(a.shift_factors),
+                  friction_range=None if a.friction_range is None else tuple(a.friction_range))
     rate = man["env_steps_per_s"]
     print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "

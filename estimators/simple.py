@@ -20,12 +20,16 @@ class OracleEstimator:
         return FrictionEstimate(mu=float(obs.true_friction), sigma=0.0, ready=True)
 
 
+SAFE_FLOOR_MU = 0.2  # [-] lowest floor friction the deployment must handle (the filtered trot falls below it)
+
+
 class FixedEstimator:
-    """Always returns the same friction coefficient ``mu`` [-] (the filter without terrain awareness)."""
+    """Always returns the same friction coefficient ``mu`` [-] (the filter without terrain awareness); by
+    default the safe floor :data:`SAFE_FLOOR_MU`, which never over-estimates a floor the deployment handles."""
 
     name = "fixed"
 
-    def __init__(self, mu: float = 0.5) -> None:
+    def __init__(self, mu: float = SAFE_FLOOR_MU) -> None:
         if not (math.isfinite(mu) and mu > 0.0):
             raise ValueError(f"FixedEstimator mu must be a positive finite number, got {mu!r}")
         self.mu = float(mu)

@@ -183,6 +183,7 @@ class Episode:
                 t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
                 trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s,
                              ecbf)
+                trace.mu_hat_ready[k] = est.ready
                 # --- termination checks (plant state after the tick) ---
                 # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
                 vel_sq, pos_sq = float(qvel @ qvel), float(qpos @ qpos)

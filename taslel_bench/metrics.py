@@ -152,6 +152,7 @@ def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
         "estimator_overestimate_rate": float(np.mean(err > 0.05)),
     }
     out["estimator_settle_s"] = settle_time(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n])
+    out.update(estimator_safety_metrics(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n], tr.mu_hat_ready[:n]))
     return out
 
 
@@ -173,3 +174,67 @@ def settle_time(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: fl
     if last_out == len(outside) - 1:
         return math.inf
     return float(t[k0 + last_out + 1] - t[k0])
+
+
+LOW_FRICTION = 0.5  # [-] the one-sided over-estimation target conditions on mu below this
+USEFUL_CAP, USEFUL_SLACK = 0.5, 0.1  # [-] useful tick: mu_hat >= min(mu, USEFUL_CAP) - USEFUL_SLACK
+CAPPED_MAE_CAP = 0.6  # [-] capped MAE: estimate and truth capped here
+
+
+def estimator_safety_metrics(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray,
+                             ready: np.ndarray) -> dict[str, float]:
+    """One-sided estimator metrics over control ticks (issue 19); over = mu_hat > mu + 0.05.
+
+    * ``estimator_low_overestimate_rate``: over-estimation over the ticks with mu < 0.5 (every tick, the
+      startup window and friction drops included; nan without such ticks);
+    * ``estimator_startup_s``: time until the estimator first reports ``ready`` (its window is full; 0 for
+      estimators that are always ready); ``estimator_startup_overestimate_rate``: over-estimation in that
+      window (nan if empty);
+    * ``estimator_ready_overestimate_rate``: over-estimation after it;
+    * ``estimator_useful_rate``: fraction of ticks after the startup window with
+      mu_hat >= min(mu, 0.5) - 0.1 (the gait is not starved); ``estimator_capped_mae``: mean
+      |min(mu_hat, 0.6) - min(mu, 0.6)| over the same ticks;
+    * ``estimator_notready_after_startup_s``: time the estimator reported not ready after the startup window
+      (e.g. reset to its prior by a change detector);
+    * ``estimator_time_to_safe_s``: :func:`time_to_safe` after the first friction drop."""
+    n = len(t)
+    if n == 0:
+        return {}
+    over = mu_hat > mu_true + SETTLE_BAND
+    low = mu_true < LOW_FRICTION
+    first_ready = int(np.argmax(ready)) if ready.any() else n
+    dt = float(t[1] - t[0]) if n > 1 else 0.0
+    after = slice(first_ready, n)
+    out = {
+        "estimator_low_overestimate_rate": float(over[low].mean()) if low.any() else math.nan,
+        "estimator_startup_s": float(first_ready * dt),
+        "estimator_startup_overestimate_rate": float(over[:first_ready].mean()) if first_ready else math.nan,
+        "estimator_ready_overestimate_rate": float(over[after].mean()) if first_ready < n else math.nan,
+        "estimator_notready_after_startup_s": float((~ready[after]).sum() * dt),
+    }
+    if first_ready < n:
+        useful = mu_hat[after] >= np.minimum(mu_true[after], USEFUL_CAP) - USEFUL_SLACK
+        capped = np.abs(np.minimum(mu_hat[after], CAPPED_MAE_CAP) - np.minimum(mu_true[after], CAPPED_MAE_CAP))
+        out.update(estimator_useful_rate=float(useful.mean()), estimator_capped_mae=float(capped.mean()))
+    else:
+        out.update(estimator_useful_rate=math.nan, estimator_capped_mae=math.nan)
+    out["estimator_time_to_safe_s"] = time_to_safe(t, mu_true, mu_hat)
+    return out
+
+
+def time_to_safe(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: float = SETTLE_BAND) -> float:
+    """Time [s] from the first drop of the true friction under the trunk until mu_hat <= mu + band holds
+    from then on to the end of the episode (0: never over after the drop). NaN without a drop; inf if
+    mu_hat is over at the end."""
+    drops = np.flatnonzero(np.diff(mu_true) < 0.0)
+    if drops.size == 0:
+        return math.nan
+    k0 = int(drops[0]) + 1
+    over = mu_hat[k0:] > mu_true[k0:] + band
+    if not over.any():
+        return 0.0
+    last = int(np.flatnonzero(over)[-1])
+    if last == len(over) - 1:
+        return math.inf
+    return float(t[k0 + last + 1] - t[k0])
+

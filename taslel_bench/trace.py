@@ -52,6 +52,7 @@ class EpisodeTrace:
         self.barrier_he_mps = np.full((c, nl), np.nan)
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
+        self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
         self.tick_us = np.zeros(c)
         # wall time of the tick's parts [s until finalize(), then µs]: state read + estimator + controller,
         # controller model (bridge + Pinocchio), filter (QP build + solve + fallback), physics (+ contact check)
@@ -178,6 +179,7 @@ class EpisodeTrace:
         cols["qp_iterations"] = self.qp_iterations[:n]
         cols["mu_hat"] = self.mu_hat[:n]
         cols["mu_true"] = self.mu_true[:n]
+        cols["mu_hat_ready"] = self.mu_hat_ready[:n]
         cols["tick_us"] = self.tick_us[:n]
         for j, part in enumerate(TICK_PARTS):
             cols[f"tick_{part}_us"] = self.tick_parts_us[:n, j]

@@ -178,6 +178,27 @@ def test_settle_time_after_friction_change():
     assert settle_time(t, mu, np.full_like(t, 0.8)) == np.inf
 
 
+def test_one_sided_estimator_metrics_startup_and_time_to_safe():
+    from taslel_bench.metrics import estimator_safety_metrics, time_to_safe
+
+    t = np.arange(0, 2, 0.01)
+    mu = np.where(t < 1.0, 0.8, 0.2)
+    ready = t >= 0.5  # prior for the first 0.5 s
+    hat = np.where(t < 0.5, 0.5, np.where(t < 1.3, 0.6, 0.18))  # over on the 0.2 floor until 1.3 s
+    m = estimator_safety_metrics(t, mu, hat, ready)
+    assert m["estimator_startup_s"] == pytest.approx(0.5)
+    assert m["estimator_startup_overestimate_rate"] == 0.0  # 0.5 under 0.8
+    assert m["estimator_low_overestimate_rate"] == pytest.approx(0.3)  # 30 of the 100 ticks on 0.2
+    assert m["estimator_time_to_safe_s"] == pytest.approx(0.3, abs=0.011)
+    assert m["estimator_useful_rate"] == 1.0  # 0.6 >= 0.5 - 0.1 on 0.8, 0.18 >= 0.2 - 0.1 on 0.2
+    assert m["estimator_notready_after_startup_s"] == 0.0
+    assert np.isnan(time_to_safe(t, np.full_like(t, 0.2), hat))  # no drop
+    assert time_to_safe(t, mu, np.full_like(t, 0.8)) == np.inf
+    always = estimator_safety_metrics(t, mu, np.full_like(t, 0.2), np.ones_like(t, bool))
+    assert always["estimator_startup_s"] == 0.0 and np.isnan(always["estimator_startup_overestimate_rate"])
+    assert always["estimator_useful_rate"] == pytest.approx(0.0 + 0.5)  # 0.2 < 0.4 on 0.8; useful on 0.2
+
+
 class _RecordingEstimator:
     """A fixed estimate that changes every tick (so a stale value would show) and keeps what it was given."""
 

@@ -56,7 +56,10 @@ def test_simple_configs_instantiate() -> None:
     from hydra.utils import instantiate
 
     assert instantiate(OmegaConf.load(CONF / "oracle.yaml")).name == "oracle"
-    assert instantiate(OmegaConf.load(CONF / "fixed.yaml")).mu == 0.5
+    from estimators.simple import SAFE_FLOOR_MU
+
+    # the fixed baseline is the safe floor by default (never over-estimates a floor the deployment handles)
+    assert instantiate(OmegaConf.load(CONF / "fixed.yaml")).mu == SAFE_FLOOR_MU == FixedEstimator().mu == 0.2
 
 
 def test_joint_tokens_layout() -> None:
