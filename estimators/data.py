@@ -59,13 +59,19 @@ class WindowDataModule(L.LightningDataModule):
         batch_size: int = 128,
         arrays: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
         filter_mu: bool = False,
+        crop_steps: int | None = None,
     ) -> None:
         """Either ``data_dir`` (npz files) or ``arrays`` = {split: (X, y)} (tests, tiny generated data);
-        ``filter_mu``: load the windows with the 2 filter features (:func:`load_split`)."""
+        ``filter_mu``: load the windows with the 2 filter features (:func:`load_split`); ``crop_steps``: keep
+        only the last that many samples of every window (short-window models, e.g. the drop detector of
+        :class:`estimators.learned.LearnedEstimator`)."""
         super().__init__()
         if (data_dir is None) == (arrays is None):
             raise ValueError("give exactly one of data_dir or arrays")
+        if crop_steps is not None and crop_steps < 1:
+            raise ValueError(f"crop_steps must be >= 1, got {crop_steps!r}")
         self.data_dir, self.batch_size, self._arrays, self.filter_mu = data_dir, batch_size, arrays, filter_mu
+        self.crop_steps = crop_steps
         self.tensors: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
 
     def setup(self, stage: str | None = None) -> None:
@@ -76,6 +82,10 @@ class WindowDataModule(L.LightningDataModule):
                 X, y = self._arrays[split]
             else:
                 X, y, _ = load_split(self.data_dir, split, self.filter_mu)  # type: ignore[arg-type]
+            if self.crop_steps is not None:
+                if self.crop_steps > X.shape[1]:
+                    raise ValueError(f"crop_steps={self.crop_steps} exceeds the {X.shape[1]}-sample windows")
+                X = X[:, -self.crop_steps :]
             self.tensors[split] = (torch.from_numpy(np.asarray(X, np.float32)), torch.from_numpy(np.asarray(y, np.float32)))
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:

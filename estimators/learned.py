@@ -2,33 +2,102 @@
 
 Every control tick the runner calls :meth:`LearnedEstimator.step`. The estimator keeps a ring buffer of
 ``WINDOW_STEPS`` samples taken every ``WINDOW_DT_S`` seconds of episode time (the first tick at or after
-each sample instant, as in :mod:`estimators.collect`). Until the buffer is full it returns ``prior_mu``
-with ``ready=False``; afterwards, at each new sample it runs the model once (``torch.no_grad``, one CPU
-thread by default) and holds the result between samples. The reported ``mu`` is the conservative bound
-``max(mu_min, mean - conservative_k * sigma)``; ``sigma`` is the model's predicted standard deviation.
-With ``bound="quantile"`` (models trained with a lower-quantile head, ``model.lower_quantile > 0``) it is
-``max(mu_min, lower - conservative_k * sigma)`` instead. With ``hold_min_samples = n > 1`` the reported
-``mu`` is the smallest bound of the last n model outputs: a drop in friction shows at once, a rise only
-after n x 0.03 s (the window right after a drop still holds high-friction samples, and an over-estimate
-lets the filter ask for more tangential force than the ground holds). A checkpoint trained with
-``filter_mu_input`` also reads ``Proprioception.filter_mu`` (the friction the filter assumed on the tick
-that produced ``tau_joints``; NaN without a filter) into every sample. A seed-ensemble checkpoint
-(:class:`estimators.models.EnsembleModel`) runs all its members on each window; ``sigma`` is then the
-ensemble's (members' variances plus their disagreement).
+each sample instant, as in :mod:`estimators.collect`). At each new sample, once the window is full, it runs
+the model (``torch.no_grad``, one CPU thread by default) and holds the result between samples.
+
+The reported ``mu`` (what the safety filter uses) is
+
+    max(mu_min, base - conservative_k * sigma - margin(mean))
+
+with ``base`` the model's mean (``bound="gaussian"``) or its lower-quantile head (``bound="quantile"``,
+models trained with ``model.lower_quantile > 0``), ``sigma`` its predicted standard deviation and
+``margin`` the band-aware margin (:class:`estimators.safety.BandMargin`, ``band_margin``: an extra margin
+that depends on the band of the raw mean, chosen on a shifted validation set). With
+``hold_min_samples = n > 1`` it is the smallest such bound of the last n outputs.
+
+**Startup**: until the window is full (1.17 s) the estimator returns ``prior_mu`` with ``ready=False``; the
+default prior is the safe floor :data:`estimators.simple.SAFE_FLOOR_MU` (the lowest friction the deployment
+must handle), so the startup window never claims more friction than such a floor holds.
+
+**Friction drops** (``drop_detector``): a second model on the last few samples only (a short window, e.g.
+12 samples = 0.36 s) runs beside the main one. When its upper bound ``mean_s + k * sigma_s`` lies more than
+``delta`` below the ``mu`` about to be reported for ``confirm`` consecutive samples, the main window (which still
+holds the old surface) is discarded: the estimator returns ``prior_mu`` (``ready=False``) until the window
+has refilled with samples taken after the detection, as at startup.
+
+**Inference off the control tick.** ``inference="staged"`` (a deadline-aware schedule, deterministic):
+the tick that takes a sample only copies the window; the models then run one slice per control tick
+(:meth:`estimators.models.FrictionModel.predict_stages`: the embedding, each attention and feed-forward
+half-block, each MLP layer), and the result is applied on the tick at ``sample time + apply_delay_s``
+(slices still left then run in that tick, counted in ``deadline_misses``). ``inference="thread"``: the models
+run in a worker thread and the result is applied at the same due tick, which waits for the worker if it is
+late (``deadline_misses``, ``wait_s``); in this single-process harness the worker competes with the
+control loop for Python's GIL. ``inference="inline"``: the models run inside the tick that takes the sample
+and the result applies at once (the earlier behaviour).
+
+A checkpoint trained with ``filter_mu_input`` also reads ``Proprioception.filter_mu`` into every sample. A
+seed-ensemble checkpoint (:class:`estimators.models.EnsembleModel`) runs all its members on each window.
 """
 
 from __future__ import annotations
 
 import math
+import threading
+import time
+from collections.abc import Generator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
 from estimators.checkpoint import load_checkpoint
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_channels, sample_vector
-from estimators.models import VARIANTS
+from estimators.models import VARIANTS, run_stages
+from estimators.safety import BandMargin
+from estimators.simple import SAFE_FLOOR_MU
 from taslel_bench.interfaces import FrictionEstimate, Proprioception
+
+INFERENCE_MODES = ("inline", "staged", "thread")
+
+
+class DropDetector:
+    """Short-window model for friction drops: ``checkpoint`` (a model whose ``window_steps`` is shorter
+    than the main window), ``k`` [sigmas] of its upper bound, ``delta`` [-] by which that bound must lie below
+    the reported mu, ``confirm`` [samples] in a row."""
+
+    def __init__(self, checkpoint: str | Path, k: float = 2.0, delta: float = 0.1, confirm: int = 1) -> None:
+        if k < 0 or not math.isfinite(k):
+            raise ValueError(f"drop_detector.k must be finite and >= 0, got {k!r}")
+        if delta < 0 or not math.isfinite(delta):
+            raise ValueError(f"drop_detector.delta must be finite and >= 0, got {delta!r}")
+        if int(confirm) != confirm or confirm < 1:
+            raise ValueError(f"drop_detector.confirm must be an integer >= 1, got {confirm!r}")
+        self.model, self.meta = load_checkpoint(checkpoint)
+        self.steps = int(self.model.cfg.window_steps)
+        if not 1 <= self.steps < WINDOW_STEPS:
+            raise ValueError(f"drop_detector checkpoint {checkpoint!r} has a {self.steps}-sample window; it must be "
+                             f"shorter than the main window ({WINDOW_STEPS})")
+        if self.model.cfg.filter_mu_input:
+            raise ValueError("drop_detector: models with filter_mu_input are not supported")
+        self.k, self.delta, self.confirm = float(k), float(delta), int(confirm)
+
+    def upper(self, window: np.ndarray) -> tuple[float, float, float]:
+        """(mean, sigma, mean + k sigma) [-] of the short model on the last ``steps`` samples of ``window``."""
+        x = torch.from_numpy(np.ascontiguousarray(window[-self.steps :, :N_FEATURES])).unsqueeze(0)
+        with torch.no_grad():
+            mean, log_var, _ = self.model.predict(x)
+        m, s = float(mean[0]), float(torch.exp(0.5 * log_var[0]))
+        return m, s, m + self.k * s
+
+    def upper_stages(self, window: np.ndarray) -> Generator[None, None, tuple[float, float, float]]:
+        """:meth:`upper` as a generator over the model's slices (``inference="staged"``)."""
+        x = torch.from_numpy(np.ascontiguousarray(window[-self.steps :, :N_FEATURES])).unsqueeze(0)
+        with torch.no_grad():
+            mean, log_var, _ = yield from self.model.predict_stages(x)
+        m, s = float(mean[0]), float(torch.exp(0.5 * log_var[0]))
+        return m, s, m + self.k * s
 
 
 class LearnedEstimator:
@@ -38,17 +107,26 @@ class LearnedEstimator:
         self,
         variant: str = "linformer",
         checkpoint: str | Path | None = None,
-        prior_mu: float = 0.5,
+        prior_mu: float = SAFE_FLOOR_MU,
         conservative_k: float = 1.0,
         mu_min: float = 0.05,
         threads: int | None = 1,
         bound: str = "gaussian",
         hold_min_samples: int = 1,
+        band_margin: dict[str, Any] | None = None,
+        drop_detector: dict[str, Any] | None = None,
+        inference: str = "inline",
+        apply_delay_s: float = 0.02,
     ) -> None:
         """``variant`` names the shipped checkpoint used when ``checkpoint`` is None; ``prior_mu`` [-] is
-        returned until the window is full; ``conservative_k`` [-] sigmas are subtracted from the mean;
-        ``mu_min`` [-] floors the result; ``threads`` sets ``torch.set_num_threads`` (None: leave it);
-        ``hold_min_samples`` [samples of 0.03 s]: report the minimum bound of the last that many outputs."""
+        returned until the window is full (and after a detected drop); ``conservative_k`` [-] sigmas are
+        subtracted from the base; ``mu_min`` [-] floors the result; ``threads`` sets
+        ``torch.set_num_threads`` (None: leave it); ``hold_min_samples`` [samples of 0.03 s]: report the
+        minimum bound of the last that many outputs; ``band_margin``: ``{"edges": [...], "margins": [...]}``
+        (:class:`estimators.safety.BandMargin`; None: no margin); ``drop_detector``: ``{"checkpoint": ...,
+        "k": ..., "delta": ..., "confirm": ...}`` (:class:`DropDetector`; None: none); ``inference``:
+        ``"inline"``, ``"staged"`` or ``"thread"``; ``apply_delay_s`` [s]: with ``"staged"`` / ``"thread"``, the
+        latency after which a sample's result is applied."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
         if not (prior_mu > 0 and math.isfinite(prior_mu)):
@@ -59,6 +137,10 @@ class LearnedEstimator:
             raise ValueError(f"unknown bound {bound!r}; valid choices: gaussian, quantile")
         if int(hold_min_samples) != hold_min_samples or hold_min_samples < 1:
             raise ValueError(f"hold_min_samples must be an integer >= 1, got {hold_min_samples!r}")
+        if inference not in INFERENCE_MODES:
+            raise ValueError(f"unknown inference {inference!r}; valid choices: {', '.join(INFERENCE_MODES)}")
+        if not (0.0 <= apply_delay_s < WINDOW_DT_S):
+            raise ValueError(f"apply_delay_s must be in [0, {WINDOW_DT_S}) s, got {apply_delay_s!r}")
         if threads is not None:
             torch.set_num_threads(int(threads))
         self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
@@ -71,23 +153,56 @@ class LearnedEstimator:
         self.bound = bound
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
+        self.band_margin = BandMargin(**{k: tuple(v) for k, v in dict(band_margin).items()}) if band_margin else None
+        self.detector = DropDetector(**dict(drop_detector)) if drop_detector else None
+        self.inference, self.apply_delay_s = inference, float(apply_delay_s)
         self._hold = np.full(int(hold_min_samples), np.inf)  # ring of the last bounds [-]
         self.filter_mu_input = self.model.cfg.filter_mu_input
         n_raw = self.model.cfg.n_raw  # 36, or 38 with the filter features
         self._buf = np.zeros((WINDOW_STEPS, n_raw), np.float32)
-        self._x = torch.zeros(1, WINDOW_STEPS, n_raw)
+        self._pool: ThreadPoolExecutor | None = None
+        self._lock = threading.Lock()  # one model call at a time (torch modules are not re-entrant)
         self.reset()
 
+    # ------------------------------------------------------------------------------------------ state
     def reset(self) -> None:
         """Empty the window; the next estimates are the prior."""
+        if getattr(self, "_job", None) is not None:  # a result still in flight belongs to the old episode
+            self._job[0].result()
         self._count = 0  # samples taken this episode
-        self._n_out = 0  # model outputs this episode
+        self._fill = 0  # samples taken since the last (re)start: the model runs once it reaches WINDOW_STEPS
+        self._n_out = 0  # model outputs since the last (re)start
         self._hold[:] = np.inf
+        self._alarm = 0  # consecutive samples the drop detector fired
         self._next_t = 0.0  # [s] next sample instant
+        self._job: tuple[Future, float, int] | None = None  # (result, due time [s], fill at submission)
+        self._stages: tuple[Generator, float, int] | None = None  # staged: (slices, due time [s], fill)
+        self._stage_result: tuple[float, ...] | None = None
         self._last = FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         self.mean, self.sigma, self.lower = float("nan"), float("nan"), float("nan")  # last raw model output
+        self.short_mean, self.short_sigma = float("nan"), float("nan")  # last drop-detector output
+        self.drops_detected = 0
+        self.deadline_misses = 0  # thread: results not ready at their due tick (that tick waited)
+        self.wait_s = 0.0  # [s] wall time ticks waited for the worker
 
+    def close(self) -> None:
+        """Stop the worker thread (if any); the estimator restarts it when needed."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def __del__(self) -> None:  # pragma: no cover - interpreter shutdown order varies
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - never raise from a finaliser
+            pass
+
+    # ------------------------------------------------------------------------------------------ loop
     def step(self, obs: Proprioception) -> FrictionEstimate:
+        if self._job is not None:
+            self._poll(obs.t_s)
+        if self._stages is not None:
+            self._advance_staged(obs.t_s)
         if obs.t_s + 1e-9 < self._next_t:
             return self._last
         row = self._buf[self._count % WINDOW_STEPS]
@@ -95,24 +210,117 @@ class LearnedEstimator:
         if self.filter_mu_input:  # what the filter assumed on the tick that produced tau_joints
             row[N_FEATURES:] = filter_channels(obs.filter_mu)
         self._count += 1
+        self._fill += 1
         self._next_t += WINDOW_DT_S
         while self._next_t <= obs.t_s + 1e-9:  # ticks coarser than the sample period: skip instants
             self._next_t += WINDOW_DT_S
-        if self._count >= WINDOW_STEPS:
-            self._last = self._estimate()
+        if self._fill >= WINDOW_STEPS:
+            if self.inference == "inline":
+                self._last = self._apply(self._compute(self._window()), self._fill)
+            elif self.inference == "staged":
+                if self._stages is not None:  # apply_delay_s >= the sample period: finish the previous one
+                    self._finish_staged()
+                self._stages = (self._compute_stages(self._window()), obs.t_s + self.apply_delay_s, self._fill)
+                self._stage_result = None
+            else:
+                if self._job is not None:  # apply_delay_s < the sample period: only if ticks are that coarse
+                    self._poll(math.inf)
+                if self._pool is None:
+                    self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="friction-estimator")
+                fut = self._pool.submit(self._compute, self._window())
+                self._job = (fut, obs.t_s + self.apply_delay_s, self._fill)
+                if self.apply_delay_s == 0.0:
+                    self._poll(obs.t_s)
         return self._last
 
-    def _estimate(self) -> FrictionEstimate:
-        start = self._count % WINDOW_STEPS  # oldest sample in the ring
-        self._x[0] = torch.from_numpy(np.roll(self._buf, -start, axis=0))
+    def _poll(self, t_s: float) -> None:
+        """Thread mode: apply the pending result once it is due (waits for the worker only if it is late)."""
+        fut, due, fill = self._job  # type: ignore[misc]
+        if t_s + 1e-9 < due:
+            return
+        if not fut.done():
+            self.deadline_misses += 1
+            t0 = time.perf_counter()
+            fut.result()
+            self.wait_s += time.perf_counter() - t0
+        self._job = None
+        self._last = self._apply(fut.result(), fill)
+
+    def _advance_staged(self, t_s: float) -> None:
+        """Staged mode: one slice of the models per tick; apply the result at its due tick."""
+        gen, due, fill = self._stages  # type: ignore[misc]
+        if self._stage_result is None:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                self._stage_result = stop.value
+        if t_s + 1e-9 >= due:
+            self._finish_staged()
+
+    def _finish_staged(self) -> None:
+        gen, _, fill = self._stages  # type: ignore[misc]
+        if self._stage_result is None:
+            self.deadline_misses += 1
+            self._stage_result = run_stages(gen)
+        self._stages = None
+        self._last = self._apply(self._stage_result, fill)
+
+    def _window(self) -> np.ndarray:
+        """The last WINDOW_STEPS samples, oldest first (a copy)."""
+        return np.roll(self._buf, -(self._count % WINDOW_STEPS), axis=0)
+
+    def _compute(self, window: np.ndarray) -> tuple[float, float, float, float, float, float]:
+        """Model outputs for one window: (mean, sigma, lower, short mean, short sigma, short upper) [-]
+        (nan where absent). Runs in the worker thread with ``inference="thread"``."""
+        with self._lock, torch.no_grad():
+            mean, log_var, lower = self.model.predict(torch.from_numpy(window).unsqueeze(0))
+            short = self.detector.upper(window) if self.detector is not None else (math.nan,) * 3
+        lo = float(lower[0]) if lower is not None else math.nan
+        return float(mean[0]), float(torch.exp(0.5 * log_var[0])), lo, *short
+
+    def _compute_stages(self, window: np.ndarray) -> Generator[None, None, tuple[float, ...]]:
+        """:meth:`_compute` as a generator yielding between slices of the models (``inference="staged"``)."""
+        x = torch.from_numpy(window).unsqueeze(0)
         with torch.no_grad():
-            mean, log_var, lower = self.model.predict(self._x)
-        self.mean = float(mean[0])
-        self.sigma = float(torch.exp(0.5 * log_var[0]))
-        if lower is not None:
-            self.lower = float(lower[0])
+            mean, log_var, lower = yield from self.model.predict_stages(x)
+        short = (math.nan,) * 3
+        if self.detector is not None:
+            yield
+            short = yield from self.detector.upper_stages(window)
+        lo = float(lower[0]) if lower is not None else math.nan
+        return float(mean[0]), float(torch.exp(0.5 * log_var[0])), lo, *short
+
+    def _estimate(self) -> FrictionEstimate:
+        """Run the models on the current window and apply the result (inline; tests drive this directly)."""
+        self._fill = max(self._fill, WINDOW_STEPS)
+        self._last = self._apply(self._compute(self._window()), self._fill)
+        return self._last
+
+    def _apply(self, raw: tuple[float, ...], fill: int) -> FrictionEstimate:
+        """Bound, band margin, hold and the drop detector on one model output (runs on the control thread)."""
+        self.mean, self.sigma, lower, self.short_mean, self.short_sigma, short_upper = raw
+        if not math.isnan(lower):
+            self.lower = lower
+        if fill < WINDOW_STEPS or self._fill < WINDOW_STEPS:  # a reset since: the window is not refilled yet
+            return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         base = self.lower if self.bound == "quantile" else self.mean
-        self._hold[self._n_out % len(self._hold)] = max(self.mu_min, base - self.k * self.sigma)
+        b = base - self.k * self.sigma
+        if self.band_margin is not None:
+            b -= float(self.band_margin.margin(self.mean))
+        self._hold[self._n_out % len(self._hold)] = max(self.mu_min, b)
         self._n_out += 1
         mu = float(self._hold.min())
+        if self.detector is not None:
+            self._alarm = self._alarm + 1 if short_upper < mu - self.detector.delta else 0
+            if self._alarm >= self.detector.confirm:  # friction dropped: discard the window, back to the prior
+                self.drops_detected += 1
+                self._alarm, self._fill, self._n_out = 0, 0, 0
+                self._hold[:] = np.inf
+                return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)
+
+    def diagnostics(self) -> dict[str, float]:
+        """Counters of this episode: drops detected, samples, and with ``inference="thread"`` the deadline
+        misses and the wall time [s] ticks waited for the worker."""
+        return {"drops_detected": self.drops_detected, "samples": self._count,
+                "deadline_misses": self.deadline_misses, "wait_s": self.wait_s}

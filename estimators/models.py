@@ -22,7 +22,9 @@ sequence from n to ``linformer_k`` with learned (k, n) matrices (Wang et al. 202
 from __future__ import annotations
 
 import math
+from collections.abc import Generator
 from dataclasses import asdict, dataclass, field
+from typing import TypeVar
 
 import torch
 import torch.nn.functional as F
@@ -36,6 +38,7 @@ TOKENISATIONS = ("joint", "step")
 WINDOW_NORMS = ("none", "tau", "tau_q")
 POOLINGS = ("mean", "cls")
 LOG_VAR_RANGE = (-12.0, 4.0)  # clamp of the normalised log-variance
+T = TypeVar("T")
 
 
 @dataclass
@@ -245,6 +248,18 @@ class FrictionModel(nn.Module):
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """``x`` (B, T, n_raw) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,).
         The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
+        return run_stages(self.predict_stages(x))
+
+    def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
+        """:meth:`encode` in slices (a generator that yields between them and returns the result); the
+        default is one slice."""
+        return self.encode(x)
+        yield  # noqa: B901 - makes this a generator
+
+    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
+        """:meth:`predict` as a generator that yields between slices of the network (embedding, each
+        attention / feed-forward half-block, each MLP layer) and returns predict's result: the in-loop
+        estimator runs one slice per control tick (``inference="staged"``)."""
         if x.ndim != 3 or x.shape[-1] != self.cfg.n_raw or x.shape[1] != self.cfg.window_steps:
             hint = " (36 proprioception + 2 filter features, see estimators.features.with_filter_channels)" \
                 if self.cfg.filter_mu_input else ""
@@ -254,7 +269,7 @@ class FrictionModel(nn.Module):
         z = (self.features(x) - self.norm.x_mean) / self.norm.x_std
         if not self.cfg.use_tau:
             z = torch.cat([z[..., :24], torch.zeros_like(z[..., 24:N_FEATURES]), z[..., N_FEATURES:]], dim=-1)
-        out = self.encode(z)
+        out = yield from self.encode_stages(z)
         mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
         log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
         lower = None
@@ -278,6 +293,14 @@ class MLPModel(FrictionModel):
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x.flatten(1))
+
+    def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
+        h = x.flatten(1)
+        for i, layer in enumerate(self.net):
+            if i and isinstance(layer, nn.Linear):
+                yield
+            h = layer(h)
+        return h
 
 
 class SelfAttention(nn.Module):
@@ -323,7 +346,12 @@ class Block(nn.Module):
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        x = x + self.attn(self.ln1(x))
+        return self.feed_forward(self.attention(x))
+
+    def attention(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.attn(self.ln1(x))
+
+    def feed_forward(self, x: torch.Tensor) -> torch.Tensor:
         return x + self.ff(self.ln2(x))
 
 
@@ -360,9 +388,21 @@ class TransformerModel(FrictionModel):
         h = self.tokens(x)
         for blk in self.blocks:
             h = blk(h)
+        return self._head(h)
+
+    def _head(self, h: torch.Tensor) -> torch.Tensor:
         h = self.ln(h)
         pooled = h[:, 0] if self.cls is not None else h.mean(1)
         return self.head(pooled)
+
+    def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
+        h = self.tokens(x)
+        for blk in self.blocks:
+            yield
+            h = blk.attention(h)
+            yield
+            h = blk.feed_forward(h)
+        return self._head(h)
 
 
 class EnsembleModel(nn.Module):
@@ -388,7 +428,15 @@ class EnsembleModel(nn.Module):
         return mean, log_var
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        outs = [m.predict(x) for m in self.members]
+        return run_stages(self.predict_stages(x))
+
+    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
+        """The members' slices one after the other (:meth:`FrictionModel.predict_stages`)."""
+        outs = []
+        for i, m in enumerate(self.members):
+            if i:
+                yield
+            outs.append((yield from m.predict_stages(x)))
         means = torch.stack([o[0] for o in outs])  # (M, B)
         var = torch.stack([torch.exp(o[1]) for o in outs]).mean(0) + means.var(0, unbiased=False)
         mean = means.mean(0)
@@ -398,6 +446,15 @@ class EnsembleModel(nn.Module):
             gap = torch.stack([o[0] - o[2] for o in outs]).mean(0)  # type: ignore[operator]
             lower = mean - gap
         return mean, log_var, lower
+
+
+def run_stages(gen: Generator[None, None, T]) -> T:
+    """Run a ``*_stages`` generator to the end and return its result."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
 
 
 def build_model(cfg: ModelConfig) -> FrictionModel:

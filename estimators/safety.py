@@ -149,43 +149,51 @@ def fit_band_margin(y: np.ndarray, mean: np.ndarray, bound: np.ndarray, mu_min: 
                     edges: tuple[float, ...] = (0.3, 0.5, 0.8), grid: np.ndarray | None = None,
                     max_over: float = 0.03) -> tuple[BandMargin, dict[str, float]] | None:
     """Margins (one per band of the raw mean, from ``grid``) that keep the over-estimation rate of every
-    truth band below 0.5 (0.1-0.3, 0.3-0.5) at most ``max_over`` on (y, mean, bound) and, among those, give
-    the most useful windows (ties: the smallest total margin). The search is exact: the windows of each
-    mean band contribute to the counts independently of the other bands' margins. None if no grid point
-    meets ``max_over``. Returns the margin and its rates on this set."""
+    truth band below 0.5 (0.1-0.3, 0.3-0.5) at most ``max_over`` on (y, mean, bound) and, among those,
+    maximise the smallest per-truth-band usefulness (ties: the most useful windows overall, then the
+    smallest total margin). The search is exhaustive over the grid^(bands) combinations: the windows of
+    each mean band contribute to the counts independently of the other bands' margins. None if no
+    combination meets ``max_over``. Returns the margin and its rates on this set."""
     y, mean, bound = (np.asarray(a, float) for a in (y, mean, bound))
     grid = np.round(np.arange(0.0, 0.301, 0.01), 4) if grid is None else np.asarray(grid, float)
     idx = np.searchsorted(np.asarray(edges, float), mean, side="right")
     n_b, n_m = len(edges) + 1, len(grid)
     low_bands = [band_mask(y, lo, hi) for lo, hi in BANDS if hi <= LOW_MU]
+    all_bands = [band_mask(y, lo, hi) for lo, hi in BANDS]
     over = np.zeros((len(low_bands), n_b, n_m))  # over-estimate counts per truth band, mean band, margin
-    use = np.zeros((n_b, n_m))
+    use = np.zeros((len(all_bands), n_b, n_m))  # useful counts per truth band, mean band, margin
     for b in range(n_b):
         in_b = idx == b
         for j, m in enumerate(grid):
             mu = np.maximum(bound[in_b] - m, mu_min)
-            ov = overestimates(y[in_b], mu)
+            ov, us = overestimates(y[in_b], mu), useful(y[in_b], mu)
             for t, sel in enumerate(low_bands):
                 over[t, b, j] = ov[sel[in_b]].sum()
-            use[b, j] = useful(y[in_b], mu).sum()
-    n_t = np.array([s.sum() for s in low_bands], float)
-    # exhaustive over the grid^n_b combinations, one mean band at a time (broadcast sums)
-    tot_over = over[:, 0, :]
-    tot_use = use[0]
-    tot_m = grid.copy()
-    for b in range(1, n_b):
-        tot_over = tot_over[..., None] + over[:, b, :].reshape((len(low_bands),) + (1,) * b + (n_m,))
-        tot_use = tot_use[..., None] + use[b].reshape((1,) * b + (n_m,))
-        tot_m = tot_m[..., None] + grid.reshape((1,) * b + (n_m,))
-    rate = tot_over / np.maximum(n_t, 1).reshape((-1,) + (1,) * n_b)
-    ok = np.all(rate <= max_over, axis=0)
+            for t, sel in enumerate(all_bands):
+                use[t, b, j] = us[sel[in_b]].sum()
+
+    def combine(a: np.ndarray) -> np.ndarray:  # (T, n_b, n_m) -> (T, n_m, ..., n_m): sum over mean bands
+        tot = a[:, 0, :]
+        for b in range(1, n_b):
+            tot = tot[..., None] + a[:, b, :].reshape((a.shape[0],) + (1,) * b + (n_m,))
+        return tot
+
+    shape = (-1,) + (1,) * n_b
+    n_low = np.array([s.sum() for s in low_bands], float)
+    n_all = np.array([s.sum() for s in all_bands], float)
+    ok = np.all(combine(over) <= max_over * n_low.reshape(shape) + 1e-9, axis=0)
     if not ok.any():
         return None
-    score = np.where(ok, tot_use - 1e-6 * tot_m, -np.inf)
+    tot_use = combine(use)
+    has = n_all > 0
+    worst = np.min(tot_use[has] / n_all[has].reshape(shape), axis=0)
+    pooled = tot_use.sum(0) / max(n_all.sum(), 1)
+    tot_m = combine(np.broadcast_to(grid, (1, n_b, n_m)))[0]
+    score = np.where(ok, worst + 1e-4 * pooled - 1e-7 * tot_m, -np.inf)
     pick = np.unravel_index(int(np.argmax(score)), score.shape)
     bm = BandMargin(tuple(float(e) for e in edges), tuple(float(grid[i]) for i in pick))
     mu = np.maximum(bm.apply(mean, bound), mu_min)
-    info = {"useful": float(useful(y, mu).mean())}
+    info = {"useful": float(useful(y, mu).mean()), "useful_worst_band": float(worst[pick])}
     for (lo, hi), sel in zip([b for b in BANDS if b[1] <= LOW_MU], low_bands):
         info[f"over_{band_label(lo, hi)}"] = float(overestimates(y[sel], mu[sel]).mean()) if sel.any() else float("nan")
     return bm, info

@@ -32,7 +32,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint, save_checkpoint
 from estimators.data import WindowDataModule, load_split
-from estimators.features import N_FEATURES
+from estimators.features import N_FEATURES, WINDOW_STEPS
 from estimators.models import (
     VARIANTS,
     EnsembleModel,
@@ -192,7 +192,9 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     torch.set_num_threads(int(cfg.threads))
     L.seed_everything(int(cfg.seed), workers=True)
     filter_mu = bool(cfg.model.get("filter_mu_input", False))
-    dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size), filter_mu=filter_mu)
+    steps = int(cfg.model.get("window_steps", WINDOW_STEPS))  # < 40: a short-window model on the last samples
+    dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size), filter_mu=filter_mu,
+                                        crop_steps=steps if steps != WINDOW_STEPS else None)
     dm.setup("fit")
     task = FrictionTask(
         OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss,  # type: ignore[arg-type]
@@ -301,6 +303,7 @@ def train_ensemble(cfg: DictConfig) -> tuple[EnsembleModel, dict[str, object]]:
     var_scale = 1.0
     if not fast:
         x_val, y_val, _ = load_split(cfg.data_dir, "val", bool(cfg.model.get("filter_mu_input", False)))
+        x_val = x_val[:, -int(cfg.model.get("window_steps", WINDOW_STEPS)) :]
         torch.set_num_threads(int(cfg.threads))
         var_scale = calibrate_variance(ens, torch.from_numpy(x_val), torch.from_numpy(y_val))
     recs = [meta["training"] for _, meta in loaded]

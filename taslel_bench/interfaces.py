@@ -189,7 +189,9 @@ class FrictionEstimate:
 
 @runtime_checkable
 class Estimator(Protocol):
-    """Terrain (friction) estimator in the loop."""
+    """Terrain (friction) estimator in the loop. Optional: ``diagnostics() -> dict[str, float]`` (counters of
+    the episode, e.g. drops detected, inference deadlines missed), added to ``summary.json`` as
+    ``estimator_<key>``."""
 
     name: str
 

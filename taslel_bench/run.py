@@ -188,6 +188,9 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
     }
     summary.update(summarize(res, dt, float(cfg.controller.stand_duration)))
+    diagnostics = getattr(built.estimator, "diagnostics", None)  # optional: counters of the estimator's own
+    if callable(diagnostics):
+        summary.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.backend is not None:
         summary["solver_settings"] = str(built.backend.describe())
     events = list(res.trace.events)
