@@ -19,9 +19,9 @@ that depends on the band of the raw mean, chosen on a shifted validation set). W
 default prior is the safe floor :data:`estimators.simple.SAFE_FLOOR_MU` (the lowest friction the deployment
 must handle), so the startup window never claims more friction than such a floor holds.
 
-**Friction drops** (``drop_detector``): a second model on the last few samples only (a short window, e.g.
-12 samples = 0.36 s) runs beside the main one. When its upper bound ``mean_s + k * sigma_s`` lies more than
-``delta`` below the ``mu`` about to be reported for ``confirm`` consecutive samples, the main window (which still
+**Friction drops** (``drop_detector``, :class:`DropDetector`): a detector beside the main model — a jump
+of the main model's own raw mean (``checkpoint: null``), or a second model on the last few samples only
+(``checkpoint``: a short-window model, e.g. 12 samples = 0.36 s). When it fires, the main window (which still
 holds the old surface) is discarded: the estimator returns ``prior_mu`` (``ready=False``) until the window
 has refilled with samples taken after the detection, as at startup.
 
@@ -63,17 +63,31 @@ INFERENCE_MODES = ("inline", "staged", "thread")
 
 
 class DropDetector:
-    """Short-window model for friction drops: ``checkpoint`` (a model whose ``window_steps`` is shorter
-    than the main window), ``k`` [sigmas] of its upper bound, ``delta`` [-] by which that bound must lie below
-    the reported mu, ``confirm`` [samples] in a row."""
+    """Friction-drop detector, one of two kinds:
 
-    def __init__(self, checkpoint: str | Path, k: float = 2.0, delta: float = 0.1, confirm: int = 1) -> None:
+    * ``checkpoint`` given: a short-window model (its ``window_steps`` shorter than the main window) on the last
+      samples; it fires when its upper bound ``mean_s + k sigma_s`` lies more than ``delta`` [-] below the mu
+      about to be reported;
+    * ``checkpoint=None`` (a jump detector, no model of its own): it fires when the main model's raw mean falls
+      more than ``delta`` [-] below the largest of its last ``lookback`` outputs (a surface change shows as a
+      sudden fall once the window holds the new contacts' signature).
+
+    Either must fire on ``confirm`` consecutive samples."""
+
+    def __init__(self, checkpoint: str | Path | None = None, k: float = 2.0, delta: float = 0.1, confirm: int = 1,
+                 lookback: int = 3) -> None:
         if k < 0 or not math.isfinite(k):
             raise ValueError(f"drop_detector.k must be finite and >= 0, got {k!r}")
         if delta < 0 or not math.isfinite(delta):
             raise ValueError(f"drop_detector.delta must be finite and >= 0, got {delta!r}")
         if int(confirm) != confirm or confirm < 1:
             raise ValueError(f"drop_detector.confirm must be an integer >= 1, got {confirm!r}")
+        if int(lookback) != lookback or lookback < 1:
+            raise ValueError(f"drop_detector.lookback must be an integer >= 1, got {lookback!r}")
+        self.k, self.delta, self.confirm, self.lookback = float(k), float(delta), int(confirm), int(lookback)
+        self.model = None
+        if checkpoint is None:
+            return
         self.model, self.meta = load_checkpoint(checkpoint)
         self.steps = int(self.model.cfg.window_steps)
         if not 1 <= self.steps < WINDOW_STEPS:
@@ -81,7 +95,6 @@ class DropDetector:
                              f"shorter than the main window ({WINDOW_STEPS})")
         if self.model.cfg.filter_mu_input:
             raise ValueError("drop_detector: models with filter_mu_input are not supported")
-        self.k, self.delta, self.confirm = float(k), float(delta), int(confirm)
 
     def upper(self, window: np.ndarray) -> tuple[float, float, float]:
         """(mean, sigma, mean + k sigma) [-] of the short model on the last ``steps`` samples of ``window``."""
@@ -123,8 +136,8 @@ class LearnedEstimator:
         subtracted from the base; ``mu_min`` [-] floors the result; ``threads`` sets
         ``torch.set_num_threads`` (None: leave it); ``hold_min_samples`` [samples of 0.03 s]: report the
         minimum bound of the last that many outputs; ``band_margin``: ``{"edges": [...], "margins": [...]}``
-        (:class:`estimators.safety.BandMargin`; None: no margin); ``drop_detector``: ``{"checkpoint": ...,
-        "k": ..., "delta": ..., "confirm": ...}`` (:class:`DropDetector`; None: none); ``inference``:
+        (:class:`estimators.safety.BandMargin`; None: no margin); ``drop_detector``: ``{"checkpoint": ... or None,
+        "k": ..., "delta": ..., "confirm": ..., "lookback": ...}`` (:class:`DropDetector`; None: none); ``inference``:
         ``"inline"``, ``"staged"`` or ``"thread"``; ``apply_delay_s`` [s]: with ``"staged"`` / ``"thread"``, the
         latency after which a sample's result is applied."""
         if variant not in VARIANTS:
@@ -174,6 +187,7 @@ class LearnedEstimator:
         self._n_out = 0  # model outputs since the last (re)start
         self._hold[:] = np.inf
         self._alarm = 0  # consecutive samples the drop detector fired
+        self._recent: list[float] = []  # jump detector: the last raw means since the (re)start
         self._next_t = 0.0  # [s] next sample instant
         self._job: tuple[Future, float, int] | None = None  # (result, due time [s], fill at submission)
         self._stages: tuple[Generator, float, int] | None = None  # staged: (slices, due time [s], fill)
@@ -274,7 +288,8 @@ class LearnedEstimator:
         (nan where absent). Runs in the worker thread with ``inference="thread"``."""
         with self._lock, torch.no_grad():
             mean, log_var, lower = self.model.predict(torch.from_numpy(window).unsqueeze(0))
-            short = self.detector.upper(window) if self.detector is not None else (math.nan,) * 3
+            short = self.detector.upper(window) if self.detector is not None and self.detector.model is not None \
+                else (math.nan,) * 3
         lo = float(lower[0]) if lower is not None else math.nan
         return float(mean[0]), float(torch.exp(0.5 * log_var[0])), lo, *short
 
@@ -284,7 +299,7 @@ class LearnedEstimator:
         with torch.no_grad():
             mean, log_var, lower = yield from self.model.predict_stages(x)
         short = (math.nan,) * 3
-        if self.detector is not None:
+        if self.detector is not None and self.detector.model is not None:
             yield
             short = yield from self.detector.upper_stages(window)
         lo = float(lower[0]) if lower is not None else math.nan
@@ -310,11 +325,16 @@ class LearnedEstimator:
         self._hold[self._n_out % len(self._hold)] = max(self.mu_min, b)
         self._n_out += 1
         mu = float(self._hold.min())
-        if self.detector is not None:
-            self._alarm = self._alarm + 1 if short_upper < mu - self.detector.delta else 0
-            if self._alarm >= self.detector.confirm:  # friction dropped: discard the window, back to the prior
+        if (det := self.detector) is not None:
+            if det.model is not None:
+                fired = short_upper < mu - det.delta
+            else:  # jump: the raw mean fell below the largest of its last `lookback` outputs
+                fired = bool(self._recent) and self.mean < max(self._recent) - det.delta
+                self._recent = (self._recent + [self.mean])[-det.lookback :]
+            self._alarm = self._alarm + 1 if fired else 0
+            if self._alarm >= det.confirm:  # friction dropped: discard the window, back to the prior
                 self.drops_detected += 1
-                self._alarm, self._fill, self._n_out = 0, 0, 0
+                self._alarm, self._fill, self._n_out, self._recent = 0, 0, 0, []
                 self._hold[:] = np.inf
                 return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)

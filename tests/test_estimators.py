@@ -521,15 +521,15 @@ def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("config", ["mlp", "attention_step", "linformer_step", "attention", "linformer"])
 def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> None:
-    """conf/estimator/<config>.yaml deploys the bound that estimators.evaluate chose on the validation split
-    for the checkpoint it loads (metrics.val_bound_choice), so a retrained checkpoint cannot silently keep
-    the previous k."""
+    """conf/estimator/<config>.yaml deploys the bound that ``estimators.targets offline`` chose on the shifted
+    validation set for the checkpoint it loads (metrics.safety_calibration: bound, k, band margin), so a
+    retrained checkpoint cannot silently keep the previous calibration."""
     cfg = OmegaConf.load(CONF / f"{config}.yaml")
     name = cfg.get("checkpoint") or config
     meta = json.loads((Path(__file__).resolve().parents[1] / "estimators" / "checkpoints" / f"{name}.json").read_text())
-    choice = meta["metrics"]["val_bound_choice"]  # e.g. "gaussian k=1" / "quantile k=0"
-    kind, k = choice.split(" k=")
-    assert (cfg.bound, float(cfg.conservative_k)) == (kind, float(k)), f"{config}.yaml vs {name}.json: {choice}"
+    choice = meta["metrics"]["safety_calibration"]
+    assert (cfg.bound, float(cfg.conservative_k)) == (choice["bound"], float(choice["k"])), f"{config}.yaml vs {name}.json"
+    assert OmegaConf.to_container(cfg.band_margin) == choice["band_margin"], f"{config}.yaml vs {name}.json"
 
 
 # --------------------------------------------------------------------- the filter's mu as an input
