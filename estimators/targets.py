@@ -254,7 +254,7 @@ def inloop(a: argparse.Namespace) -> None:
         cfg = yaml.safe_load(r["config"]) if r["config"] else {}
         sc = cfg.get("scenario", {})
         tag = group_name(r["summary"], sc)
-        est = estimator_label(r["summary"], cfg.get("estimator", {}))
+        est = estimator_label(r["summary"], cfg.get("estimator", {}), a.label_detector)
         groups.setdefault((tag, est), []).append(r)
         family = "all " + str(r["summary"].get("scenario", "?"))  # the scenario's runs pooled over frictions
         if family != "all " + tag:
@@ -334,10 +334,15 @@ def group_name(summary: dict, sc: dict) -> str:
     return tag
 
 
-def estimator_label(summary: dict, ec: dict) -> str:
-    """Estimator name plus the settings that distinguish deployments of one checkpoint."""
+def estimator_label(summary: dict, ec: dict, detector: bool = False) -> str:
+    """Estimator name plus the settings that distinguish deployments of one checkpoint (``detector``: also the
+    drop detector's settings)."""
     name = str(summary.get("estimator", "?"))
     extra = []
+    dd = ec.get("drop_detector")
+    if detector and dd:
+        extra.append(f"jump delta={dd['delta']:g}" if dd.get("checkpoint") is None else
+                     f"short k={dd['k']:g} delta={dd['delta']:g} confirm={dd['confirm']}")
     if "mu" in ec:
         extra.append(f"mu={float(ec['mu']):g}")
     if ec.get("inference") is not None:
@@ -603,6 +608,7 @@ def main(argv: list[str] | None = None) -> None:
     i = sub.add_parser("inloop", help="score sweeps' runs per scenario group and estimator")
     i.add_argument("sweeps", nargs="+", type=Path)
     i.add_argument("--n-boot", type=int, default=2000)
+    i.add_argument("--label-detector", action="store_true", help="tell runs apart by their drop-detector settings")
     i.add_argument("--out", type=Path, default=ROOT / "results" / "estimators_inloop" / "targets_inloop")
     lt = sub.add_parser("latency", help="estimator cost per tick in a paced 1 kHz loop, per inference mode")
     lt.add_argument("--estimators", nargs="+", required=True, help="estimator config names (conf/estimator)")

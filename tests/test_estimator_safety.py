@@ -136,10 +136,9 @@ def test_off_tick_inference_applies_the_inline_results_after_a_fixed_latency(tin
         LearnedEstimator("mlp", checkpoint=tiny_checkpoints / "m", inference="process")
 
 
-def test_short_window_training_crops_the_windows(tmp_path: Path) -> None:
+def test_short_window_datamodule_crops_the_windows() -> None:
     pytest.importorskip("lightning")
     from estimators.data import WindowDataModule
-    from estimators.train import make_config, train
 
     rng = np.random.default_rng(0)
     arrays = {s: (rng.normal(size=(16, WINDOW_STEPS, N_FEATURES)).astype(np.float32),
@@ -147,10 +146,8 @@ def test_short_window_training_crops_the_windows(tmp_path: Path) -> None:
     dm = WindowDataModule(arrays=arrays, batch_size=8, crop_steps=12)
     dm.setup("fit")
     np.testing.assert_array_equal(dm.tensors["train"][0].numpy(), arrays["train"][0][:, -12:])
-    cfg = make_config(["estimator=mlp", f"runs_dir={tmp_path}", "trainer.fast_dev_run=true", "model.mlp_hidden=[8]",
-                       "model.window_steps=12", "threads=1"])
-    task, record = train(cfg, datamodule=dm)
-    assert record["global_steps"] == 1 and task.model.cfg.window_steps == 12
+    with pytest.raises(ValueError, match="crop_steps"):
+        WindowDataModule(arrays=arrays, crop_steps=0)
 
 
 def test_staged_prediction_equals_the_forward_pass() -> None:
@@ -180,3 +177,25 @@ def test_staged_prediction_equals_the_forward_pass() -> None:
     with torch.no_grad():
         mean = torch.stack([m(x)[0] for m in ens.members]).mean(0)
         assert torch.allclose(ens.predict(x)[0], mean)
+
+
+def test_targets_choose_keeps_the_fit_sets_upper_ci_under_five_percent(monkeypatch: pytest.MonkeyPatch) -> None:
+    import estimators.targets as targets
+    from estimators.targets import choose, deployed, estimator_label, group_name
+
+    monkeypatch.setattr(targets, "K_GRID", (0.0, 1.0))
+    rng = np.random.default_rng(2)
+    y = np.repeat(rng.uniform(0.1, 1.2, 300), 10)  # 300 episodes of 10 windows
+    ep = np.repeat(np.arange(300), 10)
+    sigma = np.where(y < 0.5, 0.01, 0.08)
+    mean = y + np.where(y < 0.3, 0.05, 0.0) + rng.normal(0, 1, y.size) * sigma  # biased high at low friction
+    d = {"mean": mean, "sigma": sigma, "lower": mean - sigma, "y": y, "episode": ep}
+    c = choose(d, mu_min=0.05, n_boot=200, edges=(0.3, 0.5, 0.8))
+    assert all(hi <= 0.05 for hi in c["fit_over_hi"].values()) and c["bound"] in ("gaussian", "quantile")
+    rows = {r["band"]: r for r in band_rows(y, deployed(d, c, 0.05), ep, n_boot=200)}
+    assert rows["0.1-0.3"]["over"] <= c["alpha"] + 1e-9 and rows["0.8-1.2"]["useful"] > 0.95
+    assert group_name({"scenario": "friction_patch"}, {"friction": 0.8, "friction_after": 0.2}) == \
+        "friction_patch mu=0.8->0.2"
+    assert group_name({"scenario": "stress"}, {"friction": 0.3, "trunk_mass_scale": 1.6}) == "stress mu=0.3 trunk x1.6"
+    assert estimator_label({"estimator": "fixed"}, {"mu": 0.2}) == "fixed (mu=0.2)"
+    assert estimator_label({"estimator": "mlp"}, {"inference": "staged"}) == "mlp (staged)"
