@@ -41,6 +41,7 @@ seed-ensemble checkpoint (:class:`estimators.models.EnsembleModel`) runs all its
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
@@ -206,10 +207,8 @@ class LearnedEstimator:
             self._pool = None
 
     def __del__(self) -> None:  # pragma: no cover - interpreter shutdown order varies
-        try:
+        with contextlib.suppress(Exception):  # never raise from a finaliser
             self.close()
-        except Exception:  # noqa: BLE001 - never raise from a finaliser
-            pass
 
     # ------------------------------------------------------------------------------------------ loop
     def step(self, obs: Proprioception) -> FrictionEstimate:
@@ -262,7 +261,7 @@ class LearnedEstimator:
 
     def _advance_staged(self, t_s: float) -> None:
         """Staged mode: one slice of the models per tick; apply the result at its due tick."""
-        gen, due, fill = self._stages  # type: ignore[misc]
+        gen, due, _ = self._stages  # type: ignore[misc]
         if self._stage_result is None:
             try:
                 next(gen)

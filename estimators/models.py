@@ -254,7 +254,7 @@ class FrictionModel(nn.Module):
         """:meth:`encode` in slices (a generator that yields between them and returns the result); the
         default is one slice."""
         return self.encode(x)
-        yield  # noqa: B901 - makes this a generator
+        yield
 
     def predict_stages(self, x: torch.Tensor) -> Generator[None, None, tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
         """:meth:`predict` as a generator that yields between slices of the network (embedding, each

@@ -180,7 +180,7 @@ def test_staged_prediction_equals_the_forward_pass() -> None:
 
 
 def test_targets_choose_keeps_the_fit_sets_upper_ci_under_five_percent(monkeypatch: pytest.MonkeyPatch) -> None:
-    import estimators.targets as targets
+    from estimators import targets
     from estimators.targets import choose, deployed, estimator_label, group_name
 
     monkeypatch.setattr(targets, "K_GRID", (0.0, 1.0))
