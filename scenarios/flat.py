@@ -5,7 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
 
 
 class FlatGround:
@@ -25,6 +25,9 @@ class FlatGround:
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return None
+
+    def obstacles(self) -> tuple[RoundObstacle, ...]:
+        return ()
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
         return None

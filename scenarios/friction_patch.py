@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench import plant
-from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
 
 HALF_LENGTH_M = 50.0  # [m] half-extent of each floor patch
 THICKNESS_M = 0.1  # [m] patch boxes: top face at z = 0
@@ -39,6 +39,9 @@ class FrictionPatch:
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return None
+
+    def obstacles(self) -> tuple[RoundObstacle, ...]:
+        return ()
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
         return None

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from taslel_bench import robot
-from taslel_bench.interfaces import ClearanceProfile, QPProblem
+from taslel_bench.interfaces import ClearanceProfile, QPProblem, RoundObstacle
 from taslel_bench.jit import kernel
 from taslel_bench.model import A1Model
 
@@ -180,6 +180,46 @@ class SwingClearanceECBF:
                    self._c2, self.alpha1, self.alpha2, robot.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
 
 
+class SwingObstacleECBF:
+    """Swing-foot clearance of physical round obstacles (logs across the path), one row per foot: the
+    paper's exponential CBF with the Euclidean clearance of the foot sphere from the nearest log as h.
+
+    For a log with axis along world y through (x_o, z_o) and radius R, and the foot-sphere centre p (radius
+    r): rho = |(p_x - x_o, p_z - z_o)|, n = (p - o)_xz / rho, h = rho - R - r (>= 0 <=> no contact),
+    hdot = n . v_xz, hddot = n . a_xz + (|v_xz|² - hdot²) / rho with a = J vdot + J̇v. The row enforces
+    hdot_e + a2 h_e >= 0 with h_e = hdot + a1 h:
+    -(n_x J_x + n_z J_z) vdot <= a2 h_e + a1 hdot + n . (J̇v)_xz + (|v_xz|² - hdot²) / rho.
+    Each swing foot is constrained by its nearest log (smallest h); stance feet get an inactive row.
+    """
+
+    name, n_rows = "obstacle", robot.N_LEGS
+
+    def __init__(self, obstacles: tuple[RoundObstacle, ...], alpha1: float, alpha2: float) -> None:
+        if not obstacles:
+            raise ValueError("SwingObstacleECBF needs at least one obstacle")
+        self.obstacles, self.alpha1, self.alpha2 = obstacles, alpha1, alpha2
+        self._geometry = np.array([[ob.x_m, ob.z_m, ob.radius_m] for ob in obstacles])  # [m] (n_obstacles, 3)
+        self.start = 0
+        self.h = np.full(robot.N_LEGS, np.nan)  # [m] clearance of each swing foot (nan in stance)
+        self.h_e = np.full(robot.N_LEGS, np.nan)  # [m/s]
+
+    def pattern(self, mask: np.ndarray) -> None:
+        mask[self.start : self.start + robot.N_LEGS, VDOT] = True
+
+    def labels(self) -> list[str]:
+        return [f"{leg}_obstacle" for leg in robot.LEGS]
+
+    def init(self, qp: QPProblem) -> None:
+        qp.G[self.start : self.start + robot.N_LEGS] = 0.0
+        qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        m = x.model
+        _obstacle_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
+                       m.foot_jdotv_in_world, x.in_stance, self._geometry, self.alpha1, self.alpha2,
+                       robot.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+
+
 # --------------------------------------------------------------------------------- compiled row writers
 # Column blocks of X are fixed (VDOT, U, LAM above); each kernel writes one family's rows in place.
 
@@ -245,5 +285,39 @@ def _ecbf_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_stance,
         for col in range(nv):
             G[r, col] = -foot_jac[i, 2, col]
         hvec[r] = alpha2 * h_e + foot_jdotv[i, 2] - ddz * sdot * sdot + alpha1 * hdot
+        h_out[i] = h
+        he_out[i] = h_e
+
+
+@kernel
+def _obstacle_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_stance, geometry, alpha1, alpha2,
+                   foot_radius, h_out, he_out):  # fmt: skip
+    """Row r0 + i per foot (see :class:`SwingObstacleECBF`); ``geometry`` rows are (x_o, z_o, R) [m]."""
+    nv = foot_jac.shape[2]
+    for i in range(foot_jac.shape[0]):
+        r = r0 + i
+        if in_stance[i]:
+            for col in range(nv):
+                G[r, col] = 0.0
+            hvec[r] = INACTIVE_RHS
+            h_out[i] = np.nan
+            he_out[i] = np.nan
+            continue
+        px, pz = foot_pos[i, 0], foot_pos[i, 2]
+        best, h, dx, dz, rho = -1, np.inf, 0.0, 1.0, 1.0
+        for k in range(geometry.shape[0]):
+            ddx, ddz = px - geometry[k, 0], pz - geometry[k, 1]
+            rr = np.sqrt(ddx * ddx + ddz * ddz)
+            hk = rr - geometry[k, 2] - foot_radius
+            if hk < h:
+                best, h, dx, dz, rho = k, hk, ddx, ddz, max(rr, 1e-9)
+        nx, nz = dx / rho, dz / rho
+        vx, vz = foot_vel[i, 0], foot_vel[i, 2]
+        hdot = nx * vx + nz * vz
+        curvature = (vx * vx + vz * vz - hdot * hdot) / rho
+        h_e = hdot + alpha1 * h
+        for col in range(nv):
+            G[r, col] = -(nx * foot_jac[i, 0, col] + nz * foot_jac[i, 2, col])
+        hvec[r] = alpha2 * h_e + alpha1 * hdot + nx * foot_jdotv[i, 0] + nz * foot_jdotv[i, 2] + curvature
         h_out[i] = h
         he_out[i] = h_e

@@ -12,6 +12,7 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +20,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench import robot
+from taslel_bench.interfaces import RoundObstacle
 
 TERRAIN_PRIORITY = 1
 
@@ -171,6 +173,41 @@ def add_terrain_geom(
     return geom
 
 
+OBSTACLE_BODY = "obstacles"  # static (mocap) body holding every physical obstacle geom
+OBSTACLE_SENSOR_SUFFIX = "obstacle"  # per foot: contacts of the foot sphere with the obstacles body
+
+
+def add_round_obstacles(spec: mujoco.MjSpec, obstacles: Sequence[RoundObstacle], friction: float) -> None:
+    """Put each :class:`RoundObstacle` in the plant as a capsule along world y (exact sphere-capsule
+    collision, so the contact geometry is the barrier's geometry), on one static body
+    :data:`OBSTACLE_BODY` (mocap: not fused into the world, so contact sensors can name it), plus one
+    contact sensor per foot counting that foot's contacts with the obstacles (:class:`FootContactReader`).
+    Obstacle geoms are terrain (their friction wins, robot geoms collide with them)."""
+    if not obstacles:
+        return
+    body = spec.worldbody.add_body(name=OBSTACLE_BODY, mocap=True)
+    axis_along_y = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # capsule axis: local z -> world y
+    for i, ob in enumerate(obstacles):
+        geom = body.add_geom(name=f"{OBSTACLE_BODY}_{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                             size=[ob.radius_m, ob.half_width_m, 0.0], pos=[ob.x_m, 0.0, ob.z_m],
+                             quat=axis_along_y, rgba=[0.55, 0.4, 0.25, 1.0])  # fmt: skip
+        geom.friction = [friction, 0.005, 0.0001]
+        geom.priority = TERRAIN_PRIORITY
+        geom.contype, geom.conaffinity = 0, 1
+        geom.condim = 3
+    for foot in robot.FOOT_FRAMES:
+        sensor = spec.add_sensor(name=f"{foot}_{OBSTACLE_SENSOR_SUFFIX}", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                                 objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot, reftype=mujoco.mjtObj.mjOBJ_BODY,
+                                 refname=OBSTACLE_BODY)  # fmt: skip
+        sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
+
+
+def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
+    """(ngeom,) bool: geoms of the :data:`OBSTACLE_BODY` (all False when the plant has none)."""
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
+    return model.geom_bodyid == body if body >= 0 else np.zeros(model.ngeom, bool)
+
+
 def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:
     """Compile with a clear error if the spec lost what the harness relies on."""
     model = spec.compile()
@@ -212,8 +249,13 @@ class FootContactReader:
 
     ``forces_in_world`` (4, 3): net contact force **on** each foot [N], world axes (0 without contact) —
     the constraint forces MuJoCo applied in the last physics step. ``in_contact`` (4,) bool.
-    ``non_foot_contact``: True if any robot geom other than a foot touches terrain (checked through
-    ``data.contact`` only when the contact count exceeds the feet's).
+    Robot geoms other than the feet, touching terrain (checked through ``data.contact`` only when the
+    contact count exceeds the feet's; a contact counts only at distance <= 0, a contact inside a geom margin
+    is not a touch; ``data.contact`` after ``mj_step`` holds the contacts of the step's *starting* state):
+    ``body_contact``: the trunk, a hip or a thigh (anything above the knee) touches any terrain: a fall;
+    ``shin_contact``: a lower leg (the other geoms of the body that carries a foot sphere) touches the
+    floor; ``non_foot_obstacle_contact``: a lower leg touches a physical obstacle (:data:`OBSTACLE_BODY`):
+    a trip. ``non_foot_contact_name``: the body of the first such geom.
     ``slip_velocity_in_world`` (4, 2): horizontal velocity [m/s] of the sphere's lowest point (the contact
     point on flat ground): v_centre + omega x (-r z) — the centre of a rolling, non-slipping foot moves.
     ``foot_pos_in_world`` (4, 3): foot-sphere centres [m].
@@ -247,11 +289,18 @@ class FootContactReader:
         self._is_foot[self.foot_geoms] = True
         robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
+        foot_bodies = model.geom_bodyid[self.foot_geoms]
+        self._is_lower_leg = np.isin(model.geom_bodyid, foot_bodies) & ~self._is_foot  # calves (knee to foot)
+        self._is_obstacle = obstacle_geom_mask(model)
+        self.has_obstacles = bool(self._is_obstacle.any())
+        if self.has_obstacles:  # per foot: number of contacts with the obstacles body
+            self._obstacle_rows = sensor_adr(OBSTACLE_SENSOR_SUFFIX)
+        self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+        self.non_foot_contact_name = ""
         self.forces_in_world = np.zeros((robot.N_LEGS, 3))
         self.in_contact = np.zeros(robot.N_LEGS, bool)
         self.slip_velocity_in_world = np.zeros((robot.N_LEGS, 2))
         self.foot_pos_in_world = np.zeros((robot.N_LEGS, 3))
-        self.non_foot_contact = False
         self._data: mujoco.MjData | None = None
         self._sensordata = np.zeros(0)
 
@@ -264,29 +313,49 @@ class FootContactReader:
         np.multiply(sd[self._ang_rows], self._radius_sign, out=self.slip_velocity_in_world)
         self.slip_velocity_in_world += sd[self._lin_rows]
         self.foot_pos_in_world[:] = sd[self._pos_rows]
-        self.non_foot_contact = bool(data.ncon > found.sum()) and self._other_contact(data)
+        self.check_non_foot_contact(data)
 
     def check_non_foot_contact(self, data: mujoco.MjData) -> bool:
-        """Only ``non_foot_contact`` (cheap unless there are more contacts than foot contacts)."""
+        """Only ``body_contact``, ``shin_contact`` and ``non_foot_obstacle_contact`` (cheap unless there are
+        more contacts than foot contacts). Returns ``body_contact`` (a fall)."""
         if data is not self._data:  # keep the sensordata view of this data (a new wrapper per attribute read)
             self._data, self._sensordata = data, data.sensordata
         sd, (r0, r1, r2, r3) = self._sensordata, self._found_rows_list
         n_found = sd[r0] + sd[r1] + sd[r2] + sd[r3]  # 4 scalar reads: cheaper than a fancy index + sum
-        self.non_foot_contact = bool(data.ncon > n_found) and self._other_contact(data)
-        return self.non_foot_contact
+        if data.ncon > n_found:
+            self._classify_other_contacts(data)
+        else:
+            self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+        return self.body_contact
 
     def from_sensor_log(self, sensors: np.ndarray) -> dict[str, np.ndarray]:
         """(n, nsensordata) rows -> ``forces_in_world`` (n, 4, 3), ``in_contact`` (n, 4),
         ``slip_velocity_in_world`` (n, 4, 2), ``foot_pos_in_world`` (n, 4, 3); same definitions as :meth:`read`."""
+        n = sensors.shape[0]
         return {
             "forces_in_world": -sensors[:, self._force_rows],
             "in_contact": sensors[:, self._found_rows] > 0.0,
             "slip_velocity_in_world": sensors[:, self._lin_rows] + sensors[:, self._ang_rows] * self._radius_sign,
             "foot_pos_in_world": sensors[:, self._pos_rows],
+            "obstacle_contact": (sensors[:, self._obstacle_rows] > 0.0 if self.has_obstacles
+                                 else np.zeros((n, robot.N_LEGS), bool)),
         }
 
-    def _other_contact(self, data: mujoco.MjData) -> bool:
-        geom = data.contact.geom
-        other = ~(self._is_foot[geom[:, 0]] | self._is_foot[geom[:, 1]])
-        robot_side = self._is_robot_geom[geom[other]]
-        return bool(np.any(robot_side[:, 0] != robot_side[:, 1]))
+    def _classify_other_contacts(self, data: mujoco.MjData) -> None:
+        """Non-foot robot geoms touching terrain at distance <= 0 (see the class doc)."""
+        con = data.contact
+        geom = con.geom
+        robot_side = self._is_robot_geom[geom]
+        other = (con.dist <= 0.0) & ~(self._is_foot[geom[:, 0]] | self._is_foot[geom[:, 1]])
+        other &= robot_side[:, 0] != robot_side[:, 1]
+        if not other.any():
+            self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+            return
+        pairs = geom[other]
+        robot_geom = np.where(robot_side[other, 0], pairs[:, 0], pairs[:, 1])
+        on_obstacle = self._is_obstacle[np.where(robot_side[other, 0], pairs[:, 1], pairs[:, 0])]
+        lower = self._is_lower_leg[robot_geom]
+        body, shin, trip = ~lower, lower & ~on_obstacle, lower & on_obstacle
+        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = bool(body.any()), bool(shin.any()), bool(trip.any())
+        first = robot_geom[np.argmax(body)] if self.body_contact else robot_geom[0]
+        self.non_foot_contact_name = self.model.body(self.model.geom_bodyid[first]).name

@@ -6,6 +6,7 @@ each config group (``{"scenario": "flat", "solver": "daqp", ...}``).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import sys
 import traceback
@@ -16,11 +17,12 @@ import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench import plant, qpset, recording
+from taslel_bench import plant, qpset, recording, robot
 from taslel_bench.config import ConfigError, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
 from taslel_bench.gait import GaitParams
+from taslel_bench.health import HealthLimits
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
@@ -126,7 +128,9 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
-            SafetyFilter(fs, self.backend, self.scenario.clearance_profile()) if self.backend is not None else None
+            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.obstacles())
+            if self.backend is not None
+            else None
         )
         self.episode = Episode(
             episode_settings(cfg),
@@ -138,8 +142,32 @@ class Built:
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
         )
-        self.episode.initial_state()
-        self.friction_checked = check_friction(self.episode)
+        self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
+
+
+def health_limits(cfg: DictConfig) -> HealthLimits:
+    h = cfg.get("health") or {}
+    return HealthLimits(**{k: float(v) for k, v in h.items()})
+
+
+def file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
+    """What was simulated and what the controller believed: the plant source (the URDF of
+    example-robot-data or ``robot.plant_mjcf``) with its content hash, and the controller model's source,
+    hash and total mass (the filter's equations of motion)."""
+    mjcf = cfg.robot.get("plant_mjcf")
+    plant_src = Path(mjcf) if mjcf else robot.a1_urdf_path()
+    return {
+        "plant_source": str(plant_src),
+        "plant_sha256": file_sha256(plant_src),
+        "plant_total_mass_kg": float(sum(built.mj_model.body_mass)),
+        "model_source": str(robot.a1_urdf_path()),
+        "model_sha256": file_sha256(robot.a1_urdf_path()),
+        "model_total_mass_kg": float(built.episode.model.total_mass_kg),
+    }
 
 
 def _progress_printer(duration: float, enabled: bool):
@@ -187,7 +215,9 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "commanded_speed_mps": float(cfg.controller.speed),
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
     }
-    summary.update(summarize(res, dt, float(cfg.controller.stand_duration)))
+    summary.update(plant_identity(cfg, built))
+    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
+    summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
     if built.backend is not None:
         summary["solver_settings"] = str(built.backend.describe())
     events = list(res.trace.events)

@@ -48,11 +48,12 @@ from taslel_bench.constraints import (
     EquationsOfMotion,
     FrictionCone,
     SwingClearanceECBF,
+    SwingObstacleECBF,
     TickInputs,
     U,
 )
 from taslel_bench.equality_solve import FreeBlockSolver, solve_free
-from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution
+from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution, RoundObstacle
 from taslel_bench.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
@@ -91,7 +92,11 @@ class SafetyFilter:
     """Owns the QP layout and the constraint families; one instance per episode."""
 
     def __init__(
-        self, settings: FilterSettings, backend: QPBackend, profile: ClearanceProfile | None = None
+        self,
+        settings: FilterSettings,
+        backend: QPBackend,
+        profile: ClearanceProfile | None = None,
+        obstacles: tuple[RoundObstacle, ...] = (),
     ) -> None:
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
@@ -111,7 +116,12 @@ class SafetyFilter:
             if (profile is not None and settings.ecbf_enabled)
             else None
         )
-        ineq = [self.friction] + ([self.ecbf] if self.ecbf is not None else [])
+        self.obstacle_ecbf = (
+            SwingObstacleECBF(tuple(obstacles), settings.ecbf_alpha1, settings.ecbf_alpha2)
+            if (obstacles and settings.ecbf_enabled)
+            else None
+        )
+        ineq = [self.friction] + [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
         m_eq = 0
         for fam in self.eq_families:
             fam.start, m_eq = m_eq, m_eq + fam.n_rows

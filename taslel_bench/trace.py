@@ -1,9 +1,20 @@
 """Per-tick record of an episode in preallocated arrays, turned into a typed table at the end.
 
-Every plant quantity is read from MuJoCo after the tick's physics steps: the state (trunk pose and
-velocity, joints) is the one after the tick; foot positions, contact forces and contact-point velocities
-are those MuJoCo computed in the tick's last physics step (its starting state, 1 physics step earlier).
-Frames in the column names: ``_w`` = world axes, joint vectors in core order.
+Timing of the column groups within the row of tick k (control period dt, physics step dt_p):
+
+* ``t_s`` = k dt: the tick's start; the controller and filter read the plant state at ``t_s``;
+* commands (``u_nom_*``, ``u_*``), the filter's answer (``*_grf_filter_*``, ``qp_*``, ``*_barrier_*``), the
+  gait schedule (``gait_phase``, ``*_stance``, ``*_swing_phase``) and ``mu_hat``/``mu_true``: computed at
+  ``t_s`` from that state; ``u`` is held over [t_s, t_s + dt);
+* the plant state (``base_*``, ``q_*``, ``qd_*``): the state at the end of the tick, t_s + dt (the state
+  the next tick reads). ``base_*`` position and quaternion (wxyz), linear velocity in world axes, angular
+  velocity in trunk axes, ``q``/``qd``: together a full MuJoCo (qpos, qvel), enough to restart the plant;
+* contact and foot quantities (``*_contact``, ``*_grf_plant_*``, ``*_foot_*``, ``*_contact_point_speed``,
+  ``*_obstacle_contact``, ``*_mu_foot``, ``*_clearance_m``, ``*_obstacle_clearance_m``): MuJoCo's sensors of
+  the tick's last physics step, i.e. of its starting state at t_s + dt - dt_p (contact forces are the
+  constraint forces applied during that step).
+
+Frames in the column names: ``_w`` = world axes, ``_b`` = trunk axes; joint vectors in core order.
 
 In the control loop :meth:`EpisodeTrace.record` only copies raw rows (``qpos``, ``qvel``, ``sensordata``,
 the controller's and filter's vectors); :meth:`EpisodeTrace.finalize` derives the named quantities for all
@@ -48,8 +59,11 @@ class EpisodeTrace:
         self.qp_build_us = np.full(c, np.nan)
         self.qp_solve_us = np.full(c, np.nan)
         self.qp_iterations = np.full(c, -1, np.int32)
-        self.barrier_h_m = np.full((c, nl), np.nan)  # ECBF h per foot (nan in stance / no ECBF)
+        self.barrier_h_m = np.full((c, nl), np.nan)  # phase-profile ECBF h per foot (nan in stance / no ECBF)
         self.barrier_he_mps = np.full((c, nl), np.nan)
+        self.barrier_obstacle_h_m = np.full((c, nl), np.nan)  # obstacle ECBF h per foot (the filter's model)
+        self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
+        self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.tick_us = np.zeros(c)
@@ -61,6 +75,7 @@ class EpisodeTrace:
         self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
         self.base_quat_wxyz = np.zeros((0, 4))
         self.base_linvel_w = np.zeros((0, 3))  # [m/s]
+        self.base_angvel_b = np.zeros((0, 3))  # [rad/s] trunk axes
         self.q = np.zeros((0, 12))  # [rad]
         self.qd = np.zeros((0, 12))  # [rad/s]
         self.foot_pos_w = np.zeros((0, nl, 3))  # [m] foot-sphere centres
@@ -68,11 +83,14 @@ class EpisodeTrace:
         self.in_contact = np.zeros((0, nl), bool)
         self.slip_w = np.zeros((0, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
         self.clearance_m = np.zeros((0, nl))  # swing foot bottom - z(s) [m] (nan in stance)
+        self.obstacle_contact = np.zeros((0, nl), bool)  # foot sphere touches a physical obstacle
+        self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
+        self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
 
     def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
-               ecbf) -> None:  # fmt: skip
+               barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
         """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
-        outputs)."""
+        outputs). ``barriers``: the filter's (phase-profile ECBF, obstacle ECBF), either may be None."""
         self.t_s[k] = t
         self.qpos_mj[k] = qpos
         self.qvel_mj[k] = qvel
@@ -99,16 +117,23 @@ class EpisodeTrace:
                 self.qp_solve_us[k] = sol.solve_time_s * 1e6
                 if sol.iterations is not None:
                     self.qp_iterations[k] = sol.iterations
+            ecbf, obstacle_ecbf = barriers
             if ecbf is not None:
                 self.barrier_h_m[k] = ecbf.h
                 self.barrier_he_mps[k] = ecbf.h_e
+            if obstacle_ecbf is not None:
+                self.barrier_obstacle_h_m[k] = obstacle_ecbf.h
+        self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
+        self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
 
-    def finalize(self, br: StateBridge, contacts, profile) -> None:
+    def finalize(self, br: StateBridge, contacts, profile, scenario=None) -> None:
         """Derive the named plant quantities of the ``n`` recorded ticks (idempotent).
 
         ``contacts``: the episode's :class:`taslel_bench.plant.FootContactReader` (sensor layout);
-        ``profile``: the scenario's clearance profile or None (then ``clearance_m`` is all nan)."""
+        ``profile``: the scenario's clearance profile or None (then ``clearance_m`` is all nan);
+        ``scenario``: gives the friction under each foot and the physical obstacles (None: the trunk's
+        friction ``mu_true`` for every foot, no obstacles)."""
         if self.finalized:
             return
         n, a, dv = self.n, br.free_qadr, br.free_dadr
@@ -117,6 +142,7 @@ class EpisodeTrace:
         self.base_pos_w = qpos[:, a : a + 3].copy()
         self.base_quat_wxyz = qpos[:, a + 3 : a + 7].copy()
         self.base_linvel_w = qvel[:, dv : dv + 3].copy()
+        self.base_angvel_b = qvel[:, dv + 3 : dv + 6].copy()
         self.q = qpos[:, br.joint_qadr]
         self.qd = qvel[:, br.joint_dadr]
         plant_side = contacts.from_sensor_log(self.sensordata_mj[:n])
@@ -124,6 +150,10 @@ class EpisodeTrace:
         self.grf_plant_w = plant_side["forces_in_world"]
         self.in_contact = plant_side["in_contact"]
         self.slip_w = plant_side["slip_velocity_in_world"]
+        self.obstacle_contact = plant_side["obstacle_contact"]
+        self.mu_foot = friction_under_feet(scenario, self.foot_pos_w, self.mu_true[:n])
+        obstacles = scenario.obstacles() if scenario is not None else ()
+        self.obstacle_clearance_m = obstacle_clearance(obstacles, self.foot_pos_w)
         self.clearance_m = np.full((n, robot.N_LEGS), np.nan)
         if profile is not None and n:
             swing = ~self.in_stance[:n]
@@ -146,8 +176,12 @@ class EpisodeTrace:
         cols: dict[str, np.ndarray] = {"t_s": self.t_s[:n]}
         for j, ax in enumerate("xyz"):
             cols[f"base_{ax}_w_m"] = self.base_pos_w[:n, j]
+        for j, ax in enumerate("wxyz"):
+            cols[f"base_quat_{ax}"] = self.base_quat_wxyz[:n, j]
         for j, ax in enumerate("xyz"):
             cols[f"base_v{ax}_w_mps"] = self.base_linvel_w[:n, j]
+        for j, ax in enumerate("xyz"):
+            cols[f"base_w{ax}_b_radps"] = self.base_angvel_b[:n, j]
         for j, name in enumerate(("roll", "pitch", "yaw")):
             cols[f"base_{name}_rad"] = self.base_rpy()[:, j]
         for j, jn in enumerate(robot.JOINT_NAMES):
@@ -171,6 +205,12 @@ class EpisodeTrace:
             cols[f"{leg}_barrier_h_m"] = self.barrier_h_m[:n, i]
             cols[f"{leg}_barrier_he_mps"] = self.barrier_he_mps[:n, i]
             cols[f"{leg}_clearance_m"] = self.clearance_m[:n, i]
+            cols[f"{leg}_mu_foot"] = self.mu_foot[:n, i]
+            cols[f"{leg}_obstacle_contact"] = self.obstacle_contact[:n, i]
+            cols[f"{leg}_obstacle_clearance_m"] = self.obstacle_clearance_m[:n, i]
+            cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[:n, i]
+        cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[:n]
+        cols["shin_floor_contact"] = self.shin_floor_contact[:n]
         cols["qp_status"] = self.qp_status[:n]
         cols["qp_fallback"] = self.qp_fallback[:n]
         cols["qp_build_us"] = self.qp_build_us[:n]
@@ -183,3 +223,33 @@ class EpisodeTrace:
             cols[f"tick_{part}_us"] = self.tick_parts_us[:n, j]
         return pd.DataFrame(cols)
 
+
+
+def friction_under_feet(scenario, foot_pos_w: np.ndarray, mu_trunk: np.ndarray) -> np.ndarray:
+    """(n, 4) true friction coefficient [-] of the terrain under each foot-sphere centre (the scenario's
+    :meth:`friction_at` at the foot's world (x, y)); without a scenario the trunk's, for every foot."""
+    n = foot_pos_w.shape[0]
+    if scenario is None:
+        return np.repeat(mu_trunk[:, None], robot.N_LEGS, axis=1)
+    flat = foot_pos_w[:, :, :2].reshape(-1, 2)
+    cache: dict[tuple[float, float], float] = {}
+    out = np.empty(flat.shape[0])
+    for j, xy in enumerate(flat):  # a few 10k calls per episode, once after it
+        key = (float(xy[0]), float(xy[1]))
+        if key not in cache:
+            cache[key] = float(scenario.friction_at(xy))
+        out[j] = cache[key]
+    return out.reshape(n, robot.N_LEGS)
+
+
+def obstacle_clearance(obstacles, foot_pos_w: np.ndarray) -> np.ndarray:
+    """(n, 4) signed distance [m] from each foot sphere to the nearest physical obstacle (a log with its axis
+    along world y, :class:`taslel_bench.interfaces.RoundObstacle`): <= 0 means touching. NaN without
+    obstacles."""
+    n = foot_pos_w.shape[0]
+    if not obstacles:
+        return np.full((n, robot.N_LEGS), np.nan)
+    geo = np.array([[ob.x_m, ob.z_m, ob.radius_m] for ob in obstacles])  # (m, 3)
+    dx = foot_pos_w[:, :, 0, None] - geo[:, 0]  # (n, 4, m)
+    dz = foot_pos_w[:, :, 2, None] - geo[:, 1]
+    return (np.hypot(dx, dz) - geo[:, 2]).min(axis=2) - robot.FOOT_RADIUS_M

@@ -224,7 +224,7 @@ def test_foot_contact_sensors_match_contact_forces(setup):
     for key, j in (("forces_in_world", 0), ("in_contact", 1), ("slip_velocity_in_world", 2), ("foot_pos_in_world", 3)):
         assert np.array_equal(whole[key], np.array([row[j] for row in per_tick])), key
     # standing still, the feet carry the weight
-    assert reader.non_foot_contact is False
+    assert reader.body_contact is False
 
 
 def test_controller_reference_table_matches_fresh_computation():
