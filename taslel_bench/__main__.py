@@ -27,12 +27,12 @@ def main(cfg: DictConfig) -> dict:
     out_dir = Path(hc.runtime.output_dir)
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if "/" not in k and not k.startswith("hydra")}
     try:
-        summary = run(cfg, out_dir, choices)
+        summary = run(cfg, out_dir, choices, list(hc.overrides.task))
     except Exception as exc:
         if hc.mode != RunMode.MULTIRUN:
             raise  # a single run: the error (e.g. a bad value, naming the field) is the output
         # in a sweep one bad job must not stop the others: leave an error summary the report lists
-        summary = record_job_error(out_dir, choices, cfg, exc)
+        summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
     print_summary(summary, out_dir)
     if hc.mode == RunMode.MULTIRUN:
         sweep_dir = Path(hc.sweep.dir)

@@ -180,9 +180,11 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
-def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -> dict[str, object]:
+def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
+        overrides: list[str] | None = None) -> dict[str, object]:  # fmt: skip
     """Run one episode and write ``out_dir``. Returns the summary. Config errors raise before simulating;
-    faults during the episode give ``status: "error"`` in the summary."""
+    faults during the episode give ``status: "error"`` in the summary. ``overrides``: the command-line
+    overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not cfg.get("force", False):
@@ -214,6 +216,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "physics_rate_hz": float(cfg.physics_rate_hz),
         "commanded_speed_mps": float(cfg.controller.speed),
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
+        "overrides": ",".join(sorted(overrides or [])),
     }
     summary.update(plant_identity(cfg, built))
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
@@ -262,7 +265,8 @@ def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
     return rec
 
 
-def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException) -> dict:
+def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException,
+                     overrides: list[str] | None = None) -> dict:  # fmt: skip
     """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     tb = traceback.format_exc()
@@ -275,6 +279,7 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
         "fell": False,
+        "overrides": ",".join(sorted(overrides or [])),
     }
     recording.write_json(out_dir / recording.SUMMARY, summary)
     return summary

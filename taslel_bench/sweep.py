@@ -34,13 +34,14 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
     row: dict[str, Any] = {"status": "error", "message": "job left no summary.json (crashed or killed)"}
     overrides = run_dir / ".hydra" / "overrides.yaml"
     if overrides.is_file():
-        for line in overrides.read_text().splitlines():
-            item = line.strip().lstrip("- ").strip()
-            if "=" in item:
-                key, value = item.split("=", 1)
-                key = OVERRIDE_COLUMNS.get(key, key)
-                if key in AXES or key in OVERRIDE_COLUMNS.values():
-                    row[key] = _typed(key, value)
+        items = [line.strip().lstrip("- ").strip() for line in overrides.read_text().splitlines()]
+        items = [item for item in items if "=" in item]
+        row["overrides"] = ",".join(sorted(items))
+        for item in items:
+            key, value = item.split("=", 1)
+            key = OVERRIDE_COLUMNS.get(key, key)
+            if key in AXES or key in OVERRIDE_COLUMNS.values():
+                row[key] = _typed(key, value)
     tb = run_dir / "traceback.txt"
     if tb.is_file():
         row["message"] = tb.read_text().strip().splitlines()[-1]
@@ -70,10 +71,26 @@ def aggregate(sweep_dir: Path) -> pd.DataFrame:
         row.pop("skipped", None)
         row["run_dir"] = str(run_dir.relative_to(sweep_dir))
         rows.append(row)
-    frame = pd.DataFrame(rows)
+    frame = expand_overrides(pd.DataFrame(rows))
     if not frame.empty:
         frame = frame.sort_values([c for c in (*AXES, "run_dir") if c in frame.columns]).reset_index(drop=True)
     recording.write_parquet(sweep_dir / SUMMARY_TABLE, frame)
+    return frame
+
+
+def expand_overrides(frame: pd.DataFrame) -> pd.DataFrame:
+    """One column per overridden config key that is not already a column (``scenario.friction``,
+    ``filter.enabled``, ...), holding the override's value as text: the report groups rows by every
+    override that varies across the sweep. Runs without the override get "" (the config default)."""
+    if "overrides" not in frame.columns:
+        return frame
+    parsed = [dict(item.split("=", 1) for item in str(o).split(",") if "=" in item) if isinstance(o, str) else {}
+              for o in frame["overrides"]]  # fmt: skip
+    keys = sorted({k for p in parsed for k in p})
+    for key in keys:
+        if key in AXES or key in frame.columns or OVERRIDE_COLUMNS.get(key) in frame.columns:
+            continue
+        frame[key] = [p.get(key, "") for p in parsed]
     return frame
 
 

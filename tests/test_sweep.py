@@ -71,7 +71,7 @@ def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
     assert len(frame) == 3 and (frame["status"] == "error").sum() == 1
     assert pd.read_parquet(tmp_path / "summary.parquet").shape[0] == 3
     report = write_report(tmp_path, frame).read_text()
-    assert "| flat | daqp | oracle | 2 | 0 | 0/2 |" in report
+    assert "| flat | daqp | oracle | 2 | 0 | 0 | 0/2 |" in report  # runs, errors, degraded, falls
     assert "left no summary.json" in report
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
 
@@ -131,3 +131,24 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
     assert "| scenario | solver | filter_contact_velocity_gain | estimator |" in report
     assert "| flat | daqp | 50 | oracle | 1 | 0 |" in report
     assert "`filter.contact_velocity_gain=0` (the paper's contact constraint) only" in report
+
+
+def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path):
+    """`scenario.friction=0.3,1.0` are two rows (not one "flat" row); a degraded run is listed with why."""
+    for mu in ("0.3", "1.0"):
+        over = ["duration=0.2", "progress=false", "record.mcap=false", f"scenario.friction={mu}"]
+        run(compose_cfg(over), tmp_path / f"mu={mu}", {"scenario": "flat", "solver": "daqp_persistent"},
+            overrides=[f"scenario.friction={mu}", "duration=0.2"])
+    bad = ["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp", "solver.settings.max_iter=1"]
+    run(compose_cfg(bad), tmp_path / "bad", {"scenario": "flat", "solver": "osqp"},
+        overrides=["solver=osqp", "solver.settings.max_iter=1", "duration=0.2"])
+    frame = aggregate(tmp_path)
+    assert sorted(frame["scenario.friction"]) == ["", "0.3", "1.0"]
+    report = write_report(tmp_path, frame).read_text()
+    header = "| scenario | solver | estimator | scenario.friction | solver.settings.max_iter | runs |"
+    assert header in report
+    assert "| flat | daqp_persistent | oracle |  | 0.3 |" not in report  # the override is its own column
+    assert "| flat | daqp_persistent | oracle | 0.3 |  | 1 | 0 | 0 |" in report
+    assert "| flat | daqp_persistent | oracle | 1.0 |  | 1 | 0 | 0 |" in report
+    assert "| flat | osqp | oracle |  | 1 | 1 | 0 | 1 |" in report
+    assert "## Runs that ended degraded" in report and "qp_failed_rate=1 > 0.05" in report
