@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from estimators.checkpoint import load_checkpoint
+from estimators.checkpoint import CheckpointError, load_checkpoint
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_channels, sample_vector
 from estimators.models import VARIANTS
-from taslel_bench.fields import integer, number
+from taslel_bench.fields import ConfigError, integer, number
 from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception
 
 MAX_CONSERVATIVE_K = 10.0  # [sigmas] the shipped configs use 1-3
@@ -61,7 +61,10 @@ class LearnedEstimator:
         integer("estimator.hold_min_samples", hold_min_samples, 1)
         if threads is not None:
             torch.set_num_threads(integer("estimator.threads", threads, 1))
-        self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+        try:
+            self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+        except (CheckpointError, FileNotFoundError) as exc:  # the message names the file
+            raise ConfigError(f"estimator.checkpoint={checkpoint!r} (variant {variant!r}): {exc}") from exc
         if self.meta["model"]["variant"] != variant:
             raise ValueError(
                 f"checkpoint {checkpoint!r} holds a {self.meta['model']['variant']!r} model, not {variant!r}"

@@ -17,6 +17,7 @@ Three layers, all run by :class:`taslel_bench.run.Built` before the episode:
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from typing import Any
 
@@ -24,6 +25,7 @@ import numpy as np
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.fields import ConfigError, choice, fail, flag, integer, number
 from taslel_bench.interfaces import MAX_FRICTION, QPBackend, QPProblem
@@ -75,7 +77,27 @@ def check_finite(cfg: DictConfig) -> None:
 
 
 def validate(cfg: DictConfig) -> None:
-    """Raise :class:`ConfigError` on the first invalid field of the core groups (see module doc)."""
+    """Raise :class:`ConfigError` on the first invalid field of the core groups (see module doc); a value
+    that cannot be resolved (``seed=${oops}``, a missing ``???``) is one too."""
+    try:
+        _validate(cfg)
+    except (InterpolationResolutionError, MissingMandatoryValue) as exc:
+        path = str(getattr(exc, "full_key", "") or "")
+        raise fail(path, _raw(cfg, path), f"cannot be resolved: {str(exc).splitlines()[0]}") from exc
+
+
+def _raw(cfg: DictConfig, path: str) -> Any:
+    """The unresolved value at ``path`` (``a.b[0].c``), e.g. the text of a broken interpolation."""
+    node: Any = cfg
+    try:
+        for part in re.findall(r"[^.\[\]]+", path):
+            node = node._get_node(int(part) if isinstance(node, ListConfig) else part)
+        return node._value()
+    except Exception:  # noqa: BLE001 - only for the message
+        return "?"
+
+
+def _validate(cfg: DictConfig) -> None:
     check_finite(cfg)
     control_rate_hz = _top_level(cfg)
     stand_height_m = _controller(cfg, control_rate_hz)
