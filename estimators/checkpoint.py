@@ -65,15 +65,16 @@ def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel | EnsembleM
     try:
         meta = json.loads(js.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CheckpointError(f"checkpoint metadata {js} cannot be read: {type(exc).__name__}: {exc}") from exc
+        raise CheckpointError(f"checkpoint metadata {js} cannot be read: {type(exc).__name__}: {exc}") \
+            from exc
     try:
         state = torch.load(pt, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises RuntimeError, OSError, UnpicklingError ... on a damaged file  # noqa: BLE001
-        raise CheckpointError(f"checkpoint weights {pt} cannot be read (truncated or not a torch state dict?): "
-                              f"{type(exc).__name__}: {exc}") from exc
+    except Exception as exc:  # torch raises RuntimeError, OSError, UnpicklingError ... on a damaged file
+        raise CheckpointError(f"checkpoint weights {pt} cannot be read (truncated or not a torch state "
+                              f"dict?): {type(exc).__name__}: {exc}") from exc
     try:
         return _build(meta, state)
-    except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # load_state_dict: RuntimeError on mismatch
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # RuntimeError: state dict mismatch
         raise CheckpointError(f"checkpoint {pt} with metadata {js} cannot be loaded into a model: "
                               f"{type(exc).__name__}: {exc}") from exc
 

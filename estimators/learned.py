@@ -54,7 +54,8 @@ class LearnedEstimator:
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
         prior_mu = number("estimator.prior_mu", prior_mu, 0.0, MAX_FRICTION, lo_open=True)
-        conservative_k = number("estimator.conservative_k", conservative_k, 0.0, MAX_CONSERVATIVE_K, unit="sigmas")
+        conservative_k = number("estimator.conservative_k", conservative_k, 0.0, MAX_CONSERVATIVE_K,
+                                unit="sigmas")
         mu_min = number("estimator.mu_min", mu_min, 0.0, MAX_FRICTION)
         if bound not in ("gaussian", "quantile"):
             raise ValueError(f"unknown bound {bound!r}; valid choices: gaussian, quantile")

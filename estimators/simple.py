@@ -25,7 +25,8 @@ class FixedEstimator:
     name = "fixed"
 
     def __init__(self, mu: float = 0.5) -> None:
-        self.mu = number("estimator.mu", mu, 0.0, MAX_FRICTION, lo_open=True, why="a positive friction coefficient")
+        self.mu = number("estimator.mu", mu, 0.0, MAX_FRICTION, lo_open=True,
+                         why="a positive friction coefficient")
 
     def reset(self) -> None:
         """Nothing to forget."""

@@ -22,8 +22,8 @@ class FrictionPatch:
         self.name = name
         self.friction = friction_coefficient("scenario.friction", friction)
         self.friction_after = friction_coefficient("scenario.friction_after", friction_after)
-        self.change_at_m = number("scenario.change_at_m", change_at_m, -HALF_LENGTH_M, HALF_LENGTH_M, unit="m",
-                                  why="the floor patches are 100 m long")
+        self.change_at_m = number("scenario.change_at_m", change_at_m, -HALF_LENGTH_M, HALF_LENGTH_M,
+                                  unit="m", why="the floor patches are 100 m long")
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         spec.delete(spec.geom("floor"))

@@ -42,8 +42,8 @@ class ObstacleProfile(FlatGround):
                              "default bump of height_m")
         self.profile = ClearanceProfile(coeffs)
         if self.profile.peak_m > MAX_HEIGHT_M:
-            raise fail("scenario.coefficients", coefficients,
-                       f"the profile peaks at {self.profile.peak_m:.3g} m over the swing; must be <= {MAX_HEIGHT_M} m")
+            peak = f"the profile peaks at {self.profile.peak_m:.3g} m over the swing"
+            raise fail("scenario.coefficients", coefficients, f"{peak}; must be <= {MAX_HEIGHT_M} m")
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return self.profile

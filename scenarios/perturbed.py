@@ -37,14 +37,16 @@ class PerturbedPlant(FlatGround):
         super().__init__(name=name, friction=friction)
         s = "scenario."
         self.trunk_mass_scale = number(s + "trunk_mass_scale", trunk_mass_scale, 0.0, MAX_SCALE, lo_open=True)
-        self.trunk_com_shift_m = np.asarray(numbers(s + "trunk_com_shift_m", trunk_com_shift_m, -MAX_COM_SHIFT_M,
-                                                    MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame"))
+        shift = numbers(s + "trunk_com_shift_m", trunk_com_shift_m, -MAX_COM_SHIFT_M, MAX_COM_SHIFT_M,
+                        length=3, unit="m", why="[x, y, z] in the trunk frame")
+        self.trunk_com_shift_m = np.asarray(shift)
         self.joint_damping = number(s + "joint_damping", joint_damping, 0.0, MAX_JOINT_LOSS, unit="N·m·s/rad")
-        self.joint_frictionloss = number(s + "joint_frictionloss", joint_frictionloss, 0.0, MAX_JOINT_LOSS, unit="N·m")
+        self.joint_frictionloss = number(s + "joint_frictionloss", joint_frictionloss, 0.0, MAX_JOINT_LOSS,
+                                         unit="N·m")
         self.motor_strength_scale = number(s + "motor_strength_scale", motor_strength_scale, 0.0, MAX_SCALE,
                                            lo_open=True)
-        self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0, MAX_DELAY_STEPS,
-                                            unit="physics steps")
+        self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0,
+                                            MAX_DELAY_STEPS, unit="physics steps")
         self._queue: deque[np.ndarray] = deque()
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:

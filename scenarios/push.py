@@ -24,7 +24,8 @@ class Pushes(FlatGround):
                  pushes: Sequence[dict] = ({"t_s": 2.0, "force_n": (0.0, 60.0, 0.0), "duration_s": 0.1},)) -> None:
         super().__init__(name=name, friction=friction)
         if isinstance(pushes, (str, bytes)) or not isinstance(pushes, Sequence):  # ListConfig is a Sequence
-            raise fail("scenario.pushes", pushes, "must be a list of {t_s, force_n: [fx, fy, fz], duration_s}")
+            raise fail("scenario.pushes", pushes, "must be a list of {t_s, force_n: [fx, fy, fz],"
+                                                  " duration_s}")
         self.pushes = [_push(f"scenario.pushes[{i}]", p) for i, p in enumerate(pushes)]
         self._trunk = -1
 

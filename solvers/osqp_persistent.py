@@ -64,10 +64,10 @@ class OsqpPersistent(PersistentBackend):
         self._kept_patterns: dict[bytes, tuple] = {}  # vacuous-row mask -> pattern of the kept G rows
         self._vac_bytes = self._g_rows_of = b""
         self.settings["warm_starting"] = self.warm_start  # off: every solve starts from zero
-        self.settings_with_equalities = check_settings(
-            DEFAULT_SETTINGS_WITH_EQUALITIES if settings_with_equalities is None else settings_with_equalities,
-            "solver.settings_with_equalities",
-        )
+        with_eq = settings_with_equalities
+        if with_eq is None:
+            with_eq = DEFAULT_SETTINGS_WITH_EQUALITIES
+        self.settings_with_equalities = check_settings(with_eq, "solver.settings_with_equalities")
         self._solver = None
 
     def settings_for(self, problem: QPProblem) -> dict[str, Any]:

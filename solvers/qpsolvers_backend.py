@@ -89,7 +89,8 @@ class QpsolversBackend:
 
         available = installed_solvers()
         if solver not in available:
-            raise fail("solver.solver", solver, f"this qpsolvers solver is not installed; available: {', '.join(available)}")
+            raise fail("solver.solver", solver,
+                       f"this qpsolvers solver is not installed; available: {', '.join(available)}")
         choice("solver.matrices", matrices, ("auto", "dense", "sparse"))
         choice("solver.bounds", bounds, ("auto", "native", "rows"))
         if presolve is not None:

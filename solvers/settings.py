@@ -31,7 +31,8 @@ def is_tolerance(key: str) -> bool:
 
 
 def check_settings(settings: Mapping[str, Any] | None, path: str = "solver.settings") -> dict[str, Any]:
-    """A plain dict of ``settings`` after the by-name checks of the module doc (raises naming ``path.key``)."""
+    """A plain dict of ``settings`` after the by-name checks of the module doc (raises naming
+    ``path.key``)."""
     if settings is None:
         return {}
     if not isinstance(settings, Mapping):

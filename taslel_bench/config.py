@@ -57,10 +57,10 @@ def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
 
 
 def _leaves(node: Any, path: str) -> Iterator[tuple[str, Any]]:
-    """(dotted path, value) of every leaf under ``node`` (list entries as ``path[i]``)."""
+    """(dotted path, value) of every leaf under ``node`` at ``path`` (list entries as ``path[i]``)."""
     if isinstance(node, DictConfig):
         for key in node:
-            yield from _leaves(node[key], f"{path}.{key}" if path else str(key))
+            yield from _leaves(node[key], f"{path}.{key}")
     elif isinstance(node, ListConfig):
         for i, item in enumerate(node):
             yield from _leaves(item, f"{path}[{i}]")
@@ -71,9 +71,10 @@ def _leaves(node: Any, path: str) -> Iterator[tuple[str, Any]]:
 def check_finite(cfg: DictConfig) -> None:
     """The generic pass: no field anywhere in the run config (axis settings included) may be NaN or
     infinite -- no field of this harness has a meaning for them; null is the "not set" value."""
-    for path, value in _leaves(cfg, ""):
-        if path != "hydra" and not path.startswith("hydra.") and isinstance(value, float) and not math.isfinite(value):
-            raise fail(path, value, "must be finite (NaN and infinity are refused in every field)")
+    for group in (key for key in cfg if key != "hydra"):
+        for path, value in _leaves(cfg[group], str(group)):
+            if isinstance(value, float) and not math.isfinite(value):
+                raise fail(path, value, "must be finite (NaN and infinity are refused in every field)")
 
 
 def validate(cfg: DictConfig) -> None:
@@ -98,6 +99,7 @@ def _raw(cfg: DictConfig, path: str) -> Any:
 
 
 def _validate(cfg: DictConfig) -> None:
+    """The generic pass, the core groups' rules, the axes' ``_target_``."""
     check_finite(cfg)
     control_rate_hz = _top_level(cfg)
     stand_height_m = _controller(cfg, control_rate_hz)
@@ -115,9 +117,13 @@ def _top_level(cfg: DictConfig) -> int:
     integer("seed", _get(cfg, "seed"), 0, MAX_SEED)
     number("duration", _get(cfg, "duration"), 0.0, MAX_DURATION_S, lo_open=True, unit="s")
     physics = integer("physics_rate_hz", _get(cfg, "physics_rate_hz"), *PHYSICS_RATE_RANGE_HZ, unit="Hz")
-    control = integer("control_rate_hz", _get(cfg, "control_rate_hz"), MIN_CONTROL_RATE_HZ, physics, unit="Hz")
+    control = integer(
+        "control_rate_hz", _get(cfg, "control_rate_hz"), MIN_CONTROL_RATE_HZ, physics, unit="Hz"
+    )
     if physics % control:
-        raise fail("control_rate_hz", control, f"must divide physics_rate_hz={physics} (valid: {_divisors(physics)})")
+        raise fail(
+            "control_rate_hz", control, f"must divide physics_rate_hz={physics} (valid: {_divisors(physics)})"
+        )
     for key in ("force", "progress", "record.mcap", "record.qps"):
         flag(key, _get(cfg, key, False))
     integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
@@ -127,24 +133,38 @@ def _top_level(cfg: DictConfig) -> int:
 def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     """Trot parameters; returns the stand height [m]."""
     c = "controller"
-    stand = number(f"{c}.stand_height", _get(cfg, f"{c}.stand_height"), 0.1, MAX_LEG_REACH_M, unit="m",
-                   why="leg reach")
+    stand = number(
+        f"{c}.stand_height", _get(cfg, f"{c}.stand_height"), 0.1, MAX_LEG_REACH_M, unit="m", why="leg reach"
+    )
     swing = number(f"{c}.swing_height", _get(cfg, f"{c}.swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
     if stand + swing > MAX_LEG_REACH_M + 0.1:
-        raise fail(f"{c}.swing_height", swing, f"too high for the leg: stand_height + swing_height must be <= "
-                                               f"{MAX_LEG_REACH_M + 0.1:g} m")
+        raise fail(
+            f"{c}.swing_height",
+            swing,
+            f"too high for the leg: stand_height + swing_height must be <= {MAX_LEG_REACH_M + 0.1:g} m",
+        )
     period = number(f"{c}.period", _get(cfg, f"{c}.period"), 0.0, MAX_PERIOD_S, lo_open=True, unit="s")
     duty = number(f"{c}.duty", _get(cfg, f"{c}.duty"), 0.0, 1.0, lo_open=True, hi_open=True)
     shortest_s = period * min(duty, 1.0 - duty)
     if shortest_s * control_rate_hz < MIN_PHASE_TICKS:
         blamed = ("duty", duty) if 0.5 * period * control_rate_hz >= MIN_PHASE_TICKS else ("period", period)
-        raise fail(f"{c}.{blamed[0]}", blamed[1], f"at period={period:g} s and duty={duty:g} the shorter of stance "
-                   f"and swing lasts {shortest_s:g} s; it must last >= {MIN_PHASE_TICKS} control periods "
-                   f"({MIN_PHASE_TICKS / control_rate_hz:g} s)")
+        raise fail(
+            f"{c}.{blamed[0]}",
+            blamed[1],
+            f"at period={period:g} s and duty={duty:g} the shorter of stance "
+            f"and swing lasts {shortest_s:g} s; it must last >= {MIN_PHASE_TICKS} control periods "
+            f"({MIN_PHASE_TICKS / control_rate_hz:g} s)",
+        )
     max_speed = 2.0 * math.sqrt(MAX_LEG_REACH_M**2 - stand**2) / (period * duty)
-    number(f"{c}.speed", _get(cfg, f"{c}.speed"), 0.0, max_speed, unit="m/s",
-           why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
-               f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}")
+    number(
+        f"{c}.speed",
+        _get(cfg, f"{c}.speed"),
+        0.0,
+        max_speed,
+        unit="m/s",
+        why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
+        f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
+    )
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
     number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
@@ -160,13 +180,30 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     number(f"{f}.regularization", _get(cfg, f"{f}.regularization"), 0.0, 1.0, lo_open=True)
     number(f"{f}.lambda_min_n", _get(cfg, f"{f}.lambda_min_n"), 0.0, MAX_LAMBDA_MIN_N, unit="N")
     rate_bound = f"gain x control period <= 1 at control_rate_hz={control_rate_hz}"
-    number(f"{f}.contact_velocity_gain", _get(cfg, f"{f}.contact_velocity_gain", 0.0), 0.0, control_rate_hz,
-           unit="1/s", why=rate_bound)
+    number(
+        f"{f}.contact_velocity_gain",
+        _get(cfg, f"{f}.contact_velocity_gain", 0.0),
+        0.0,
+        control_rate_hz,
+        unit="1/s",
+        why=rate_bound,
+    )
     for key in ("alpha1", "alpha2"):
-        number(f"{f}.ecbf.{key}", _get(cfg, f"{f}.ecbf.{key}"), 0.0, control_rate_hz, lo_open=True, unit="1/s",
-               why=rate_bound)
+        number(
+            f"{f}.ecbf.{key}",
+            _get(cfg, f"{f}.ecbf.{key}"),
+            0.0,
+            control_rate_hz,
+            lo_open=True,
+            unit="1/s",
+            why=rate_bound,
+        )
     choice(f"{f}.fallback", _get(cfg, f"{f}.fallback"), FALLBACKS)
-    choice(f"{f}.regularization_target", _get(cfg, f"{f}.regularization_target", "nominal"), REGULARIZATION_TARGETS)
+    choice(
+        f"{f}.regularization_target",
+        _get(cfg, f"{f}.regularization_target", "nominal"),
+        REGULARIZATION_TARGETS,
+    )
     choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
     choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
 
@@ -174,14 +211,38 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
 def _robot(cfg: DictConfig, stand_height_m: float) -> None:
     """Torque limit, fall thresholds, initial-state noise, the plant MJCF path (read at build time)."""
     r = "robot"
-    number(f"{r}.torque_limit_nm", _get(cfg, f"{r}.torque_limit_nm"), 0.0, MAX_TORQUE_LIMIT_NM, lo_open=True,
-           unit="N·m")
-    number(f"{r}.fall_height_m", _get(cfg, f"{r}.fall_height_m"), 0.0, stand_height_m, hi_open=True, unit="m",
-           why="below controller.stand_height, else the stand is a fall")
+    number(
+        f"{r}.torque_limit_nm",
+        _get(cfg, f"{r}.torque_limit_nm"),
+        0.0,
+        MAX_TORQUE_LIMIT_NM,
+        lo_open=True,
+        unit="N·m",
+    )
+    number(
+        f"{r}.fall_height_m",
+        _get(cfg, f"{r}.fall_height_m"),
+        0.0,
+        stand_height_m,
+        hi_open=True,
+        unit="m",
+        why="below controller.stand_height, else the stand is a fall",
+    )
     number(f"{r}.fall_tilt_deg", _get(cfg, f"{r}.fall_tilt_deg"), 0.0, 180.0, lo_open=True, unit="deg")
-    number(f"{r}.init_joint_noise_rad", _get(cfg, f"{r}.init_joint_noise_rad"), 0.0, MAX_JOINT_NOISE_RAD, unit="rad")
-    number(f"{r}.init_base_vel_noise_mps", _get(cfg, f"{r}.init_base_vel_noise_mps"), 0.0, MAX_BASE_VEL_NOISE_MPS,
-           unit="m/s")
+    number(
+        f"{r}.init_joint_noise_rad",
+        _get(cfg, f"{r}.init_joint_noise_rad"),
+        0.0,
+        MAX_JOINT_NOISE_RAD,
+        unit="rad",
+    )
+    number(
+        f"{r}.init_base_vel_noise_mps",
+        _get(cfg, f"{r}.init_base_vel_noise_mps"),
+        0.0,
+        MAX_BASE_VEL_NOISE_MPS,
+        unit="m/s",
+    )
     mjcf = _get(cfg, f"{r}.plant_mjcf")
     if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
         raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
@@ -224,8 +285,12 @@ def build_backend(cfg: DictConfig) -> QPBackend:
     backend.reset()
     if not solution.ok:
         path = "solver.settings" if "settings" in cfg.solver else "solver"
-        raise fail(path, _get(cfg, path), f"{cfg.solver.get('_target_')} fails a trivial 3-variable QP with "
-                                          f"these settings: status {solution.status!r}")
+        raise fail(
+            path,
+            _get(cfg, path),
+            f"{cfg.solver.get('_target_')} fails a trivial 3-variable QP with "
+            f"these settings: status {solution.status!r}",
+        )
     return backend
 
 

@@ -54,8 +54,17 @@ def is_number(value: Any) -> bool:
     return isinstance(value, _numbers.Real) and not isinstance(value, bool)
 
 
-def number(path: str, value: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-           hi_open: bool = False, unit: str = "", why: str = "") -> float:
+def number(
+    path: str,
+    value: Any,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+    why: str = "",
+) -> float:
     """``value`` as a float; raises unless it is a finite number in the range (``lo``/``hi`` None: open).
     ``why`` (appended in parentheses) says where a range comes from when it is not obvious."""
     rng = interval(lo, hi, lo_open, hi_open)
@@ -96,12 +105,23 @@ def choice(path: str, value: Any, choices: Iterable[str]) -> str:
     return str(value)
 
 
-def numbers(path: str, values: Any, lo: float | None = None, hi: float | None = None, *,
-            length: int | None = None, min_length: int = 0, unit: str = "", why: str = "") -> tuple[float, ...]:
+def numbers(
+    path: str,
+    values: Any,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    length: int | None = None,
+    min_length: int = 0,
+    unit: str = "",
+    why: str = "",
+) -> tuple[float, ...]:
     """A list of finite numbers in a range, of exactly ``length`` (or at least ``min_length``) entries;
     an entry out of range is named ``path[i]``."""
     count = f"{length}" if length is not None else f"at least {min_length}"
-    rule = f"must be a list of {count} numbers" + (f" [{unit}]" if unit else "") + (f" ({why})" if why else "")
+    rule = (
+        f"must be a list of {count} numbers" + (f" [{unit}]" if unit else "") + (f" ({why})" if why else "")
+    )
     if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):  # ListConfig is a Sequence
         raise fail(path, values, rule)
     items = list(values)

@@ -122,7 +122,8 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo's parse error names neither the file nor the config field
         reason = " ".join(str(exc).split())
-        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: MuJoCo cannot read this file as MJCF: {reason}") from exc
+        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: MuJoCo cannot read this file as MJCF: {reason}") \
+            from exc
     geoms = {g.name: g for g in spec.geoms}
     joints = {j.name for j in spec.joints}
     actuated = {a.target for a in spec.actuators}

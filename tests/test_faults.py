@@ -54,18 +54,37 @@ FAULTS = [
     (["scenario=friction_patch", "scenario.friction_after=abc"], "scenario.friction_after", "'abc'"),
     (["scenario=friction_patch", "scenario.change_at_m=nan"], "scenario.change_at_m", "nan"),
     (["scenario=perturbed", "scenario.trunk_com_shift_m=[5,0,0]"], "scenario.trunk_com_shift_m[0]", "5"),
-    (["scenario=perturbed", "scenario.motor_strength_scale=1e6"], "scenario.motor_strength_scale", "1000000.0"),
-    (["scenario=perturbed", "scenario.actuator_delay_steps=1e9"], "scenario.actuator_delay_steps", "1000000000.0"),
-    (["scenario=push", "scenario.pushes=[{t_s:1,force_n:[0,nan,0],duration_s:0.1}]"],
-     "scenario.pushes[0].force_n[1]", "nan"),
-    (["scenario=push", "scenario.pushes=[{t:1,force_n:[0,60,0],duration_s:0.1}]"], "scenario.pushes[0]", "'t': 1"),
+    (
+        ["scenario=perturbed", "scenario.motor_strength_scale=1e6"],
+        "scenario.motor_strength_scale",
+        "1000000.0",
+    ),
+    (
+        ["scenario=perturbed", "scenario.actuator_delay_steps=1e9"],
+        "scenario.actuator_delay_steps",
+        "1000000000.0",
+    ),
+    (
+        ["scenario=push", "scenario.pushes=[{t_s:1,force_n:[0,nan,0],duration_s:0.1}]"],
+        "scenario.pushes[0].force_n[1]",
+        "nan",
+    ),
+    (
+        ["scenario=push", "scenario.pushes=[{t:1,force_n:[0,60,0],duration_s:0.1}]"],
+        "scenario.pushes[0]",
+        "'t': 1",
+    ),
     # solvers (checked by the backends, then on a trivial QP)
     (["solver=proxqp_persistent", "solver.settings.max_iter=0"], "solver.settings.max_iter", "0"),
     (["solver=clarabel", "solver.settings.tol_feas=-1"], "solver.settings.tol_feas", "-1"),
     (["solver=daqp_persistent", "solver.check.primal=-1"], "solver.check.primal", "-1"),
     (["solver=reference", "solver.agree_u_nm=-1"], "solver.agree_u_nm", "-1"),
     (["solver=piqp_persistent", "solver.backend=gpu"], "solver.backend", "'gpu'"),
-    (["solver=osqp_persistent", "+solver.settings.no_such_setting=1"], "solver.settings", "'no_such_setting': 1"),
+    (
+        ["solver=osqp_persistent", "+solver.settings.no_such_setting=1"],
+        "solver.settings",
+        "'no_such_setting': 1",
+    ),
     # estimators (checked by the estimator classes)
     (["estimator=fixed", "estimator.mu=1e6"], "estimator.mu", "1000000.0"),
     (["estimator=mlp", "estimator.conservative_k=-1"], "estimator.conservative_k", "-1"),
@@ -131,8 +150,11 @@ def _corrupt_metadata(tmp_path: Path) -> tuple[list[str], Path]:
 
 @pytest.mark.parametrize(
     ("make", "field"),
-    [(_garbage_mjcf, "robot.plant_mjcf"), (_truncated_weights, "estimator.checkpoint"),
-     (_corrupt_metadata, "estimator.checkpoint")],
+    [
+        (_garbage_mjcf, "robot.plant_mjcf"),
+        (_truncated_weights, "estimator.checkpoint"),
+        (_corrupt_metadata, "estimator.checkpoint"),
+    ],
     ids=["random-text MJCF", "truncated checkpoint weights", "truncated checkpoint metadata"],
 )
 def test_unreadable_file_is_refused_naming_field_and_file(make, field, tmp_path, no_episode):
