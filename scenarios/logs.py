@@ -15,7 +15,9 @@ import mujoco
 import numpy as np
 
 from scenarios.flat import FlatGround
+from scenarios.obstacle import checked_profile
 from taslel_bench import plant
+from taslel_bench.fields import integer, number
 from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
 
 
@@ -28,25 +30,20 @@ class LogRow(FlatGround):
                  first_x_m: float = 0.6, spacing_m: float = 0.7, count: int = 8, half_width_m: float = 0.5,
                  coefficients: Sequence[float] | None = None) -> None:  # fmt: skip
         super().__init__(name=name, friction=friction)
-        rules = {
-            "height_m": (height_m, 0.0 < height_m <= 2.0 * radius_m, "must be in (0, 2 radius_m] (log on the floor)"),
-            "radius_m": (radius_m, 0.0 < radius_m <= 1.0, "must be in (0, 1] m"),
-            "first_x_m": (first_x_m, first_x_m >= 0.35 + radius_m, "must be >= 0.35 m + radius_m (clear of the "
-                          "standing robot's feet)"),
-            "spacing_m": (spacing_m, spacing_m > 2.0 * radius_m, "must be > 2 radius_m (logs must not overlap)"),
-            "count": (count, int(count) == count and 1 <= count <= 200, "must be an integer in [1, 200]"),
-            "half_width_m": (half_width_m, 0.2 <= half_width_m <= 5.0, "must be in [0.2, 5] m"),
-        }
-        for key, (value, ok, rule) in rules.items():
-            if not (np.isfinite(float(value)) and ok):
-                raise ValueError(f"scenario.{key}={value!r}: {rule}")
-        z_centre = height_m - radius_m
+        radius = number("scenario.radius_m", radius_m, 0.0, 1.0, lo_open=True, unit="m")
+        height = number("scenario.height_m", height_m, 0.0, 2.0 * radius, lo_open=True, unit="m",
+                        why="the log lies on the floor, sunk to height_m - radius_m")
+        first = number("scenario.first_x_m", first_x_m, 0.35 + radius, 50.0, unit="m",
+                       why="clear of the standing robot's feet: >= 0.35 m + radius_m")
+        spacing = number("scenario.spacing_m", spacing_m, 2.0 * radius, 10.0, lo_open=True, unit="m",
+                         why="logs must not overlap: > 2 radius_m")
+        n = integer("scenario.count", count, 1, 200)
+        half = number("scenario.half_width_m", half_width_m, 0.2, 5.0, unit="m")
         self._obstacles = tuple(
-            RoundObstacle(x_m=float(first_x_m + i * spacing_m), z_m=float(z_centre), radius_m=float(radius_m),
-                          half_width_m=float(half_width_m))
-            for i in range(int(count))
+            RoundObstacle(x_m=first + i * spacing, z_m=height - radius, radius_m=radius, half_width_m=half)
+            for i in range(n)
         )
-        self._profile = ClearanceProfile(tuple(float(c) for c in coefficients)) if coefficients else None
+        self._profile = checked_profile(coefficients) if coefficients is not None else None
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         super().build(spec, rng)

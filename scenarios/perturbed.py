@@ -12,6 +12,12 @@ import numpy as np
 
 from scenarios.flat import FlatGround
 from taslel_bench import robot
+from taslel_bench.fields import integer, number, numbers
+
+MAX_SCALE = 10.0  # [-] mass and motor-strength factors
+MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)
+MAX_JOINT_LOSS = 10.0  # [N·m·s/rad] damping, [N·m] dry friction (the motors give 33.5 N·m)
+MAX_DELAY_STEPS = 1000  # [physics steps]
 
 
 class PerturbedPlant(FlatGround):
@@ -29,19 +35,18 @@ class PerturbedPlant(FlatGround):
                  joint_frictionloss: float = 0.0, motor_strength_scale: float = 1.0,
                  actuator_delay_steps: int = 0) -> None:
         super().__init__(name=name, friction=friction)
-        checks = {"trunk_mass_scale": trunk_mass_scale > 0, "joint_damping": joint_damping >= 0,
-                  "joint_frictionloss": joint_frictionloss >= 0, "motor_strength_scale": motor_strength_scale > 0,
-                  "actuator_delay_steps": int(actuator_delay_steps) == actuator_delay_steps >= 0}
-        for key, ok in checks.items():
-            if not ok:
-                raise ValueError(f"scenario.{key}={locals()[key]!r} is out of range")
-        if len(trunk_com_shift_m) != 3:
-            raise ValueError(f"scenario.trunk_com_shift_m={list(trunk_com_shift_m)!r}: need [x, y, z] in metres")
-        self.trunk_mass_scale = float(trunk_mass_scale)
-        self.trunk_com_shift_m = np.asarray(trunk_com_shift_m, float)
-        self.joint_damping, self.joint_frictionloss = float(joint_damping), float(joint_frictionloss)
-        self.motor_strength_scale = float(motor_strength_scale)
-        self.actuator_delay_steps = int(actuator_delay_steps)
+        s = "scenario."
+        self.trunk_mass_scale = number(s + "trunk_mass_scale", trunk_mass_scale, 0.0, MAX_SCALE, lo_open=True)
+        shift = numbers(s + "trunk_com_shift_m", trunk_com_shift_m, -MAX_COM_SHIFT_M, MAX_COM_SHIFT_M,
+                        length=3, unit="m", why="[x, y, z] in the trunk frame")
+        self.trunk_com_shift_m = np.asarray(shift)
+        self.joint_damping = number(s + "joint_damping", joint_damping, 0.0, MAX_JOINT_LOSS, unit="N·m·s/rad")
+        self.joint_frictionloss = number(s + "joint_frictionloss", joint_frictionloss, 0.0, MAX_JOINT_LOSS,
+                                         unit="N·m")
+        self.motor_strength_scale = number(s + "motor_strength_scale", motor_strength_scale, 0.0, MAX_SCALE,
+                                           lo_open=True)
+        self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0,
+                                            MAX_DELAY_STEPS, unit="physics steps")
         self._queue: deque[np.ndarray] = deque()
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:

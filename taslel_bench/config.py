@@ -1,98 +1,309 @@
-"""Validation of a composed run config: every bad value is refused with the field name, the value and
-what is allowed, before anything is built or simulated. (Unknown group options and unknown keys are
-refused by Hydra itself, with the list of valid options.)"""
+"""Validation of a composed run config: every bad value is refused with the field name (dotted config
+path), the value and what is allowed, before anything is built or simulated. (Unknown group options and
+unknown keys are refused by Hydra itself, with the list of valid options.)
+
+Three layers, all run by :class:`taslel_bench.run.Built` before the episode:
+
+1. :func:`validate` -- a generic pass (no NaN or infinity anywhere in the config) and one rule per field of
+   the core groups (top level, ``record``, ``controller``, ``filter``, ``robot``); the ranges are the
+   constants below.
+2. :func:`build_axis` -- the sweep axes (``scenario``, ``solver``, ``estimator``) check their own
+   constructor arguments (with :mod:`taslel_bench.fields`, naming ``scenario.<key>`` ...); an error raised
+   inside Hydra's ``instantiate`` is turned back into a :class:`ConfigError` with that message.
+3. :func:`build_backend` -- the QP backend must solve a trivial QP of the configured formulation's shape,
+   which catches native solver settings the solver itself rejects.
+"""
 
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Iterator
 from typing import Any
 
-from omegaconf import DictConfig
+import numpy as np
+from hydra.errors import InstantiationException
+from hydra.utils import instantiate
+from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
+from taslel_bench.fields import ConfigError, choice, fail, flag, integer, number
+from taslel_bench.interfaces import MAX_FRICTION, QPBackend, QPProblem
 from taslel_bench.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 
+AXES = ("scenario", "solver", "estimator")
 STANCE_SOURCES = ("schedule", "contact")
 MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
+MAX_SEED = 2**63 - 1
+MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
+PHYSICS_RATE_RANGE_HZ = (100, 100_000)  # MuJoCo is unstable on this robot beyond 10 ms steps
+MIN_CONTROL_RATE_HZ = 10
+MIN_PHASE_TICKS = 2  # stance and swing each last at least this many control periods
+MAX_PERIOD_S = 5.0  # [s] gait period
+MAX_SWING_HEIGHT_M = 0.2  # [m]
+MAX_STAND_DURATION_S = 60.0  # [s]
+MAX_KP = 1000.0  # [N·m/rad] joint PD (the default is 100)
+MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
+MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
+MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
+MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
+MAX_BASE_VEL_NOISE_MPS = 2.0  # [m/s]
+BUILD_ERRORS = (ValueError, TypeError, OSError)  # what an axis class raises for a bad argument or file
 
 
-class ConfigError(ValueError):
-    """A config value is invalid; the message names the field."""
+def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
+    """The value at a dotted path (None, or ``default``, when absent; interpolation errors propagate)."""
+    return OmegaConf.select(cfg, path, default=default, throw_on_missing=True)
 
 
-def _num(cfg: DictConfig, path: str) -> float:
-    node: Any = cfg
-    for part in path.split("."):
-        node = node[part]
-    try:
-        value = float(node)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{path}={node!r}: must be a number") from exc
-    if not math.isfinite(value):
-        raise ConfigError(f"{path}={node!r}: must be finite")
-    return value
+def _leaves(node: Any, path: str) -> Iterator[tuple[str, Any]]:
+    """(dotted path, value) of every leaf under ``node`` at ``path`` (list entries as ``path[i]``)."""
+    if isinstance(node, DictConfig):
+        for key in node:
+            yield from _leaves(node[key], f"{path}.{key}")
+    elif isinstance(node, ListConfig):
+        for i, item in enumerate(node):
+            yield from _leaves(item, f"{path}[{i}]")
+    else:
+        yield path, node
 
 
-def _check(cond: bool, path: str, value: object, rule: str) -> None:
-    if not cond:
-        raise ConfigError(f"{path}={value!r}: {rule}")
+def check_finite(cfg: DictConfig) -> None:
+    """The generic pass: no field anywhere in the run config (axis settings included) may be NaN or
+    infinite -- no field of this harness has a meaning for them; null is the "not set" value."""
+    for group in (key for key in cfg if key != "hydra"):
+        for path, value in _leaves(cfg[group], str(group)):
+            if isinstance(value, float) and not math.isfinite(value):
+                raise fail(path, value, "must be finite (NaN and infinity are refused in every field)")
 
 
 def validate(cfg: DictConfig) -> None:
-    """Raise :class:`ConfigError` on the first invalid field."""
-    d = _num(cfg, "duration")
-    _check(d > 0, "duration", cfg.duration, "must be > 0 seconds")
-    _check(float(cfg.seed).is_integer() and cfg.seed >= 0, "seed", cfg.seed, "must be an integer >= 0")
-    pr, cr = _num(cfg, "physics_rate_hz"), _num(cfg, "control_rate_hz")
-    _check(pr > 0 and pr.is_integer(), "physics_rate_hz", cfg.physics_rate_hz, "must be a positive integer")
-    _check(cr > 0 and cr.is_integer(), "control_rate_hz", cfg.control_rate_hz, "must be a positive integer")
-    _check(
-        int(pr) % int(cr) == 0,
-        "control_rate_hz",
-        cfg.control_rate_hz,
-        f"must divide physics_rate_hz={int(pr)} (valid: {_divisors(int(pr))})",
+    """Raise :class:`ConfigError` on the first invalid field of the core groups (see module doc); a value
+    that cannot be resolved (``seed=${oops}``, a missing ``???``) is one too."""
+    try:
+        _validate(cfg)
+    except (InterpolationResolutionError, MissingMandatoryValue) as exc:
+        path = str(getattr(exc, "full_key", "") or "")
+        raise fail(path, _raw(cfg, path), f"cannot be resolved: {str(exc).splitlines()[0]}") from exc
+
+
+def _raw(cfg: DictConfig, path: str) -> Any:
+    """The unresolved value at ``path`` (``a.b[0].c``), e.g. the text of a broken interpolation."""
+    node: Any = cfg
+    try:
+        for part in re.findall(r"[^.\[\]]+", path):
+            node = node._get_node(int(part) if isinstance(node, ListConfig) else part)
+        return node._value()
+    except Exception:  # noqa: BLE001 - only for the message
+        return "?"
+
+
+def _validate(cfg: DictConfig) -> None:
+    """The generic pass, the core groups' rules, the axes' ``_target_``."""
+    check_finite(cfg)
+    control_rate_hz = _top_level(cfg)
+    stand_height_m = _controller(cfg, control_rate_hz)
+    _filter(cfg, control_rate_hz)
+    _robot(cfg, stand_height_m)
+    for group in AXES:
+        if not isinstance(_get(cfg, group), DictConfig) or "_target_" not in cfg[group]:
+            raise fail(group, _get(cfg, group), "has no _target_ to build it from")
+    if _get(cfg, "scenario.friction") is not None:  # every scenario has one (the scenario checks it too)
+        number("scenario.friction", cfg.scenario.friction, 0.0, MAX_FRICTION, lo_open=True)
+
+
+def _top_level(cfg: DictConfig) -> int:
+    """Seed, duration, rates, flags, ``record.*``; returns the control rate [Hz]."""
+    integer("seed", _get(cfg, "seed"), 0, MAX_SEED)
+    number("duration", _get(cfg, "duration"), 0.0, MAX_DURATION_S, lo_open=True, unit="s")
+    physics = integer("physics_rate_hz", _get(cfg, "physics_rate_hz"), *PHYSICS_RATE_RANGE_HZ, unit="Hz")
+    control = integer(
+        "control_rate_hz", _get(cfg, "control_rate_hz"), MIN_CONTROL_RATE_HZ, physics, unit="Hz"
     )
+    if physics % control:
+        raise fail(
+            "control_rate_hz", control, f"must divide physics_rate_hz={physics} (valid: {_divisors(physics)})"
+        )
+    for key in ("force", "progress", "record.mcap", "record.qps"):
+        flag(key, _get(cfg, key, False))
+    integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
+    return control
+
+
+def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
+    """Trot parameters; returns the stand height [m]."""
     c = "controller"
-    _check(_num(cfg, f"{c}.speed") >= 0, f"{c}.speed", cfg.controller.speed, "must be >= 0 m/s")
-    _check(_num(cfg, f"{c}.period") > 0, f"{c}.period", cfg.controller.period, "must be > 0 s")
-    duty = _num(cfg, f"{c}.duty")
-    _check(0 < duty < 1, f"{c}.duty", cfg.controller.duty, "must be in (0, 1)")
-    _check(_num(cfg, f"{c}.swing_height") >= 0, f"{c}.swing_height", cfg.controller.swing_height, "must be >= 0")
-    sh = _num(cfg, f"{c}.stand_height")
-    _check(0.1 <= sh <= MAX_LEG_REACH_M, f"{c}.stand_height", cfg.controller.stand_height,
-           f"must be in [0.1, {MAX_LEG_REACH_M}] m (leg reach)")
-    _check(sh + _num(cfg, f"{c}.swing_height") <= MAX_LEG_REACH_M + 0.1, f"{c}.swing_height",
-           cfg.controller.swing_height, "too high for the leg")
-    for key in ("kp", "kd", "stand_duration"):
-        _check(_num(cfg, f"{c}.{key}") >= 0, f"{c}.{key}", cfg.controller[key], "must be >= 0")
+    stand = number(
+        f"{c}.stand_height", _get(cfg, f"{c}.stand_height"), 0.1, MAX_LEG_REACH_M, unit="m", why="leg reach"
+    )
+    swing = number(f"{c}.swing_height", _get(cfg, f"{c}.swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
+    if stand + swing > MAX_LEG_REACH_M + 0.1:
+        raise fail(
+            f"{c}.swing_height",
+            swing,
+            f"too high for the leg: stand_height + swing_height must be <= {MAX_LEG_REACH_M + 0.1:g} m",
+        )
+    period = number(f"{c}.period", _get(cfg, f"{c}.period"), 0.0, MAX_PERIOD_S, lo_open=True, unit="s")
+    duty = number(f"{c}.duty", _get(cfg, f"{c}.duty"), 0.0, 1.0, lo_open=True, hi_open=True)
+    shortest_s = period * min(duty, 1.0 - duty)
+    if shortest_s * control_rate_hz < MIN_PHASE_TICKS:
+        blamed = ("duty", duty) if 0.5 * period * control_rate_hz >= MIN_PHASE_TICKS else ("period", period)
+        raise fail(
+            f"{c}.{blamed[0]}",
+            blamed[1],
+            f"at period={period:g} s and duty={duty:g} the shorter of stance "
+            f"and swing lasts {shortest_s:g} s; it must last >= {MIN_PHASE_TICKS} control periods "
+            f"({MIN_PHASE_TICKS / control_rate_hz:g} s)",
+        )
+    max_speed = 2.0 * math.sqrt(MAX_LEG_REACH_M**2 - stand**2) / (period * duty)
+    number(
+        f"{c}.speed",
+        _get(cfg, f"{c}.speed"),
+        0.0,
+        max_speed,
+        unit="m/s",
+        why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
+        f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
+    )
+    number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
+    number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
+    number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
+    return stand
+
+
+def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
+    """The safety filter's settings; gains are bounded by the control rate (gain x control period <= 1)."""
     f = "filter"
-    _check(_num(cfg, f"{f}.regularization") > 0, f"{f}.regularization", cfg.filter.regularization, "must be > 0")
-    _check(_num(cfg, f"{f}.lambda_min_n") >= 0, f"{f}.lambda_min_n", cfg.filter.lambda_min_n, "must be >= 0 N")
-    _check(_num(cfg, f"{f}.start_time") >= 0, f"{f}.start_time", cfg.filter.start_time, "must be >= 0 s")
-    _check(_num(cfg, f"{f}.contact_velocity_gain") >= 0, f"{f}.contact_velocity_gain",
-           cfg.filter.contact_velocity_gain, "must be >= 0 1/s")
+    flag(f"{f}.enabled", _get(cfg, f"{f}.enabled"))
+    flag(f"{f}.ecbf.enabled", _get(cfg, f"{f}.ecbf.enabled"))
+    number(f"{f}.start_time", _get(cfg, f"{f}.start_time", 0.0), 0.0, MAX_DURATION_S, unit="s")
+    number(f"{f}.regularization", _get(cfg, f"{f}.regularization"), 0.0, 1.0, lo_open=True)
+    number(f"{f}.lambda_min_n", _get(cfg, f"{f}.lambda_min_n"), 0.0, MAX_LAMBDA_MIN_N, unit="N")
+    rate_bound = f"gain x control period <= 1 at control_rate_hz={control_rate_hz}"
+    number(
+        f"{f}.contact_velocity_gain",
+        _get(cfg, f"{f}.contact_velocity_gain", 0.0),
+        0.0,
+        control_rate_hz,
+        unit="1/s",
+        why=rate_bound,
+    )
     for key in ("alpha1", "alpha2"):
-        _check(_num(cfg, f"{f}.ecbf.{key}") > 0, f"{f}.ecbf.{key}", cfg.filter.ecbf[key], "must be > 0 1/s")
-    _check(cfg.filter.fallback in FALLBACKS, f"{f}.fallback", cfg.filter.fallback,
-           f"valid: {', '.join(FALLBACKS)}")
-    _check(cfg.filter.regularization_target in REGULARIZATION_TARGETS, f"{f}.regularization_target",
-           cfg.filter.regularization_target, f"valid: {', '.join(REGULARIZATION_TARGETS)}")
-    _check(cfg.filter.get("formulation", "full") in FORMULATIONS, f"{f}.formulation", cfg.filter.get("formulation"),
-           f"valid: {', '.join(FORMULATIONS)}")
-    _check(cfg.filter.stance_source in STANCE_SOURCES, f"{f}.stance_source", cfg.filter.stance_source,
-           f"valid: {', '.join(STANCE_SOURCES)}")
+        number(
+            f"{f}.ecbf.{key}",
+            _get(cfg, f"{f}.ecbf.{key}"),
+            0.0,
+            control_rate_hz,
+            lo_open=True,
+            unit="1/s",
+            why=rate_bound,
+        )
+    choice(f"{f}.fallback", _get(cfg, f"{f}.fallback"), FALLBACKS)
+    choice(
+        f"{f}.regularization_target",
+        _get(cfg, f"{f}.regularization_target", "nominal"),
+        REGULARIZATION_TARGETS,
+    )
+    choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
+    choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
+
+
+def _robot(cfg: DictConfig, stand_height_m: float) -> None:
+    """Torque limit, fall thresholds, initial-state noise, the plant MJCF path (read at build time)."""
     r = "robot"
-    _check(_num(cfg, f"{r}.torque_limit_nm") > 0, f"{r}.torque_limit_nm", cfg.robot.torque_limit_nm, "must be > 0")
-    _check(0 < _num(cfg, f"{r}.fall_tilt_deg") <= 180, f"{r}.fall_tilt_deg", cfg.robot.fall_tilt_deg,
-           "must be in (0, 180]")
-    _check(_num(cfg, f"{r}.fall_height_m") >= 0, f"{r}.fall_height_m", cfg.robot.fall_height_m, "must be >= 0")
-    for key in ("init_joint_noise_rad", "init_base_vel_noise_mps"):
-        _check(_num(cfg, f"{r}.{key}") >= 0, f"{r}.{key}", cfg.robot[key], "must be >= 0")
-    if "friction" in cfg.scenario and cfg.scenario.friction is not None:
-        _check(_num(cfg, "scenario.friction") > 0, "scenario.friction", cfg.scenario.friction, "must be > 0")
-    for group in ("scenario", "solver", "estimator"):
-        _check("_target_" in cfg[group], group, dict(cfg[group]), "has no _target_ to build it from")
+    number(
+        f"{r}.torque_limit_nm",
+        _get(cfg, f"{r}.torque_limit_nm"),
+        0.0,
+        MAX_TORQUE_LIMIT_NM,
+        lo_open=True,
+        unit="N·m",
+    )
+    number(
+        f"{r}.fall_height_m",
+        _get(cfg, f"{r}.fall_height_m"),
+        0.0,
+        stand_height_m,
+        hi_open=True,
+        unit="m",
+        why="below controller.stand_height, else the stand is a fall",
+    )
+    number(f"{r}.fall_tilt_deg", _get(cfg, f"{r}.fall_tilt_deg"), 0.0, 180.0, lo_open=True, unit="deg")
+    number(
+        f"{r}.init_joint_noise_rad",
+        _get(cfg, f"{r}.init_joint_noise_rad"),
+        0.0,
+        MAX_JOINT_NOISE_RAD,
+        unit="rad",
+    )
+    number(
+        f"{r}.init_base_vel_noise_mps",
+        _get(cfg, f"{r}.init_base_vel_noise_mps"),
+        0.0,
+        MAX_BASE_VEL_NOISE_MPS,
+        unit="m/s",
+    )
+    mjcf = _get(cfg, f"{r}.plant_mjcf")
+    if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
+        raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
 
 
 def _divisors(n: int) -> str:
     divs = [k for k in range(1, n + 1) if n % k == 0]
     return ", ".join(map(str, divs[:12])) + (" ..." if len(divs) > 12 else "")
+
+
+# ------------------------------------------------------------------------------------------ the axes
+
+
+def build_axis(cfg: DictConfig, group: str) -> Any:
+    """``instantiate(cfg[group])``. Hydra wraps what the constructor raises in an
+    ``InstantiationException`` whose text is the repr of the error; a bad argument or file (ValueError,
+    TypeError, OSError) comes back as a :class:`ConfigError` with the axis' own message, which names the
+    field (``scenario.coefficients=[]: ...``), prefixed with the group and its target when it does not."""
+    try:
+        return instantiate(cfg[group])
+    except InstantiationException as exc:
+        cause = exc.__cause__
+        if isinstance(cause, ConfigError) and str(cause).startswith(f"{group}."):
+            raise cause from None  # already names the field: shown once, where it was raised
+        if not isinstance(cause, BUILD_ERRORS):
+            raise
+        message = str(cause) if str(cause) else type(cause).__name__
+        if not message.startswith(f"{group}."):
+            message = f"{group} ({cfg[group].get('_target_')}): {type(cause).__name__}: {message}"
+        raise ConfigError(message) from cause
+
+
+def build_backend(cfg: DictConfig) -> QPBackend:
+    """The ``solver`` axis, checked on a trivial QP of the configured formulation's shape (with the 30
+    equality rows of ``full``, without them for ``condensed``): settings that make the backend fail there
+    (``solver.settings.eps_abs=-1``: OSQP rejects it at every setup) fail every tick of a run."""
+    backend = build_axis(cfg, "solver")
+    with_equalities = _get(cfg, "filter.formulation", "full") == "full"
+    solution = backend.solve(probe_problem(with_equalities))
+    backend.reset()
+    if not solution.ok:
+        path = "solver.settings" if "settings" in cfg.solver else "solver"
+        raise fail(
+            path,
+            _get(cfg, path),
+            f"{cfg.solver.get('_target_')} fails a trivial 3-variable QP with "
+            f"these settings: status {solution.status!r}",
+        )
+    return backend
+
+
+def probe_problem(with_equalities: bool) -> QPProblem:
+    """min 0.5 |x|^2 + q'x over 3 variables, one active inequality (x0 <= 0.8), a box on x0 and, with
+    ``with_equalities``, x0 + x1 + x2 = 1. Solution (with equalities): (0.8, -0.15, 0.35)."""
+    n = 3
+    P, q = np.eye(n), np.array([-1.0, 0.5, 0.0])
+    A = np.ones((1 if with_equalities else 0, n))
+    b = np.ones(A.shape[0])
+    G, h = np.array([[1.0, 0.0, 0.0]]), np.array([0.8])
+    lb, ub = np.array([-2.0, -np.inf, -np.inf]), np.array([2.0, np.inf, np.inf])
+    return QPProblem(P, q, A, b, G, h, lb, ub, P != 0, A != 0, G != 0, {"u": slice(0, n)}, ["probe"])
+
+
+__all__ = ["ConfigError", "build_axis", "build_backend", "check_finite", "probe_problem", "validate"]

@@ -189,6 +189,10 @@ class Scenario(Protocol):
 
 # ---------------------------------------------------------------------------------------- estimator
 
+# [-] largest friction coefficient a config may give (scenario frictions, estimator constants): far above any
+# real foot-ground pair (rubber on concrete ~1), low enough to catch typos like 1e6
+MAX_FRICTION = 5.0
+
 
 @dataclass
 class Proprioception:

@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench import robot
+from taslel_bench.fields import ConfigError
 from taslel_bench.interfaces import RoundObstacle
 
 TERRAIN_PRIORITY = 1
@@ -118,8 +119,13 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"robot.plant_mjcf={str(path)!r}: no such file")
-    spec = mujoco.MjSpec.from_file(str(path))
+        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: no such file")
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # MuJoCo's parse error names neither the file nor the config field
+        reason = " ".join(str(exc).split())
+        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: MuJoCo cannot read this file as MJCF: {reason}") \
+            from exc
     geoms = {g.name: g for g in spec.geoms}
     joints = {j.name for j in spec.joints}
     actuated = {a.target for a in spec.actuators}

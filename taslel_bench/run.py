@@ -14,11 +14,10 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench import plant, qpset, recording, robot
-from taslel_bench.config import ConfigError, validate
+from taslel_bench.config import ConfigError, build_axis, build_backend, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
 from taslel_bench.gait import GaitParams
@@ -121,10 +120,10 @@ class Built:
         validate(cfg)
         self.cfg = cfg
         self.rng = np.random.default_rng(int(cfg.seed))
-        self.scenario: Scenario = instantiate(cfg.scenario)
-        self.estimator: Estimator = instantiate(cfg.estimator)
+        self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
+        self.estimator: Estimator = build_axis(cfg, "estimator")
         fs = filter_settings(cfg)
-        self.backend: QPBackend | None = instantiate(cfg.solver) if fs.enabled else None
+        self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
@@ -275,7 +274,7 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
         "scenario": choices.get("scenario", ""),
         "solver": choices.get("solver", ""),
         "estimator": choices.get("estimator", ""),
-        "seed": int(cfg.seed) if str(cfg.get("seed", "")).isdigit() else -1,
+        "seed": _seed_or_minus_one(cfg),
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
         "fell": False,
@@ -283,6 +282,15 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
     }
     recording.write_json(out_dir / recording.SUMMARY, summary)
     return summary
+
+
+def _seed_or_minus_one(cfg: DictConfig) -> int:
+    """The run's seed for an error summary, -1 when it is not a valid one (``seed=abc``, ``seed=${oops}``)."""
+    try:
+        seed = cfg.get("seed")
+    except Exception:  # noqa: BLE001 - an interpolation error must not hide the job's own error
+        return -1
+    return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
 __all__ = ["Built", "ConfigError", "FrictionMismatch", "check_friction", "run"]

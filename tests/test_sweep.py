@@ -133,12 +133,17 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
     assert "`filter.contact_velocity_gain=0` (the paper's contact constraint) only" in report
 
 
-def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path):
+def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path, monkeypatch):
     """`scenario.friction=0.3,1.0` are two rows (not one "flat" row); a degraded run is listed with why."""
+    import taslel_bench.run as run_module
+
+    from tests.conftest import NeverSolves
+
     for mu in ("0.3", "1.0"):
         over = ["duration=0.2", "progress=false", "record.mcap=false", f"scenario.friction={mu}"]
         run(compose_cfg(over), tmp_path / f"mu={mu}", {"scenario": "flat", "solver": "daqp_persistent"},
             overrides=[f"scenario.friction={mu}", "duration=0.2"])
+    monkeypatch.setattr(run_module, "build_backend", lambda cfg: NeverSolves())  # every tick fails
     bad = ["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp", "solver.settings.max_iter=1"]
     run(compose_cfg(bad), tmp_path / "bad", {"scenario": "flat", "solver": "osqp"},
         overrides=["solver=osqp", "solver.settings.max_iter=1", "duration=0.2"])
