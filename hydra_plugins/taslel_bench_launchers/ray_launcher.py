@@ -3,7 +3,7 @@
 The joblib launcher plugin fixes its backend to loky; this launcher runs the same per-job function
 (``hydra_joblib_launcher._core.execute_job``) with ``joblib.Parallel(backend="ray")`` instead, after
 ``ray.init`` on a new local instance (``address: null``) or a running cluster (``address: auto`` or
-``ray://<head>:10001``). Each job writes its own run folder; the sweep callback aggregates the folder.
+``<head>:6379``). Each job writes its own run folder; the sweep callback aggregates the folder.
 """
 
 from __future__ import annotations
