@@ -3,6 +3,7 @@ sweep runs end to end on a local Ray instance and on submitit_local (subprocesse
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -33,7 +34,7 @@ def test_launcher_options_are_the_documented_three():
     ("name", "target_class", "key", "value"),
     [
         ("local", "JoblibLauncher", "n_jobs", -1),  # -1: every core of the machine, not a fixed count
-        ("ray", "RayLauncher", "address", None),  # null: a new local Ray instance
+        ("ray", "RayLauncher", "address", "local"),  # a new local Ray instance, whatever runs on the node
         ("slurm", "SlurmLauncher", "timeout_min", 30),
     ],
 )
@@ -78,7 +79,9 @@ def test_slurm_without_submitit_exits_with_the_hint_before_running(tmp_path):
 def test_two_job_sweep_through_launcher(tmp_path, launcher_args):
     cmd = [sys.executable, "-m", "taslel_bench", "-m", *launcher_args, "seed=0,1", *TINY,
            f"hydra.sweep.dir={tmp_path}"]  # fmt: skip
-    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+    # a dead cluster address in the environment: the ray launcher must still start its own local instance
+    env = {**os.environ, "RAY_ADDRESS": "127.0.0.1:1"}
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600, check=False)
     assert out.returncode == 0, out.stderr[-3000:]
     summaries = sorted(tmp_path.glob("*/summary.json"))
     assert [p.parent.name for p in summaries] == ["duration=0.3,seed=0", "duration=0.3,seed=1"]

@@ -2,7 +2,7 @@
 
 The joblib launcher plugin fixes its backend to loky; this launcher runs the same per-job function
 (``hydra_joblib_launcher._core.execute_job``) with ``joblib.Parallel(backend="ray")`` instead, after
-``ray.init`` on a new local instance (``address: null``) or a running cluster (``address: auto`` or
+``ray.init`` on a new local instance (``address: local``) or a running cluster (``address: auto`` or
 ``<head>:6379``). Each job writes its own run folder; the sweep callback aggregates the folder.
 """
 
@@ -27,19 +27,21 @@ log = logging.getLogger(__name__)
 class RayLauncher(Launcher):
     """Jobs as tasks of a Ray actor pool (one actor per concurrent job).
 
+    ``address``: ``local`` starts a new instance even when ``RAY_ADDRESS`` is set or a cluster (or a stale
+    record of one) is on this node; ``auto`` / ``<host>:<port>`` joins a running cluster (Ray's meanings);
     ``n_jobs``: concurrent jobs, -1 = every CPU of the Ray cluster (never more than the sweep's jobs);
-    ``num_cpus``: CPUs of a new local instance (null = all cores; ignored when joining a cluster);
+    ``num_cpus``: CPUs of a new local instance (null = all cores; Ray refuses it when joining a cluster);
     ``ray_remote_args``: options of each pool actor (e.g. ``{num_cpus: 1}`` to spread them over nodes).
     """
 
     def __init__(
         self,
-        address: str | None = None,
+        address: str = "local",
         num_cpus: int | None = None,
         n_jobs: int = -1,
         ray_remote_args: dict[str, Any] | None = None,
     ) -> None:
-        self.address = address
+        self.address = address or "local"
         self.num_cpus = num_cpus
         self.n_jobs = int(n_jobs)
         if self.n_jobs == 0 or self.n_jobs < -1:
