@@ -6,6 +6,7 @@ multirun the :class:`taslel_bench.sweep.SweepCallback` aggregates the sweep fold
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import hydra
@@ -14,6 +15,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from taslel_bench.console import print_summary
+from taslel_bench.launchers import LauncherNotInstalled, check_launcher_overrides
 from taslel_bench.run import record_job_error
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
@@ -42,4 +44,8 @@ def main(cfg: DictConfig) -> dict:
 
 
 if __name__ == "__main__":
+    try:
+        check_launcher_overrides(sys.argv[1:])
+    except LauncherNotInstalled as exc:
+        sys.exit(f"error: {exc}")
     main()
