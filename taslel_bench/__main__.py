@@ -37,9 +37,13 @@ def main(cfg: DictConfig) -> dict:
         summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
     print_summary(summary, out_dir)
     if hc.mode == RunMode.MULTIRUN:
+        from taslel_bench.sweep import run_folders
+
         sweep_dir = Path(hc.sweep.dir)
-        done = sum(1 for _ in sweep_dir.rglob("summary.json"))
-        print(f"sweep progress: {done} runs complete in {sweep_dir} (this was job #{hc.job.num})", flush=True)
+        done = sum(1 for d in run_folders(sweep_dir) if (d / "summary.json").is_file())
+        job = hc.job.override_dirname or f"#{hc.job.num}"
+        print(f"sweep progress: job #{hc.job.num} ({job}) ended {summary.get('status')}; {done} runs complete "
+              f"in {sweep_dir}", flush=True)
     return summary
 
 

@@ -97,6 +97,10 @@ class Episode:
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
+        # --- streaming hook (record.mcap): chunk_sink(trace, k0, k1) after every chunk_ticks ticks, outside
+        # the ticks' timers (its time is reported as recording_s, not in wall_time_s)
+        self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
+        self.chunk_ticks = 1000
         self.initial_qpos, self.initial_qvel = self._draw_initial_state()
         self.initial_state()
 
@@ -154,6 +158,9 @@ class Episode:
         self.initial_state()
         self.estimator.reset()
         profile = self.scenario.clearance_profile()
+        trace.bind(br, self.contacts, profile, self.scenario)
+        sink, chunk = self.chunk_sink, max(1, int(self.chunk_ticks))
+        recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
         q = np.zeros(robot.NQ)  # Pinocchio configuration, read from the plant every tick
         v = np.zeros(robot.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         qj, qdj = q[7:], v[6:]  # views: joint angles [rad] and velocities [rad/s], core order
@@ -225,7 +232,7 @@ class Episode:
                     contacts.read(d)
                 tau_prev[:] = u
                 tick4 = time.perf_counter()
-                trace.tick_parts_us[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
+                trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
                 trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                              tick4 - tick0, barriers, obstacle_touch, shin_touch)  # fmt: skip
                 # --- termination: a non-finite / exploding state (one dot product catches NaN/inf anywhere in
@@ -240,11 +247,16 @@ class Episode:
                     break
                 if progress is not None and k % 500 == 0:
                     progress(t)
+                if sink is not None and (k + 1) % chunk == 0:  # streaming recording, between two ticks
+                    rec0 = time.perf_counter()
+                    sink(trace, k + 1 - chunk, k + 1)
+                    recording_s += time.perf_counter() - rec0
         except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
             res.status = "error"
             res.message = f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
-        trace.finalize(br, contacts, profile, self.scenario)
+        trace.finalize()
         res.n_ticks = trace.n
-        res.wall_time_s = time.perf_counter() - wall0
+        res.wall_time_s = time.perf_counter() - wall0 - recording_s
+        res.extras["recording_s"] = recording_s
         return res

@@ -18,7 +18,7 @@ import pandas as pd
 from taslel_bench import recording
 from taslel_bench.machine import machine_info
 from taslel_bench.paper_claims import paper_claims
-from taslel_bench.sweep import SUMMARY_TABLE, aggregate
+from taslel_bench.sweep import SUMMARY_TABLE, aggregate, run_folders
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
@@ -339,6 +339,9 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     if not args.sweep_dir.is_dir():
         raise SystemExit(f"not a folder: {args.sweep_dir}")
+    if not run_folders(args.sweep_dir):
+        raise SystemExit(f"no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
+                         ".hydra/ (a sweep folder, outputs/sweeps/<time>/)")
     frame = aggregate(args.sweep_dir)
     print(write_report(args.sweep_dir, frame))
 

@@ -179,22 +179,80 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
+def config_sha256(cfg: DictConfig) -> str:
+    """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
+    only change what is printed) and the content of ``robot.plant_mjcf``, if any."""
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    for key in ("progress", "force"):
+        plain.pop(key, None)
+    h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
+    mjcf = cfg.robot.get("plant_mjcf")
+    if mjcf and Path(mjcf).is_file():
+        h.update(Path(mjcf).read_bytes())
+    return h.hexdigest()
+
+
+def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[dict | None, dict[str, object]]:
+    """(summary of a complete run to skip, or None; notes for the new run's summary). A complete run of the
+    same config is skipped unless ``force``; any other result in the folder (a complete run of another
+    config, a forced rerun, a killed run's partial MCAP) is moved to ``superseded/`` first, never
+    overwritten; files of interrupted writes are removed and named."""
+    from taslel_bench.mcap_log import PARTIAL_NAME
+
+    previous = recording.completed_summary(out_dir)
+    same = previous is not None and previous.get("config_sha256") == config_hash
+    if same and not cfg.get("force", False):
+        return {**previous, "skipped": True}, {}
+    notes: dict[str, object] = {}
+    stale = recording.remove_stale(out_dir)
+    if stale:
+        notes["stale_files_removed"] = ",".join(stale)
+    if previous is not None or (out_dir / PARTIAL_NAME).exists():
+        if previous is None:
+            tag = "killed"
+        else:
+            tag = "forced" if same else f"config-{str(previous.get('config_sha256', 'unknown'))[:8]}"
+        moved = recording.supersede(out_dir, tag)
+        if moved is not None:
+            notes["superseded"] = str(moved.relative_to(out_dir))
+            print(f"{out_dir}: held a {tag} run; moved to {moved}", file=sys.stderr)
+    return None, notes
+
+
+class _GuardedSink:
+    """The MCAP stream as the episode's chunk sink: a recording failure is noted and stops the streaming,
+    it never ends the episode."""
+
+    def __init__(self, stream) -> None:
+        self.stream, self.error = stream, ""
+
+    def __call__(self, trace, k0: int, k1: int) -> None:
+        if self.error:
+            return
+        try:
+            self.stream(trace, k0, k1)
+        except Exception:  # noqa: BLE001 - recording must not lose the run
+            self.error = traceback.format_exc().strip().splitlines()[-1]
+            self.stream.abandon()
+
+
 def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         overrides: list[str] | None = None) -> dict[str, object]:  # fmt: skip
     """Run one episode and write ``out_dir``. Returns the summary. Config errors raise before simulating;
     faults during the episode give ``status: "error"`` in the summary. ``overrides``: the command-line
     overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
+    validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if not cfg.get("force", False):
-        done = recording.completed_summary(out_dir)
-        if done is not None:
-            done["skipped"] = True
-            return done
+    config_hash = config_sha256(cfg)
+    skipped, notes = prepare_folder(cfg, out_dir, config_hash)
+    if skipped is not None:
+        return skipped
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
     recording.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
+    sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
     res: EpisodeResult = built.episode.run(progress=show)
     if show is not None:
@@ -216,10 +274,13 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "commanded_speed_mps": float(cfg.controller.speed),
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
         "overrides": ",".join(sorted(overrides or [])),
+        "config_sha256": config_hash,
+        **notes,
     }
     summary.update(plant_identity(cfg, built))
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
     summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
+    summary["recording_s"] = float(res.extras.get("recording_s", 0.0))
     if built.backend is not None:
         summary["solver_settings"] = str(built.backend.describe())
     events = list(res.trace.events)
@@ -229,15 +290,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
         if "traceback" in res.extras:
             recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
-    mcap_error = None
-    if cfg.record.mcap:
-        try:
-            from taslel_bench.mcap_log import write_episode_mcap
-
-            write_episode_mcap(out_dir / "episode.mcap", res.trace, events, summary)
-        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
-            mcap_error = traceback.format_exc()
-            summary["mcap_error"] = mcap_error.strip().splitlines()[-1]
+    if sink is not None:
+        _close_mcap(sink, res, events, summary)
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.qpset)
         try:
             qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.run"})
@@ -248,6 +302,31 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     recording.write_json(out_dir / recording.EVENTS, events)
     recording.write_json(out_dir / recording.SUMMARY, summary)  # written last: marks the run complete
     return summary
+
+
+def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
+    """record.mcap: an :class:`taslel_bench.mcap_log.McapStream` fed by the episode every second of
+    simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
+    if not cfg.record.mcap:
+        return None
+    from taslel_bench.mcap_log import McapStream
+
+    sink = _GuardedSink(McapStream(out_dir))
+    built.episode.chunk_sink = sink
+    built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
+    return sink
+
+
+def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict) -> None:
+    """Finish episode.mcap (the last ticks, events, summary); a recording failure is noted in the summary."""
+    if not sink.error:
+        try:
+            sink.stream.close(res.trace, events, summary)
+        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
+            sink.error = traceback.format_exc().strip().splitlines()[-1]
+            sink.stream.abandon()
+    if sink.error:
+        summary["mcap_error"] = sink.error
 
 
 def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
@@ -268,6 +347,7 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
                      overrides: list[str] | None = None) -> dict:  # fmt: skip
     """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    recording.supersede(out_dir, "before-error")  # a result already in the folder is put aside, not overwritten
     tb = traceback.format_exc()
     recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
     summary = {

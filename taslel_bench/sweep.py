@@ -23,10 +23,11 @@ NUMERIC_COLUMNS = ("seed", "filter_contact_velocity_gain")
 
 
 def run_folders(sweep_dir: Path) -> list[Path]:
-    """Folders under ``sweep_dir`` that hold a job (its ``config.yaml`` or Hydra's ``.hydra``)."""
+    """Folders under ``sweep_dir`` that hold a job (its ``summary.json`` or Hydra's ``.hydra``); results put
+    aside by a rerun (``<run>/superseded/...``) are not runs of this sweep."""
     found = {p.parent for p in sweep_dir.rglob("summary.json")}
     found |= {p.parent.parent for p in sweep_dir.rglob(".hydra/config.yaml")}
-    return sorted(found)
+    return sorted(d for d in found if recording.SUPERSEDED not in d.relative_to(sweep_dir).parts)
 
 
 def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:

@@ -67,11 +67,13 @@ class EpisodeTrace:
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.tick_us = np.zeros(c)
-        # wall time of the tick's parts [s until finalize(), then µs]: state read + estimator + controller,
-        # controller model (bridge + Pinocchio), filter (QP build + solve + fallback), physics (+ contact check)
-        self.tick_parts_us = np.zeros((c, len(TICK_PARTS)))
+        # wall time of the tick's parts [s]: state read + estimator + controller, controller model (bridge +
+        # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
+        self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
+        self._context: tuple | None = None  # (bridge, contact reader, profile, scenario): see bind()
         # --- derived by finalize() (empty until then)
+        self.tick_parts_us = np.zeros((0, len(TICK_PARTS)))  # [µs]
         self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
         self.base_quat_wxyz = np.zeros((0, 4))
         self.base_linvel_w = np.zeros((0, 3))  # [m/s]
@@ -127,102 +129,124 @@ class EpisodeTrace:
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
 
-    def finalize(self, br: StateBridge, contacts, profile, scenario=None) -> None:
-        """Derive the named plant quantities of the ``n`` recorded ticks (idempotent).
+    def bind(self, br: StateBridge, contacts, profile, scenario=None) -> None:
+        """What deriving the named quantities needs: the state bridge (index maps), the episode's
+        :class:`taslel_bench.plant.FootContactReader` (sensor layout), the scenario's clearance profile or
+        None (then ``clearance_m`` is all nan) and the scenario (friction under each foot, physical
+        obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles)."""
+        self._context = (br, contacts, profile, scenario)
 
-        ``contacts``: the episode's :class:`taslel_bench.plant.FootContactReader` (sensor layout);
-        ``profile``: the scenario's clearance profile or None (then ``clearance_m`` is all nan);
-        ``scenario``: gives the friction under each foot and the physical obstacles (None: the trunk's
-        friction ``mu_true`` for every foot, no obstacles)."""
+    def derive(self, k0: int, k1: int) -> dict[str, np.ndarray]:
+        """The named plant quantities of ticks ``k0:k1`` from their raw rows (vectorised; the same
+        definitions for a chunk written during the episode as for the whole episode after it)."""
+        if self._context is None:
+            raise RuntimeError("EpisodeTrace.bind() must be called before deriving quantities")
+        br, contacts, profile, scenario = self._context
+        a, dv, ticks = br.free_qadr, br.free_dadr, slice(k0, k1)
+        qpos, qvel = self.qpos_mj[ticks], self.qvel_mj[ticks]
+        plant_side = contacts.from_sensor_log(self.sensordata_mj[ticks])
+        foot_pos = plant_side["foot_pos_in_world"]
+        out = {
+            "tick_parts_us": self.tick_parts_s[ticks] * 1e6,
+            "base_pos_w": qpos[:, a : a + 3].copy(),
+            "base_quat_wxyz": qpos[:, a + 3 : a + 7].copy(),
+            "base_linvel_w": qvel[:, dv : dv + 3].copy(),
+            "base_angvel_b": qvel[:, dv + 3 : dv + 6].copy(),
+            "q": qpos[:, br.joint_qadr],
+            "qd": qvel[:, br.joint_dadr],
+            "foot_pos_w": foot_pos,
+            "grf_plant_w": plant_side["forces_in_world"],
+            "in_contact": plant_side["in_contact"],
+            "slip_w": plant_side["slip_velocity_in_world"],
+            "obstacle_contact": plant_side["obstacle_contact"],
+            "mu_foot": friction_under_feet(scenario, foot_pos, self.mu_true[ticks]),
+            "obstacle_clearance_m": obstacle_clearance(scenario.obstacles() if scenario is not None else (), foot_pos),
+        }
+        clearance = np.full((k1 - k0, robot.N_LEGS), np.nan)
+        if profile is not None and k1 > k0:
+            swing = ~self.in_stance[ticks]
+            z_obstacle = profile.evaluate(self.swing_phase[ticks][swing])[0]
+            clearance[swing] = foot_pos[..., 2][swing] - robot.FOOT_RADIUS_M - z_obstacle
+        out["clearance_m"] = clearance
+        return out
+
+    def finalize(self) -> None:
+        """Derive the named plant quantities of the ``n`` recorded ticks into attributes (idempotent)."""
         if self.finalized:
             return
-        n, a, dv = self.n, br.free_qadr, br.free_dadr
-        self.tick_parts_us[:n] *= 1e6
-        qpos, qvel = self.qpos_mj[:n], self.qvel_mj[:n]
-        self.base_pos_w = qpos[:, a : a + 3].copy()
-        self.base_quat_wxyz = qpos[:, a + 3 : a + 7].copy()
-        self.base_linvel_w = qvel[:, dv : dv + 3].copy()
-        self.base_angvel_b = qvel[:, dv + 3 : dv + 6].copy()
-        self.q = qpos[:, br.joint_qadr]
-        self.qd = qvel[:, br.joint_dadr]
-        plant_side = contacts.from_sensor_log(self.sensordata_mj[:n])
-        self.foot_pos_w = plant_side["foot_pos_in_world"]
-        self.grf_plant_w = plant_side["forces_in_world"]
-        self.in_contact = plant_side["in_contact"]
-        self.slip_w = plant_side["slip_velocity_in_world"]
-        self.obstacle_contact = plant_side["obstacle_contact"]
-        self.mu_foot = friction_under_feet(scenario, self.foot_pos_w, self.mu_true[:n])
-        obstacles = scenario.obstacles() if scenario is not None else ()
-        self.obstacle_clearance_m = obstacle_clearance(obstacles, self.foot_pos_w)
-        self.clearance_m = np.full((n, robot.N_LEGS), np.nan)
-        if profile is not None and n:
-            swing = ~self.in_stance[:n]
-            z_obstacle = profile.evaluate(self.swing_phase[:n][swing])[0]
-            self.clearance_m[swing] = self.foot_pos_w[..., 2][swing] - robot.FOOT_RADIUS_M - z_obstacle
+        for name, value in self.derive(0, self.n).items():
+            setattr(self, name, value)
         self.finalized = True
 
     # ------------------------------------------------------------------------------------------ derived
     def base_rpy(self) -> np.ndarray:
         """(n, 3) roll, pitch, yaw [rad] of the trunk (ZYX convention)."""
-        w, x, y, z = self.base_quat_wxyz[: self.n].T
-        roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-        pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-        yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-        return np.stack([roll, pitch, yaw], axis=1)
+        return rpy_from_quat(self.base_quat_wxyz[: self.n])
 
-    def to_frame(self, dt: float) -> pd.DataFrame:
-        """One row per control tick, typed columns, units in the names."""
-        n = self.n
-        cols: dict[str, np.ndarray] = {"t_s": self.t_s[:n]}
-        for j, ax in enumerate("xyz"):
-            cols[f"base_{ax}_w_m"] = self.base_pos_w[:n, j]
-        for j, ax in enumerate("wxyz"):
-            cols[f"base_quat_{ax}"] = self.base_quat_wxyz[:n, j]
-        for j, ax in enumerate("xyz"):
-            cols[f"base_v{ax}_w_mps"] = self.base_linvel_w[:n, j]
-        for j, ax in enumerate("xyz"):
-            cols[f"base_w{ax}_b_radps"] = self.base_angvel_b[:n, j]
-        for j, name in enumerate(("roll", "pitch", "yaw")):
-            cols[f"base_{name}_rad"] = self.base_rpy()[:, j]
+    def to_frame(self, dt: float | None = None) -> pd.DataFrame:
+        """One row per control tick, typed columns, units in the names (all ``n`` ticks)."""
+        return self.frame(0, self.n)
+
+    def frame(self, k0: int, k1: int) -> pd.DataFrame:
+        """Rows ``k0:k1`` as :meth:`to_frame` gives them (derived from the raw rows: usable during the
+        episode, for streaming)."""
+        d, t = self.derive(k0, k1), slice(k0, k1)
+        cols: dict[str, np.ndarray] = {"t_s": self.t_s[t]}
+        _put(cols, "base_{}_w_m", "xyz", d["base_pos_w"])
+        _put(cols, "base_quat_{}", "wxyz", d["base_quat_wxyz"])
+        _put(cols, "base_v{}_w_mps", "xyz", d["base_linvel_w"])
+        _put(cols, "base_w{}_b_radps", "xyz", d["base_angvel_b"])
+        _put(cols, "base_{}_rad", ("roll", "pitch", "yaw"), rpy_from_quat(d["base_quat_wxyz"]))
         for j, jn in enumerate(robot.JOINT_NAMES):
             short = jn.removesuffix("_joint")
-            cols[f"q_{short}_rad"] = self.q[:n, j]
-            cols[f"qd_{short}_radps"] = self.qd[:n, j]
-            cols[f"u_nom_{short}_nm"] = self.u_nom[:n, j]
-            cols[f"u_{short}_nm"] = self.u[:n, j]
-        cols["gait_phase"] = self.gait_phase[:n]
-        slip = np.hypot(self.slip_w[:n, :, 0], self.slip_w[:n, :, 1])
+            cols[f"q_{short}_rad"] = d["q"][:, j]
+            cols[f"qd_{short}_radps"] = d["qd"][:, j]
+            cols[f"u_nom_{short}_nm"] = self.u_nom[t, j]
+            cols[f"u_{short}_nm"] = self.u[t, j]
+        cols["gait_phase"] = self.gait_phase[t]
+        slip = np.hypot(d["slip_w"][..., 0], d["slip_w"][..., 1])
         for i, leg in enumerate(robot.LEGS):
-            cols[f"{leg}_stance"] = self.in_stance[:n, i]
-            cols[f"{leg}_contact"] = self.in_contact[:n, i]
-            cols[f"{leg}_swing_phase"] = self.swing_phase[:n, i]
-            for j, ax in enumerate("xyz"):
-                cols[f"{leg}_foot_{ax}_w_m"] = self.foot_pos_w[:n, i, j]
+            cols[f"{leg}_stance"] = self.in_stance[t, i]
+            cols[f"{leg}_contact"] = d["in_contact"][:, i]
+            cols[f"{leg}_swing_phase"] = self.swing_phase[t, i]
+            _put(cols, leg + "_foot_{}_w_m", "xyz", d["foot_pos_w"][:, i])
             cols[f"{leg}_contact_point_speed_mps"] = slip[:, i]
-            for j, ax in enumerate("xyz"):
-                cols[f"{leg}_grf_plant_{ax}_w_n"] = self.grf_plant_w[:n, i, j]
-                cols[f"{leg}_grf_filter_{ax}_w_n"] = self.grf_filter_w[:n, i, j]
-            cols[f"{leg}_barrier_h_m"] = self.barrier_h_m[:n, i]
-            cols[f"{leg}_barrier_he_mps"] = self.barrier_he_mps[:n, i]
-            cols[f"{leg}_clearance_m"] = self.clearance_m[:n, i]
-            cols[f"{leg}_mu_foot"] = self.mu_foot[:n, i]
-            cols[f"{leg}_obstacle_contact"] = self.obstacle_contact[:n, i]
-            cols[f"{leg}_obstacle_clearance_m"] = self.obstacle_clearance_m[:n, i]
-            cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[:n, i]
-        cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[:n]
-        cols["shin_floor_contact"] = self.shin_floor_contact[:n]
-        cols["qp_status"] = self.qp_status[:n]
-        cols["qp_fallback"] = self.qp_fallback[:n]
-        cols["qp_build_us"] = self.qp_build_us[:n]
-        cols["qp_solve_us"] = self.qp_solve_us[:n]
-        cols["qp_iterations"] = self.qp_iterations[:n]
-        cols["mu_hat"] = self.mu_hat[:n]
-        cols["mu_true"] = self.mu_true[:n]
-        cols["tick_us"] = self.tick_us[:n]
-        for j, part in enumerate(TICK_PARTS):
-            cols[f"tick_{part}_us"] = self.tick_parts_us[:n, j]
+            _put(cols, leg + "_grf_plant_{}_w_n", "xyz", d["grf_plant_w"][:, i])
+            _put(cols, leg + "_grf_filter_{}_w_n", "xyz", self.grf_filter_w[t, i])
+            cols[f"{leg}_barrier_h_m"] = self.barrier_h_m[t, i]
+            cols[f"{leg}_barrier_he_mps"] = self.barrier_he_mps[t, i]
+            cols[f"{leg}_clearance_m"] = d["clearance_m"][:, i]
+            cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
+            cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
+            cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
+            cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[t, i]
+        cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
+        cols["shin_floor_contact"] = self.shin_floor_contact[t]
+        cols["qp_status"] = self.qp_status[t]
+        cols["qp_fallback"] = self.qp_fallback[t]
+        cols["qp_build_us"] = self.qp_build_us[t]
+        cols["qp_solve_us"] = self.qp_solve_us[t]
+        cols["qp_iterations"] = self.qp_iterations[t]
+        cols["mu_hat"] = self.mu_hat[t]
+        cols["mu_true"] = self.mu_true[t]
+        cols["tick_us"] = self.tick_us[t]
+        _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
         return pd.DataFrame(cols)
 
+
+def _put(cols: dict[str, np.ndarray], pattern: str, names, values: np.ndarray) -> None:
+    """cols[pattern.format(name)] = values[:, j] for each name."""
+    for j, name in enumerate(names):
+        cols[pattern.format(name)] = values[:, j]
+
+
+def rpy_from_quat(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(n, 3) roll, pitch, yaw [rad] (ZYX convention) of (n, 4) unit quaternions (w, x, y, z)."""
+    w, x, y, z = quat_wxyz.T
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=1)
 
 
 def friction_under_feet(scenario, foot_pos_w: np.ndarray, mu_trunk: np.ndarray) -> np.ndarray:

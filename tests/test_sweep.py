@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from mcap.reader import make_reader
 
-from taslel_bench.mcap_log import CHANNELS
+from taslel_bench.mcap_log import CHANNELS, EVENTS
 from taslel_bench.report import shifted_geometric_mean, write_report
 from taslel_bench.run import Built, run
 from taslel_bench.sweep import aggregate
@@ -33,7 +33,7 @@ def mcap_counts(path: Path) -> dict[str, int]:
 def test_mcap_reads_back_with_every_channel(tmp_path):
     run(compose_cfg(["duration=0.3", "progress=false", "scenario=obstacle"]), tmp_path, {"solver": "daqp"})
     counts = mcap_counts(tmp_path / "episode.mcap")
-    assert set(counts) == set(CHANNELS)
+    assert set(counts) == set(CHANNELS) | set(EVENTS)
     assert all(n > 0 for n in counts.values())
     assert counts["/torques"] == 800  # one per control tick (0.5 s stand + 0.3 s)
 
@@ -112,7 +112,8 @@ def test_multirun_with_a_failing_job_records_it_and_finishes_the_others(tmp_path
     assert len(table) == 2
     assert sorted(table["status"]) == ["error", "ok"]
     assert "controller.kp" in table.loc[table["status"] == "error", "message"].iloc[0]
-    assert "sweep progress: 2 runs complete" in out.stdout or "sweep progress: 1 runs complete" in out.stdout
+    assert "sweep progress: job #1 (controller.kp=-1,duration=0.3) ended error" in out.stdout
+    assert "sweep progress: job #0 (controller.kp=100,duration=0.3) ended ok" in out.stdout
 
 
 def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
