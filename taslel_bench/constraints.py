@@ -304,13 +304,13 @@ def _obstacle_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_sta
             he_out[i] = np.nan
             continue
         px, pz = foot_pos[i, 0], foot_pos[i, 2]
-        best, h, dx, dz, rho = -1, np.inf, 0.0, 1.0, 1.0
+        h, dx, dz, rho = np.inf, 0.0, 1.0, 1.0
         for k in range(geometry.shape[0]):
             ddx, ddz = px - geometry[k, 0], pz - geometry[k, 1]
             rr = np.sqrt(ddx * ddx + ddz * ddz)
             hk = rr - geometry[k, 2] - foot_radius
             if hk < h:
-                best, h, dx, dz, rho = k, hk, ddx, ddz, max(rr, 1e-9)
+                h, dx, dz, rho = hk, ddx, ddz, max(rr, 1e-9)
         nx, nz = dx / rho, dz / rho
         vx, vz = foot_vel[i, 0], foot_vel[i, 2]
         hdot = nx * vx + nz * vz

@@ -36,7 +36,6 @@ from taslel_bench.model import A1Model
 from taslel_bench.safety_filter import SafetyFilter
 from taslel_bench.trace import EpisodeTrace
 
-
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the floor: touching
 
 

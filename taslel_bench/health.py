@@ -21,8 +21,8 @@ class HealthLimits:
 # summary key -> (limit attribute, what crossing it means)
 CHECKS = {
     "qp_failed_rate": ("qp_failed_rate_max", "QP failed (fallback torques)"),
-    "barrier_negative_rate": ("barrier_negative_rate_max", "filter's own barrier h < 0 on swing ticks while "
-                              "the QP reported solved"),
+    "barrier_negative_rate": ("barrier_negative_rate_max",
+                              "filter's own barrier h < 0 on swing ticks while the QP reported solved"),
 }
 
 

@@ -67,7 +67,7 @@ CHANNELS: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
     },
     "/qp": {"status": (_NUM, ["qp_status"]), "fallback": ({"type": "boolean"}, ["qp_fallback"]),
             "solve_us": (_NUM, ["qp_solve_us"]), "build_us": (_NUM, ["qp_build_us"]),
-            "iterations": (_NUM, ["qp_iterations"])},  # fmt: skip
+            "iterations": (_NUM, ["qp_iterations"])},
     "/tick": {"tick_us": (_NUM, ["tick_us"]), **{f"{p}_us": (_NUM, [f"tick_{p}_us"]) for p in TICK_PARTS}},
     "/barrier": {
         "foot": (_NAMES, None),

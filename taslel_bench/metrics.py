@@ -24,8 +24,11 @@ def _median(x: np.ndarray) -> float:
     return float(np.median(x)) if x.size else math.nan
 
 
+DEFAULT_LIMITS = HealthLimits()
+
+
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
-              limits: HealthLimits = HealthLimits()) -> dict[str, object]:  # fmt: skip
+              limits: HealthLimits = DEFAULT_LIMITS) -> dict[str, object]:  # fmt: skip
     """The run's summary. ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip window);
     ``limits``: when the run is ``degraded`` instead of ``ok``."""
     tr, n = res.trace, res.trace.n

@@ -224,6 +224,8 @@ def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
         fig.savefig(sweep_dir / "grf_lateral.png", dpi=120)
         plt.close(fig)
         made.append("grf_lateral.png")
+    logs_figure = _logs_figure(sweep_dir, frame, plt)
+    made += [logs_figure] if logs_figure else []
     clearance = {on: _steps(sweep_dir, _first_run(frame, "obstacle", on)) for on in (False, True)}
     if any(r is not None for r in clearance.values()):
         fig, ax = plt.subplots(figsize=(8, 3.2))
@@ -246,6 +248,54 @@ def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
         plt.close(fig)
         made.append("clearance.png")
     return made
+
+
+def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
+    """The physical obstacles of a run, rebuilt from its config.yaml (Hydra builds the scenario)."""
+    path = sweep_dir / str(row["run_dir"]) / "config.yaml" if row is not None else None
+    if path is None or not path.is_file():
+        return ()
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    return tuple(instantiate(OmegaConf.load(path).scenario).obstacles())
+
+
+def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
+    """FL foot-sphere centre path (world x-z) over the logs, nominal vs filtered (first seed of each), with
+    the logs and the trunk's progress."""
+    rows = {on: _first_run(frame, "logs", on) for on in (False, True)}
+    runs = {on: _steps(sweep_dir, row) for on, row in rows.items()}
+    if all(r is None for r in runs.values()):
+        return None
+    fig, (ax, ax_x) = plt.subplots(2, 1, figsize=(8, 5.2), gridspec_kw={"height_ratios": [2, 1]})
+    for ob in _run_obstacles(sweep_dir, rows[True] if rows[True] is not None else rows[False]):
+        x = np.linspace(ob.x_m - ob.radius_m, ob.x_m + ob.radius_m, 101)
+        top = ob.z_m + np.sqrt(np.maximum(ob.radius_m**2 - (x - ob.x_m) ** 2, 0.0))  # the log's upper outline
+        ax.fill_between(x, 0.0, np.maximum(top, 0.0), color="saddlebrown", alpha=0.5, lw=0)
+    for on, steps in runs.items():
+        if steps is None:
+            continue
+        label = "ECBF on" if on else "nominal only"
+        ax.plot(steps["FL_foot_x_w_m"], steps["FL_foot_z_w_m"] - 0.02, lw=0.7, label=f"{label}: FL foot bottom")
+        touch = steps["FL_obstacle_contact"].to_numpy(bool)
+        ax.plot(steps["FL_foot_x_w_m"][touch], steps["FL_foot_z_w_m"][touch] - 0.02, "x", ms=3,
+                label=f"{label}: foot on or against a log")
+        ax_x.plot(steps["t_s"], steps["base_x_w_m"], label=label)
+    reach = max(float(r["FL_foot_x_w_m"].max()) for r in runs.values() if r is not None)
+    ax.set_xlim(0.1, reach + 0.3)
+    ax.set_ylim(-0.005, 0.16)
+    ax.set_xlabel("world x [m]")
+    ax.set_ylabel("z [m] (not to scale)")
+    ax.set_title("FL foot path over the logs (brown: the logs; x: foot in contact with one)")
+    ax.legend(fontsize=7)
+    ax_x.set_xlabel("t [s]")
+    ax_x.set_ylabel("trunk x [m]")
+    ax_x.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(sweep_dir / "logs.png", dpi=120)
+    plt.close(fig)
+    return "logs.png"
 
 
 def _md_table(table: pd.DataFrame) -> str:

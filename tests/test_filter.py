@@ -205,7 +205,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
         v0 = pm.foot_vel_in_world[i]
         a0 = pm.foot_jac_in_world[i] @ res.vdot + pm.foot_jdotv_in_world[i]
 
-        def clearance(t: float) -> float:
+        def clearance(t: float, p0=p0, v0=v0, a0=a0, log=log) -> float:
             pt = p0 + v0 * t + 0.5 * a0 * t * t
             return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - robot.FOOT_RADIUS_M)
 

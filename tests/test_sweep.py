@@ -137,7 +137,6 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
 def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path, monkeypatch):
     """`scenario.friction=0.3,1.0` are two rows (not one "flat" row); a degraded run is listed with why."""
     import taslel_bench.run as run_module
-
     from tests.conftest import NeverSolves
 
     for mu in ("0.3", "1.0"):
