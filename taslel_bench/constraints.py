@@ -144,7 +144,46 @@ class FrictionCone:
                 self._write_foot(qp, i, stance, x.mu)
 
 
-class SwingClearanceECBF:
+class SwingBarrier:
+    """One exponential-CBF row per foot (inactive for stance feet), written by a subclass's kernel, which also
+    fills ``h`` [m] and ``h_e`` [m/s] (nan in stance). Each row reads psi(vdot) >= margin with
+    psi = hdot_e + a2 h_e [m/s²] the ECBF condition and ``margin_mps2`` >= 0 a robustness margin (0: the
+    paper's row). After a solve, :meth:`planned` records psi at the solution's vdot (``psi_planned``): the
+    condition the filter believes the next instant satisfies."""
+
+    name, n_rows, suffix = "barrier", robot.N_LEGS, "barrier"
+
+    def __init__(self, alpha1: float, alpha2: float) -> None:
+        self.alpha1, self.alpha2 = alpha1, alpha2
+        self.start = 0
+        self.margin_mps2 = 0.0  # [m/s²] robust margin on psi (set per tick by the filter when robust)
+        self.h = np.full(robot.N_LEGS, np.nan)  # [m] barrier value per foot (nan in stance)
+        self.h_e = np.full(robot.N_LEGS, np.nan)  # [m/s]
+        self.psi_planned = np.full(robot.N_LEGS, np.nan)  # [m/s²] hdot_e + a2 h_e at the solution
+
+    def pattern(self, mask: np.ndarray) -> None:
+        mask[self.start : self.start + robot.N_LEGS, VDOT] = True
+
+    def labels(self) -> list[str]:
+        return [f"{leg}_{self.suffix}" for leg in robot.LEGS]
+
+    def init(self, qp: QPProblem) -> None:
+        qp.G[self.start : self.start + robot.N_LEGS] = 0.0
+        qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
+
+    def _tighten(self, qp: QPProblem) -> None:
+        if self.margin_mps2 > 0.0:
+            rows = slice(self.start, self.start + robot.N_LEGS)
+            qp.h[rows] -= np.where(np.isfinite(self.h), self.margin_mps2, 0.0)
+
+    def planned(self, qp: QPProblem, vdot: np.ndarray) -> None:
+        """psi at the solution: the row's slack plus the margin (nan for stance feet)."""
+        rows = slice(self.start, self.start + robot.N_LEGS)
+        psi = qp.h[rows] - qp.G[rows, VDOT] @ vdot + self.margin_mps2
+        self.psi_planned[:] = np.where(np.isfinite(self.h), psi, np.nan)
+
+
+class SwingClearanceECBF(SwingBarrier):
     """Ground-clearance exponential CBF (paper, "Ground Clearance Enforced by an ECBF"), one row per foot.
 
     h = p_z - r_foot - z(s) (foot-sphere bottom above the obstacle profile), hdot = v_z - z'(s) sdot,
@@ -154,33 +193,25 @@ class SwingClearanceECBF:
     Stance feet get an inactive row (0 <= INACTIVE_RHS).
     """
 
-    name, n_rows = "ecbf", robot.N_LEGS
+    name, suffix = "ecbf", "clearance"
 
     def __init__(self, profile: ClearanceProfile, alpha1: float, alpha2: float) -> None:
-        self.profile, self.alpha1, self.alpha2 = profile, alpha1, alpha2
-        self.start = 0
-        self.h = np.full(robot.N_LEGS, np.nan)  # [m] barrier value per foot (nan in stance)
-        self.h_e = np.full(robot.N_LEGS, np.nan)  # [m/s]
-
-    def pattern(self, mask: np.ndarray) -> None:
-        mask[self.start : self.start + robot.N_LEGS, VDOT] = True
-
-    def labels(self) -> list[str]:
-        return [f"{leg}_clearance" for leg in robot.LEGS]
+        super().__init__(alpha1, alpha2)
+        self.profile = profile
 
     def init(self, qp: QPProblem) -> None:
         self._c, self._c1, self._c2 = self.profile.coefficient_arrays()  # z, dz/ds, d²z/ds² (ascending)
-        qp.G[self.start : self.start + robot.N_LEGS] = 0.0
-        qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
+        super().init(qp)
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m = x.model
         _ecbf_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
                    m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, self._c, self._c1,
                    self._c2, self.alpha1, self.alpha2, robot.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+        self._tighten(qp)
 
 
-class SwingObstacleECBF:
+class SwingObstacleECBF(SwingBarrier):
     """Swing-foot clearance of physical round obstacles (logs across the path), one row per foot: the
     paper's exponential CBF with the Euclidean clearance of the foot sphere from the nearest log as h.
 
@@ -192,32 +223,21 @@ class SwingObstacleECBF:
     Each swing foot is constrained by its nearest log (smallest h); stance feet get an inactive row.
     """
 
-    name, n_rows = "obstacle", robot.N_LEGS
+    name, suffix = "obstacle", "obstacle"
 
     def __init__(self, obstacles: tuple[RoundObstacle, ...], alpha1: float, alpha2: float) -> None:
         if not obstacles:
             raise ValueError("SwingObstacleECBF needs at least one obstacle")
-        self.obstacles, self.alpha1, self.alpha2 = obstacles, alpha1, alpha2
+        super().__init__(alpha1, alpha2)
+        self.obstacles = obstacles
         self._geometry = np.array([[ob.x_m, ob.z_m, ob.radius_m] for ob in obstacles])  # [m] (n_obstacles, 3)
-        self.start = 0
-        self.h = np.full(robot.N_LEGS, np.nan)  # [m] clearance of each swing foot (nan in stance)
-        self.h_e = np.full(robot.N_LEGS, np.nan)  # [m/s]
-
-    def pattern(self, mask: np.ndarray) -> None:
-        mask[self.start : self.start + robot.N_LEGS, VDOT] = True
-
-    def labels(self) -> list[str]:
-        return [f"{leg}_obstacle" for leg in robot.LEGS]
-
-    def init(self, qp: QPProblem) -> None:
-        qp.G[self.start : self.start + robot.N_LEGS] = 0.0
-        qp.h[self.start : self.start + robot.N_LEGS] = INACTIVE_RHS
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m = x.model
         _obstacle_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
                        m.foot_jdotv_in_world, x.in_stance, self._geometry, self.alpha1, self.alpha2,
                        robot.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+        self._tighten(qp)
 
 
 # --------------------------------------------------------------------------------- compiled row writers

@@ -27,12 +27,13 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from taslel_bench import plant, robot
+from taslel_bench import plant, residuals, robot
 from taslel_bench.bridge import StateBridge
 from taslel_bench.constraints import TickInputs
 from taslel_bench.controller import NominalController
 from taslel_bench.interfaces import Estimator, Proprioception, Scenario
 from taslel_bench.model import A1Model
+from taslel_bench.residuals import ResidualSetup
 from taslel_bench.safety_filter import SafetyFilter
 from taslel_bench.trace import EpisodeTrace
 
@@ -149,6 +150,17 @@ class Episode:
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
         return time.perf_counter() - t0
 
+    def _residuals(self, trace: EpisodeTrace, res: EpisodeResult) -> None:
+        """The controller model's residuals against the recorded plant motion (after the episode)."""
+        t0 = time.perf_counter()
+        alpha2 = self.filter.settings.ecbf_alpha2 if self.filter is not None else 20.0
+        setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s, alpha2)
+        try:
+            residuals.compute(trace, setup)
+        except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
+            res.extras["residuals_error"] = traceback.format_exc().strip().splitlines()[-1]
+        res.extras["residuals_s"] = time.perf_counter() - t0
+
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         s, m, d, br = self.s, self.m, self.d, self.bridge
         trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
@@ -254,8 +266,9 @@ class Episode:
             res.status = "error"
             res.message = f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
-        trace.finalize()
-        res.n_ticks = trace.n
         res.wall_time_s = time.perf_counter() - wall0 - recording_s
+        trace.finalize()
+        self._residuals(trace, res)
+        res.n_ticks = trace.n
         res.extras["recording_s"] = recording_s
         return res

@@ -13,6 +13,7 @@ from taslel_bench.clearance_metrics import clearance_metrics
 from taslel_bench.contact_metrics import contact_metrics
 from taslel_bench.episode import EpisodeResult
 from taslel_bench.health import HealthLimits, assess
+from taslel_bench.residuals import residual_metrics
 from taslel_bench.trace import TICK_PARTS
 
 
@@ -54,6 +55,10 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
     out.update(filter_metrics(res))
     out.update(contact_metrics(tr, k0, control_dt_s, stance_duration_s))
     out.update(clearance_metrics(tr, k0))
+    out.update(residual_metrics(tr, k0, limits))
+    out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
+    if "residuals_error" in res.extras:
+        out["residuals_error"] = str(res.extras["residuals_error"])
     out.update(estimator_metrics(res))
     out["status"], out["degraded_reasons"] = assess(out, limits)
     return out

@@ -91,15 +91,20 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
     return spec
 
 
-# MuJoCo contact-sensor parameters (as the MJCF <contact data="found force" reduce="netforce" num="1">):
-# intprm = (data bits: found|force, reduction: netforce, num)
-_CONTACT_SENSOR_INTPRM = (3, 3, 1)
+# MuJoCo contact-sensor parameters (as the MJCF <contact data="found force torque pos" reduce="netforce"
+# num="1">): intprm = (data bits, reduction: netforce, num). netforce merges a foot's contacts into one at
+# the force-weighted centroid of the contact points, with the net force and torque (world axes).
+_CONTACT_SENSOR_INTPRM = (1 | 2 | 4 | 16, 3, 1)  # data: found, force, torque, pos
+_CONTACT_SENSOR_OBSTACLE_INTPRM = (1 | 2, 3, 1)  # found, force (obstacle contacts only need a count)
 
 
 def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
-    """Per foot: a contact sensor (number of contacts, net force in world axes exerted *by* the foot on
-    what it touches) and the foot site's position, linear and angular velocity in world axes — read in one
-    slice of ``sensordata`` instead of looping over ``data.contact``. Requires a site named like the foot."""
+    """Per foot: a contact sensor (number of contacts; net force and torque in world axes exerted *by* the
+    foot on what it touches, at the centroid of its contact points, which it also gives) and the foot site's
+    position, linear and angular velocity in world axes — read in one slice of ``sensordata`` instead of
+    looping over ``data.contact``. The force, torque and point give the generalised contact force exactly
+    (J(point)' f + J_rot' torque = MuJoCo's qfrc_constraint of the contacts). Requires a site named like the
+    foot."""
     for foot in robot.FOOT_FRAMES:
         sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
@@ -205,7 +210,7 @@ def add_round_obstacles(spec: mujoco.MjSpec, obstacles: Sequence[RoundObstacle],
         sensor = spec.add_sensor(name=f"{foot}_{OBSTACLE_SENSOR_SUFFIX}", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot, reftype=mujoco.mjtObj.mjOBJ_BODY,
                                  refname=OBSTACLE_BODY)  # fmt: skip
-        sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
+        sensor.intprm[:3] = _CONTACT_SENSOR_OBSTACLE_INTPRM
 
 
 def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
@@ -286,7 +291,9 @@ class FootContactReader:
         adr = sensor_adr("contact")
         self._found_rows = adr.copy()  # number of contacts per foot
         self._found_rows_list = [int(r) for r in adr]
-        self._force_rows = adr[:, None] + np.arange(1, 4)  # fx, fy, fz (by the foot)
+        self._force_rows = adr[:, None] + np.arange(1, 4)  # fx, fy, fz (by the foot), world axes
+        self._torque_rows = adr[:, None] + np.arange(4, 7)  # net torque about the contact point, world axes
+        self._point_rows = adr[:, None] + np.arange(7, 10)  # force-weighted centroid of the contact points
         self._pos_rows = sensor_adr("pos")[:, None] + np.arange(3)
         self._lin_rows = sensor_adr("linvel")[:, None] + np.arange(2)  # vx, vy
         self._ang_rows = sensor_adr("angvel")[:, None] + np.array([1, 0])  # wy, wx
@@ -340,6 +347,8 @@ class FootContactReader:
         n = sensors.shape[0]
         return {
             "forces_in_world": -sensors[:, self._force_rows],
+            "torques_in_world": -sensors[:, self._torque_rows],
+            "contact_point_in_world": sensors[:, self._point_rows],
             "in_contact": sensors[:, self._found_rows] > 0.0,
             "slip_velocity_in_world": sensors[:, self._lin_rows] + sensors[:, self._ang_rows] * self._radius_sign,
             "foot_pos_in_world": sensors[:, self._pos_rows],

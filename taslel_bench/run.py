@@ -24,6 +24,7 @@ from taslel_bench.gait import GaitParams
 from taslel_bench.health import HealthLimits
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
+from taslel_bench.residuals import alarm_events
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
 
 FRICTION_CHECK_TOL = 1e-9
@@ -284,6 +285,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     if built.backend is not None:
         summary["solver_settings"] = str(built.backend.describe())
     events = list(res.trace.events)
+    k0 = min(round(float(cfg.controller.stand_duration) / dt), res.trace.n)
+    events += alarm_events(res.trace, k0, health_limits(cfg))
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
     if res.status == "error":

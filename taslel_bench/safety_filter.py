@@ -121,7 +121,8 @@ class SafetyFilter:
             if (obstacles and settings.ecbf_enabled)
             else None
         )
-        ineq = [self.friction] + [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
+        self.barriers = [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
+        ineq = [self.friction, *self.barriers]
         m_eq = 0
         for fam in self.eq_families:
             fam.start, m_eq = m_eq, m_eq + fam.n_rows
@@ -249,6 +250,8 @@ class SafetyFilter:
             # hold to solver tolerance)
             _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
                             vdot)  # fmt: skip
+            for barrier in self.barriers:  # the ECBF conditions the filter believes it planned
+                barrier.planned(qp, vdot)
             self._last_u = u
             return FilterResult(u, lam, vdot, sol.status, False, build_s, sol)
         if self.settings.fallback == "hold_last" and self._last_u is not None:

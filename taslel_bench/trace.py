@@ -62,6 +62,11 @@ class EpisodeTrace:
         self.barrier_h_m = np.full((c, nl), np.nan)  # phase-profile ECBF h per foot (nan in stance / no ECBF)
         self.barrier_he_mps = np.full((c, nl), np.nan)
         self.barrier_obstacle_h_m = np.full((c, nl), np.nan)  # obstacle ECBF h per foot (the filter's model)
+        self.barrier_obstacle_he_mps = np.full((c, nl), np.nan)
+        # [m/s²] ECBF condition psi = hdot_e + a2 h_e the filter planned (its vdot), per family and foot
+        self.barrier_psi_planned = np.full((c, nl), np.nan)
+        self.barrier_obstacle_psi_planned = np.full((c, nl), np.nan)
+        self.vdot_filter = np.full((c, robot.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
         self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.mu_hat = np.zeros(c)
@@ -72,6 +77,11 @@ class EpisodeTrace:
         self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
         self._context: tuple | None = None  # (bridge, contact reader, profile, scenario): see bind()
+        # --- the controller model's residuals, filled after the episode by taslel_bench.residuals.compute
+        self.model_residual = np.zeros((0, robot.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
+        self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
+        self.barrier_psi_realized = np.zeros((0, nl))  # [m/s²] realised ECBF condition, per family
+        self.barrier_obstacle_psi_realized = np.zeros((0, nl))
         # --- derived by finalize() (empty until then)
         self.tick_parts_us = np.zeros((0, len(TICK_PARTS)))  # [µs]
         self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
@@ -119,12 +129,16 @@ class EpisodeTrace:
                 self.qp_solve_us[k] = sol.solve_time_s * 1e6
                 if sol.iterations is not None:
                     self.qp_iterations[k] = sol.iterations
+            self.vdot_filter[k] = fres.vdot
             ecbf, obstacle_ecbf = barriers
             if ecbf is not None:
                 self.barrier_h_m[k] = ecbf.h
                 self.barrier_he_mps[k] = ecbf.h_e
+                self.barrier_psi_planned[k] = ecbf.psi_planned if not fres.used_fallback else np.nan
             if obstacle_ecbf is not None:
                 self.barrier_obstacle_h_m[k] = obstacle_ecbf.h
+                self.barrier_obstacle_he_mps[k] = obstacle_ecbf.h_e
+                self.barrier_obstacle_psi_planned[k] = obstacle_ecbf.psi_planned if not fres.used_fallback else np.nan
         self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
@@ -135,6 +149,12 @@ class EpisodeTrace:
         None (then ``clearance_m`` is all nan) and the scenario (friction under each foot, physical
         obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles)."""
         self._context = (br, contacts, profile, scenario)
+
+    def contact_reader(self):
+        """The episode's :class:`taslel_bench.plant.FootContactReader` (sensor layout of ``sensordata_mj``)."""
+        if self._context is None:
+            raise RuntimeError("EpisodeTrace.bind() must be called first")
+        return self._context[1]
 
     def derive(self, k0: int, k1: int) -> dict[str, np.ndarray]:
         """The named plant quantities of ticks ``k0:k1`` from their raw rows (vectorised; the same
@@ -220,6 +240,18 @@ class EpisodeTrace:
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
             cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[t, i]
+        residual = _rows(self.model_residual, k0, k1, robot.NV)
+        cols["residual_trunk_force_n"] = np.linalg.norm(residual[:, :3], axis=1)
+        cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
+        cols["residual_joint_nm_max"] = np.abs(residual[:, 6:]).max(axis=1)
+        acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, robot.N_LEGS, 3), axis=2)
+        psi_real = _rows(self.barrier_psi_realized, k0, k1, robot.N_LEGS)
+        psi_obstacle_real = _rows(self.barrier_obstacle_psi_realized, k0, k1, robot.N_LEGS)
+        for i, leg in enumerate(robot.LEGS):
+            cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
+            cols[f"{leg}_barrier_psi_planned_mps2"] = np.fmin(self.barrier_psi_planned[t, i],
+                                                              self.barrier_obstacle_psi_planned[t, i])
+            cols[f"{leg}_barrier_psi_realized_mps2"] = np.fmin(psi_real[:, i], psi_obstacle_real[:, i])
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
         cols["qp_status"] = self.qp_status[t]
@@ -232,6 +264,11 @@ class EpisodeTrace:
         cols["tick_us"] = self.tick_us[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
         return pd.DataFrame(cols)
+
+
+def _rows(values: np.ndarray, k0: int, k1: int, *shape: int) -> np.ndarray:
+    """Rows k0:k1 of an array filled after the episode, or nan rows while it is not filled yet."""
+    return values[k0:k1] if values.shape[0] >= k1 else np.full((k1 - k0, *shape), np.nan)
 
 
 def _put(cols: dict[str, np.ndarray], pattern: str, names, values: np.ndarray) -> None:
