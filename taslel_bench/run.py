@@ -17,7 +17,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench import plant, qpset, recording, robot
-from taslel_bench.config import ConfigError, build_axis, build_backend, validate
+from taslel_bench.config import ConfigError, build_axis, build_backend, build_model, plant_options, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
 from taslel_bench.gait import GaitParams
@@ -34,9 +34,7 @@ class FrictionMismatch(RuntimeError):
 
 
 def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    options = plant.PlantOptions(
-        timestep_s=1.0 / float(cfg.physics_rate_hz), torque_limit_nm=float(cfg.robot.torque_limit_nm)
-    )
+    options = plant_options(cfg)
     if cfg.robot.get("plant_mjcf"):
         spec = plant.mjcf_spec(Path(cfg.robot.plant_mjcf), options)
     else:
@@ -140,6 +138,7 @@ class Built:
             self.estimator,
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
+            model=build_model(cfg),
         )
         self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
 
