@@ -197,6 +197,7 @@ def _find_actuators(spec: mujoco.MjSpec, names: PlantNames,
                     file_joint: dict[str, str]) -> tuple[dict[str, mujoco.MjsActuator], list[str]]:
     """The actuator of each core joint (by name with ``names.actuators``, else the one driving the joint)."""
     by_name = {a.name: a for a in spec.actuators if a.name}
+    joint_names = {j.name for j in spec.joints}
     driving: dict[str, list] = {}
     for a in spec.actuators:
         if a.trntype in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT):
@@ -212,6 +213,8 @@ def _find_actuators(spec: mujoco.MjSpec, names: PlantNames,
             if act.trntype not in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT) or act.target != fj:
                 wrong.append(f"{fa!r} drives {act.target!r}, not joint {fj!r}")
                 continue
+        elif fj not in joint_names:
+            continue  # reported under joints
         else:
             acts = driving.get(fj, [])
             if len(acts) != 1:
@@ -243,19 +246,20 @@ def _torque_motors(spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], t
     """Make each chosen actuator a torque motor taking joint torque [N·m] as ctrl (gain 1, gear 1); delete
     other actuators on the 12 joints. A servo (affine bias: tau = kp (ctrl - q) - kv qdot) becomes a motor
     with ctrlrange +-``torque_limit_nm`` (the URDF effort limit by default); a motor with gear x gain g != 1
-    gets gear 1 and its ctrlrange scaled by g. Returns the record (what was converted or removed)."""
+    gets gear 1 and its ctrlrange scaled by g. Returns the record: ``actuators_converted`` [[core joint,
+    what], ...], ``actuators_removed`` [names]."""
     converted, removed = [], []
     for core, act in chosen.items():
         gain = float(act.gainprm[0]) * float(act.gear[0])
         if act.biastype == mujoco.mjtBias.mjBIAS_AFFINE:
             kp, kv = float(act.gainprm[0]), -float(act.biasprm[2])
-            converted.append(f"{core}: servo kp={kp:g} kv={kv:g} -> motor +-{torque_limit_nm:g} N·m")
+            converted.append([core, f"servo kp={kp:g} kv={kv:g} -> motor +-{torque_limit_nm:g} N·m"])
             act.set_to_motor()
             act.gear = [1.0, 0, 0, 0, 0, 0]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.ctrlrange = [-torque_limit_nm, torque_limit_nm]
         elif gain != 1.0:
-            converted.append(f"{core}: motor gear x gain {gain:g} -> 1 (ctrlrange scaled)")
+            converted.append([core, f"motor gear x gain {gain:g} -> 1 (ctrlrange scaled)"])
             act.ctrlrange = np.asarray(act.ctrlrange) * gain
             act.gainprm[0], act.gear = 1.0, [1.0, 0, 0, 0, 0, 0]
     kept = {id(a) for a in chosen.values()}

@@ -24,6 +24,7 @@ from taslel_bench.gait import GaitParams
 from taslel_bench.health import HealthLimits
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
+from taslel_bench.model_report import plant_vs_model
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
 
 FRICTION_CHECK_TOL = 1e-9
@@ -217,6 +218,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "overrides": ",".join(sorted(overrides or [])),
     }
     summary.update(plant_identity(cfg, built))
+    summary.update(plant_vs_model(built.mj_model, built.episode.model, built.controller.stand_configuration()))
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
     summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
     if built.backend is not None:
