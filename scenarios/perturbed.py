@@ -32,15 +32,16 @@ class PerturbedPlant(FlatGround):
     * ``trunk_mass_scale`` (the trunk link's mass and inertia about its CoM scaled together),
       ``trunk_com_shift_m`` [m] in the trunk frame;
     * ``payload_mass_kg`` [kg]: a point mass fixed to the trunk at ``payload_pos_m`` [m, trunk frame];
-    * ``joint_damping`` [N·m·s/rad], ``armature`` [kg·m²] and ``joint_frictionloss`` [N·m] added to the leg
-      joints: one number for all 12 or 12 numbers in the core joint order (legs FL, FR, RL, RR);
+    * ``joint_damping`` [N·m·s/rad], ``armature`` [kg·m²] and ``joint_frictionloss`` [N·m] added to the
+      leg joints: one number for all 12 or 12 numbers in the core joint order (legs FL, FR, RL, RR);
     * ``motor_strength_scale`` (actuator gear: the torque the plant applies per commanded N·m);
     * ``actuator_delay_steps``: commands reach the plant this many physics steps late.
     """
 
     def __init__(self, name: str = "perturbed", friction: float = 1.0, trunk_mass_scale: float = 1.0,
                  trunk_com_shift_m: Sequence[float] = (0.0, 0.0, 0.0),
-                 joint_damping: float | Sequence[float] = 0.0, joint_frictionloss: float | Sequence[float] = 0.0,
+                 joint_damping: float | Sequence[float] = 0.0,
+                 joint_frictionloss: float | Sequence[float] = 0.0,
                  motor_strength_scale: float = 1.0, actuator_delay_steps: int = 0,
                  armature: float | Sequence[float] = 0.0, payload_mass_kg: float = 0.0,
                  payload_pos_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
@@ -53,12 +54,14 @@ class PerturbedPlant(FlatGround):
         n = robot.N_JOINTS
         self.joint_damping = number_or_list(s + "joint_damping", joint_damping, 0.0, MAX_JOINT_LOSS, length=n,
                                             unit="N·m·s/rad")
-        self.joint_frictionloss = number_or_list(s + "joint_frictionloss", joint_frictionloss, 0.0, MAX_JOINT_LOSS,
-                                                 length=n, unit="N·m")
-        self.armature = number_or_list(s + "armature", armature, 0.0, MAX_ARMATURE_KGM2, length=n, unit="kg·m²")
+        self.joint_frictionloss = number_or_list(s + "joint_frictionloss", joint_frictionloss, 0.0,
+                                                 MAX_JOINT_LOSS, length=n, unit="N·m")
+        self.armature = number_or_list(s + "armature", armature, 0.0, MAX_ARMATURE_KGM2, length=n,
+                                       unit="kg·m²")
         self.payload_mass_kg = number(s + "payload_mass_kg", payload_mass_kg, 0.0, MAX_PAYLOAD_KG, unit="kg")
-        self.payload_pos_m = numbers(s + "payload_pos_m", payload_pos_m, -MAX_PAYLOAD_OFFSET_M, MAX_PAYLOAD_OFFSET_M,
-                                     length=3, unit="m", why="[x, y, z] in the trunk frame")
+        self.payload_pos_m = numbers(s + "payload_pos_m", payload_pos_m, -MAX_PAYLOAD_OFFSET_M,
+                                     MAX_PAYLOAD_OFFSET_M, length=3, unit="m",
+                                     why="[x, y, z] in the trunk frame")
         self.motor_strength_scale = number(s + "motor_strength_scale", motor_strength_scale, 0.0, MAX_SCALE,
                                            lo_open=True)
         self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0,
@@ -75,7 +78,8 @@ class PerturbedPlant(FlatGround):
         if self.payload_mass_kg > 0.0:  # a body without joints: MuJoCo fuses it into the trunk (fusestatic)
             payload = trunk.add_body(name=PAYLOAD_BODY, pos=list(self.payload_pos_m))
             payload.explicitinertial = True
-            payload.mass, payload.ipos, payload.inertia = self.payload_mass_kg, [0.0] * 3, [0.0] * 3  # a point mass
+            payload.mass, payload.ipos = self.payload_mass_kg, [0.0] * 3
+            payload.inertia = [0.0] * 3  # a point mass
         for i, name in enumerate(robot.JOINT_NAMES):
             joint = spec.joint(name)
             damping = np.array(joint.damping)  # MuJoCo >= 4: [linear, higher-order polynomial terms ...]

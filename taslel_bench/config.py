@@ -281,7 +281,8 @@ def _optional_name(path: str, value: Any) -> None:
 def _plant_names(cfg: DictConfig, has_file: bool) -> None:
     """``robot.plant_names``: per kind null, a pattern with {leg} (and {joint}) or {core name: file name}."""
     p = "robot.plant_names"
-    for kind, cores in (("joints", robot.JOINT_NAMES), ("actuators", robot.JOINT_NAMES), ("feet", robot.FOOT_FRAMES)):
+    kinds = (("joints", robot.JOINT_NAMES), ("actuators", robot.JOINT_NAMES), ("feet", robot.FOOT_FRAMES))
+    for kind, cores in kinds:
         path, value = f"{p}.{kind}", _get(cfg, f"{p}.{kind}")
         if value is not None and not has_file:
             raise fail(path, value, "is only used with robot.plant_mjcf (set it, or leave this null)")
@@ -294,13 +295,15 @@ def _plant_names(cfg: DictConfig, has_file: bool) -> None:
             except (KeyError, IndexError, ValueError) as exc:
                 raise fail(path, value, f"a pattern may use only {placeholders} ({exc!r})") from None
             if len(names) != len(cores):
-                raise fail(path, value, f"a pattern must give {len(cores)} different names: use {placeholders}")
+                raise fail(path, value, f"a pattern must give {len(cores)} different names: use "
+                                        f"{placeholders}")
         elif isinstance(value, DictConfig):
             for core, name in value.items():
                 choice(f"{path} key", core, cores)
                 _optional_name(f"{path}.{core}", name)
         else:
-            raise fail(path, value, f"must be null, a pattern with {placeholders}, or {{core name: name in the file}}")
+            raise fail(path, value, f"must be null, a pattern with {placeholders}, or "
+                                    f"{{core name: name in the file}}")
     for key in ("trunk", "floor"):
         value = _get(cfg, f"{p}.{key}")
         _optional_name(f"{p}.{key}", value)
@@ -321,7 +324,8 @@ def _plant_overrides(cfg: DictConfig) -> None:
         number(f"{p}.impratio", v, 0.0, MAX_IMPRATIO, lo_open=True)
     if (v := _get(cfg, f"{p}.contact_solref")) is not None:
         numbers(f"{p}.contact_solref", v, length=2, why="[timeconst s, dampratio]")
-        number(f"{p}.contact_solref[0]", v[0], 0.0, MAX_SOLREF_TIMECONST_S, lo_open=True, unit="s", why="timeconst")
+        number(f"{p}.contact_solref[0]", v[0], 0.0, MAX_SOLREF_TIMECONST_S, lo_open=True, unit="s",
+               why="timeconst")
         number(f"{p}.contact_solref[1]", v[1], 0.0, MAX_SOLREF_DAMPRATIO, lo_open=True, why="dampratio")
     if (v := _get(cfg, f"{p}.contact_solimp")) is not None:
         numbers(f"{p}.contact_solimp", v, length=5, why="[dmin, dmax, width m, midpoint, power]")
@@ -340,14 +344,19 @@ def _model(cfg: DictConfig) -> None:
     m, n = "model", robot.N_JOINTS
     urdf = _get(cfg, f"{m}.urdf")
     if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
-        raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an existing URDF")
+        raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "
+                                      "existing URDF")
     joint_rule = "one number for all 12 joints or 12 in the core order (legs FL, FR, RL, RR)"
-    for key, hi, unit in (("joint_damping", MAX_JOINT_DAMPING, "N·m·s/rad"), ("armature", MAX_ARMATURE_KGM2, "kg·m²"),
-                          ("joint_frictionloss", MAX_JOINT_FRICTIONLOSS_NM, "N·m")):  # fmt: skip
-        number_or_list(f"{m}.{key}", _get(cfg, f"{m}.{key}", 0.0), 0.0, hi, length=n, unit=unit, why=joint_rule)
+    joint_fields = (("joint_damping", MAX_JOINT_DAMPING, "N·m·s/rad"),
+                    ("armature", MAX_ARMATURE_KGM2, "kg·m²"),
+                    ("joint_frictionloss", MAX_JOINT_FRICTIONLOSS_NM, "N·m"))
+    for key, hi, unit in joint_fields:
+        number_or_list(f"{m}.{key}", _get(cfg, f"{m}.{key}", 0.0), 0.0, hi, length=n, unit=unit,
+                       why=joint_rule)
     number(f"{m}.frictionloss_smoothing_radps", _get(cfg, f"{m}.frictionloss_smoothing_radps", 0.05), 0.0,
            MAX_FRICTION_SMOOTHING_RADPS, lo_open=True, unit="rad/s")
-    number(f"{m}.trunk_mass_scale", _get(cfg, f"{m}.trunk_mass_scale", 1.0), 0.0, MAX_MASS_SCALE, lo_open=True)
+    number(f"{m}.trunk_mass_scale", _get(cfg, f"{m}.trunk_mass_scale", 1.0), 0.0, MAX_MASS_SCALE,
+           lo_open=True)
     numbers(f"{m}.trunk_com_shift_m", _get(cfg, f"{m}.trunk_com_shift_m", [0.0] * 3), -MAX_COM_SHIFT_M,
             MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
     number(f"{m}.payload_mass_kg", _get(cfg, f"{m}.payload_mass_kg", 0.0), 0.0, MAX_PAYLOAD_KG, unit="kg")
@@ -380,7 +389,8 @@ def build_model(cfg: DictConfig) -> A1Model:
         if options.urdf is None:
             raise
         reason = " ".join(str(exc).split())
-        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") from exc
+        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") \
+            from exc
 
 
 def plant_options(cfg: DictConfig) -> PlantOptions:

@@ -151,5 +151,5 @@ def number_or_list(
     return numbers(path, value, lo, hi, length=length, unit=unit, why=why)
 
 
-__all__ = ["ConfigError", "choice", "fail", "flag", "integer", "interval", "is_number", "number", "number_or_list",
-           "numbers"]
+__all__ = ["ConfigError", "choice", "fail", "flag", "integer", "interval", "is_number", "number",
+           "number_or_list", "numbers"]

@@ -42,7 +42,8 @@ class A1Model:
         self.model = pin.buildModelFromUrdf(self.urdf_path, pin.JointModelFreeFlyer())
         names = list(self.model.names)[2:]
         if tuple(names) != robot.JOINT_NAMES:
-            raise ValueError(f"{self.urdf_path}: Pinocchio joint order {names} differs from robot.JOINT_NAMES")
+            raise ValueError(f"{self.urdf_path}: Pinocchio joint order {names} differs from "
+                             f"robot.JOINT_NAMES")
         model_options.apply(self.model, options)
         self.data = self.model.createData()
         # known joint losses added to h's joint rows each tick (skipped when all are 0: h is Pinocchio's nle)
@@ -82,7 +83,8 @@ class A1Model:
             self.foot_jdotv_in_world,
         )  # fmt: skip
         if self._joint_losses:
-            _add_joint_losses(self.h, v, self.joint_damping, self.joint_frictionloss, self.frictionloss_smoothing_radps)
+            _add_joint_losses(self.h, v, self.joint_damping, self.joint_frictionloss,
+                              self.frictionloss_smoothing_radps)
 
     def neutral_q(self) -> np.ndarray:
         return pin.neutral(self.model)

@@ -54,7 +54,7 @@ class ModelOptions:
     @property
     def edits_trunk(self) -> bool:
         """True when the trunk's inertia differs from the URDF's."""
-        return (self.trunk_mass_scale != 1.0 or any(self.trunk_com_shift_m) or self.payload_mass_kg != 0.0)
+        return self.trunk_mass_scale != 1.0 or any(self.trunk_com_shift_m) or self.payload_mass_kg != 0.0
 
 
 def joint_vector(value: JointValue, name: str = "value") -> np.ndarray:
@@ -89,12 +89,16 @@ def edit_trunk(model: pin.Model, options: ModelOptions) -> None:
     inertia about the frame origin), which are linear in the edits."""
     placement, own = trunk_link_inertia(model)
     s = options.trunk_mass_scale
-    edited = pin.Inertia(own.mass * s, own.lever + np.asarray(options.trunk_com_shift_m, float), own.inertia * s)
+    edited = pin.Inertia(
+        own.mass * s, own.lever + np.asarray(options.trunk_com_shift_m, float), own.inertia * s
+    )
     payload = pin.Inertia(options.payload_mass_kg, np.asarray(options.payload_pos_m, float), np.zeros((3, 3)))
-    params = (model.inertias[ROOT_JOINT].toDynamicParameters()
-              - placement.act(own).toDynamicParameters()
-              + placement.act(edited).toDynamicParameters()
-              + placement.act(payload).toDynamicParameters())  # fmt: skip
+    params = (
+        model.inertias[ROOT_JOINT].toDynamicParameters()
+        - placement.act(own).toDynamicParameters()
+        + placement.act(edited).toDynamicParameters()
+        + placement.act(payload).toDynamicParameters()
+    )
     model.inertias[ROOT_JOINT] = pin.Inertia.FromDynamicParameters(params)
 
 
@@ -105,7 +109,11 @@ def apply(model: pin.Model, options: ModelOptions) -> None:
     ``nle`` ignores them: :class:`taslel_bench.model.A1Model` adds them to h)."""
     if options.edits_trunk:
         edit_trunk(model, options)
-    for attr, field in (("armature", "armature"), ("damping", "joint_damping"), ("friction", "joint_frictionloss")):
+    for attr, field in (
+        ("armature", "armature"),
+        ("damping", "joint_damping"),
+        ("friction", "joint_frictionloss"),
+    ):
         values = np.array(getattr(model, attr))  # (nv,) a copy: assign the whole vector back
         values[6:] = options.per_joint(field)
         setattr(model, attr, values)

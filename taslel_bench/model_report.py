@@ -30,7 +30,11 @@ def _fmt(values) -> str:
 
 def _per_foot(values: list[str]) -> str:
     """One text when the four feet agree, else ``FL: ..; FR: ..`` (legs in core order)."""
-    return values[0] if len(set(values)) == 1 else "; ".join(f"{leg}: {v}" for leg, v in zip(robot.LEGS, values))
+    return (
+        values[0]
+        if len(set(values)) == 1
+        else "; ".join(f"{leg}: {v}" for leg, v in zip(robot.LEGS, values, strict=True))
+    )
 
 
 def _stand_q(stand_joints_rad: np.ndarray) -> np.ndarray:
@@ -40,7 +44,9 @@ def _stand_q(stand_joints_rad: np.ndarray) -> np.ndarray:
     return q
 
 
-def plant_vs_model(mj_model: mujoco.MjModel, model: A1Model, stand_joints_rad: np.ndarray) -> dict[str, object]:
+def plant_vs_model(
+    mj_model: mujoco.MjModel, model: A1Model, stand_joints_rad: np.ndarray
+) -> dict[str, object]:
     """The report (module doc) for a compiled plant and the controller's model; ``stand_joints_rad`` (12,
     core order) is the stand pose's joint angles [rad]."""
     out: dict[str, object] = {}
@@ -70,12 +76,14 @@ def _masses_com_feet(m: mujoco.MjModel, pm: A1Model, qj: np.ndarray) -> dict[str
     plant_total = float(m.body_mass[m.body_rootid == root].sum())
     plant_trunk, model_trunk = float(m.body_mass[trunk]), float(pm.model.inertias[1].mass)
     out: dict[str, object] = {
-        "plant_total_mass_kg": plant_total, "model_total_mass_kg": pm.total_mass_kg,
+        "plant_total_mass_kg": plant_total,
+        "model_total_mass_kg": pm.total_mass_kg,
         "model_minus_plant_total_mass_kg": pm.total_mass_kg - plant_total,
-        "plant_trunk_mass_kg": plant_trunk, "model_trunk_mass_kg": model_trunk,
+        "plant_trunk_mass_kg": plant_trunk,
+        "model_trunk_mass_kg": model_trunk,
         "model_minus_plant_trunk_mass_kg": model_trunk - plant_trunk,
-    }  # fmt: skip
-    for axis, i in zip("xyz", range(3)):
+    }
+    for i, axis in enumerate("xyz"):
         out[f"plant_com_stand_{axis}_m"] = float(plant_com[i])
         out[f"model_com_stand_{axis}_m"] = float(model_com[i])
     out["model_minus_plant_com_stand_m"] = float(np.linalg.norm(model_com - plant_com))
@@ -88,10 +96,16 @@ def _joints(m: mujoco.MjModel, pm: A1Model) -> dict[str, object]:
     both; the plant's higher-order damping coefficients and its torque limit per joint [N·m]."""
     br = StateBridge(m)
     dofs = br.joint_dadr
-    plant = {"damping_nms_per_rad": m.dof_damping[dofs], "armature_kgm2": m.dof_armature[dofs],
-             "frictionloss_nm": m.dof_frictionloss[dofs]}  # fmt: skip
-    model = {"damping_nms_per_rad": pm.model.damping[6:], "armature_kgm2": pm.model.armature[6:],
-             "frictionloss_nm": pm.model.friction[6:]}  # fmt: skip
+    plant = {
+        "damping_nms_per_rad": m.dof_damping[dofs],
+        "armature_kgm2": m.dof_armature[dofs],
+        "frictionloss_nm": m.dof_frictionloss[dofs],
+    }
+    model = {
+        "damping_nms_per_rad": pm.model.damping[6:],
+        "armature_kgm2": pm.model.armature[6:],
+        "frictionloss_nm": pm.model.friction[6:],
+    }
     out: dict[str, object] = {}
     for side, values in (("plant", plant), ("model", model)):
         for key, v in values.items():
@@ -100,7 +114,9 @@ def _joints(m: mujoco.MjModel, pm: A1Model) -> dict[str, object]:
     out["plant_joint_damping_higher_order_max"] = float(np.abs(m.dof_dampingpoly[dofs]).max())
     out["model_frictionloss_smoothing_radps"] = float(pm.frictionloss_smoothing_radps)
     out["model_urdf"] = pm.urdf_path
-    limits = np.array([_torque_limit(m, int(a), int(j)) for a, j in zip(br.actuator_ids, m.dof_jntid[dofs])])
+    limits = np.array(
+        [_torque_limit(m, int(a), int(j)) for a, j in zip(br.actuator_ids, m.dof_jntid[dofs], strict=True)]
+    )
     out["plant_torque_limit_nm_min"] = float(limits.min())
     out["plant_torque_limit_nm_max"] = float(limits.max())
     return out
@@ -111,7 +127,9 @@ def _torque_limit(m: mujoco.MjModel, act: int, joint: int) -> float:
     forcerange and the joint's actuator-force range (inf when nothing limits it)."""
     limit = np.inf
     if m.actuator_ctrllimited[act]:
-        limit = np.abs(m.actuator_ctrlrange[act]).max() * abs(m.actuator_gainprm[act, 0] * m.actuator_gear[act, 0])
+        limit = np.abs(m.actuator_ctrlrange[act]).max() * abs(
+            m.actuator_gainprm[act, 0] * m.actuator_gear[act, 0]
+        )
     if m.actuator_forcelimited[act]:
         limit = min(limit, np.abs(m.actuator_forcerange[act]).max())
     if m.jnt_actfrclimited[joint]:
@@ -120,9 +138,15 @@ def _torque_limit(m: mujoco.MjModel, act: int, joint: int) -> float:
 
 
 def _geom_params(m: mujoco.MjModel, g: int) -> dict[str, str]:
-    return {"solref": _fmt(m.geom_solref[g]), "solimp": _fmt(m.geom_solimp[g]), "margin_m": f"{m.geom_margin[g]:g}",
-            "gap_m": f"{m.geom_gap[g]:g}", "friction": _fmt(m.geom_friction[g]), "priority": str(m.geom_priority[g]),
-            "condim": str(m.geom_condim[g])}  # fmt: skip
+    return {
+        "solref": _fmt(m.geom_solref[g]),
+        "solimp": _fmt(m.geom_solimp[g]),
+        "margin_m": f"{m.geom_margin[g]:g}",
+        "gap_m": f"{m.geom_gap[g]:g}",
+        "friction": _fmt(m.geom_friction[g]),
+        "priority": str(m.geom_priority[g]),
+        "condim": str(m.geom_condim[g]),
+    }
 
 
 def _options_and_geoms(m: mujoco.MjModel) -> dict[str, object]:
@@ -161,24 +185,42 @@ def _contacts_at_stand(m: mujoco.MjModel, qj: np.ndarray) -> dict[str, object]:
         c = d.contact[i]
         leg = next((robot.LEGS[k] for k, g in enumerate(feet) if g in (c.geom1, c.geom2)), None)
         if leg is not None:
-            rows.setdefault(leg, {"solref": _fmt(c.solref), "solimp": _fmt(c.solimp), "friction": _fmt(c.friction),
-                                  "includemargin_m": f"{c.includemargin:g}", "condim": str(c.dim)})  # fmt: skip
+            rows.setdefault(
+                leg,
+                {
+                    "solref": _fmt(c.solref),
+                    "solimp": _fmt(c.solimp),
+                    "friction": _fmt(c.friction),
+                    "includemargin_m": f"{c.includemargin:g}",
+                    "condim": str(c.dim),
+                },
+            )
     out: dict[str, object] = {"plant_contact_feet_at_stand": len(rows)}
     if rows:
         legs = [leg for leg in robot.LEGS if leg in rows]
         for key in rows[legs[0]]:
             values = [rows[leg][key] for leg in legs]
-            out[f"plant_contact_{key}"] = values[0] if len(set(values)) == 1 else \
-                "; ".join(f"{leg}: {v}" for leg, v in zip(legs, values))  # fmt: skip
+            out[f"plant_contact_{key}"] = (
+                values[0]
+                if len(set(values)) == 1
+                else "; ".join(f"{leg}: {v}" for leg, v in zip(legs, values, strict=True))
+            )
     return out
 
 
 def _adapter(m: mujoco.MjModel) -> dict[str, object]:
     """What the plant adapter and the overrides changed (``""`` when nothing)."""
     rec = read_record(m)
-    renamed = {kind: (f"{len(v)} ({next(iter(v.values()))!r} ...)" if isinstance(v, dict) and len(v) > 1
-                      else repr(next(iter(v.values()))) if isinstance(v, dict) else repr(v))
-               for kind, v in rec.get("renamed", {}).items()}  # fmt: skip
+    renamed = {
+        kind: (
+            f"{len(v)} ({next(iter(v.values()))!r} ...)"
+            if isinstance(v, dict) and len(v) > 1
+            else repr(next(iter(v.values())))
+            if isinstance(v, dict)
+            else repr(v)
+        )
+        for kind, v in rec.get("renamed", {}).items()
+    }
     by_what: dict[str, list[str]] = {}
     for joint, what in rec.get("actuators_converted", []):
         by_what.setdefault(what, []).append(joint)
@@ -186,7 +228,8 @@ def _adapter(m: mujoco.MjModel) -> dict[str, object]:
         "plant_renamed": "; ".join(f"{kind}: {v}" for kind, v in renamed.items()),  # full map: config.yaml
         "plant_actuators_converted": "; ".join(
             f"{what} ({len(joints)} joints)" if len(joints) > 2 else f"{what} ({', '.join(joints)})"
-            for what, joints in by_what.items()),
+            for what, joints in by_what.items()
+        ),
         "plant_actuators_removed": ", ".join(rec.get("actuators_removed", [])),
         "plant_floor_source": rec.get("floor", "the harness's (URDF plant)"),
         "plant_overrides": "; ".join(f"{k}: {b} -> {a}" for k, (b, a) in rec.get("overrides", {}).items()),

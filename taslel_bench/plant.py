@@ -13,7 +13,7 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -34,8 +34,8 @@ class PlantOptions:
     timestep_s: float = 0.001  # [s] physics step
     floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
     torque_limit_nm: float = robot.TORQUE_LIMIT_NM  # [N·m] motor ctrlrange
-    names: PlantNames = PlantNames()  # robot.plant_mjcf: names of its elements where they differ from the core's
-    overrides: PlantOverrides = PlantOverrides()  # contact and integrator settings set by the config
+    names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
+    overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
 
 
 def _strip_visuals(spec: mujoco.MjSpec) -> None:
@@ -169,8 +169,8 @@ def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) ->
     blind = [f for f in robot.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
                                                  or (floor.contype & spec.geom(f).conaffinity))]
     if blind:
-        raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide with the "
-                          f"floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
+        raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
+                          f"with the floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
                           f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
 
 

@@ -24,9 +24,12 @@ from taslel_bench.fields import ConfigError
 
 RECORD_TEXT = "taslel_plant_adapter"  # custom text element holding the adapter's record (JSON)
 FLOOR = "floor"
-INTEGRATORS = {"Euler": mujoco.mjtIntegrator.mjINT_EULER, "RK4": mujoco.mjtIntegrator.mjINT_RK4,
-               "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-               "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST}  # fmt: skip
+INTEGRATORS = {
+    "Euler": mujoco.mjtIntegrator.mjINT_EULER,
+    "RK4": mujoco.mjtIntegrator.mjINT_RK4,
+    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+}
 CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
 NameMap = Mapping[str, str] | str | None  # {core name: file name}, a "{leg}_{joint}" pattern, or None (same)
 _KINDS = ("joints", "actuators", "feet")
@@ -85,7 +88,9 @@ def _fmt(values) -> str:
 # ------------------------------------------------------------------------------------------- renaming
 
 
-def _rename(spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, object], new_names: dict[str, str]) -> None:
+def _rename(
+    spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, object], new_names: dict[str, str]
+) -> None:
     """Give each element (``elements[old] -> element``) its name ``new_names[old]`` -- through unique
     temporary names, so swaps work -- and rewrite the string references of that type to it."""
     for i, element in enumerate(elements.values()):
@@ -94,8 +99,10 @@ def _rename(spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, obj
         try:
             element.name = new_names[old]
         except ValueError as exc:
-            raise ValueError(f"renaming {objtype.name} {old!r} to {new_names[old]!r}: another element of the file "
-                             f"already has that name") from exc  # fmt: skip
+            raise ValueError(
+                f"renaming {objtype.name} {old!r} to {new_names[old]!r}: another element of the file "
+                f"already has that name"
+            ) from exc
     mapping = {old: new_names[old] for old in elements}
 
     def swap(name: str) -> str:
@@ -133,7 +140,9 @@ def _available(names) -> str:
 # -------------------------------------------------------------------------------------------- adapting
 
 
-def adapt(spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where: str) -> tuple[mujoco.MjsGeom | None, dict]:
+def adapt(
+    spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where: str
+) -> tuple[mujoco.MjsGeom | None, dict]:
     """Rename the file's joints, actuators, foot geoms and trunk to the core's names, make the 12 actuators
     torque motors, find the floor. Returns (the floor geom or None, record). Raises :class:`ConfigError`
     (prefixed ``where``) naming *joints*, *actuators*, *feet*, *trunk* or *floor* for each thing missing."""
@@ -143,20 +152,31 @@ def adapt(spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where:
     bodies = {b.name: b for b in spec.bodies if b.name}
 
     file_joint = {core: names.file_name("joints", core) for core in robot.JOINT_NAMES}
-    missing = [f"{core} (as {f!r})" if f != core else core for core, f in file_joint.items() if f not in joints]
+    missing = [
+        f"{core} (as {f!r})" if f != core else core for core, f in file_joint.items() if f not in joints
+    ]
     if missing:
-        problems.append(f"joints: no joint {', '.join(missing)} (robot.plant_names.joints); "
-                        f"joints in the file: {_available(joints)}")  # fmt: skip
+        problems.append(
+            f"joints: no joint {', '.join(missing)} (robot.plant_names.joints); "
+            f"joints in the file: {_available(joints)}"
+        )
     feet = {core: names.file_name("feet", core) for core in robot.FOOT_FRAMES}
-    bad_feet = [f"{core} (as {f!r})" if f != core else core for core, f in feet.items()
-                if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE]
+    bad_feet = [
+        f"{core} (as {f!r})" if f != core else core
+        for core, f in feet.items()
+        if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE
+    ]
     if bad_feet:
-        problems.append(f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
-                        f"sphere geoms in the file: "
-                        f"{_available(n for n, g in geoms.items() if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)}")
+        problems.append(
+            f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
+            f"sphere geoms in the file: "
+            f"{_available(n for n, g in geoms.items() if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)}"
+        )
     trunk = names.trunk or robot.TRUNK_BODY
     if trunk not in bodies:
-        problems.append(f"trunk: no body {trunk!r} (robot.plant_names.trunk); bodies in the file: {_available(bodies)}")
+        problems.append(
+            f"trunk: no body {trunk!r} (robot.plant_names.trunk); bodies in the file: {_available(bodies)}"
+        )
     if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
         problems.append("trunk: no free joint (the floating base)")
     chosen, act_problems = _find_actuators(spec, names, file_joint)
@@ -167,14 +187,19 @@ def adapt(spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where:
     if problems:
         raise ConfigError(f"{where} does not fit the A1 controller:\n  " + "\n  ".join(problems))
 
-    record: dict[str, object] = _torque_motors(spec, chosen, torque_limit_nm)  # also deletes the other actuators
+    # torque motors first (it deletes the other actuators on the leg joints), then the core's names
+    record: dict[str, object] = _torque_motors(spec, chosen, torque_limit_nm)
     renamed: dict[str, object] = {}
     for kind, objtype, table, wanted in (
         ("joints", mujoco.mjtObj.mjOBJ_JOINT, joints, file_joint),
         ("feet", mujoco.mjtObj.mjOBJ_GEOM, geoms, feet),
         ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {robot.TRUNK_BODY: trunk}),
-        ("actuators", mujoco.mjtObj.mjOBJ_ACTUATOR, {a.name: a for a in chosen.values() if a.name},
-         {core: a.name for core, a in chosen.items() if a.name}),
+        (
+            "actuators",
+            mujoco.mjtObj.mjOBJ_ACTUATOR,
+            {a.name: a for a in chosen.values() if a.name},
+            {core: a.name for core, a in chosen.items() if a.name},
+        ),
     ):
         to_core = {f: core for core, f in wanted.items() if f != core}
         if to_core:
@@ -193,8 +218,9 @@ def adapt(spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where:
     return floor, record
 
 
-def _find_actuators(spec: mujoco.MjSpec, names: PlantNames,
-                    file_joint: dict[str, str]) -> tuple[dict[str, mujoco.MjsActuator], list[str]]:
+def _find_actuators(
+    spec: mujoco.MjSpec, names: PlantNames, file_joint: dict[str, str]
+) -> tuple[dict[str, mujoco.MjsActuator], list[str]]:
     """The actuator of each core joint (by name with ``names.actuators``, else the one driving the joint)."""
     by_name = {a.name: a for a in spec.actuators if a.name}
     joint_names = {j.name for j in spec.joints}
@@ -210,7 +236,10 @@ def _find_actuators(spec: mujoco.MjSpec, names: PlantNames,
                 missing.append(f"{core} (as {fa!r})")
                 continue
             act = by_name[fa]
-            if act.trntype not in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT) or act.target != fj:
+            if (
+                act.trntype not in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT)
+                or act.target != fj
+            ):
                 wrong.append(f"{fa!r} drives {act.target!r}, not joint {fj!r}")
                 continue
         elif fj not in joint_names:
@@ -219,30 +248,43 @@ def _find_actuators(spec: mujoco.MjSpec, names: PlantNames,
             acts = driving.get(fj, [])
             if len(acts) != 1:
                 (missing if not acts else ambiguous).append(
-                    f"{core}" + (f" (joint {fj!r})" if fj != core else "")
-                    + (f": {', '.join(repr(a.name) for a in acts)}" if acts else ""))
+                    f"{core}"
+                    + (f" (joint {fj!r})" if fj != core else "")
+                    + (f": {', '.join(repr(a.name) for a in acts)}" if acts else "")
+                )
                 continue
             act = acts[0]
         chosen[core] = act
     problems = []
     if missing:
-        problems.append(f"actuators: none for {', '.join(missing)} (robot.plant_names.actuators); "
-                        f"actuators in the file: {_available(by_name)}")  # fmt: skip
+        problems.append(
+            f"actuators: none for {', '.join(missing)} (robot.plant_names.actuators); "
+            f"actuators in the file: {_available(by_name)}"
+        )
     if ambiguous:
-        problems.append(f"actuators: several drive {'; '.join(ambiguous)}: name the one to command in "
-                        f"robot.plant_names.actuators")  # fmt: skip
+        problems.append(
+            f"actuators: several drive {'; '.join(ambiguous)}: name the one to command in "
+            f"robot.plant_names.actuators"
+        )
     if wrong:
         problems.append(f"actuators: {'; '.join(wrong)}")
     for core, act in chosen.items():
-        if act.dyntype != mujoco.mjtDyn.mjDYN_NONE or act.gaintype != mujoco.mjtGain.mjGAIN_FIXED or \
-                act.biastype not in (mujoco.mjtBias.mjBIAS_NONE, mujoco.mjtBias.mjBIAS_AFFINE):
-            problems.append(f"actuators: {act.name or core!r} is neither a torque motor nor a position/velocity "
-                            f"servo (dyntype {act.dyntype.name}, gaintype {act.gaintype.name}, "
-                            f"biastype {act.biastype.name})")  # fmt: skip
+        if (
+            act.dyntype != mujoco.mjtDyn.mjDYN_NONE
+            or act.gaintype != mujoco.mjtGain.mjGAIN_FIXED
+            or act.biastype not in (mujoco.mjtBias.mjBIAS_NONE, mujoco.mjtBias.mjBIAS_AFFINE)
+        ):
+            problems.append(
+                f"actuators: {act.name or core!r} is neither a torque motor nor a position/velocity "
+                f"servo (dyntype {act.dyntype.name}, gaintype {act.gaintype.name}, "
+                f"biastype {act.biastype.name})"
+            )
     return chosen, problems
 
 
-def _torque_motors(spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], torque_limit_nm: float) -> dict:
+def _torque_motors(
+    spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], torque_limit_nm: float
+) -> dict:
     """Make each chosen actuator a torque motor taking joint torque [N·m] as ctrl (gain 1, gear 1); delete
     other actuators on the 12 joints. A servo (affine bias: tau = kp (ctrl - q) - kv qdot) becomes a motor
     with ctrlrange +-``torque_limit_nm`` (the URDF effort limit by default); a motor with gear x gain g != 1
@@ -262,10 +304,10 @@ def _torque_motors(spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], t
             converted.append([core, f"motor gear x gain {gain:g} -> 1 (ctrlrange scaled)"])
             act.ctrlrange = np.asarray(act.ctrlrange) * gain
             act.gainprm[0], act.gear = 1.0, [1.0, 0, 0, 0, 0, 0]
-    kept = {id(a) for a in chosen.values()}
-    targets = {a.target for a in chosen.values()}
+    kept = list(chosen.values())
+    targets = {a.target for a in kept}
     for act in list(spec.actuators):
-        if id(act) not in kept and act.target in targets:
+        if act.target in targets and not any(act == k for k in kept):  # MjSpec elements compare by identity
             removed.append(act.name or f"(unnamed, on {act.target})")
             spec.delete(act)
     record: dict[str, object] = {}
@@ -277,22 +319,26 @@ def _torque_motors(spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], t
 
 
 def _find_floor(spec: mujoco.MjSpec, names: PlantNames) -> tuple[mujoco.MjsGeom | None, str]:
-    """(the file's floor geom or None, a problem or ""): ``names.floor``, else the only plane geom of the world
-    body (one named ``floor`` when there are several)."""
+    """(the file's floor geom or None, a problem or ""): ``names.floor``, else the only plane geom of the
+    world body (the one named ``floor`` when there are several)."""
     world = [g for g in spec.geoms if g.parent == spec.worldbody]
     if names.floor is not None:
         found = [g for g in world if g.name == names.floor]
         if not found:
-            return None, (f"floor: no geom {names.floor!r} on the world body (robot.plant_names.floor); "
-                          f"world geoms: {_available(g.name for g in world)}")  # fmt: skip
+            return None, (
+                f"floor: no geom {names.floor!r} on the world body (robot.plant_names.floor); "
+                f"world geoms: {_available(g.name for g in world)}"
+            )
         return found[0], ""
     planes = [g for g in world if g.type == mujoco.mjtGeom.mjGEOM_PLANE]
     if len(planes) > 1:
         named = [g for g in planes if g.name == FLOOR]
         if named:
             return named[0], ""
-        return None, (f"floor: {len(planes)} plane geoms on the world body ({_available(g.name for g in planes)}): "
-                      f"name the floor in robot.plant_names.floor")  # fmt: skip
+        return None, (
+            f"floor: {len(planes)} plane geoms on the world body ({_available(g.name for g in planes)}): "
+            f"name the floor in robot.plant_names.floor"
+        )
     return (planes[0] if planes else None), ""
 
 
@@ -326,8 +372,11 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: PlantOverrides, timestep_s: 
         spec.option.impratio = float(o.impratio)
     feet = [spec.geom(f) for f in robot.FOOT_FRAMES]
     floor = [g for g in [spec.geom(FLOOR)] if g is not None]
-    for attr, value, geoms in (("solref", o.contact_solref, feet + floor), ("solimp", o.contact_solimp, feet + floor),
-                               ("margin", o.foot_margin_m, feet)):  # fmt: skip
+    for attr, value, geoms in (
+        ("solref", o.contact_solref, feet + floor),
+        ("solimp", o.contact_solimp, feet + floor),
+        ("margin", o.foot_margin_m, feet),
+    ):
         if value is None:
             continue
         for g in geoms:

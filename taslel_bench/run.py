@@ -218,7 +218,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "overrides": ",".join(sorted(overrides or [])),
     }
     summary.update(plant_identity(cfg, built))
-    summary.update(plant_vs_model(built.mj_model, built.episode.model, built.controller.stand_configuration()))
+    summary.update(plant_vs_model(built.mj_model, built.episode.model,
+                                  built.controller.stand_configuration()))
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
     summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
     if built.backend is not None:

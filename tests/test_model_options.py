@@ -54,7 +54,7 @@ def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) 
 
 
 def test_default_model_is_bit_identical_to_the_plain_urdf_model():
-    """Default options (in code and from the default config) give exactly Pinocchio's M and nle of the URDF."""
+    """Default options (in code, from the default config) give exactly Pinocchio's M and nle of the URDF."""
     ref = pin.buildModelFromUrdf(str(robot.a1_urdf_path()), pin.JointModelFreeFlyer())
     ref_data = ref.createData()
     models = [A1Model(), A1Model(ModelOptions()), A1Model(model_options(compose_cfg()))]
@@ -77,9 +77,15 @@ MATCHED = {
     "trunk_mass_scale": {"trunk_mass_scale": 0.8},
     "trunk_com_shift_m": {"trunk_com_shift_m": (0.02, -0.01, 0.01)},
     "payload": {"payload_mass_kg": 2.0, "payload_pos_m": (0.1, 0.02, 0.05)},
-    "all at once": {"trunk_mass_scale": 1.3, "trunk_com_shift_m": (0.02, 0.0, 0.01), "payload_mass_kg": 1.0,
-                    "payload_pos_m": (-0.1, 0.0, 0.05), "joint_damping": 1.0, "armature": 0.02},
-}  # fmt: skip
+    "all at once": {
+        "trunk_mass_scale": 1.3,
+        "trunk_com_shift_m": (0.02, 0.0, 0.01),
+        "payload_mass_kg": 1.0,
+        "payload_pos_m": (-0.1, 0.0, 0.05),
+        "joint_damping": 1.0,
+        "armature": 0.02,
+    },
+}
 
 
 @pytest.mark.parametrize("options", MATCHED.values(), ids=MATCHED.keys())
@@ -136,8 +142,16 @@ def test_coulomb_frictionloss_disturbance_against_mujoco():
 
 
 def test_model_group_reaches_the_episode_and_is_validated(tmp_path, no_episode):  # noqa: F811
-    built = Built(compose_cfg(["model.joint_damping=1.5", "model.armature=[0.01,0,0,0,0,0,0,0,0,0,0,0.02]",
-                               "model.payload_mass_kg=1", "filter.enabled=false"]))  # fmt: skip
+    built = Built(
+        compose_cfg(
+            [
+                "model.joint_damping=1.5",
+                "model.armature=[0.01,0,0,0,0,0,0,0,0,0,0,0.02]",
+                "model.payload_mass_kg=1",
+                "filter.enabled=false",
+            ]
+        )
+    )
     pm = built.episode.model
     assert np.allclose(pm.joint_damping, 1.5)
     assert pm.model.armature[6] == 0.01 and pm.model.armature[17] == 0.02
@@ -152,7 +166,9 @@ def test_model_group_reaches_the_episode_and_is_validated(tmp_path, no_episode):
     ):
         assert_refused(overrides, tmp_path / field, f"{field}=", value)
     not_a1 = tmp_path / "box.urdf"
-    not_a1.write_text('<robot name="box"><link name="trunk"><inertial><mass value="1"/>'
-                      '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link></robot>')
+    not_a1.write_text(
+        '<robot name="box"><link name="trunk"><inertial><mass value="1"/>'
+        '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link></robot>'
+    )
     with pytest.raises(ConfigError, match="model.urdf=.*box.urdf.*joint order"):
         Built(compose_cfg([f"model.urdf={not_a1}", "filter.enabled=false"]))

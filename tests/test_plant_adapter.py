@@ -31,8 +31,14 @@ MENAGERIE_LIKE = [  # Menagerie-style names as robot.plant_names overrides (Hydr
 STAND = NominalController(GaitParams(), PDGains()).stand_configuration()
 
 
-def third_party_a1(path: Path, *, servos: bool = True, floor: bool = True, losses: bool = True,
-                   drop_actuator: str | None = None) -> Path:
+def third_party_a1(
+    path: Path,
+    *,
+    servos: bool = True,
+    floor: bool = True,
+    losses: bool = True,
+    drop_actuator: str | None = None,
+) -> Path:
     """An A1 MJCF as another project would ship it: the harness's plant with its sites, sensors and floor
     removed, elements renamed (joints ``FL_hip``, actuators ``FL_hip_servo``, feet ``FL``, trunk ``torso``),
     optionally position servos (kp 60, kv 2), a plane ``ground`` of its own (priority 0, friction 0.8) and
@@ -62,20 +68,37 @@ def third_party_a1(path: Path, *, servos: bool = True, floor: bool = True, losse
         spec.delete(ground)
     if drop_actuator:
         spec.delete(spec.actuator(drop_actuator))
-    spec.add_sensor(name="fl_hip_angle", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT,
-                    objname="FL_hip")  # fmt: skip
+    spec.add_sensor(
+        name="fl_hip_angle",
+        type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+        objtype=mujoco.mjtObj.mjOBJ_JOINT,
+        objname="FL_hip",
+    )
     path.write_text(spec.to_xml())
     return path
 
 
 def build(xml: Path, extra: list[str] | None = None) -> Built:
-    return Built(compose_cfg([f"robot.plant_mjcf={xml}", *MENAGERIE_LIKE, "filter.enabled=false", *(extra or [])]))
+    return Built(
+        compose_cfg([f"robot.plant_mjcf={xml}", *MENAGERIE_LIKE, "filter.enabled=false", *(extra or [])])
+    )
 
 
 def test_renamed_servo_plant_with_its_own_floor_runs(tmp_path):
     xml = third_party_a1(tmp_path / "a1_other.xml")
-    summary = run(compose_cfg([f"robot.plant_mjcf={xml}", *MENAGERIE_LIKE, "duration=0.3", "progress=false",
-                               "record.mcap=false", "scenario.friction=0.6"]), tmp_path / "run")  # fmt: skip
+    summary = run(
+        compose_cfg(
+            [
+                f"robot.plant_mjcf={xml}",
+                *MENAGERIE_LIKE,
+                "duration=0.3",
+                "progress=false",
+                "record.mcap=false",
+                "scenario.friction=0.6",
+            ]
+        ),
+        tmp_path / "run",
+    )
     assert summary["status"] == "ok" and not summary["fell"]
     built = build(xml, ["scenario.friction=0.6"])
     m = built.mj_model
@@ -87,9 +110,14 @@ def test_renamed_servo_plant_with_its_own_floor_runs(tmp_path):
     assert np.all(m.actuator_biastype == mujoco.mjtBias.mjBIAS_NONE)
     assert np.all(m.actuator_gainprm[:, 0] == 1.0) and np.allclose(m.actuator_ctrlrange, [[-33.5, 33.5]] * 12)
     record = read_record(m)
-    assert len(record["actuators_converted"]) == 12 and record["actuators_converted"][0] == ["FL_hip_joint", "servo kp=60 kv=2 -> motor +-33.5 N·m"]
+    assert len(record["actuators_converted"]) == 12 and record["actuators_converted"][0] == [
+        "FL_hip_joint",
+        "servo kp=60 kv=2 -> motor +-33.5 N·m",
+    ]
     assert record["renamed"]["joints"]["FL_hip_joint"] == "FL_hip" and record["renamed"]["floor"] == "ground"
-    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "fl_hip_angle") >= 0  # reference followed the rename
+    assert (
+        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "fl_hip_angle") >= 0
+    )  # reference followed the rename
 
 
 def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
@@ -109,7 +137,9 @@ def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
             br.qpos_mj(q, d.qpos)
             br.qvel_mj(q, v, d.qvel)
             mujoco.mj_forward(m, d)
-            feet.append(d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in robot.FOOT_FRAMES]])
+            feet.append(
+                d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in robot.FOOT_FRAMES]]
+            )
             states.append(np.concatenate([br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)]))
         np.testing.assert_allclose(feet[0], feet[1], atol=1e-12)
         np.testing.assert_allclose(states[0], np.concatenate([q, v]), atol=1e-12)
@@ -138,7 +168,9 @@ def test_missing_names_are_reported_by_kind(tmp_path):
 
 
 def test_names_without_a_plant_file_and_bad_patterns_are_refused():
-    with pytest.raises(ConfigError, match=r"robot.plant_names.feet='\{leg\}': is only used with robot.plant_mjcf"):
+    with pytest.raises(
+        ConfigError, match=r"robot.plant_names.feet='\{leg\}': is only used with robot.plant_mjcf"
+    ):
         Built(compose_cfg(["robot.plant_names.feet='{leg}'"]))
     with pytest.raises(ConfigError, match=r"robot.plant_names.joints='\{leg\}': a pattern must give 12"):
         Built(compose_cfg(["robot.plant_mjcf=x.xml", "robot.plant_names.joints='{leg}'"]))
@@ -156,25 +188,42 @@ def test_no_floor_in_the_file_gets_the_harness_floor(tmp_path):
 
 
 def test_overrides_are_applied_and_reported(tmp_path):
-    overrides = ["robot.plant_overrides.integrator=Euler", "robot.plant_overrides.cone=pyramidal",
-                 "robot.plant_overrides.noslip_iterations=3", "robot.plant_overrides.contact_solref=[0.01,1.2]",
-                 "robot.plant_overrides.contact_solimp=[0.8,0.9,0.002,0.5,2]",
-                 "robot.plant_overrides.foot_margin_m=0.001"]  # fmt: skip
+    overrides = [
+        "robot.plant_overrides.integrator=Euler",
+        "robot.plant_overrides.cone=pyramidal",
+        "robot.plant_overrides.noslip_iterations=3",
+        "robot.plant_overrides.contact_solref=[0.01,1.2]",
+        "robot.plant_overrides.contact_solimp=[0.8,0.9,0.002,0.5,2]",
+        "robot.plant_overrides.foot_margin_m=0.001",
+    ]
     built = build(third_party_a1(tmp_path / "a1.xml"), overrides)
     m = built.mj_model
-    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    assert (
+        m.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    )
     assert m.opt.noslip_iterations == 3
     report = plant_vs_model(m, built.episode.model, STAND)
     assert report["plant_integrator"] == "euler" and report["plant_cone"] == "pyramidal"
-    assert report["plant_contact_solref"] == "0.01 1.2" and report["plant_contact_solimp"] == "0.8 0.9 0.002 0.5 2"
+    assert (
+        report["plant_contact_solref"] == "0.01 1.2"
+        and report["plant_contact_solimp"] == "0.8 0.9 0.002 0.5 2"
+    )
     assert report["plant_foot_margin_m"] == "0.001" and report["plant_contact_feet_at_stand"] == 4
-    for text in ("integrator: mjINT_IMPLICITFAST -> mjINT_EULER", "cone: mjCONE_ELLIPTIC -> mjCONE_PYRAMIDAL",
-                 "noslip_iterations: 0 -> 3", "FL_foot.solref: 0.02 1 -> 0.01 1.2", "floor.solref: 0.02 1 -> 0.01 1.2",
-                 "FL_foot.margin: 0 -> 0.001"):  # fmt: skip
+    for text in (
+        "integrator: mjINT_IMPLICITFAST -> mjINT_EULER",
+        "cone: mjCONE_ELLIPTIC -> mjCONE_PYRAMIDAL",
+        "noslip_iterations: 0 -> 3",
+        "FL_foot.solref: 0.02 1 -> 0.01 1.2",
+        "floor.solref: 0.02 1 -> 0.01 1.2",
+        "FL_foot.margin: 0 -> 0.001",
+    ):
         assert text in report["plant_overrides"], report["plant_overrides"]
     # the URDF plant takes the same overrides; with the defaults nothing changes and nothing is recorded
     urdf_plant = plant.build_plant(plant_options(compose_cfg(overrides)))
-    assert urdf_plant.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and "cone" in read_record(urdf_plant)["overrides"]
+    assert (
+        urdf_plant.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
+        and "cone" in read_record(urdf_plant)["overrides"]
+    )
     default = plant.build_plant(plant_options(compose_cfg()))
     assert default.ntext == 0 and default.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
 
@@ -187,7 +236,11 @@ def test_report_default_plant_agrees_with_the_model():
     for side in ("plant", "model"):
         for key in ("damping_nms_per_rad", "armature_kgm2", "frictionloss_nm"):
             assert r[f"{side}_joint_{key}_max"] == 0.0
-    assert (r["plant_integrator"], r["plant_timestep_s"], r["plant_cone"]) == ("implicitfast", 0.001, "elliptic")
+    assert (r["plant_integrator"], r["plant_timestep_s"], r["plant_cone"]) == (
+        "implicitfast",
+        0.001,
+        "elliptic",
+    )
     assert r["plant_torque_limit_nm_min"] == r["plant_torque_limit_nm_max"] == 33.5
     assert r["plant_foot_priority"] == "0" and r["plant_floor_priority"] == "1"
     assert r["plant_contact_solref"] == "0.02 1" and r["plant_contact_feet_at_stand"] == 4
@@ -196,22 +249,39 @@ def test_report_default_plant_agrees_with_the_model():
 
 
 def test_report_shows_a_perturbed_plant_and_a_matching_model():
-    kw = {"joint_damping": 1.5, "armature": 0.01, "joint_frictionloss": 0.2, "trunk_mass_scale": 0.8,
-          "payload_mass_kg": 1.0, "payload_pos_m": (0.1, 0.0, 0.0)}  # fmt: skip
+    kw = {
+        "joint_damping": 1.5,
+        "armature": 0.01,
+        "joint_frictionloss": 0.2,
+        "trunk_mass_scale": 0.8,
+        "payload_mass_kg": 1.0,
+        "payload_pos_m": (0.1, 0.0, 0.0),
+    }
     spec = plant.a1_spec()
     PerturbedPlant(**kw).build(spec, np.random.default_rng(0))
     m = plant.compile_plant(spec)
     nominal = plant_vs_model(m, A1Model(), STAND)
-    assert nominal["plant_joint_damping_nms_per_rad_min"] == 1.5 and nominal["model_joint_damping_nms_per_rad_max"] == 0
-    assert nominal["plant_joint_armature_kgm2_max"] == 0.01 and nominal["plant_joint_frictionloss_nm_max"] == 0.2
+    assert (
+        nominal["plant_joint_damping_nms_per_rad_min"] == 1.5
+        and nominal["model_joint_damping_nms_per_rad_max"] == 0
+    )
+    assert (
+        nominal["plant_joint_armature_kgm2_max"] == 0.01 and nominal["plant_joint_frictionloss_nm_max"] == 0.2
+    )
     assert nominal["model_minus_plant_total_mass_kg"] == pytest.approx(6.0 * 0.2 - 1.0, abs=1e-12)
     assert nominal["model_minus_plant_com_stand_m"] > 1e-3
     from taslel_bench.model_options import ModelOptions
 
     matched = plant_vs_model(m, A1Model(ModelOptions(**kw)), STAND)
-    assert matched["model_joint_damping_nms_per_rad_min"] == 1.5 and matched["model_joint_armature_kgm2_max"] == 0.01
+    assert (
+        matched["model_joint_damping_nms_per_rad_min"] == 1.5
+        and matched["model_joint_armature_kgm2_max"] == 0.01
+    )
     assert matched["model_joint_frictionloss_nm_max"] == 0.2
-    assert abs(matched["model_minus_plant_total_mass_kg"]) < 1e-12 and matched["model_minus_plant_com_stand_m"] < 1e-12
+    assert (
+        abs(matched["model_minus_plant_total_mass_kg"]) < 1e-12
+        and matched["model_minus_plant_com_stand_m"] < 1e-12
+    )
 
 
 def test_a_second_actuator_on_a_joint_must_be_chosen_and_is_removed(tmp_path):
@@ -224,8 +294,11 @@ def test_a_second_actuator_on_a_joint_must_be_chosen_and_is_removed(tmp_path):
     damper = spec.add_actuator(name="FL_hip_damper", target="FL_hip", trntype=mujoco.mjtTrn.mjTRN_JOINT)
     damper.set_to_velocity(kv=1.0)
     xml.write_text(spec.to_xml())
-    with pytest.raises(ConfigError, match=r"actuators: several drive FL_hip_joint \(joint 'FL_hip'\): "
-                                          r"'FL_hip_servo', 'FL_hip_damper': name the one"):
+    with pytest.raises(
+        ConfigError,
+        match=r"actuators: several drive FL_hip_joint \(joint 'FL_hip'\): "
+        r"'FL_hip_servo', 'FL_hip_damper': name the one",
+    ):
         build(xml, ["robot.plant_names.actuators=null"])
     m = build(xml).mj_model
     assert m.nu == 12 and mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, "FL_hip_damper") < 0
