@@ -17,6 +17,7 @@ Three layers, all run by :class:`taslel_bench.run.Built` before the episode:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Iterator
@@ -269,6 +270,8 @@ def _robot(cfg: DictConfig, stand_height_m: float) -> None:
     mjcf = _get(cfg, f"{r}.plant_mjcf")
     if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
         raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
+    _known_keys(f"{r}.plant_names", _get(cfg, f"{r}.plant_names"), PlantNames)
+    _known_keys(f"{r}.plant_overrides", _get(cfg, f"{r}.plant_overrides"), PlantOverrides)
     _plant_names(cfg, has_file=mjcf is not None)
     _plant_overrides(cfg)
 
@@ -339,9 +342,20 @@ def _plant_overrides(cfg: DictConfig) -> None:
         number(f"{p}.foot_margin_m", v, 0.0, MAX_FOOT_MARGIN_M, unit="m")
 
 
+def _known_keys(path: str, group: Any, cls: type) -> None:
+    """Refuse keys of ``group`` (a config node or None) that ``cls`` (a dataclass) has no field for."""
+    if isinstance(group, DictConfig):
+        valid = [f.name for f in dataclasses.fields(cls)]
+        for key in group:
+            if key not in valid:
+                raise fail(f"{path}.{key}", _raw(group, str(key)),
+                           f"unknown field; valid: {', '.join(valid)}")
+
+
 def _model(cfg: DictConfig) -> None:
     """The controller's model (``model`` group; absent = the URDF as is)."""
     m, n = "model", robot.N_JOINTS
+    _known_keys(m, _get(cfg, m), ModelOptions)
     urdf = _get(cfg, f"{m}.urdf")
     if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
         raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "

@@ -163,6 +163,8 @@ def test_model_group_reaches_the_episode_and_is_validated(tmp_path, no_episode):
         (["model.payload_pos_m=[0,0,9]"], "model.payload_pos_m[2]", "9"),
         (["model.frictionloss_smoothing_radps=0"], "model.frictionloss_smoothing_radps", "0"),
         ([f"model.urdf={tmp_path / 'none.urdf'}"], "model.urdf", "none.urdf"),
+        (["+model.joint_stiffness=1"], "model.joint_stiffness", "1"),
+        (["+robot.plant_overrides.timestep=0.002"], "robot.plant_overrides.timestep", "0.002"),
     ):
         assert_refused(overrides, tmp_path / field, f"{field}=", value)
     not_a1 = tmp_path / "box.urdf"
