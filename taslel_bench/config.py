@@ -5,8 +5,9 @@ unknown keys are refused by Hydra itself, with the list of valid options.)
 Three layers, all run by :class:`taslel_bench.run.Built` before the episode:
 
 1. :func:`validate` -- a generic pass (no NaN or infinity anywhere in the config) and one rule per field of
-   the core groups (top level, ``record``, ``controller``, ``filter``, ``robot``); the ranges are the
-   constants below.
+   the core groups (top level, ``record``, ``controller``, ``filter``, ``robot``, ``model``); the ranges are
+   the constants below. :func:`model_options` and :func:`plant_options` turn the validated ``model`` and
+   ``robot`` groups into the builders' options.
 2. :func:`build_axis` -- the sweep axes (``scenario``, ``solver``, ``estimator``) check their own
    constructor arguments (with :mod:`taslel_bench.fields`, naming ``scenario.<key>`` ...); an error raised
    inside Hydra's ``instantiate`` is turned back into a :class:`ConfigError` with that message.
@@ -16,9 +17,11 @@ Three layers, all run by :class:`taslel_bench.run.Built` before the episode:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,8 +30,13 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
-from taslel_bench.fields import ConfigError, choice, fail, flag, integer, number
+from taslel_bench import robot
+from taslel_bench.fields import ConfigError, choice, fail, flag, integer, number, number_or_list, numbers
 from taslel_bench.interfaces import MAX_FRICTION, QPBackend, QPProblem
+from taslel_bench.model import A1Model
+from taslel_bench.model_options import ModelOptions
+from taslel_bench.plant import PlantOptions
+from taslel_bench.plant_adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 
 AXES = ("scenario", "solver", "estimator")
@@ -48,6 +56,21 @@ MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot c
 MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
 MAX_BASE_VEL_NOISE_MPS = 2.0  # [m/s]
+# the controller's model (same ranges as the plant perturbations of scenarios/perturbed.py)
+MAX_JOINT_DAMPING = 10.0  # [N·m·s/rad]
+MAX_ARMATURE_KGM2 = 1.0  # [kg·m²]
+MAX_JOINT_FRICTIONLOSS_NM = 10.0  # [N·m] (the motors give 33.5)
+MAX_FRICTION_SMOOTHING_RADPS = 10.0  # [rad/s]
+MAX_MASS_SCALE = 10.0  # [-]
+MAX_COM_SHIFT_M = 0.2  # [m] per axis
+MAX_PAYLOAD_KG = 50.0  # [kg]
+MAX_PAYLOAD_OFFSET_M = 0.5  # [m] per axis
+# plant overrides
+MAX_NOSLIP_ITERATIONS = 1000
+MAX_IMPRATIO = 100.0  # [-]
+MAX_SOLREF_TIMECONST_S = 1.0  # [s]
+MAX_SOLREF_DAMPRATIO = 10.0  # [-]
+MAX_FOOT_MARGIN_M = 0.05  # [m]
 BUILD_ERRORS = (ValueError, TypeError, OSError)  # what an axis class raises for a bad argument or file
 
 
@@ -105,6 +128,7 @@ def _validate(cfg: DictConfig) -> None:
     stand_height_m = _controller(cfg, control_rate_hz)
     _filter(cfg, control_rate_hz)
     _robot(cfg, stand_height_m)
+    _model(cfg)
     for group in AXES:
         if not isinstance(_get(cfg, group), DictConfig) or "_target_" not in cfg[group]:
             raise fail(group, _get(cfg, group), "has no _target_ to build it from")
@@ -246,6 +270,154 @@ def _robot(cfg: DictConfig, stand_height_m: float) -> None:
     mjcf = _get(cfg, f"{r}.plant_mjcf")
     if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
         raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
+    _known_keys(f"{r}.plant_names", _get(cfg, f"{r}.plant_names"), PlantNames)
+    _known_keys(f"{r}.plant_overrides", _get(cfg, f"{r}.plant_overrides"), PlantOverrides)
+    _plant_names(cfg, has_file=mjcf is not None)
+    _plant_overrides(cfg)
+
+
+def _optional_name(path: str, value: Any) -> None:
+    if value is not None and not (isinstance(value, str) and value.strip()):
+        raise fail(path, value, "must be null or a name")
+
+
+def _plant_names(cfg: DictConfig, has_file: bool) -> None:
+    """``robot.plant_names``: per kind null, a pattern with {leg} (and {joint}) or {core name: file name}."""
+    p = "robot.plant_names"
+    kinds = (("joints", robot.JOINT_NAMES), ("actuators", robot.JOINT_NAMES), ("feet", robot.FOOT_FRAMES))
+    for kind, cores in kinds:
+        path, value = f"{p}.{kind}", _get(cfg, f"{p}.{kind}")
+        if value is not None and not has_file:
+            raise fail(path, value, "is only used with robot.plant_mjcf (set it, or leave this null)")
+        if value is None:
+            continue
+        placeholders = "{leg}" + (" and {joint}" if kind != "feet" else "")
+        if isinstance(value, str):
+            try:
+                names = {value.format(leg=c.split("_")[0], joint=c.split("_")[1]) for c in cores}
+            except (KeyError, IndexError, ValueError) as exc:
+                raise fail(path, value, f"a pattern may use only {placeholders} ({exc!r})") from None
+            if len(names) != len(cores):
+                raise fail(path, value, f"a pattern must give {len(cores)} different names: use "
+                                        f"{placeholders}")
+        elif isinstance(value, DictConfig):
+            for core, name in value.items():
+                choice(f"{path} key", core, cores)
+                _optional_name(f"{path}.{core}", name)
+        else:
+            raise fail(path, value, f"must be null, a pattern with {placeholders}, or "
+                                    f"{{core name: name in the file}}")
+    for key in ("trunk", "floor"):
+        value = _get(cfg, f"{p}.{key}")
+        _optional_name(f"{p}.{key}", value)
+        if value is not None and not has_file:
+            raise fail(f"{p}.{key}", value, "is only used with robot.plant_mjcf (set it, or leave this null)")
+
+
+def _plant_overrides(cfg: DictConfig) -> None:
+    """``robot.plant_overrides``: null keeps the plant file's (or the URDF plant's) value."""
+    p = "robot.plant_overrides"
+    if (v := _get(cfg, f"{p}.integrator")) is not None:
+        choice(f"{p}.integrator", v, INTEGRATORS)
+    if (v := _get(cfg, f"{p}.cone")) is not None:
+        choice(f"{p}.cone", v, CONES)
+    if (v := _get(cfg, f"{p}.noslip_iterations")) is not None:
+        integer(f"{p}.noslip_iterations", v, 0, MAX_NOSLIP_ITERATIONS)
+    if (v := _get(cfg, f"{p}.impratio")) is not None:
+        number(f"{p}.impratio", v, 0.0, MAX_IMPRATIO, lo_open=True)
+    if (v := _get(cfg, f"{p}.contact_solref")) is not None:
+        numbers(f"{p}.contact_solref", v, length=2, why="[timeconst s, dampratio]")
+        number(f"{p}.contact_solref[0]", v[0], 0.0, MAX_SOLREF_TIMECONST_S, lo_open=True, unit="s",
+               why="timeconst")
+        number(f"{p}.contact_solref[1]", v[1], 0.0, MAX_SOLREF_DAMPRATIO, lo_open=True, why="dampratio")
+    if (v := _get(cfg, f"{p}.contact_solimp")) is not None:
+        numbers(f"{p}.contact_solimp", v, length=5, why="[dmin, dmax, width m, midpoint, power]")
+        for i, (key, lo, hi, hi_open) in enumerate((("dmin", 0.0, 1.0, True), ("dmax", 0.0, 1.0, True),
+                                                     ("width", 0.0, 1.0, False), ("midpoint", 0.0, 1.0, True),
+                                                     ("power", 1.0, 10.0, False))):  # fmt: skip
+            number(f"{p}.contact_solimp[{i}]", v[i], lo, hi, lo_open=True, hi_open=hi_open, why=key)
+        if v[0] > v[1]:
+            raise fail(f"{p}.contact_solimp", v, "dmin must be <= dmax")
+    if (v := _get(cfg, f"{p}.foot_margin_m")) is not None:
+        number(f"{p}.foot_margin_m", v, 0.0, MAX_FOOT_MARGIN_M, unit="m")
+
+
+def _known_keys(path: str, group: Any, cls: type) -> None:
+    """Refuse keys of ``group`` (a config node or None) that ``cls`` (a dataclass) has no field for."""
+    if isinstance(group, DictConfig):
+        valid = [f.name for f in dataclasses.fields(cls)]
+        for key in group:
+            if key not in valid:
+                raise fail(f"{path}.{key}", _raw(group, str(key)),
+                           f"unknown field; valid: {', '.join(valid)}")
+
+
+def _model(cfg: DictConfig) -> None:
+    """The controller's model (``model`` group; absent = the URDF as is)."""
+    m, n = "model", robot.N_JOINTS
+    _known_keys(m, _get(cfg, m), ModelOptions)
+    urdf = _get(cfg, f"{m}.urdf")
+    if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
+        raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "
+                                      "existing URDF")
+    joint_rule = "one number for all 12 joints or 12 in the core order (legs FL, FR, RL, RR)"
+    joint_fields = (("joint_damping", MAX_JOINT_DAMPING, "N·m·s/rad"),
+                    ("armature", MAX_ARMATURE_KGM2, "kg·m²"),
+                    ("joint_frictionloss", MAX_JOINT_FRICTIONLOSS_NM, "N·m"))
+    for key, hi, unit in joint_fields:
+        number_or_list(f"{m}.{key}", _get(cfg, f"{m}.{key}", 0.0), 0.0, hi, length=n, unit=unit,
+                       why=joint_rule)
+    number(f"{m}.frictionloss_smoothing_radps", _get(cfg, f"{m}.frictionloss_smoothing_radps", 0.05), 0.0,
+           MAX_FRICTION_SMOOTHING_RADPS, lo_open=True, unit="rad/s")
+    number(f"{m}.trunk_mass_scale", _get(cfg, f"{m}.trunk_mass_scale", 1.0), 0.0, MAX_MASS_SCALE,
+           lo_open=True)
+    numbers(f"{m}.trunk_com_shift_m", _get(cfg, f"{m}.trunk_com_shift_m", [0.0] * 3), -MAX_COM_SHIFT_M,
+            MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
+    number(f"{m}.payload_mass_kg", _get(cfg, f"{m}.payload_mass_kg", 0.0), 0.0, MAX_PAYLOAD_KG, unit="kg")
+    numbers(f"{m}.payload_pos_m", _get(cfg, f"{m}.payload_pos_m", [0.0] * 3), -MAX_PAYLOAD_OFFSET_M,
+            MAX_PAYLOAD_OFFSET_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
+
+
+def _plain(value: Any) -> Any:
+    """OmegaConf containers as plain Python (lists as tuples), other values as they are."""
+    if isinstance(value, (DictConfig, ListConfig)):
+        value = OmegaConf.to_container(value, resolve=True)
+    return tuple(value) if isinstance(value, list) else value
+
+
+def model_options(cfg: DictConfig) -> ModelOptions:
+    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`; absent = defaults."""
+    group = _get(cfg, "model")
+    if group is None:
+        return ModelOptions()
+    return ModelOptions(**{k: _plain(v) for k, v in group.items()})
+
+
+def build_model(cfg: DictConfig) -> A1Model:
+    """The controller's model; a URDF Pinocchio cannot read or that lacks the A1's joints raises a
+    :class:`ConfigError` naming ``model.urdf``."""
+    options = model_options(cfg)
+    try:
+        return A1Model(options)
+    except (ValueError, RuntimeError) as exc:
+        if options.urdf is None:
+            raise
+        reason = " ".join(str(exc).split())
+        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") \
+            from exc
+
+
+def plant_options(cfg: DictConfig) -> PlantOptions:
+    """The plant builder's options from the validated config (time step, torque limit, names, overrides)."""
+    names = _get(cfg, "robot.plant_names")
+    overrides = _get(cfg, "robot.plant_overrides")
+    return PlantOptions(
+        timestep_s=1.0 / float(cfg.physics_rate_hz),
+        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        names=PlantNames(**{k: _plain(v) for k, v in names.items()}) if names is not None else PlantNames(),
+        overrides=(PlantOverrides(**{k: _plain(v) for k, v in overrides.items()}) if overrides is not None
+                   else PlantOverrides()),
+    )
 
 
 def _divisors(n: int) -> str:
@@ -306,4 +478,5 @@ def probe_problem(with_equalities: bool) -> QPProblem:
     return QPProblem(P, q, A, b, G, h, lb, ub, P != 0, A != 0, G != 0, {"u": slice(0, n)}, ["probe"])
 
 
-__all__ = ["ConfigError", "build_axis", "build_backend", "check_finite", "probe_problem", "validate"]
+__all__ = ["ConfigError", "build_axis", "build_backend", "build_model", "check_finite", "model_options",
+           "plant_options", "probe_problem", "validate"]

@@ -80,13 +80,14 @@ class Episode:
         estimator: Estimator,
         rng: np.random.Generator,
         stance_from_contact: bool = False,
+        model: A1Model | None = None,  # the controller's model (None: the URDF as is)
     ) -> None:
         self.s = settings
         self.scenario = scenario
         self.m = mj_model
         self.d = mujoco.MjData(mj_model)
         self.bridge = StateBridge(mj_model)
-        self.model = A1Model()
+        self.model = model if model is not None else A1Model()
         self.controller = controller
         self.filter = safety_filter
         self.estimator = estimator

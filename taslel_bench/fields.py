@@ -130,4 +130,26 @@ def numbers(
     return tuple(number(f"{path}[{i}]", v, lo, hi, unit=unit) for i, v in enumerate(items))
 
 
-__all__ = ["ConfigError", "choice", "fail", "flag", "integer", "interval", "is_number", "number", "numbers"]
+def number_or_list(
+    path: str,
+    value: Any,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    length: int,
+    unit: str = "",
+    why: str = "",
+) -> tuple[float, ...]:
+    """One number (repeated ``length`` times) or a list of exactly ``length`` numbers, each in the range
+    (e.g. a joint property given for all 12 joints at once or per joint)."""
+    if is_number(value):
+        return (number(path, value, lo, hi, unit=unit, why=why),) * length
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        rng = interval(lo, hi) + (f" [{unit}]" if unit else "")
+        raise fail(path, value, f"must be one number or a list of {length} numbers in {rng}"
+                                + (f" ({why})" if why else ""))  # fmt: skip
+    return numbers(path, value, lo, hi, length=length, unit=unit, why=why)
+
+
+__all__ = ["ConfigError", "choice", "fail", "flag", "integer", "interval", "is_number", "number",
+           "number_or_list", "numbers"]

@@ -13,7 +13,7 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -22,6 +22,7 @@ import numpy as np
 from taslel_bench import robot
 from taslel_bench.fields import ConfigError
 from taslel_bench.interfaces import RoundObstacle
+from taslel_bench.plant_adapter import PlantNames, PlantOverrides, adapt, apply_overrides, store_record
 
 TERRAIN_PRIORITY = 1
 
@@ -33,6 +34,8 @@ class PlantOptions:
     timestep_s: float = 0.001  # [s] physics step
     floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
     torque_limit_nm: float = robot.TORQUE_LIMIT_NM  # [N·m] motor ctrlrange
+    names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
+    overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
 
 
 def _strip_visuals(spec: mujoco.MjSpec) -> None:
@@ -88,6 +91,8 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
         act.set_to_motor()
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.ctrlrange = [-options.torque_limit_nm, options.torque_limit_nm]
+    changes = apply_overrides(spec, options.overrides, options.timestep_s)  # the defaults change nothing here
+    store_record(spec, {"overrides": changes} if changes else {})
     return spec
 
 
@@ -116,53 +121,62 @@ def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
 
 
 def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
-    """Plant from any A1 MJCF with the URDF's joint names, one torque actuator per joint (named like the
-    joint) and sphere foot geoms named FR_foot, FL_foot, RR_foot, RL_foot; the controller keeps its URDF model.
+    """Plant from another A1 MJCF: a free joint, 12 leg joints, one torque motor or servo per joint, sphere
+    foot geoms; names as the core's or mapped by ``options.names`` (:mod:`taslel_bench.plant_adapter`
+    renames them to the core's, converts servos to torque motors, finds the file's floor).
 
-    Adds what the harness needs if absent (free joint check, foot sites, foot sensors, a floor), sets the
-    time step and the elliptic cone, and makes terrain friction win. Raises ValueError naming what is missing.
+    Adds what the harness needs if absent (foot sites, foot sensors, a floor if the file has no plane on its
+    world body), sets the time step and ``options.overrides``, and makes terrain friction win (the floor
+    gets terrain priority and condim 3; the feet priority 0). What was changed is kept in the model
+    (:func:`taslel_bench.plant_adapter.read_record`). Raises :class:`ConfigError` naming the field and what
+    is missing (joints, actuators, feet, trunk, floor).
     """
     path = Path(path)
+    where = f"robot.plant_mjcf={str(path)!r}"
     if not path.is_file():
-        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: no such file")
+        raise ConfigError(f"{where}: no such file")
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo's parse error names neither the file nor the config field
         reason = " ".join(str(exc).split())
-        raise ConfigError(f"robot.plant_mjcf={str(path)!r}: MuJoCo cannot read this file as MJCF: {reason}") \
-            from exc
-    geoms = {g.name: g for g in spec.geoms}
-    joints = {j.name for j in spec.joints}
-    actuated = {a.target for a in spec.actuators}
-    missing = [f"joint {n}" for n in robot.JOINT_NAMES if n not in joints]
-    missing += [f"actuator on {n}" for n in robot.JOINT_NAMES if n not in actuated]
-    missing += [f"torque motor (not a servo) on {a.target}" for a in spec.actuators
-                if a.biastype != mujoco.mjtBias.mjBIAS_NONE]
-    missing += [f"sphere geom {f}" for f in robot.FOOT_FRAMES
-                if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE]
-    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
-        missing.append("a free joint on the trunk")
-    if missing:
-        raise ValueError(f"robot.plant_mjcf={str(path)!r} does not fit the A1 controller: missing {', '.join(missing)}")
-    for act in spec.actuators:
-        act.name = act.name or act.target
-    spec.option.timestep = options.timestep_s
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        raise ConfigError(f"{where}: MuJoCo cannot read this file as MJCF: {reason}") from exc
+    try:
+        floor, record = adapt(spec, options.names, options.torque_limit_nm, where)
+    except ValueError as exc:
+        raise ConfigError(str(exc) if str(exc).startswith(where) else f"{where}: {exc}") from exc
     sites = {s.name for s in spec.sites}
     for foot in robot.FOOT_FRAMES:
-        g = geoms[foot]
+        g = spec.geom(foot)
         if foot not in sites:
             g.parent.add_site(name=foot, pos=list(g.pos))
         g.priority = 0
-    if "floor" not in geoms:
+    if floor is None:
         add_terrain_geom(spec, name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
                          friction=options.floor_friction)
+        record["floor"] = "added (the file has no plane on its world body)"
     else:
-        geoms["floor"].priority = TERRAIN_PRIORITY
+        before = f"priority {floor.priority}, condim {floor.condim}, friction {floor.friction[0]:g}"
+        floor.priority, floor.condim, floor.friction[0] = TERRAIN_PRIORITY, 3, options.floor_friction
+        record["floor"] = f"the file's ({before} -> terrain priority {TERRAIN_PRIORITY}, condim 3)"
+        _check_feet_touch(spec, floor, where)
+    changes = apply_overrides(spec, options.overrides, options.timestep_s)
+    if changes:
+        record["overrides"] = changes
     sensors = {s.name for s in spec.sensors}
     if f"{robot.FOOT_FRAMES[0]}_contact" not in sensors:
         add_foot_contact_sensors(spec)
+    store_record(spec, record)
     return spec
+
+
+def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) -> None:
+    """Raise naming *feet* if a foot geom's contype/conaffinity bits exclude collisions with ``floor``."""
+    blind = [f for f in robot.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
+                                                 or (floor.contype & spec.geom(f).conaffinity))]
+    if blind:
+        raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
+                          f"with the floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
+                          f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
 
 
 def add_terrain_geom(

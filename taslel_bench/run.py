@@ -17,13 +17,14 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench import plant, qpset, recording, robot
-from taslel_bench.config import ConfigError, build_axis, build_backend, validate
+from taslel_bench.config import ConfigError, build_axis, build_backend, build_model, plant_options, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
 from taslel_bench.gait import GaitParams
 from taslel_bench.health import HealthLimits
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
+from taslel_bench.model_report import plant_vs_model
 from taslel_bench.residuals import alarm_events
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
 
@@ -35,9 +36,7 @@ class FrictionMismatch(RuntimeError):
 
 
 def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    options = plant.PlantOptions(
-        timestep_s=1.0 / float(cfg.physics_rate_hz), torque_limit_nm=float(cfg.robot.torque_limit_nm)
-    )
+    options = plant_options(cfg)
     if cfg.robot.get("plant_mjcf"):
         spec = plant.mjcf_spec(Path(cfg.robot.plant_mjcf), options)
     else:
@@ -141,6 +140,7 @@ class Built:
             self.estimator,
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
+            model=build_model(cfg),
         )
         self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
 
@@ -156,17 +156,16 @@ def file_sha256(path: Path) -> str:
 
 def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
     """What was simulated and what the controller believed: the plant source (the URDF of
-    example-robot-data or ``robot.plant_mjcf``) with its content hash, and the controller model's source,
-    hash and total mass (the filter's equations of motion)."""
+    example-robot-data or ``robot.plant_mjcf``) and the controller model's URDF, with their content hashes
+    (masses, inertias, joint losses: :func:`taslel_bench.model_report.plant_vs_model`)."""
     mjcf = cfg.robot.get("plant_mjcf")
     plant_src = Path(mjcf) if mjcf else robot.a1_urdf_path()
+    model_src = Path(built.episode.model.urdf_path)
     return {
         "plant_source": str(plant_src),
         "plant_sha256": file_sha256(plant_src),
-        "plant_total_mass_kg": float(sum(built.mj_model.body_mass)),
-        "model_source": str(robot.a1_urdf_path()),
-        "model_sha256": file_sha256(robot.a1_urdf_path()),
-        "model_total_mass_kg": float(built.episode.model.total_mass_kg),
+        "model_source": str(model_src),
+        "model_sha256": file_sha256(model_src),
     }
 
 
@@ -182,14 +181,15 @@ def _progress_printer(duration: float, enabled: bool):
 
 def config_sha256(cfg: DictConfig) -> str:
     """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
-    only change what is printed) and the content of ``robot.plant_mjcf``, if any."""
+    only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
+    ``model.urdf``)."""
     plain = OmegaConf.to_container(cfg, resolve=True)
     for key in ("progress", "force"):
         plain.pop(key, None)
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
-    mjcf = cfg.robot.get("plant_mjcf")
-    if mjcf and Path(mjcf).is_file():
-        h.update(Path(mjcf).read_bytes())
+    for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
+        if source and Path(source).is_file():
+            h.update(Path(source).read_bytes())
     return h.hexdigest()
 
 
@@ -279,6 +279,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         **notes,
     }
     summary.update(plant_identity(cfg, built))
+    summary.update(plant_vs_model(built.mj_model, built.episode.model,
+                                  built.controller.stand_configuration()))
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
     summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
     summary["recording_s"] = float(res.extras.get("recording_s", 0.0))
