@@ -13,8 +13,10 @@ import mujoco
 import numpy as np
 
 from scenarios.flat import FlatGround
+from scenarios.obstacle import checked_profile
 from taslel_bench import robot
 from taslel_bench.fields import integer, number, number_or_list, numbers
+from taslel_bench.interfaces import ClearanceProfile
 
 MAX_SCALE = 10.0  # [-] mass and motor-strength factors
 MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)
@@ -35,7 +37,8 @@ class PerturbedPlant(FlatGround):
     * ``joint_damping`` [N·m·s/rad], ``armature`` [kg·m²] and ``joint_frictionloss`` [N·m] added to the
       leg joints: one number for all 12 or 12 numbers in the core joint order (legs FL, FR, RL, RR);
     * ``motor_strength_scale`` (actuator gear: the torque the plant applies per commanded N·m);
-    * ``actuator_delay_steps``: commands reach the plant this many physics steps late.
+    * ``actuator_delay_steps``: commands reach the plant this many physics steps late;
+    * ``coefficients``: an optional virtual swing-foot profile z(s) as in ``obstacle`` (null: none).
     """
 
     def __init__(self, name: str = "perturbed", friction: float = 1.0, trunk_mass_scale: float = 1.0,
@@ -44,7 +47,8 @@ class PerturbedPlant(FlatGround):
                  joint_frictionloss: float | Sequence[float] = 0.0,
                  motor_strength_scale: float = 1.0, actuator_delay_steps: int = 0,
                  armature: float | Sequence[float] = 0.0, payload_mass_kg: float = 0.0,
-                 payload_pos_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+                 payload_pos_m: Sequence[float] = (0.0, 0.0, 0.0),
+                 coefficients: Sequence[float] | None = None) -> None:
         super().__init__(name=name, friction=friction)
         s = "scenario."
         self.trunk_mass_scale = number(s + "trunk_mass_scale", trunk_mass_scale, 0.0, MAX_SCALE, lo_open=True)
@@ -67,6 +71,11 @@ class PerturbedPlant(FlatGround):
         self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0,
                                             MAX_DELAY_STEPS, unit="physics steps")
         self._queue: deque[np.ndarray] = deque()
+        # optional virtual obstacle under every swing foot (the paper's z(s)): clearance under mismatch
+        self._profile = checked_profile(coefficients) if coefficients is not None else None
+
+    def clearance_profile(self) -> ClearanceProfile | None:
+        return self._profile
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         super().build(spec, rng)

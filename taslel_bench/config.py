@@ -37,6 +37,7 @@ from taslel_bench.model import A1Model
 from taslel_bench.model_options import ModelOptions
 from taslel_bench.plant import PlantOptions
 from taslel_bench.plant_adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
+from taslel_bench.robust import RobustSettings
 from taslel_bench.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 
 AXES = ("scenario", "solver", "estimator")
@@ -230,6 +231,25 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     )
     choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
     choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
+    _robust(cfg)
+
+
+def _robust(cfg: DictConfig) -> None:
+    """``filter.robust``: the margins of taslel_bench/robust.py."""
+    r = "filter.robust"
+    if _get(cfg, r) is None:
+        return
+    _known_keys(r, _get(cfg, r), RobustSettings)
+    flag(f"{r}.enabled", _get(cfg, f"{r}.enabled", False))
+    number(f"{r}.ecbf_margin_mps2", _get(cfg, f"{r}.ecbf_margin_mps2", 0.0), 0.0, 100.0, unit="m/s²")
+    number(f"{r}.adaptive_gain", _get(cfg, f"{r}.adaptive_gain", 0.0), 0.0, 100.0)
+    number(f"{r}.adaptive_time_constant_s", _get(cfg, f"{r}.adaptive_time_constant_s", 0.5), 0.0, 60.0,
+           lo_open=True, unit="s")
+    number(f"{r}.max_margin_mps2", _get(cfg, f"{r}.max_margin_mps2", 50.0), 0.0, 1000.0, unit="m/s²")
+    number(f"{r}.friction_margin", _get(cfg, f"{r}.friction_margin", 0.0), 0.0, 1.0, hi_open=True,
+           why="the pyramid uses mu (1 - friction_margin)")
+    number(f"{r}.observer_time_constant_s", _get(cfg, f"{r}.observer_time_constant_s", 0.0), 0.0, 10.0,
+           unit="s", why="0: no disturbance observer")
 
 
 def _robot(cfg: DictConfig, stand_height_m: float) -> None:
@@ -374,6 +394,8 @@ def _model(cfg: DictConfig) -> None:
     numbers(f"{m}.trunk_com_shift_m", _get(cfg, f"{m}.trunk_com_shift_m", [0.0] * 3), -MAX_COM_SHIFT_M,
             MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
     number(f"{m}.payload_mass_kg", _get(cfg, f"{m}.payload_mass_kg", 0.0), 0.0, MAX_PAYLOAD_KG, unit="kg")
+    number(f"{m}.implicit_damping_dt_s", _get(cfg, f"{m}.implicit_damping_dt_s", 0.0), 0.0, 0.1, unit="s",
+           why="0: continuous model; the plant's time step when it integrates joint damping implicitly")
     numbers(f"{m}.payload_pos_m", _get(cfg, f"{m}.payload_pos_m", [0.0] * 3), -MAX_PAYLOAD_OFFSET_M,
             MAX_PAYLOAD_OFFSET_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
 

@@ -46,6 +46,10 @@ class ModelOptions:
     trunk_com_shift_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # [m] trunk frame
     payload_mass_kg: float = 0.0  # [kg]
     payload_pos_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # [m] trunk frame
+    # [s] the discrete model of a simulator that integrates joint damping implicitly (MuJoCo's Euler,
+    # implicit and implicitfast: v+ = v + dt (M + dt D)^-1 f): dt d is added to the joints' diagonal of M
+    # with the damping; 0 = the continuous model
+    implicit_damping_dt_s: float = 0.0
 
     def per_joint(self, name: str) -> np.ndarray:
         """The joint field ``name`` as 12 values in the core joint order."""
@@ -116,4 +120,6 @@ def apply(model: pin.Model, options: ModelOptions) -> None:
     ):
         values = np.array(getattr(model, attr))  # (nv,) a copy: assign the whole vector back
         values[6:] = options.per_joint(field)
+        if attr == "armature":  # implicit damping: (M + dt D) vdot + D v = f, dt D on the joint diagonal
+            values[6:] += options.implicit_damping_dt_s * options.per_joint("joint_damping")
         setattr(model, attr, values)

@@ -18,7 +18,7 @@ import pandas as pd
 from taslel_bench import recording
 from taslel_bench.machine import machine_info
 from taslel_bench.paper_claims import paper_claims
-from taslel_bench.sweep import SUMMARY_TABLE, aggregate, run_folders
+from taslel_bench.sweep import SUMMARY_TABLE, aggregate, override_keys, run_folders
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
@@ -27,7 +27,7 @@ OPTIONAL_GROUP = ("filter_formulation", "filter_contact_velocity_gain")  # colum
 
 def override_columns(frame: pd.DataFrame) -> list[str]:
     """Columns of overridden config keys (``scenario.friction``, ...; :func:`sweep.expand_overrides`)."""
-    return sorted(c for c in frame.columns if "." in c and not c.startswith(("+", "~")))
+    return override_keys(frame)
 
 
 def group_columns(frame: pd.DataFrame) -> list[str]:

@@ -26,6 +26,8 @@ from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
 from taslel_bench.model_report import plant_vs_model
 from taslel_bench.residuals import alarm_events
+from taslel_bench.robust import RobustSettings
+from taslel_bench.sweep import OVERRIDE_SEPARATOR
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
 
 FRICTION_CHECK_TOL = 1e-9
@@ -78,7 +80,17 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         fallback=str(f.fallback),
         stance_source=str(f.stance_source),
         formulation=str(f.get("formulation", "full")),
+        robust=robust_settings(f.get("robust")),
+        control_dt_s=1.0 / float(cfg.control_rate_hz),
     )
+
+
+def robust_settings(node) -> RobustSettings:
+    """``filter.robust`` (absent: off)."""
+    if not node:
+        return RobustSettings()
+    return RobustSettings(enabled=bool(node.get("enabled", False)),
+                          **{k: float(v) for k, v in node.items() if k != "enabled"})
 
 
 def episode_settings(cfg: DictConfig) -> EpisodeSettings:
@@ -274,7 +286,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "physics_rate_hz": float(cfg.physics_rate_hz),
         "commanded_speed_mps": float(cfg.controller.speed),
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
-        "overrides": ",".join(sorted(overrides or [])),
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
         **notes,
     }
@@ -363,7 +375,7 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
         "fell": False,
-        "overrides": ",".join(sorted(overrides or [])),
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
     }
     recording.write_json(out_dir / recording.SUMMARY, summary)
     return summary

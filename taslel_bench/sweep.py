@@ -37,7 +37,7 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
     if overrides.is_file():
         items = [line.strip().lstrip("- ").strip() for line in overrides.read_text().splitlines()]
         items = [item for item in items if "=" in item]
-        row["overrides"] = ",".join(sorted(items))
+        row["overrides"] = OVERRIDE_SEPARATOR.join(sorted(items))
         for item in items:
             key, value = item.split("=", 1)
             key = OVERRIDE_COLUMNS.get(key, key)
@@ -79,16 +79,33 @@ def aggregate(sweep_dir: Path) -> pd.DataFrame:
     return frame
 
 
+OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may hold commas and spaces)
+
+
+def parse_overrides(text: object) -> dict[str, str]:
+    """``{key: value}`` of a summary's ``overrides`` text; the key without Hydra's ``+``/``~``/``++``."""
+    if not isinstance(text, str):
+        return {}
+    items = (item.split("=", 1) for item in text.split(OVERRIDE_SEPARATOR) if "=" in item)
+    return {key.lstrip("+~"): value for key, value in items}
+
+
+def override_keys(frame: pd.DataFrame) -> list[str]:
+    """The columns :func:`expand_overrides` made (keys overridden in some run, not already a column)."""
+    if "overrides" not in frame.columns:
+        return []
+    keys = {k for text in frame["overrides"] for k in parse_overrides(text)}
+    return sorted(k for k in keys if k in frame.columns and k not in AXES and k not in OVERRIDE_COLUMNS)
+
+
 def expand_overrides(frame: pd.DataFrame) -> pd.DataFrame:
     """One column per overridden config key that is not already a column (``scenario.friction``,
-    ``filter.enabled``, ...), holding the override's value as text: the report groups rows by every
-    override that varies across the sweep. Runs without the override get "" (the config default)."""
+    ``filter.enabled``, ``mismatch_plant``, ...), holding the override's value as text: the report groups
+    rows by every override that varies across the sweep. Runs without the override get "" (the default)."""
     if "overrides" not in frame.columns:
         return frame
-    parsed = [dict(item.split("=", 1) for item in str(o).split(",") if "=" in item) if isinstance(o, str) else {}
-              for o in frame["overrides"]]  # fmt: skip
-    keys = sorted({k for p in parsed for k in p})
-    for key in keys:
+    parsed = [parse_overrides(text) for text in frame["overrides"]]
+    for key in sorted({k for p in parsed for k in p}):
         if key in AXES or key in frame.columns or OVERRIDE_COLUMNS.get(key) in frame.columns:
             continue
         frame[key] = [p.get(key, "") for p in parsed]

@@ -67,6 +67,7 @@ class EpisodeTrace:
         self.barrier_psi_planned = np.full((c, nl), np.nan)
         self.barrier_obstacle_psi_planned = np.full((c, nl), np.nan)
         self.vdot_filter = np.full((c, robot.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
+        self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
         self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.mu_hat = np.zeros(c)
@@ -130,6 +131,7 @@ class EpisodeTrace:
                 if sol.iterations is not None:
                     self.qp_iterations[k] = sol.iterations
             self.vdot_filter[k] = fres.vdot
+            self.ecbf_margin_mps2[k] = fres.ecbf_margin_mps2
             ecbf, obstacle_ecbf = barriers
             if ecbf is not None:
                 self.barrier_h_m[k] = ecbf.h
@@ -254,6 +256,7 @@ class EpisodeTrace:
             cols[f"{leg}_barrier_psi_realized_mps2"] = np.fmin(psi_real[:, i], psi_obstacle_real[:, i])
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
+        cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
         cols["qp_status"] = self.qp_status[t]
         cols["qp_fallback"] = self.qp_fallback[t]
         cols["qp_build_us"] = self.qp_build_us[t]
