@@ -5,7 +5,8 @@ Written *while* the episode runs: :class:`McapStream` is the episode's chunk sin
 (:attr:`taslel_bench.episode.Episode.chunk_ticks`, 1 s of simulated time by default) becomes messages of the
 same columns as ``steps.parquet`` and is flushed to ``episode.partial.mcap`` as one MCAP chunk. A killed run
 leaves that partial file, readable up to its last chunk (:func:`read_messages`); :meth:`McapStream.close`
-adds the events and the summary, writes the MCAP summary section and renames the file ``episode.mcap``.
+adds the channels computed after the episode (``/residual``: the controller model's residuals), the events
+and the summary, writes the MCAP summary section and renames the file ``episode.mcap``.
 """
 
 from __future__ import annotations
@@ -80,6 +81,18 @@ CHANNELS: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
     },
     "/friction": {"mu_hat": (_NUM, ["mu_hat"]), "mu_true": (_NUM, ["mu_true"])},
 }
+# computed after the episode (taslel_bench.residuals): written for every tick when the file is closed
+AFTER_EPISODE: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
+    "/residual": {
+        "foot": (_NAMES, None),
+        "trunk_force_n": (_NUM, ["residual_trunk_force_n"]),
+        "trunk_torque_nm": (_NUM, ["residual_trunk_torque_nm"]),
+        "joint_max_nm": (_NUM, ["residual_joint_nm_max"]),
+        "foot_acc_error_mps2": (_ARR, _legs("{leg}_foot_acc_error_mps2")),
+        "barrier_psi_planned_mps2": (_ARR, _legs("{leg}_barrier_psi_planned_mps2")),
+        "barrier_psi_realized_mps2": (_ARR, _legs("{leg}_barrier_psi_realized_mps2")),
+    },
+}
 CONSTANTS = {"name": _SHORT, "foot": _LEGS}
 EVENTS = {"/events": {"t_s": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
           "/summary": {"summary": {"type": "object"}}}  # fmt: skip
@@ -109,7 +122,7 @@ class McapStream:
         self._writer = Writer(self._file)
         self._writer.start(profile="", library="taslel_bench")
         self._channels: dict[str, int] = {}
-        for topic, fields in CHANNELS.items():
+        for topic, fields in {**CHANNELS, **AFTER_EPISODE}.items():
             self._register(topic, {name: schema for name, (schema, _) in fields.items()})
         for topic, props in EVENTS.items():
             self._register(topic, props)
@@ -127,19 +140,23 @@ class McapStream:
         """Write ticks ``k0:k1`` (the rows steps.parquet will hold) and flush them to disk."""
         if k1 <= k0:
             return
-        frame = trace.frame(k0, k1)
+        self._write(trace.frame(k0, k1), CHANNELS)
+        self.ticks_written = k1
+
+    def _write(self, frame: pd.DataFrame, channels: dict) -> None:
         times = frame["t_s"].tolist()
-        for topic, fields in CHANNELS.items():
+        for topic, fields in channels.items():
             columns = {name: (_values(frame, cols) if cols is not None else None) for name, (_, cols) in fields.items()}
             for i, t in enumerate(times):
                 msg = {name: (vals[i] if vals is not None else CONSTANTS[name]) for name, vals in columns.items()}
                 self._put(topic, t, msg)
         self._writer.flush()
-        self.ticks_written = k1
 
     def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:
         """Write the ticks not streamed yet, the events and the summary; finish; rename to episode.mcap."""
         self(trace, self.ticks_written, trace.n)
+        if trace.n:
+            self._write(trace.frame(0, trace.n), AFTER_EPISODE)
         t_end = float(trace.t_s[trace.n - 1]) if trace.n else 0.0
         for e in [*events, {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}]:
             t = float(e.get("t_s") if e.get("t_s") is not None else t_end)

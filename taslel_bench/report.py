@@ -107,6 +107,9 @@ SAFETY_COLUMNS = {
     "clearance_depth_p95_m": "clearance_violation_depth_p95_m",
     "trips": "trips",
     "barrier_negative_rate": "barrier_negative_rate",
+    "residual_joint_nm": "residual_joint_nm_rms",
+    "residual_trunk_force_n": "residual_trunk_force_n_rms",
+    "residual_alarm_rate": "residual_alarm_rate",
 }
 COST_COLUMNS = {
     "qp_solve_us_median": "qp_solve_us_median",
@@ -329,6 +332,10 @@ crossed a health limit and are listed below):
   virtual profile z(s); `clearance_depth_p95_m`: 95th percentile of how far below.
 - `trips`: onsets of a swing foot or a lower leg touching a physical obstacle (MuJoCo contacts, distance <= 0).
 - `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
+- `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
+  |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows
+  [N·m] and trunk-force rows [N]; 0 up to rounding when the model is the plant. `residual_alarm_rate`:
+  share of ticks beyond `health.residual_trunk_force_n_max` / `health.residual_joint_nm_max`.
 - `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
 - `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
   solver, divided by the best solver's; 1.0 = fastest.

@@ -11,11 +11,12 @@ friction rows hold although the filter's model is wrong, input-to-state-safe sty
   capped at ``max_margin_mps2``.
 * Friction rows: the pyramid uses mu (1 - ``friction_margin``) instead of mu.
 * Disturbance observer (``observer_time_constant_s`` > 0): the equations of motion become
-  M vdot + h + d_hat = S u + J' lambda, with d_hat a low-pass (that time constant) of the residual the filter
-  can compute from what a real controller knows: r = M vdot_measured + h - S u - J' lambda_planned over the
-  previous tick (vdot_measured the finite difference of the measured velocity, lambda_planned its own
-  contact-force plan). Unknown joint losses, a payload or a weaker motor show in r; so do contact forces
-  the plan got wrong.
+  M vdot + h = S u + J' lambda + d_hat, with d_hat [N·m] on the joint rows a low-pass (that time constant) of
+  the residual the filter can compute from what a real controller knows: r = M vdot_measured + h - S u -
+  J' lambda_planned over the previous tick (vdot_measured the finite difference of the measured velocity,
+  lambda_planned its own contact-force plan) = the generalised force the model misses. Unknown joint losses
+  or a weaker motor show in r; the trunk rows, dominated by errors of the contact-force plan, are not
+  estimated.
 """
 
 from __future__ import annotations
@@ -75,31 +76,36 @@ class RobustMargin:
 
 
 class DisturbanceObserver:
-    """d_hat [N, N·m] (Pinocchio rows) of the dynamics the model misses, from the previous tick's residual
-    (see the module doc). One per filter; :meth:`update` once per tick before the QP is built."""
+    """d_hat [N·m] on the joint rows of swing legs: the generalised force the model misses there, from the
+    previous tick's residual (see the module doc). A leg's estimate is updated only over ticks the leg swung
+    (no contact force on it: its joint rows hold model error alone) and applied only while it swings. One
+    per filter; :meth:`update` once per tick before the QP is built."""
 
     def __init__(self, time_constant_s: float, control_dt_s: float, nv: int) -> None:
         self.dt = control_dt_s
         self._weight = 1.0 - math.exp(-control_dt_s / time_constant_s)
-        self.d_hat = np.zeros(nv)
-        self._previous: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (v, M, h - S u - J' lambda)
-        self._nv = nv
+        self.estimate = np.zeros(nv)  # running estimate per joint row
+        self.d_hat = np.zeros(nv)  # what the EoM rows get this tick (swing legs only)
+        self._previous: tuple | None = None  # (v, M, h - S u - J' lambda, swing joint rows)
 
     def reset(self) -> None:
+        self.estimate[:] = 0.0
         self.d_hat[:] = 0.0
         self._previous = None
 
-    def update(self, v: np.ndarray) -> None:
-        """Fold the residual of the tick that ended at velocity ``v`` into d_hat."""
-        if self._previous is None:
-            return
-        v_prev, mass, rest = self._previous
-        residual = mass @ ((v - v_prev) / self.dt) + rest
-        residual[:6] = 0.0  # the trunk rows mostly hold contact-force plan errors: only joint torques are estimated
-        self.d_hat += self._weight * (residual - self.d_hat)
+    def update(self, v: np.ndarray, in_stance: np.ndarray) -> None:
+        """Fold the residual of the tick that ended at velocity ``v`` into the estimate of the legs that swung
+        through it; set d_hat for the legs that swing now (``in_stance`` per leg)."""
+        if self._previous is not None:
+            v_prev, mass, rest, swung = self._previous
+            residual = mass @ ((v - v_prev) / self.dt) + rest
+            self.estimate[swung] += self._weight * (residual[swung] - self.estimate[swung])
+        self.d_hat[:] = 0.0
+        swing = _joint_rows(~np.asarray(in_stance, bool))
+        self.d_hat[swing] = self.estimate[swing]
 
     def remember(self, v: np.ndarray, mass: np.ndarray, h: np.ndarray, u: np.ndarray,
-                 jac_t_lambda: np.ndarray | None) -> None:  # fmt: skip
+                 jac_t_lambda: np.ndarray | None, in_stance: np.ndarray) -> None:  # fmt: skip
         """This tick's state, model terms and the filter's answer (None when it failed: no residual then)."""
         if jac_t_lambda is None:
             self._previous = None
@@ -107,4 +113,9 @@ class DisturbanceObserver:
         rest = h.copy()
         rest[6:] -= u
         rest -= jac_t_lambda
-        self._previous = (v.copy(), mass.copy(), rest)
+        self._previous = (v.copy(), mass.copy(), rest, _joint_rows(~np.asarray(in_stance, bool)))
+
+
+def _joint_rows(legs: np.ndarray) -> np.ndarray:
+    """Pinocchio velocity rows of the joints of the selected legs (3 per leg after the 6 trunk rows)."""
+    return np.flatnonzero(np.r_[np.zeros(6, bool), np.repeat(legs, 3)])

@@ -27,8 +27,8 @@ from taslel_bench.metrics import summarize
 from taslel_bench.model_report import plant_vs_model
 from taslel_bench.residuals import alarm_events
 from taslel_bench.robust import RobustSettings
-from taslel_bench.sweep import OVERRIDE_SEPARATOR
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
+from taslel_bench.sweep import OVERRIDE_SEPARATOR
 
 FRICTION_CHECK_TOL = 1e-9
 

@@ -218,9 +218,9 @@ class SafetyFilter:
         qp.q[U] = -u_nom
         for fam in self.eq_families:
             fam.write(qp, inputs)
-        if self.observer is not None:  # M vdot + h + d_hat = S u + J' lambda (b = -(h + d_hat) on the EoM rows)
+        if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
             eom = self.eq_families[0]
-            qp.b[eom.start : eom.start + NV] -= self.observer.d_hat
+            qp.b[eom.start : eom.start + NV] += self.observer.d_hat
         for fam in self.ineq_families:
             fam.write(qp, inputs)
         if self.condensed is not None:
@@ -248,7 +248,7 @@ class SafetyFilter:
         t0 = time.perf_counter()
         robust = self.settings.robust.enabled
         if self.observer is not None:
-            self.observer.update(inputs.v)
+            self.observer.update(inputs.v, inputs.in_stance)
         if robust:  # margins sized from the running shortfall of the realised barrier condition
             margin = self.robust.ecbf_margin_mps2
             for barrier in self.barriers:
@@ -280,15 +280,15 @@ class SafetyFilter:
                 self.robust.remember(self.barriers)
             if self.observer is not None:
                 m = inputs.model
-                self.observer.remember(inputs.v, m.M, m.h, u, np.einsum("ikj,ik->j", m.foot_jac_in_world,
-                                                                         lam.reshape(robot.N_LEGS, 3)))
+                jac_t_lambda = np.einsum("ikj,ik->j", m.foot_jac_in_world, lam.reshape(robot.N_LEGS, 3))
+                self.observer.remember(inputs.v, m.M, m.h, u, jac_t_lambda, inputs.in_stance)
             self._last_u = u
             margin = self.barriers[0].margin_mps2 if self.barriers else 0.0
             return FilterResult(u, lam, vdot, sol.status, False, build_s, sol, margin)
         for barrier in self.barriers:  # nothing planned on this tick
             barrier.psi_planned[:] = np.nan
         if self.observer is not None:
-            self.observer.remember(inputs.v, inputs.model.M, inputs.model.h, u_nom, None)
+            self.observer.remember(inputs.v, inputs.model.M, inputs.model.h, u_nom, None, inputs.in_stance)
         if robust:
             self.robust.remember(self.barriers)
         if self.settings.fallback == "hold_last" and self._last_u is not None:

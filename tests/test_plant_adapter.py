@@ -310,3 +310,16 @@ def test_a_second_actuator_on_a_joint_must_be_chosen_and_is_removed(tmp_path):
     record = read_record(m)
     assert record["actuators_removed"] == ["FL_hip_damper"]
     assert record["actuators_converted"] == [["FL_hip_joint", "motor gear x gain 2 -> 1 (ctrlrange scaled)"]]
+
+
+def test_a_changed_plant_file_reruns_instead_of_being_skipped(tmp_path):
+    """Same config, same path, other content: the folder's run is not "complete"; it is put aside."""
+    xml = third_party_a1(tmp_path / "a1_other.xml", losses=False)
+    overrides = [f"robot.plant_mjcf={xml}", *MENAGERIE_LIKE, "duration=0.2", "progress=false", "record.mcap=false"]
+    first = run(compose_cfg(overrides), tmp_path / "run")
+    assert run(compose_cfg(overrides), tmp_path / "run").get("skipped") is True
+    third_party_a1(xml, losses=True)  # the file now has joint losses
+    second = run(compose_cfg(overrides), tmp_path / "run")
+    assert "skipped" not in second and second["plant_sha256"] != first["plant_sha256"]
+    assert second["superseded"].endswith(f"config-{first['config_sha256'][:8]}")
+    assert second["plant_joint_damping_nms_per_rad_max"] == 1.5 and first["plant_joint_damping_nms_per_rad_max"] == 0.0

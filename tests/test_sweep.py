@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from mcap.reader import make_reader
 
-from taslel_bench.mcap_log import CHANNELS, EVENTS
+from taslel_bench.mcap_log import AFTER_EPISODE, CHANNELS, EVENTS
 from taslel_bench.report import shifted_geometric_mean, write_report
 from taslel_bench.run import Built, run
 from taslel_bench.sweep import aggregate
@@ -33,7 +33,7 @@ def mcap_counts(path: Path) -> dict[str, int]:
 def test_mcap_reads_back_with_every_channel(tmp_path):
     run(compose_cfg(["duration=0.3", "progress=false", "scenario=obstacle"]), tmp_path, {"solver": "daqp"})
     counts = mcap_counts(tmp_path / "episode.mcap")
-    assert set(counts) == set(CHANNELS) | set(EVENTS)
+    assert set(counts) == set(CHANNELS) | set(AFTER_EPISODE) | set(EVENTS)
     assert all(n > 0 for n in counts.values())
     assert counts["/torques"] == 800  # one per control tick (0.5 s stand + 0.3 s)
 
