@@ -282,6 +282,16 @@ def _horner(coeffs, s):
 
 
 @kernel
+def _inactive_barrier_row(G, hvec, r, h_out, he_out, i):
+    """A stance foot's barrier row: 0 <= INACTIVE_RHS, and nan barrier values."""
+    for col in range(G.shape[1]):
+        G[r, col] = 0.0
+    hvec[r] = INACTIVE_RHS
+    h_out[i] = np.nan
+    he_out[i] = np.nan
+
+
+@kernel
 def _ecbf_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_stance, swing_phase, sdot, c, c1, c2,
                alpha1, alpha2, foot_radius, h_out, he_out):  # fmt: skip
     """Row r0 + i per foot (see :class:`SwingClearanceECBF`): swing -> -J_z vdot <= a2 h_e + (J̇v)_z
@@ -291,11 +301,7 @@ def _ecbf_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_stance,
     for i in range(foot_jac.shape[0]):
         r = r0 + i
         if in_stance[i]:
-            for col in range(nv):
-                G[r, col] = 0.0
-            hvec[r] = INACTIVE_RHS
-            h_out[i] = np.nan
-            he_out[i] = np.nan
+            _inactive_barrier_row(G, hvec, r, h_out, he_out, i)
             continue
         s = swing_phase[i]
         dz, ddz = _horner(c1, s), _horner(c2, s)
@@ -317,11 +323,7 @@ def _obstacle_rows(G, hvec, r0, foot_pos, foot_vel, foot_jac, foot_jdotv, in_sta
     for i in range(foot_jac.shape[0]):
         r = r0 + i
         if in_stance[i]:
-            for col in range(nv):
-                G[r, col] = 0.0
-            hvec[r] = INACTIVE_RHS
-            h_out[i] = np.nan
-            he_out[i] = np.nan
+            _inactive_barrier_row(G, hvec, r, h_out, he_out, i)
             continue
         px, pz = foot_pos[i, 0], foot_pos[i, 2]
         h, dx, dz, rho = np.inf, 0.0, 1.0, 1.0
