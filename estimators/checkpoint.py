@@ -51,15 +51,36 @@ def save_checkpoint(model: FrictionModel | EnsembleModel, path: str | Path,
     return pt
 
 
+class CheckpointError(ValueError):
+    """A checkpoint file exists but cannot be read (truncated, not JSON / not a torch file, mismatched)."""
+
+
 def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel | EnsembleModel, dict[str, object]]:
     """Model (or ensemble) in eval mode and its metadata. Raises FileNotFoundError naming the shipped
-    checkpoints."""
+    checkpoints, :class:`CheckpointError` naming the file that cannot be read."""
     pt, js = checkpoint_paths(name_or_path)
     if not (pt.is_file() and js.is_file()):
         shipped = sorted(p.stem for p in CHECKPOINT_DIR.glob("*.pt"))
         raise FileNotFoundError(f"checkpoint {pt} / {js} not found; shipped checkpoints: {shipped}")
-    meta = json.loads(js.read_text())
-    state = torch.load(pt, map_location="cpu", weights_only=True)
+    try:
+        meta = json.loads(js.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"checkpoint metadata {js} cannot be read: {type(exc).__name__}: {exc}") \
+            from exc
+    try:
+        state = torch.load(pt, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises RuntimeError, OSError, UnpicklingError ... on a damaged file
+        raise CheckpointError(f"checkpoint weights {pt} cannot be read (truncated or not a torch state "
+                              f"dict?): {type(exc).__name__}: {exc}") from exc
+    try:
+        return _build(meta, state)
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # RuntimeError: state dict mismatch
+        raise CheckpointError(f"checkpoint {pt} with metadata {js} cannot be loaded into a model: "
+                              f"{type(exc).__name__}: {exc}") from exc
+
+
+def _build(meta: dict, state: dict) -> tuple[FrictionModel | EnsembleModel, dict[str, object]]:
+    """The model (or ensemble) described by ``meta`` with the weights ``state``, in eval mode."""
     if "ensemble" in meta:
         cfg = ModelConfig(**meta["model"])
         ens = EnsembleModel([build_model(cfg) for _ in range(int(meta["ensemble"]["members"]))])

@@ -53,12 +53,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from estimators.checkpoint import load_checkpoint
+from estimators.checkpoint import CheckpointError, load_checkpoint
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_channels, sample_vector
 from estimators.models import VARIANTS, run_stages
 from estimators.safety import BandMargin
 from estimators.simple import SAFE_FLOOR_MU
-from taslel_bench.interfaces import FrictionEstimate, Proprioception
+from taslel_bench.fields import ConfigError, integer, number
+from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception
+
+MAX_CONSERVATIVE_K = 10.0  # [sigmas] the shipped configs use 0.5-3
 
 INFERENCE_MODES = ("inline", "staged", "thread")
 
@@ -143,21 +146,23 @@ class LearnedEstimator:
         latency after which a sample's result is applied."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
-        if not (prior_mu > 0 and math.isfinite(prior_mu)):
-            raise ValueError(f"prior_mu must be positive and finite, got {prior_mu!r}")
-        if conservative_k < 0:
-            raise ValueError(f"conservative_k must be >= 0, got {conservative_k!r}")
+        prior_mu = number("estimator.prior_mu", prior_mu, 0.0, MAX_FRICTION, lo_open=True)
+        conservative_k = number("estimator.conservative_k", conservative_k, 0.0, MAX_CONSERVATIVE_K,
+                                unit="sigmas")
+        mu_min = number("estimator.mu_min", mu_min, 0.0, MAX_FRICTION)
         if bound not in ("gaussian", "quantile"):
             raise ValueError(f"unknown bound {bound!r}; valid choices: gaussian, quantile")
-        if int(hold_min_samples) != hold_min_samples or hold_min_samples < 1:
-            raise ValueError(f"hold_min_samples must be an integer >= 1, got {hold_min_samples!r}")
+        integer("estimator.hold_min_samples", hold_min_samples, 1)
         if inference not in INFERENCE_MODES:
             raise ValueError(f"unknown inference {inference!r}; valid choices: {', '.join(INFERENCE_MODES)}")
         if not (0.0 <= apply_delay_s < WINDOW_DT_S):
             raise ValueError(f"apply_delay_s must be in [0, {WINDOW_DT_S}) s, got {apply_delay_s!r}")
         if threads is not None:
-            torch.set_num_threads(int(threads))
-        self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+            torch.set_num_threads(integer("estimator.threads", threads, 1))
+        try:
+            self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+        except (CheckpointError, FileNotFoundError) as exc:  # the message names the file
+            raise ConfigError(f"estimator.checkpoint={checkpoint!r} (variant {variant!r}): {exc}") from exc
         if self.meta["model"]["variant"] != variant:
             raise ValueError(
                 f"checkpoint {checkpoint!r} holds a {self.meta['model']['variant']!r} model, not {variant!r}"

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import math
-
-from taslel_bench.interfaces import FrictionEstimate, Proprioception
+from taslel_bench.fields import number
+from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception
 
 
 class OracleEstimator:
@@ -30,9 +29,8 @@ class FixedEstimator:
     name = "fixed"
 
     def __init__(self, mu: float = SAFE_FLOOR_MU) -> None:
-        if not (math.isfinite(mu) and mu > 0.0):
-            raise ValueError(f"FixedEstimator mu must be a positive finite number, got {mu!r}")
-        self.mu = float(mu)
+        self.mu = number("estimator.mu", mu, 0.0, MAX_FRICTION, lo_open=True,
+                         why="a positive friction coefficient")
 
     def reset(self) -> None:
         """Nothing to forget."""

@@ -5,17 +5,21 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.fields import number
+from taslel_bench.interfaces import MAX_FRICTION, ClearanceProfile, RoundObstacle
+
+
+def friction_coefficient(path: str, value: object) -> float:
+    """A Coulomb coefficient from the config, in (0, MAX_FRICTION] (raises naming ``path``)."""
+    return number(path, value, 0.0, MAX_FRICTION, lo_open=True)
 
 
 class FlatGround:
     """The default floor of the plant with friction ``friction`` [-] for every foot contact."""
 
     def __init__(self, name: str = "flat", friction: float = 1.0) -> None:
-        if not friction > 0.0:
-            raise ValueError(f"scenario.friction must be > 0, got {friction!r}")
         self.name = name
-        self.friction = float(friction)
+        self.friction = friction_coefficient("scenario.friction", friction)
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         spec.geom("floor").friction[0] = self.friction
@@ -25,6 +29,9 @@ class FlatGround:
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return None
+
+    def obstacles(self) -> tuple[RoundObstacle, ...]:
+        return ()
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
         return None

@@ -5,8 +5,10 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from scenarios.flat import friction_coefficient
 from taslel_bench import plant
-from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.fields import number
+from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
 
 HALF_LENGTH_M = 50.0  # [m] half-extent of each floor patch
 THICKNESS_M = 0.1  # [m] patch boxes: top face at z = 0
@@ -17,11 +19,11 @@ class FrictionPatch:
 
     def __init__(self, name: str = "friction_patch", friction: float = 0.8, friction_after: float = 0.2,
                  change_at_m: float = 1.2) -> None:
-        for key, value in (("friction", friction), ("friction_after", friction_after)):
-            if not value > 0.0:
-                raise ValueError(f"scenario.{key} must be > 0, got {value!r}")
         self.name = name
-        self.friction, self.friction_after, self.change_at_m = float(friction), float(friction_after), float(change_at_m)
+        self.friction = friction_coefficient("scenario.friction", friction)
+        self.friction_after = friction_coefficient("scenario.friction_after", friction_after)
+        self.change_at_m = number("scenario.change_at_m", change_at_m, -HALF_LENGTH_M, HALF_LENGTH_M,
+                                  unit="m", why="the floor patches are 100 m long")
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         spec.delete(spec.geom("floor"))
@@ -39,6 +41,9 @@ class FrictionPatch:
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return None
+
+    def obstacles(self) -> tuple[RoundObstacle, ...]:
+        return ()
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
         return None

@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numba import njit
 
+from taslel_bench.fields import choice, number
 from taslel_bench.interfaces import SOLVED, QPProblem
 
 LEVELS = ("kkt", "primal", "none")
@@ -40,8 +41,10 @@ class Tolerances:
     level: str = "kkt"
 
     def __post_init__(self) -> None:
-        if self.level not in LEVELS:
-            raise ValueError(f"check level {self.level!r}; valid: {', '.join(LEVELS)}")
+        """Checked as the ``solver.check`` config group: positive finite thresholds, a known level."""
+        for name in ("primal", "dual", "gap"):
+            number(f"solver.check.{name}", getattr(self, name), 0.0, lo_open=True)
+        choice("solver.check.level", self.level, LEVELS)
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)

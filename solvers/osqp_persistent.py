@@ -23,7 +23,9 @@ import scipy.sparse as sp
 from numba import njit
 
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
+from solvers.settings import check_settings
 from solvers.sparse import PatternCSC
+from taslel_bench.fields import flag
 from taslel_bench.interfaces import QPProblem
 
 # Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
@@ -58,13 +60,14 @@ class OsqpPersistent(PersistentBackend):
                  settings_with_equalities: dict[str, Any] | None = None, drop_vacuous_rows: bool = True,
                  **kwargs: Any) -> None:  # fmt: skip
         super().__init__({**DEFAULT_SETTINGS, **dict(settings or {})}, **kwargs)
-        self.drop_vacuous_rows = bool(drop_vacuous_rows)
+        self.drop_vacuous_rows = flag("solver.drop_vacuous_rows", drop_vacuous_rows)
         self._kept_patterns: dict[bytes, tuple] = {}  # vacuous-row mask -> pattern of the kept G rows
         self._vac_bytes = self._g_rows_of = b""
         self.settings["warm_starting"] = self.warm_start  # off: every solve starts from zero
-        self.settings_with_equalities = dict(
-            DEFAULT_SETTINGS_WITH_EQUALITIES if settings_with_equalities is None else settings_with_equalities
-        )
+        with_eq = settings_with_equalities
+        if with_eq is None:
+            with_eq = DEFAULT_SETTINGS_WITH_EQUALITIES
+        self.settings_with_equalities = check_settings(with_eq, "solver.settings_with_equalities")
         self._solver = None
 
     def settings_for(self, problem: QPProblem) -> dict[str, Any]:

@@ -24,6 +24,8 @@ from numba import njit
 
 from solvers.base import BackendSolution, checked, invalid_data, layout_key, package_version
 from solvers.checks import Tolerances
+from solvers.settings import check_settings
+from taslel_bench.fields import flag
 from taslel_bench.interfaces import QPProblem
 
 BIG = 1e20  # finite stand-in for an infinite bound, where a solver needs one
@@ -61,9 +63,9 @@ class PersistentBackend:
 
     def __init__(self, settings: Mapping[str, Any] | None = None, check: Mapping[str, float] | None = None,
                  warm_start: bool = True) -> None:  # fmt: skip
-        self.settings = dict(settings or {})
+        self.settings = check_settings(settings)
         self.tol = Tolerances(**dict(check or {}))
-        self.warm_start = bool(warm_start)
+        self.warm_start = flag("solver.warm_start", warm_start)
         self._key: tuple | None = None
         self._masks: tuple | None = None  # pattern masks of the last layout key (see _pattern_key)
         self._masks_key: tuple = ()

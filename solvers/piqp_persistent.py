@@ -21,6 +21,7 @@ import numpy as np
 
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
+from taslel_bench.fields import choice
 from taslel_bench.interfaces import QPProblem
 
 DEFAULT_SETTINGS: dict[str, Any] = {"eps_abs": 1e-9, "eps_rel": 0.0, "verbose": False}
@@ -31,8 +32,7 @@ class PiqpPersistent(PersistentBackend):
     package = "piqp"
 
     def __init__(self, settings: dict[str, Any] | None = None, backend: str = "dense", **kwargs: Any) -> None:
-        if backend not in ("dense", "sparse"):
-            raise ValueError(f"piqp_persistent backend={backend!r}; valid: dense, sparse")
+        choice("solver.backend", backend, ("dense", "sparse"))
         super().__init__({**DEFAULT_SETTINGS, **dict(settings or {})}, **kwargs)
         self.backend = backend
         self._solver = None

@@ -12,7 +12,9 @@ import numpy as np
 from solvers.base import BackendSolution, checked, invalid_data, package_version
 from solvers.checks import Tolerances
 from solvers.presolve import Reduced, reduce
+from solvers.settings import check_settings
 from solvers.sparse import PatternCache
+from taslel_bench.fields import choice, fail, flag
 from taslel_bench.interfaces import QPProblem
 
 # Solvers whose qpsolvers interface passes lb/ub to the native solver (others turn them into G rows,
@@ -87,27 +89,26 @@ class QpsolversBackend:
 
         available = installed_solvers()
         if solver not in available:
-            raise ValueError(
-                f"qpsolvers solver {solver!r} is not installed; available: {', '.join(available)}"
-            )
-        if matrices not in ("auto", "dense", "sparse") or bounds not in ("auto", "native", "rows"):
-            raise ValueError(
-                f"matrices={matrices!r} (auto|dense|sparse), bounds={bounds!r} (auto|native|rows)"
-            )
+            raise fail("solver.solver", solver,
+                       f"this qpsolvers solver is not installed; available: {', '.join(available)}")
+        choice("solver.matrices", matrices, ("auto", "dense", "sparse"))
+        choice("solver.bounds", bounds, ("auto", "native", "rows"))
+        if presolve is not None:
+            flag("solver.presolve", presolve)
         if matrices == "auto":
             matrices = "dense" if solver in qpsolvers.dense_solvers else "sparse"
         if matrices == "sparse" and solver not in qpsolvers.sparse_solvers:
-            raise ValueError(f"{solver} has no sparse interface in qpsolvers")
+            raise fail("solver.matrices", matrices, f"{solver} has no sparse interface in qpsolvers")
         if bounds == "auto":
             bounds = "native" if solver in NATIVE_BOX else "rows"
         self.solver = solver
         self.name = solver
-        self.settings = dict(settings or {})
+        self.settings = check_settings(settings)
         self.matrices, self.bounds = matrices, bounds
         self.presolve = (solver in NEEDS_PRESOLVE) if presolve is None else bool(presolve)
         self.tol = Tolerances(**dict(check or {}))
         self._patterns = PatternCache()
-        self.warm_start = bool(warm_start)
+        self.warm_start = flag("solver.warm_start", warm_start)
         self.supports_warm_start = solver in USES_INITVALS
         self._x_prev: np.ndarray | None = None
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from solvers.base import BackendSolution
 from solvers.qpsolvers_backend import QpsolversBackend
+from taslel_bench.fields import number
 from taslel_bench.interfaces import QPBackend, QPProblem
 
 TIGHT_CHECK = {"primal": 1e-8, "dual": 1e-8, "gap": 1e-8}
@@ -30,7 +31,7 @@ class CrossChecked:
 
     def __init__(self, primary: QPBackend, secondary: QPBackend, agree_u_nm: float = 1e-8) -> None:
         self.primary, self.secondary = primary, secondary
-        self.agree_u_nm = agree_u_nm  # [N·m]
+        self.agree_u_nm = number("solver.agree_u_nm", agree_u_nm, 0.0, lo_open=True, unit="N·m")
         self.name = f"reference({primary.name}+{secondary.name})"
 
     def reset(self) -> None:

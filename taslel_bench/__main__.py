@@ -6,6 +6,7 @@ multirun the :class:`taslel_bench.sweep.SweepCallback` aggregates the sweep fold
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import hydra
@@ -14,6 +15,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from taslel_bench.console import print_summary
+from taslel_bench.launchers import LauncherNotInstalled, check_launcher_overrides
 from taslel_bench.run import record_job_error
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
@@ -27,19 +29,27 @@ def main(cfg: DictConfig) -> dict:
     out_dir = Path(hc.runtime.output_dir)
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if "/" not in k and not k.startswith("hydra")}
     try:
-        summary = run(cfg, out_dir, choices)
+        summary = run(cfg, out_dir, choices, list(hc.overrides.task))
     except Exception as exc:
         if hc.mode != RunMode.MULTIRUN:
             raise  # a single run: the error (e.g. a bad value, naming the field) is the output
         # in a sweep one bad job must not stop the others: leave an error summary the report lists
-        summary = record_job_error(out_dir, choices, cfg, exc)
+        summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
     print_summary(summary, out_dir)
     if hc.mode == RunMode.MULTIRUN:
+        from taslel_bench.sweep import run_folders
+
         sweep_dir = Path(hc.sweep.dir)
-        done = sum(1 for _ in sweep_dir.rglob("summary.json"))
-        print(f"sweep progress: {done} runs complete in {sweep_dir} (this was job #{hc.job.num})", flush=True)
+        done = sum(1 for d in run_folders(sweep_dir) if (d / "summary.json").is_file())
+        job = hc.job.override_dirname or f"#{hc.job.num}"
+        print(f"sweep progress: job #{hc.job.num} ({job}) ended {summary.get('status')}; {done} runs complete "
+              f"in {sweep_dir}", flush=True)
     return summary
 
 
 if __name__ == "__main__":
+    try:
+        check_launcher_overrides(sys.argv[1:])
+    except LauncherNotInstalled as exc:
+        sys.exit(f"error: {exc}")
     main()

@@ -18,7 +18,7 @@ from taslel_bench.jit import kernel
 
 
 @kernel
-def _quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
+def quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix (world from body) of a unit quaternion (w, x, y, z)."""
     w, x, y, z = quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]
     R = np.empty((3, 3))
@@ -96,7 +96,7 @@ class StateBridge:
     def qvel_mj(self, q: np.ndarray, v: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         """Write a Pinocchio velocity into MuJoCo ``qvel`` (in place) and return it."""
         d = self.free_dadr
-        rot_world_from_trunk = _quat_wxyz_to_matrix(np.array([q[6], q[3], q[4], q[5]]))
+        rot_world_from_trunk = quat_wxyz_to_matrix(np.array([q[6], q[3], q[4], q[5]]))
         qvel[d : d + 3] = rot_world_from_trunk @ v[:3]
         qvel[d + 3 : d + 6] = v[3:6]
         qvel[self.joint_dadr] = v[6:]
@@ -121,7 +121,7 @@ def _state_pin(qpos, qvel, q_from_qpos, v_from_qvel, quat_adr, q, v):
     for i in range(v.shape[0]):
         v[i] = qvel[v_from_qvel[i]]
     quat = qpos[quat_adr : quat_adr + 4]
-    R = _quat_wxyz_to_matrix(quat / np.sqrt(quat @ quat))  # MuJoCo keeps |quat| ~ 1: make R a rotation
+    R = quat_wxyz_to_matrix(quat / np.sqrt(quat @ quat))  # MuJoCo keeps |quat| ~ 1: make R a rotation
     vx, vy, vz = v[0], v[1], v[2]
     for i in range(3):  # R' v_world
         v[i] = R[0, i] * vx + R[1, i] * vy + R[2, i] * vz

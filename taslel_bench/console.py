@@ -8,10 +8,19 @@ from rich.console import Console
 from rich.table import Table
 
 KEY_METRICS = (
-    "status", "fell", "time_to_fall_s", "distance_m", "mean_speed_mps", "real_time_factor", "tick_us_median",
-    "intervention_nm_mean", "qp_failed_rate", "qp_solve_us_median", "qp_solve_us_p99", "grf_mae_z_n",
-    "grf_mae_xy_n", "friction_ratio_p95", "slip_mps_mean", "clearance_violation_rate", "clearance_min_m",
-    "estimator_mae",
+    "status", "degraded_reasons", "fell", "time_to_fall_s", "fall_reason", "distance_m", "mean_speed_mps",
+    "real_time_factor", "tick_us_median", "intervention_nm_mean", "u_nom_nm_mean", "qp_failed_rate",
+    "qp_solve_us_median", "qp_solve_us_p99", "grf_mae_z_n", "grf_mae_z_n_stance", "friction_cone_edge_rate",
+    "filter_demand_beyond_cone_rate", "slip_mps_mean", "sliding_distance_m", "clearance_violation_rate",
+    "clearance_min_m", "trips", "barrier_negative_rate", "estimator_mae",
+)
+# what the plant is against what the controller's model believes (taslel_bench.model_report) and how wrong
+# the model was in the episode (taslel_bench.residuals)
+MODEL_METRICS = (
+    "plant_total_mass_kg", "model_total_mass_kg", "model_minus_plant_com_stand_m",
+    "plant_joint_damping_nms_per_rad_max", "model_joint_damping_nms_per_rad_max", "plant_joint_armature_kgm2_max",
+    "model_joint_armature_kgm2_max", "plant_joint_frictionloss_nm_max", "model_joint_frictionloss_nm_max",
+    "plant_integrator", "residual_trunk_force_n_rms", "residual_joint_nm_rms", "residual_alarm_rate",
 )
 
 
@@ -27,8 +36,8 @@ def print_summary(summary: dict, out_dir: Path) -> None:
     table = Table(title=title, show_header=True, header_style="bold")
     table.add_column("metric")
     table.add_column("value", justify="right")
-    for k in KEY_METRICS:
-        if k in summary:
+    for k in (*KEY_METRICS, *MODEL_METRICS):
+        if k in summary and summary[k] not in ("", None):
             table.add_row(k, _fmt(summary[k]))
     if summary.get("message"):
         table.add_row("message", str(summary["message"]))

@@ -5,6 +5,15 @@ faults inside the episode (NaN state, solver exceptions): they end or mark the r
 Time: ``t`` [s] is episode time from the start of the stand; walking starts at ``stand_duration_s``.
 The control tick reads the plant state, computes u_nom, filters it, holds u for ``physics_per_tick``
 physics steps (zero-order hold), then reads plant contact forces of the last physics step.
+
+Initial state: built once per episode object from the seeded rng (stand pose + joint and trunk-velocity
+noise), placed so that the lowest foot sphere touches the floor (z = 0) by :data:`INITIAL_PENETRATION_M`;
+every :meth:`Episode.run` starts from that same state (the friction check of the run sees it too).
+
+Falls are checked after *every* physics step on the state that step produced (trunk height and tilt read
+from ``qpos``, not from ``xpos``/``xmat``, which ``mj_step`` leaves at the step's starting state), and on the
+contacts MuJoCo found for the step's starting state (a non-foot robot geom touching the floor at distance
+<= 0). ``time_to_fall_s`` is the episode time of the first state past a threshold.
 """
 
 from __future__ import annotations
@@ -18,14 +27,17 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from taslel_bench import plant, robot
+from taslel_bench import plant, residuals, robot
 from taslel_bench.bridge import StateBridge
 from taslel_bench.constraints import TickInputs
 from taslel_bench.controller import NominalController
 from taslel_bench.interfaces import Estimator, Proprioception, Scenario
 from taslel_bench.model import A1Model
+from taslel_bench.residuals import ResidualSetup
 from taslel_bench.safety_filter import SafetyFilter
 from taslel_bench.trace import EpisodeTrace
+
+INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the floor: touching
 
 
 @dataclass(frozen=True)
@@ -68,13 +80,14 @@ class Episode:
         estimator: Estimator,
         rng: np.random.Generator,
         stance_from_contact: bool = False,
+        model: A1Model | None = None,  # the controller's model (None: the URDF as is)
     ) -> None:
         self.s = settings
         self.scenario = scenario
         self.m = mj_model
         self.d = mujoco.MjData(mj_model)
         self.bridge = StateBridge(mj_model)
-        self.model = A1Model()
+        self.model = model if model is not None else A1Model()
         self.controller = controller
         self.filter = safety_filter
         self.estimator = estimator
@@ -83,23 +96,42 @@ class Episode:
         self.contacts = plant.FootContactReader(mj_model)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
-        self.trunk_body = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
         # --- QP recording hook (record.qps, taslel_bench.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
+        # --- streaming hook (record.mcap): chunk_sink(trace, k0, k1) after every chunk_ticks ticks, outside
+        # the ticks' timers (its time is reported as recording_s, not in wall_time_s)
+        self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
+        self.chunk_ticks = 1000
+        self.initial_qpos, self.initial_qvel = self._draw_initial_state()
+        self.initial_state()
 
-    def initial_state(self) -> None:
-        """Stand pose with feet on the ground, perturbed by the seeded rng."""
-        s, d = self.s, self.d
+    def _draw_initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """MuJoCo (qpos, qvel) of the stand pose perturbed by the seeded rng (drawn once per episode): joint
+        angles + N(0, init_joint_noise_rad), trunk linear velocity + N(0, init_base_vel_noise_mps) [world
+        axes], trunk height set so the lowest foot-sphere bottom is INITIAL_PENETRATION_M below z = 0."""
+        s, m, d = self.s, self.m, self.d
         q = np.zeros(robot.NQ)
         q[6] = 1.0
         q[2] = self.controller.gait.p.stand_height_m + robot.FOOT_RADIUS_M
         q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
         v = np.zeros(robot.NV)
         v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)
-        mujoco.mj_resetData(self.m, d)
+        mujoco.mj_resetData(m, d)
+        self.bridge.qpos_mj(q, d.qpos)
+        mujoco.mj_kinematics(m, d)
+        feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in robot.FOOT_FRAMES]
+        lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0]))
+        q[2] -= lowest_bottom + INITIAL_PENETRATION_M
         self.bridge.qpos_mj(q, d.qpos)
         self.bridge.qvel_mj(q, v, d.qvel)
-        mujoco.mj_forward(self.m, d)
+        return d.qpos.copy(), d.qvel.copy()
+
+    def initial_state(self) -> None:
+        """Reset the plant to the episode's initial state (the same one every time)."""
+        mujoco.mj_resetData(self.m, self.d)
+        self.d.qpos[:] = self.initial_qpos
+        self.d.qvel[:] = self.initial_qvel
+        mujoco.mj_forward(self.m, self.d)
 
     def _warm_up(self, q: np.ndarray, v: np.ndarray) -> float:
         """Run the tick's compiled kernels once on the initial state, before the episode clock starts (the
@@ -119,6 +151,17 @@ class Episode:
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
         return time.perf_counter() - t0
 
+    def _residuals(self, trace: EpisodeTrace, res: EpisodeResult) -> None:
+        """The controller model's residuals against the recorded plant motion (after the episode)."""
+        t0 = time.perf_counter()
+        alpha2 = self.filter.settings.ecbf_alpha2 if self.filter is not None else 20.0
+        setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s, alpha2)
+        try:
+            residuals.compute(trace, setup)
+        except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
+            res.extras["residuals_error"] = traceback.format_exc().strip().splitlines()[-1]
+        res.extras["residuals_s"] = time.perf_counter() - t0
+
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         s, m, d, br = self.s, self.m, self.d, self.bridge
         trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
@@ -127,6 +170,9 @@ class Episode:
         self.initial_state()
         self.estimator.reset()
         profile = self.scenario.clearance_profile()
+        trace.bind(br, self.contacts, profile, self.scenario)
+        sink, chunk = self.chunk_sink, max(1, int(self.chunk_ticks))
+        recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
         q = np.zeros(robot.NQ)  # Pinocchio configuration, read from the plant every tick
         v = np.zeros(robot.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         qj, qdj = q[7:], v[6:]  # views: joint angles [rad] and velocities [rad/s], core order
@@ -134,12 +180,13 @@ class Episode:
         mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         need_model = self.filter is not None
         res.extras["warmup_s"] = self._warm_up(q, v)
-        ecbf = self.filter.ecbf if self.filter is not None else None
+        barriers = (self.filter.ecbf, self.filter.obstacle_ecbf) if self.filter is not None else (None, None)
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
         t0_plant = d.time
         qpos, qvel, ctrl, sensordata = d.qpos, d.qvel, d.ctrl, d.sensordata  # views, valid for the episode
-        xpos, xmat, trunk = d.xpos, d.xmat, self.trunk_body
+        a = br.free_qadr  # trunk origin z [m] at qpos[a + 2], orientation (w, x, y, z) at qpos[a + 3 : a + 7]
+        contacts = self.contacts
         wall0 = time.perf_counter()
         k = 0
         try:
@@ -147,12 +194,12 @@ class Episode:
                 tick0 = time.perf_counter()
                 t = k * s.control_dt_s
                 br.state_pin(qpos, qvel, q, v)  # also fills qj, qdj
-                trunk_xy = qpos[br.free_qadr : br.free_qadr + 2]
+                trunk_xy = qpos[a : a + 2]
                 true_mu = self.scenario.friction_at(trunk_xy)
                 est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu, mu_filter_prev))
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)
-                in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+                in_stance = contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
                 tick1 = tick2 = tick3 = time.perf_counter()
                 if need_model and t >= s.filter_start_s:
                     self.model.update(q, v)
@@ -168,49 +215,62 @@ class Episode:
                     fres = None
                     u = u_nom
                     mu_filter_prev = math.nan
+                reason, t_fall, obstacle_touch, shin_touch, unstable = "", math.nan, False, False, False
                 for _ in range(self.physics_per_tick):
                     br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
                     self.scenario.on_tick(m, d, t)
+                    t_before = d.time
                     mujoco.mj_step(m, d)
+                    if d.time <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
+                        unstable = True
+                        break
+                    # --- fall checks on this step's result: trunk pose from qpos (the new state) ...
+                    z = qpos[a + 2]
+                    cos_tilt = 1.0 - 2.0 * (qpos[a + 4] * qpos[a + 4] + qpos[a + 5] * qpos[a + 5])  # trunk z . world z
+                    if z < s.fall_height_m:
+                        reason, t_fall = f"trunk height {z:.3f} m < {s.fall_height_m} m", d.time - t0_plant
+                    elif cos_tilt < cos_tilt_min:
+                        tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
+                        reason, t_fall = f"trunk tilt {tilt:.0f} deg", d.time - t0_plant
+                    # ... and contacts, which MuJoCo found for the step's starting state (one step earlier)
+                    elif contacts.check_non_foot_contact(d):
+                        reason = f"{contacts.non_foot_contact_name} (above the knee) touched the terrain"
+                        t_fall = d.time - s.physics_dt_s - t0_plant
+                    obstacle_touch |= contacts.non_foot_obstacle_contact
+                    shin_touch |= contacts.shin_contact
+                    if reason:
+                        break
                 if self.stance_from_contact:  # next tick's stance set
-                    self.contacts.read(d)
-                else:
-                    self.contacts.check_non_foot_contact(d)
+                    contacts.read(d)
                 tau_prev[:] = u
                 tick4 = time.perf_counter()
-                trace.tick_parts_us[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
-                tick_s = tick4 - tick0
-                t_end_of_tick = t0_plant + (k + 1) * s.control_dt_s - 0.5 * s.physics_dt_s
-                trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu, tick_s,
-                             ecbf)
+                trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
+                trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
+                             tick4 - tick0, barriers, obstacle_touch, shin_touch)  # fmt: skip
                 trace.mu_hat_ready[k] = est.ready
-                # --- termination checks (plant state after the tick) ---
-                # one dot product catches NaN/inf anywhere in the state and bounds the joint speeds
+                # --- termination: a non-finite / exploding state (one dot product catches NaN/inf anywhere in
+                # the state and bounds the joint speeds; a MuJoCo reset is caught by its clock above), then a fall
                 vel_sq, pos_sq = float(qvel @ qvel), float(qpos @ qpos)
-                # MuJoCo resets the data (time -> 0) on a NaN/huge qpos, qvel or qacc: catch that cheaply
-                unstable = d.time < t_end_of_tick
                 if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:
                     res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
                     break
-                z = xpos[trunk, 2]
-                cos_tilt = xmat[trunk, 8]  # world-z component of the trunk z axis
-                reason = ""
-                if z < s.fall_height_m:
-                    reason = f"trunk height {z:.3f} m < {s.fall_height_m} m"
-                elif cos_tilt < cos_tilt_min:
-                    reason = f"trunk tilt {math.degrees(math.acos(max(-1.0, cos_tilt))):.0f} deg"
-                elif self.contacts.non_foot_contact:
-                    reason = "non-foot body touched the ground"
-                if reason:
-                    res.fell, res.time_to_fall_s, res.fall_reason = True, t + s.control_dt_s, reason
+                if reason:  # the time of the first physics state past a threshold, on the physics-step grid
+                    t_fall = round(t_fall / s.physics_dt_s) * s.physics_dt_s
+                    res.fell, res.time_to_fall_s, res.fall_reason = True, t_fall, reason
                     break
                 if progress is not None and k % 500 == 0:
                     progress(t)
+                if sink is not None and (k + 1) % chunk == 0:  # streaming recording, between two ticks
+                    rec0 = time.perf_counter()
+                    sink(trace, k + 1 - chunk, k + 1)
+                    recording_s += time.perf_counter() - rec0
         except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
             res.status = "error"
             res.message = f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
-        trace.finalize(br, self.contacts, profile)
+        res.wall_time_s = time.perf_counter() - wall0 - recording_s
+        trace.finalize()
+        self._residuals(trace, res)
         res.n_ticks = trace.n
-        res.wall_time_s = time.perf_counter() - wall0
+        res.extras["recording_s"] = recording_s
         return res

@@ -140,6 +140,24 @@ class ClearanceProfile:
         return float(max(self(s)[0] for s in np.linspace(0.0, 1.0, 201)))
 
 
+@dataclass(frozen=True)
+class RoundObstacle:
+    """A log (cylinder) lying across the path on the floor: its axis is parallel to world y, through
+    (x_m, z_m) [m, world], radius ``radius_m`` [m]; it spans y in [-half_width_m, half_width_m]. Its top is
+    at ``z_m + radius_m`` above the floor. Real geometry in the plant (a capsule), and the swing-foot
+    barrier's obstacle: the foot sphere of radius r is clear of it iff
+    sqrt((x - x_m)² + (z - z_m)²) >= radius_m + r for the foot-sphere centre (x, z)."""
+
+    x_m: float
+    z_m: float
+    radius_m: float
+    half_width_m: float = 0.5
+
+    @property
+    def top_m(self) -> float:
+        return self.z_m + self.radius_m
+
+
 @runtime_checkable
 class Scenario(Protocol):
     """A world: what the plant looks like and what is true about it."""
@@ -155,7 +173,13 @@ class Scenario(Protocol):
         ...
 
     def clearance_profile(self) -> ClearanceProfile | None:
-        """z(s) for the swing-foot ECBF, or None when the scenario has no obstacle profile."""
+        """z(s) for the swing-foot ECBF, or None when the scenario has no obstacle profile (a *virtual*
+        obstacle: no geometry in the plant)."""
+        ...
+
+    def obstacles(self) -> tuple[RoundObstacle, ...]:
+        """Physical obstacles the scenario puts in the plant (empty for most scenarios); the filter's
+        obstacle barrier and the clearance metrics use them."""
         ...
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
@@ -164,6 +188,10 @@ class Scenario(Protocol):
 
 
 # ---------------------------------------------------------------------------------------- estimator
+
+# [-] largest friction coefficient a config may give (scenario frictions, estimator constants): far above any
+# real foot-ground pair (rubber on concrete ~1), low enough to catch typos like 1e6
+MAX_FRICTION = 5.0
 
 
 @dataclass

@@ -1,5 +1,7 @@
 """Episode metrics for ``summary.json``: a flat dict, units in the key names, all measured in the plant
-(MuJoCo) unless the key says ``filter``. Each function states how its number is measured."""
+(MuJoCo) unless the key says ``filter``. Each function states how its number is measured. Contact metrics:
+:mod:`taslel_bench.contact_metrics`; clearance, trips and barrier values:
+:mod:`taslel_bench.clearance_metrics`; the run status: :mod:`taslel_bench.health`."""
 
 from __future__ import annotations
 
@@ -7,10 +9,12 @@ import math
 
 import numpy as np
 
+from taslel_bench.clearance_metrics import clearance_metrics
+from taslel_bench.contact_metrics import contact_metrics
 from taslel_bench.episode import EpisodeResult
+from taslel_bench.health import HealthLimits, assess
+from taslel_bench.residuals import residual_metrics
 from taslel_bench.trace import TICK_PARTS
-
-MIN_NORMAL_FORCE_N = 1.0  # [N] contacts below this are ignored in force ratios and GRF errors
 
 
 def _pct(x: np.ndarray, p: float) -> float:
@@ -21,7 +25,13 @@ def _median(x: np.ndarray) -> float:
     return float(np.median(x)) if x.size else math.nan
 
 
-def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float) -> dict[str, object]:
+DEFAULT_LIMITS = HealthLimits()
+
+
+def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
+              limits: HealthLimits = DEFAULT_LIMITS) -> dict[str, object]:  # fmt: skip
+    """The run's summary. ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip window);
+    ``limits``: when the run is ``degraded`` instead of ``ok``."""
     tr, n = res.trace, res.trace.n
     out: dict[str, object] = {
         "status": res.status,
@@ -40,11 +50,17 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float) 
     }
     for j, part in enumerate(TICK_PARTS):  # where the tick's time goes, measured inside the loop
         out[f"tick_{part}_us_median"] = _median(tr.tick_parts_us[:n, j])
+    k0 = min(round(stand_duration_s / control_dt_s), n)  # first walking tick
     out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
     out.update(filter_metrics(res))
-    out.update(contact_metrics(res, control_dt_s))
-    out.update(clearance_metrics(res))
+    out.update(contact_metrics(tr, k0, control_dt_s, stance_duration_s))
+    out.update(clearance_metrics(tr, k0))
+    out.update(residual_metrics(tr, k0, limits))
+    out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
+    if "residuals_error" in res.extras:
+        out["residuals_error"] = str(res.extras["residuals_error"])
     out.update(estimator_metrics(res))
+    out["status"], out["degraded_reasons"] = assess(out, limits)
     return out
 
 
@@ -68,21 +84,27 @@ def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[st
 
 
 def filter_metrics(res: EpisodeResult) -> dict[str, float]:
-    """Intervention = mean over ticks of ||u - u_nom||_2 [N·m]; QP timings from the backend's own timer
-    (solve) and the filter's (build)."""
+    """Intervention = mean over ticks of ||u - u_nom||_2 [N·m], beside its reference magnitude
+    ``u_nom_nm_mean`` = mean ||u_nom||_2 (what the nominal controller asks for); QP timings from the
+    backend's own timer (solve) and the filter's (build)."""
     tr, n = res.trace, res.trace.n
     du = np.linalg.norm(tr.u[:n] - tr.u_nom[:n], axis=1)
-    out: dict[str, float] = {"intervention_nm_mean": float(du.mean()) if n else math.nan}
+    u_nom = np.linalg.norm(tr.u_nom[:n], axis=1)
+    out: dict[str, float] = {
+        "intervention_nm_mean": float(du.mean()) if n else math.nan,
+        "u_nom_nm_mean": float(u_nom.mean()) if n else math.nan,
+    }
     if not tr.filter_on:
         out.update(qp_solves=0, qp_failed_rate=math.nan)
         return out
     solve = tr.qp_solve_us[:n]
     solve = solve[np.isfinite(solve)]
     build = tr.qp_build_us[:n]
+    filtered = tr.qp_status[:n] >= 0  # ticks the filter ran (filter.start_time may delay it)
     out.update(
-        qp_solves=int(n),
+        qp_solves=int(filtered.sum()),
         qp_failed=int(tr.qp_fallback[:n].sum()),
-        qp_failed_rate=float(tr.qp_fallback[:n].mean()) if n else math.nan,
+        qp_failed_rate=float(tr.qp_fallback[:n][filtered].mean()) if filtered.any() else math.nan,
         qp_solve_us_median=_median(solve),
         qp_solve_us_p99=_pct(solve, 99),
         qp_solve_us_max=float(solve.max()) if solve.size else math.nan,
@@ -93,51 +115,6 @@ def filter_metrics(res: EpisodeResult) -> dict[str, float]:
     if np.any(it >= 0):
         out["qp_iterations_median"] = float(np.median(it[it >= 0]))
     return out
-
-
-def contact_metrics(res: EpisodeResult, dt: float) -> dict[str, float]:
-    """Over (tick, foot) pairs where the foot is in the filter's stance set AND touches the ground in the
-    plant with a normal force >= MIN_NORMAL_FORCE_N:
-      * grf_mae_{z,xy}_n: |lambda (filter prediction) - MuJoCo contact force| (x and y pooled), world axes;
-      * friction_ratio_p95: 95th percentile of |f_t| / f_n of the plant force;
-      * friction_saturated_rate: fraction of those contacts with |f_t| >= 0.98 mu f_n (true mu): sliding;
-      * slip_mps_{mean,p95}: horizontal speed of the foot's contact point (centre velocity + omega x (-r z),
-        from MuJoCo's frame-velocity sensors; a rolling foot has zero slip although its centre moves)."""
-    tr, n = res.trace, res.trace.n
-    f = tr.grf_plant_w[:n]
-    sel = tr.in_stance[:n] & tr.in_contact[:n] & (f[..., 2] >= MIN_NORMAL_FORCE_N)
-    out: dict[str, float] = {}
-    ft = np.hypot(f[..., 0], f[..., 1])
-    ratio = ft[sel] / f[..., 2][sel]
-    out["friction_ratio_p95"] = _pct(ratio, 95)
-    out["friction_ratio_max"] = float(ratio.max()) if ratio.size else math.nan
-    mu = np.broadcast_to(tr.mu_true[:n, None], sel.shape)[sel]
-    # at the edge of the plant's Coulomb cone = sliding (or about to): |f_t| >= 0.98 mu f_n
-    out["friction_saturated_rate"] = float(np.mean(ratio >= 0.98 * mu)) if ratio.size else math.nan
-    slip = np.hypot(tr.slip_w[:n, :, 0], tr.slip_w[:n, :, 1])
-    out["slip_mps_mean"] = float(slip[sel].mean()) if sel.any() else math.nan
-    out["slip_mps_p95"] = _pct(slip[sel], 95)
-    if tr.filter_on:
-        lam = tr.grf_filter_w[:n]
-        ok = sel & np.all(np.isfinite(lam), axis=2)
-        err = np.abs(lam - f)
-        out["grf_mae_z_n"] = float(err[..., 2][ok].mean()) if ok.any() else math.nan
-        out["grf_mae_xy_n"] = float(err[..., :2][ok].mean()) if ok.any() else math.nan
-    return out
-
-
-def clearance_metrics(res: EpisodeResult) -> dict[str, float]:
-    """Swing ticks (schedule) of every foot: violation when foot-sphere bottom < z(s) - 1 mm;
-    clearance_min_m = min of (bottom - z(s)). NaN when the scenario has no clearance profile."""
-    tr, n = res.trace, res.trace.n
-    c = tr.clearance_m[:n]
-    c = c[np.isfinite(c)]
-    if c.size == 0:
-        return {"clearance_violation_rate": math.nan, "clearance_min_m": math.nan}
-    return {
-        "clearance_violation_rate": float(np.mean(c < -0.001)),
-        "clearance_min_m": float(c.min()),
-    }
 
 
 def estimator_metrics(res: EpisodeResult) -> dict[str, float]:

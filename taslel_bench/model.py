@@ -7,6 +7,9 @@ Frames and units: ``q`` is Pinocchio's (position of the trunk origin in world [m
 12 joint angles [rad] in :data:`robot.LEGS` order); ``v`` is (trunk linear velocity in the **trunk**
 frame [m/s], angular velocity in the trunk frame [rad/s], joint velocities [rad/s]). Foot quantities are
 expressed at the foot-sphere centre in LOCAL_WORLD_ALIGNED axes (world orientation).
+
+What the model believes about the robot (URDF file, joint damping, armature, Coulomb friction, trunk mass
+and CoM, payload) is a :class:`taslel_bench.model_options.ModelOptions`; the defaults give the URDF as is.
 """
 
 from __future__ import annotations
@@ -14,28 +17,40 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from taslel_bench import robot
+from taslel_bench import model_options, robot
 from taslel_bench.jit import kernel
+from taslel_bench.model_options import ModelOptions
 
 
 class A1Model:
     """Pinocchio model + data and the per-tick dynamics terms.
 
     After :meth:`update`:
-      * ``M`` (18x18) mass matrix [kg, kg·m, kg·m²], full symmetric;
-      * ``h`` (18) bias forces C(q, v) v + g(q) [N, N·m];
+      * ``M`` (18x18) mass matrix [kg, kg·m, kg·m²], full symmetric, armature on the joints' diagonal;
+      * ``h`` (18) bias forces C(q, v) v + g(q) [N, N·m], plus on the joint rows the known joint losses
+        d qdot + F tanh(qdot / v_eps) (damping d, Coulomb friction F of the options; 0 by default): the
+        equations of motion are M vdot + h = S u + J' lambda;
       * ``foot_pos_in_world`` (4x3) foot-sphere centres [m];
       * ``foot_vel_in_world`` (4x3) their linear velocities [m/s];
       * ``foot_jac_in_world`` (4x3x18) translational Jacobians, world axes;
       * ``foot_jdotv_in_world`` (4x3) classical acceleration at vdot = 0, i.e. J̇·v [m/s²].
     """
 
-    def __init__(self) -> None:
-        self.model = pin.buildModelFromUrdf(str(robot.a1_urdf_path()), pin.JointModelFreeFlyer())
-        self.data = self.model.createData()
+    def __init__(self, options: ModelOptions | None = None) -> None:
+        self.options = options = options or ModelOptions()
+        self.urdf_path = options.urdf or str(robot.a1_urdf_path())
+        self.model = pin.buildModelFromUrdf(self.urdf_path, pin.JointModelFreeFlyer())
         names = list(self.model.names)[2:]
         if tuple(names) != robot.JOINT_NAMES:
-            raise RuntimeError(f"Pinocchio joint order {names} differs from robot.JOINT_NAMES")
+            raise ValueError(f"{self.urdf_path}: Pinocchio joint order {names} differs from "
+                             f"robot.JOINT_NAMES")
+        model_options.apply(self.model, options)
+        self.data = self.model.createData()
+        # known joint losses added to h's joint rows each tick (skipped when all are 0: h is Pinocchio's nle)
+        self.joint_damping = options.per_joint("joint_damping")  # [N·m·s/rad] core order
+        self.joint_frictionloss = options.per_joint("joint_frictionloss")  # [N·m] core order
+        self.frictionloss_smoothing_radps = float(options.frictionloss_smoothing_radps)  # [rad/s]
+        self._joint_losses = bool(self.joint_damping.any() or self.joint_frictionloss.any())
         self.foot_frame_ids = [self.model.getFrameId(f) for f in robot.FOOT_FRAMES]
         self.total_mass_kg = float(pin.computeTotalMass(self.model))
         nv = self.model.nv
@@ -67,9 +82,21 @@ class A1Model:
             self.M, self.h, self.foot_pos_in_world, self.foot_jac_in_world, self.foot_vel_in_world,
             self.foot_jdotv_in_world,
         )  # fmt: skip
+        if self._joint_losses:
+            _add_joint_losses(self.h, v, self.joint_damping, self.joint_frictionloss,
+                              self.frictionloss_smoothing_radps)
 
     def neutral_q(self) -> np.ndarray:
         return pin.neutral(self.model)
+
+
+@kernel
+def _add_joint_losses(h, v, damping, frictionloss, v_eps):
+    """h[6 + j] += damping[j] v[6 + j] + frictionloss[j] tanh(v[6 + j] / v_eps) for the 12 joints: the torques
+    [N·m] the joint losses take from the motors (MuJoCo's passive damping force is -damping qdot)."""
+    for j in range(damping.shape[0]):
+        w = v[6 + j]
+        h[6 + j] += damping[j] * w + frictionloss[j] * np.tanh(w / v_eps)
 
 
 @kernel

@@ -17,19 +17,27 @@ import pandas as pd
 
 from taslel_bench import recording
 from taslel_bench.machine import machine_info
-from taslel_bench.sweep import SUMMARY_TABLE, aggregate
+from taslel_bench.paper_claims import paper_claims
+from taslel_bench.sweep import SUMMARY_TABLE, aggregate, override_keys, run_folders
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
 OPTIONAL_GROUP = ("filter_formulation", "filter_contact_velocity_gain")  # columns only when the sweep varies them
 
 
-def group_columns(frame: pd.DataFrame) -> list[str]:
-    """The columns that tell the rows of a sweep apart (optional ones only when they vary)."""
-    def varies(c: str) -> bool:  # among runs that have the setting at all ("none": filter off)
-        return frame.loc[frame[c] != "none", c].nunique() > 1
+def override_columns(frame: pd.DataFrame) -> list[str]:
+    """Columns of overridden config keys (``scenario.friction``, ...; :func:`sweep.expand_overrides`)."""
+    return override_keys(frame)
 
-    return [c for c in GROUP if c in frame.columns and (c not in OPTIONAL_GROUP or varies(c))]
+
+def group_columns(frame: pd.DataFrame) -> list[str]:
+    """The columns that tell the rows of a sweep apart: scenario, solver, estimator, and every setting the
+    sweep varies (optional columns and overridden keys only when they take more than one value)."""
+    def varies(c: str) -> bool:  # among runs that have the setting at all ("none": filter off)
+        return frame.loc[frame[c] != "none", c].astype(str).nunique() > 1
+
+    cols = [c for c in GROUP if c in frame.columns and (c not in OPTIONAL_GROUP or varies(c))]
+    return cols + [c for c in override_columns(frame) if varies(c)]
 
 
 def solver_label(row: pd.Series | dict, frame: pd.DataFrame) -> str:
@@ -51,9 +59,16 @@ def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT
     return float(np.exp(np.mean(np.log(v + shift_us))) - shift_us)
 
 
+FINISHED = ("ok", "degraded")  # runs that simulated to their end or to a fall
+
+
+def _finished(frame: pd.DataFrame) -> pd.DataFrame:
+    return frame[frame["status"].isin(FINISHED)] if "status" in frame else frame.iloc[0:0]
+
+
 def _fall_rate(frame: pd.DataFrame) -> str:
-    ok = frame[frame["status"] == "ok"]
-    return f"{int(ok['fell'].sum())}/{len(ok)}" if len(ok) else "—"
+    ok = _finished(frame)
+    return f"{int(ok['fell'].astype(bool).sum())}/{len(ok)}" if len(ok) else "—"
 
 
 def _mean(frame: pd.DataFrame, col: str) -> float:
@@ -73,36 +88,62 @@ def solve_times(sweep_dir: Path, frame: pd.DataFrame) -> dict[str, np.ndarray]:
     return {k: np.concatenate(v) for k, v in out.items() if v}
 
 
+COUNT_COLUMNS = ("runs", "errors", "degraded", "fall_rate")
+# report column -> summary key, per table; every number is the mean over the row's runs
+SAFETY_COLUMNS = {
+    "speed_mps": "mean_speed_mps",
+    "intervention_nm": "intervention_nm_mean",
+    "u_nom_nm": "u_nom_nm_mean",
+    "qp_failed_rate": "qp_failed_rate",
+    "grf_mae_z_n": "grf_mae_z_n",
+    "grf_mae_z_n_stance": "grf_mae_z_n_stance",
+    "grf_mae_xy_n": "grf_mae_xy_n",
+    "cone_edge_rate": "friction_cone_edge_rate",
+    "demand_beyond_cone_rate": "filter_demand_beyond_cone_rate",
+    "slip_mps_mean": "slip_mps_mean",
+    "sliding_distance_m": "sliding_distance_m",
+    "touchdown_slip_mps": "touchdown_slip_mps_mean",
+    "clearance_violation_rate": "clearance_violation_rate",
+    "clearance_depth_p95_m": "clearance_violation_depth_p95_m",
+    "trips": "trips",
+    "barrier_negative_rate": "barrier_negative_rate",
+    "residual_joint_nm": "residual_joint_nm_rms",
+    "residual_trunk_force_n": "residual_trunk_force_n_rms",
+    "residual_alarm_rate": "residual_alarm_rate",
+}
+COST_COLUMNS = {
+    "qp_solve_us_median": "qp_solve_us_median",
+    "qp_solve_us_p99": "qp_solve_us_p99",
+    "estimator_mae": "estimator_mae",
+    "estimator_overestimate_rate": "estimator_overestimate_rate",
+    "estimator_settle_s": "estimator_settle_s",
+    "real_time_factor": "real_time_factor",
+}
+
+
 def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
+    """One row per group of runs (:func:`group_columns`; seeds pooled): counts, fall rate, and the mean of
+    each metric over the row's runs that finished (``ok`` or ``degraded``; errors are counted apart)."""
     times = solve_times(sweep_dir, frame)
     shgeom = {s: shifted_geometric_mean(t) for s, t in times.items()}
     best = min(shgeom.values()) if shgeom else float("nan")
     rows = []
     cols = group_columns(frame)
-    for keys, g in frame.groupby(cols, dropna=False):
+    groups = frame.groupby(cols, dropna=False) if cols else [((), frame)]
+    status = frame["status"] if "status" in frame else pd.Series("error", index=frame.index)
+    for keys, g in groups:
         keys = keys if isinstance(keys, tuple) else (keys,)
         row = dict(zip(cols, keys))
         solver = solver_label(row, frame)
+        done = _finished(g)
         row.update({
             "runs": len(g),
-            "errors": int((g["status"] == "error").sum()),
+            "errors": int((status[g.index] == "error").sum()),
+            "degraded": int((status[g.index] == "degraded").sum()),
             "fall_rate": _fall_rate(g),
-            "speed_mps": _mean(g, "mean_speed_mps"),
-            "intervention_nm": _mean(g, "intervention_nm_mean"),
-            "qp_failed_rate": _mean(g, "qp_failed_rate"),
-            "grf_mae_z_n": _mean(g, "grf_mae_z_n"),
-            "grf_mae_xy_n": _mean(g, "grf_mae_xy_n"),
-            "friction_ratio_p95": _mean(g, "friction_ratio_p95"),
-            "slip_mps_mean": _mean(g, "slip_mps_mean"),
-            "clearance_violation_rate": _mean(g, "clearance_violation_rate"),
-            "qp_solve_us_median": _mean(g, "qp_solve_us_median"),
-            "qp_solve_us_p99": _mean(g, "qp_solve_us_p99"),
-            "qp_shgeom_rel_best": shgeom.get(solver, float("nan")) / best if solver in shgeom else float("nan"),
-            "estimator_mae": _mean(g, "estimator_mae"),
-            "estimator_overestimate_rate": _mean(g, "estimator_overestimate_rate"),
-            "estimator_settle_s": _mean(g, "estimator_settle_s"),
-            "real_time_factor": _mean(g, "real_time_factor"),
-        })
+        })  # fmt: skip
+        row.update({name: _mean(done, key) for name, key in {**SAFETY_COLUMNS, **COST_COLUMNS}.items()})
+        row["qp_shgeom_rel_best"] = shgeom.get(solver, float("nan")) / best if solver in shgeom else float("nan")
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -128,7 +169,7 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
         plt.close(fig)
         made.append("qp_solve_times.png")
     if "scenario" in table and len(table):
-        ok = frame[frame["status"] == "ok"]
+        ok = _finished(frame)
         rates = ok.groupby("scenario")["fell"].mean() if len(ok) else pd.Series(dtype=float)
         if len(rates):
             fig, ax = plt.subplots(figsize=(6, 3))
@@ -148,7 +189,8 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
 def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series | None:
     if "filter_enabled" not in frame or "scenario" not in frame:
         return None
-    sel = frame[(frame["scenario"] == scenario) & (frame["filter_enabled"] == filter_on) & (frame["status"] == "ok")]
+    done = _finished(frame)
+    sel = done[(done["scenario"] == scenario) & (done["filter_enabled"] == filter_on)]
     return sel.sort_values("seed").iloc[0] if len(sel) else None
 
 
@@ -185,6 +227,8 @@ def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
         fig.savefig(sweep_dir / "grf_lateral.png", dpi=120)
         plt.close(fig)
         made.append("grf_lateral.png")
+    logs_figure = _logs_figure(sweep_dir, frame, plt)
+    made += [logs_figure] if logs_figure else []
     clearance = {on: _steps(sweep_dir, _first_run(frame, "obstacle", on)) for on in (False, True)}
     if any(r is not None for r in clearance.values()):
         fig, ax = plt.subplots(figsize=(8, 3.2))
@@ -209,54 +253,52 @@ def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
     return made
 
 
-PAPER = {"grf_mae_z_n": 3.051, "grf_mae_xy_n": 1.847}
+def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
+    """The physical obstacles of a run, rebuilt from its config.yaml (Hydra builds the scenario)."""
+    path = sweep_dir / str(row["run_dir"]) / "config.yaml" if row is not None else None
+    if path is None or not path.is_file():
+        return ()
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    return tuple(instantiate(OmegaConf.load(path).scenario).obstacles())
 
 
-def paper_section(frame: pd.DataFrame) -> str:
-    """Paper vs ours, for the claims the sweep has runs for (mean over seeds, with min-max)."""
-    if "filter_enabled" not in frame or "scenario" not in frame:
-        return ""
-    ok = frame[frame["status"] == "ok"].copy()
-    ok["filter_enabled"] = ok["filter_enabled"].fillna(False).astype(bool)
-    note = ""
-    if "filter_contact_velocity_gain" in group_columns(frame):  # the paper's contact rows: k_v = 0
-        gain = ok["filter_contact_velocity_gain"].astype(float)
-        ok = ok[~ok["filter_enabled"] | (gain == 0.0)]
-        note = "Filter-on rows: `filter.contact_velocity_gain=0` (the paper's contact constraint) only.\n\n"
-
-    def stat(scenario: str, on: bool, col: str) -> str:
-        v = ok[(ok["scenario"] == scenario) & (ok["filter_enabled"] == on)][col].astype(float).dropna()
-        return f"{v.mean():.3g} ({v.min():.3g}–{v.max():.3g}, n={len(v)})" if len(v) else "—"
-
-    rows = []
-    if (ok["scenario"] == "flat").any():
-        rows.append(("GRF MAE vertical [N], flat, filter on", f"{PAPER['grf_mae_z_n']}", stat("flat", True, "grf_mae_z_n")))
-        rows.append(("GRF MAE lateral [N], flat, filter on", f"{PAPER['grf_mae_xy_n']}", stat("flat", True, "grf_mae_xy_n")))
-    if (ok["scenario"] == "low_friction").any():
-        rows.append(("friction ratio p95, mu=0.2, nominal only", "—", stat("low_friction", False, "friction_ratio_p95")))
-        rows.append(("friction ratio p95, mu=0.2, filter", "<= 0.2 (cone)", stat("low_friction", True, "friction_ratio_p95")))
-        rows.append(("stance contacts at the cone edge, mu=0.2, nominal only", "—",
-                     stat("low_friction", False, "friction_saturated_rate")))
-        rows.append(("stance contacts at the cone edge, mu=0.2, filter", "—",
-                     stat("low_friction", True, "friction_saturated_rate")))
-        rows.append(("slip [m/s], mu=0.2, nominal only", "sliding", stat("low_friction", False, "slip_mps_mean")))
-        rows.append(("slip [m/s], mu=0.2, filter", "sliding eliminated", stat("low_friction", True, "slip_mps_mean")))
-        rows.append(("GRF MAE vertical [N], mu=0.2, filter", "—", stat("low_friction", True, "grf_mae_z_n")))
-    if (ok["scenario"] == "obstacle").any():
-        rows.append(("clearance violation rate, nominal only", "—", stat("obstacle", False, "clearance_violation_rate")))
-        rows.append(("clearance violation rate, ECBF", "foot kept clear (figure)", stat("obstacle", True, "clearance_violation_rate")))
-        rows.append(("min clearance [m], ECBF", "—", stat("obstacle", True, "clearance_min_m")))
-        rows.append(("intervention [N·m], ECBF", "minimal", stat("obstacle", True, "intervention_nm_mean")))
-    for scenario in dict.fromkeys(ok["scenario"]):
-        counts = []
-        for on in (True, False):
-            runs = ok[(ok["scenario"] == scenario) & (ok["filter_enabled"] == on)]
-            counts.append(f"{int(runs['fell'].sum())}/{len(runs)}")
-        rows.append((f"falls, {scenario}: filter on / nominal only", "no falls", " / ".join(counts)))
-    if not rows:
-        return ""
-    table = pd.DataFrame(rows, columns=["quantity", "paper", "ours: mean (min–max, runs)"])
-    return "## Paper vs this harness\n\n" + note + _md_table(table)
+def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
+    """FL foot-sphere centre path (world x-z) over the logs, nominal vs filtered (first seed of each), with
+    the logs and the trunk's progress."""
+    rows = {on: _first_run(frame, "logs", on) for on in (False, True)}
+    runs = {on: _steps(sweep_dir, row) for on, row in rows.items()}
+    if all(r is None for r in runs.values()):
+        return None
+    fig, (ax, ax_x) = plt.subplots(2, 1, figsize=(8, 5.2), gridspec_kw={"height_ratios": [2, 1]})
+    for ob in _run_obstacles(sweep_dir, rows[True] if rows[True] is not None else rows[False]):
+        x = np.linspace(ob.x_m - ob.radius_m, ob.x_m + ob.radius_m, 101)
+        top = ob.z_m + np.sqrt(np.maximum(ob.radius_m**2 - (x - ob.x_m) ** 2, 0.0))  # the log's upper outline
+        ax.fill_between(x, 0.0, np.maximum(top, 0.0), color="saddlebrown", alpha=0.5, lw=0)
+    for on, steps in runs.items():
+        if steps is None:
+            continue
+        label = "ECBF on" if on else "nominal only"
+        ax.plot(steps["FL_foot_x_w_m"], steps["FL_foot_z_w_m"] - 0.02, lw=0.7, label=f"{label}: FL foot bottom")
+        touch = steps["FL_obstacle_contact"].to_numpy(bool)
+        ax.plot(steps["FL_foot_x_w_m"][touch], steps["FL_foot_z_w_m"][touch] - 0.02, "x", ms=3,
+                label=f"{label}: foot on or against a log")
+        ax_x.plot(steps["t_s"], steps["base_x_w_m"], label=label)
+    reach = max(float(r["FL_foot_x_w_m"].max()) for r in runs.values() if r is not None)
+    ax.set_xlim(0.1, reach + 0.3)
+    ax.set_ylim(-0.005, 0.16)
+    ax.set_xlabel("world x [m]")
+    ax.set_ylabel("z [m] (not to scale)")
+    ax.set_title("FL foot path over the logs (brown: the logs; x: foot in contact with one)")
+    ax.legend(fontsize=7)
+    ax_x.set_xlabel("t [s]")
+    ax_x.set_ylabel("trunk x [m]")
+    ax_x.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(sweep_dir / "logs.png", dpi=120)
+    plt.close(fig)
+    return "logs.png"
 
 
 def _md_table(table: pd.DataFrame) -> str:
@@ -270,14 +312,30 @@ def _md_table(table: pd.DataFrame) -> str:
 
 
 HOW_MEASURED = """
-How each column is measured (all plant quantities in MuJoCo, per run, then averaged over the runs of
-the row; `fall_rate` counts falls over runs that ended without error):
+How each column is measured (all plant quantities in MuJoCo, per run over the walking time, then averaged
+over the row's finished runs, `ok` or `degraded`; `fall_rate` counts falls over those runs; `degraded` runs
+crossed a health limit and are listed below):
 - `speed_mps`: world-x displacement of the trunk from the start of walking / walking time.
-- `intervention_nm`: mean over ticks of ||u - u_nom||₂.
-- `grf_mae_*`: |filter lambda - MuJoCo contact force| over stance ticks with the foot in contact (>= 1 N).
-- `friction_ratio_p95`: 95th percentile of |f_t|/f_n of the plant contact force of stance feet.
-- `slip_mps_mean`: mean horizontal speed of the contact point of stance feet in contact (MuJoCo sensors).
-- `clearance_violation_rate`: swing ticks with the foot-sphere bottom below z(s) - 1 mm.
+- `intervention_nm`: mean over ticks of ||u - u_nom||₂; `u_nom_nm`: mean ||u_nom||₂, its reference size.
+- *Loaded* contacts: every (tick, foot) with a MuJoCo normal force >= 1 N or a filter lambda_z >= 1 N (early
+  touchdowns in the scheduled swing and lift-off lag included); `_stance`: the filter's stance set with
+  plant load (the definition used before, and the paper's selection).
+- `grf_mae_*`: |filter lambda - MuJoCo contact force| (world axes) over loaded contacts (lambda = 0 where the
+  filter treats the foot as swing).
+- `cone_edge_rate`: share of plant-loaded contacts with |f_t| >= 0.98 mu f_n, mu = the friction under that
+  foot: sliding or about to. `demand_beyond_cone_rate`: share of filter-loaded contacts whose planned
+  |lambda_t| exceeds mu lambda_z with the true mu under the foot (what the plant had to refuse).
+- `slip_mps_mean`: mean horizontal speed of the contact point over plant-loaded contacts;
+  `sliding_distance_m`: its integral over time, summed over the feet; `touchdown_slip_mps`: the mean over
+  the first 10 % of the stance duration after each touchdown.
+- `clearance_violation_rate`: unloaded swing ticks with the foot-sphere bottom more than 1 mm below the
+  virtual profile z(s); `clearance_depth_p95_m`: 95th percentile of how far below.
+- `trips`: onsets of a swing foot or a lower leg touching a physical obstacle (MuJoCo contacts, distance <= 0).
+- `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
+- `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
+  |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows
+  [N·m] and trunk-force rows [N]; 0 up to rounding when the model is the plant. `residual_alarm_rate`:
+  share of ticks beyond `health.residual_trunk_force_n_max` / `health.residual_joint_nm_max`.
 - `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
 - `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
   solver, divided by the best solver's; 1.0 = fastest.
@@ -289,6 +347,15 @@ the row; `fall_rate` counts falls over runs that ended without error):
 """
 
 
+def _run_list(frame: pd.DataFrame, status: str, detail: str, title: str) -> list[str]:
+    if frame.empty or "status" not in frame:
+        return []
+    sel = frame[frame["status"] == status]
+    if sel.empty:
+        return []
+    return [f"## {title}\n"] + [f"- `{r.get('run_dir')}`: {r.get(detail)}\n" for _, r in sel.iterrows()]
+
+
 def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
@@ -298,21 +365,23 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     recording.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
     figures = _figures(sweep_dir, frame, table) if not frame.empty else []
     info = machine_info()
+    keys = [c for c in group_columns(frame) if c in table]
+    safety = table[[*keys, *COUNT_COLUMNS, *SAFETY_COLUMNS]] if len(table) else table
+    cost = table[[*keys, "runs", *COST_COLUMNS, "qp_shgeom_rel_best"]] if len(table) else table
     lines = [
         "# taslel_bench sweep report\n",
         f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
         f"Packages: {info['packages']}\n",
-        "## Results per scenario × solver × estimator\n",
-        _md_table(table) if len(table) else "_no runs found_\n",
+        "## Safety and physics per group of runs (seeds pooled)\n",
+        _md_table(safety) if len(table) else "_no runs found_\n",
+        "## Cost per group of runs\n" if len(table) else "",
+        _md_table(cost) if len(table) else "",
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
-        paper_section(frame) if not frame.empty else "",
+        paper_claims(_finished(frame)) if not frame.empty else "",
     ]
-    errors = frame[frame.get("status", pd.Series(dtype=str)) == "error"] if not frame.empty else frame
-    if len(errors):
-        lines.append("## Runs that ended in an error\n")
-        for _, r in errors.iterrows():
-            lines.append(f"- `{r.get('run_dir')}`: {r.get('message')}\n")
+    lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
+    lines += _run_list(frame, "error", "message", "Runs that ended in an error")
     if figures:
         lines.append("## Figures\n")
         lines += [f"![{f}]({f})\n" for f in figures]
@@ -327,6 +396,9 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     if not args.sweep_dir.is_dir():
         raise SystemExit(f"not a folder: {args.sweep_dir}")
+    if not run_folders(args.sweep_dir):
+        raise SystemExit(f"no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
+                         ".hydra/ (a sweep folder, outputs/sweeps/<time>/)")
     frame = aggregate(args.sweep_dir)
     print(write_report(args.sweep_dir, frame))
 

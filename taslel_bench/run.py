@@ -6,6 +6,7 @@ each config group (``{"scenario": "flat", "solver": "daqp", ...}``).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import sys
 import traceback
@@ -13,17 +14,21 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench import plant, qpset, recording
-from taslel_bench.config import ConfigError, validate
+from taslel_bench import plant, qpset, recording, robot
+from taslel_bench.config import ConfigError, build_axis, build_backend, build_model, plant_options, validate
 from taslel_bench.controller import NominalController, PDGains
 from taslel_bench.episode import Episode, EpisodeResult, EpisodeSettings
 from taslel_bench.gait import GaitParams
+from taslel_bench.health import HealthLimits
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.metrics import summarize
+from taslel_bench.model_report import plant_vs_model
+from taslel_bench.residuals import alarm_events
+from taslel_bench.robust import RobustSettings
 from taslel_bench.safety_filter import FilterSettings, SafetyFilter
+from taslel_bench.sweep import OVERRIDE_SEPARATOR
 
 FRICTION_CHECK_TOL = 1e-9
 
@@ -33,9 +38,7 @@ class FrictionMismatch(RuntimeError):
 
 
 def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    options = plant.PlantOptions(
-        timestep_s=1.0 / float(cfg.physics_rate_hz), torque_limit_nm=float(cfg.robot.torque_limit_nm)
-    )
+    options = plant_options(cfg)
     if cfg.robot.get("plant_mjcf"):
         spec = plant.mjcf_spec(Path(cfg.robot.plant_mjcf), options)
     else:
@@ -77,7 +80,17 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         fallback=str(f.fallback),
         stance_source=str(f.stance_source),
         formulation=str(f.get("formulation", "full")),
+        robust=robust_settings(f.get("robust")),
+        control_dt_s=1.0 / float(cfg.control_rate_hz),
     )
+
+
+def robust_settings(node) -> RobustSettings:
+    """``filter.robust`` (absent: off)."""
+    if not node:
+        return RobustSettings()
+    return RobustSettings(enabled=bool(node.get("enabled", False)),
+                          **{k: float(v) for k, v in node.items() if k != "enabled"})
 
 
 def episode_settings(cfg: DictConfig) -> EpisodeSettings:
@@ -119,14 +132,16 @@ class Built:
         validate(cfg)
         self.cfg = cfg
         self.rng = np.random.default_rng(int(cfg.seed))
-        self.scenario: Scenario = instantiate(cfg.scenario)
-        self.estimator: Estimator = instantiate(cfg.estimator)
+        self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
+        self.estimator: Estimator = build_axis(cfg, "estimator")
         fs = filter_settings(cfg)
-        self.backend: QPBackend | None = instantiate(cfg.solver) if fs.enabled else None
+        self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
-            SafetyFilter(fs, self.backend, self.scenario.clearance_profile()) if self.backend is not None else None
+            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.obstacles())
+            if self.backend is not None
+            else None
         )
         self.episode = Episode(
             episode_settings(cfg),
@@ -137,9 +152,33 @@ class Built:
             self.estimator,
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
+            model=build_model(cfg),
         )
-        self.episode.initial_state()
-        self.friction_checked = check_friction(self.episode)
+        self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
+
+
+def health_limits(cfg: DictConfig) -> HealthLimits:
+    h = cfg.get("health") or {}
+    return HealthLimits(**{k: float(v) for k, v in h.items()})
+
+
+def file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
+    """What was simulated and what the controller believed: the plant source (the URDF of
+    example-robot-data or ``robot.plant_mjcf``) and the controller model's URDF, with their content hashes
+    (masses, inertias, joint losses: :func:`taslel_bench.model_report.plant_vs_model`)."""
+    mjcf = cfg.robot.get("plant_mjcf")
+    plant_src = Path(mjcf) if mjcf else robot.a1_urdf_path()
+    model_src = Path(built.episode.model.urdf_path)
+    return {
+        "plant_source": str(plant_src),
+        "plant_sha256": file_sha256(plant_src),
+        "model_source": str(model_src),
+        "model_sha256": file_sha256(model_src),
+    }
 
 
 def _progress_printer(duration: float, enabled: bool):
@@ -152,20 +191,81 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
-def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -> dict[str, object]:
+def config_sha256(cfg: DictConfig) -> str:
+    """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
+    only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
+    ``model.urdf``)."""
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    for key in ("progress", "force"):
+        plain.pop(key, None)
+    h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
+    for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
+        if source and Path(source).is_file():
+            h.update(Path(source).read_bytes())
+    return h.hexdigest()
+
+
+def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[dict | None, dict[str, object]]:
+    """(summary of a complete run to skip, or None; notes for the new run's summary). A complete run of the
+    same config is skipped unless ``force``; any other result in the folder (a complete run of another
+    config, a forced rerun, a killed run's partial MCAP) is moved to ``superseded/`` first, never
+    overwritten; files of interrupted writes are removed and named."""
+    from taslel_bench.mcap_log import PARTIAL_NAME
+
+    previous = recording.completed_summary(out_dir)
+    same = previous is not None and previous.get("config_sha256") == config_hash
+    if same and not cfg.get("force", False):
+        return {**previous, "skipped": True}, {}
+    notes: dict[str, object] = {}
+    stale = recording.remove_stale(out_dir)
+    if stale:
+        notes["stale_files_removed"] = ",".join(stale)
+    if previous is not None or (out_dir / PARTIAL_NAME).exists():
+        if previous is None:
+            tag = "killed"
+        else:
+            tag = "forced" if same else f"config-{str(previous.get('config_sha256', 'unknown'))[:8]}"
+        moved = recording.supersede(out_dir, tag)
+        if moved is not None:
+            notes["superseded"] = str(moved.relative_to(out_dir))
+            print(f"{out_dir}: held a {tag} run; moved to {moved}", file=sys.stderr)
+    return None, notes
+
+
+class _GuardedSink:
+    """The MCAP stream as the episode's chunk sink: a recording failure is noted and stops the streaming,
+    it never ends the episode."""
+
+    def __init__(self, stream) -> None:
+        self.stream, self.error = stream, ""
+
+    def __call__(self, trace, k0: int, k1: int) -> None:
+        if self.error:
+            return
+        try:
+            self.stream(trace, k0, k1)
+        except Exception:  # noqa: BLE001 - recording must not lose the run
+            self.error = traceback.format_exc().strip().splitlines()[-1]
+            self.stream.abandon()
+
+
+def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
+        overrides: list[str] | None = None) -> dict[str, object]:  # fmt: skip
     """Run one episode and write ``out_dir``. Returns the summary. Config errors raise before simulating;
-    faults during the episode give ``status: "error"`` in the summary."""
+    faults during the episode give ``status: "error"`` in the summary. ``overrides``: the command-line
+    overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
+    validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if not cfg.get("force", False):
-        done = recording.completed_summary(out_dir)
-        if done is not None:
-            done["skipped"] = True
-            return done
+    config_hash = config_sha256(cfg)
+    skipped, notes = prepare_folder(cfg, out_dir, config_hash)
+    if skipped is not None:
+        return skipped
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
     recording.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
+    sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
     res: EpisodeResult = built.episode.run(progress=show)
     if show is not None:
@@ -186,29 +286,32 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
         "physics_rate_hz": float(cfg.physics_rate_hz),
         "commanded_speed_mps": float(cfg.controller.speed),
         "friction_true": float(built.scenario.friction_at(np.zeros(2))),
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
+        "config_sha256": config_hash,
+        **notes,
     }
-    summary.update(summarize(res, dt, float(cfg.controller.stand_duration)))
+    summary.update(plant_identity(cfg, built))
+    summary.update(plant_vs_model(built.mj_model, built.episode.model,
+                                  built.controller.stand_configuration()))
+    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
+    summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
+    summary["recording_s"] = float(res.extras.get("recording_s", 0.0))
     diagnostics = getattr(built.estimator, "diagnostics", None)  # optional: counters of the estimator's own
     if callable(diagnostics):
         summary.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.backend is not None:
         summary["solver_settings"] = str(built.backend.describe())
     events = list(res.trace.events)
+    k0 = min(round(float(cfg.controller.stand_duration) / dt), res.trace.n)
+    events += alarm_events(res.trace, k0, health_limits(cfg))
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
     if res.status == "error":
         events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
         if "traceback" in res.extras:
             recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
-    mcap_error = None
-    if cfg.record.mcap:
-        try:
-            from taslel_bench.mcap_log import write_episode_mcap
-
-            write_episode_mcap(out_dir / "episode.mcap", res.trace, events, summary)
-        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
-            mcap_error = traceback.format_exc()
-            summary["mcap_error"] = mcap_error.strip().splitlines()[-1]
+    if sink is not None:
+        _close_mcap(sink, res, events, summary)
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.qpset)
         try:
             qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.run"})
@@ -219,6 +322,31 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None) -
     recording.write_json(out_dir / recording.EVENTS, events)
     recording.write_json(out_dir / recording.SUMMARY, summary)  # written last: marks the run complete
     return summary
+
+
+def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
+    """record.mcap: an :class:`taslel_bench.mcap_log.McapStream` fed by the episode every second of
+    simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
+    if not cfg.record.mcap:
+        return None
+    from taslel_bench.mcap_log import McapStream
+
+    sink = _GuardedSink(McapStream(out_dir))
+    built.episode.chunk_sink = sink
+    built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
+    return sink
+
+
+def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict) -> None:
+    """Finish episode.mcap (the last ticks, events, summary); a recording failure is noted in the summary."""
+    if not sink.error:
+        try:
+            sink.stream.close(res.trace, events, summary)
+        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
+            sink.error = traceback.format_exc().strip().splitlines()[-1]
+            sink.stream.abandon()
+    if sink.error:
+        summary["mcap_error"] = sink.error
 
 
 def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
@@ -235,22 +363,34 @@ def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
     return rec
 
 
-def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException) -> dict:
+def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException,
+                     overrides: list[str] | None = None) -> dict:  # fmt: skip
     """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    recording.supersede(out_dir, "before-error")  # a result already in the folder is put aside, not overwritten
     tb = traceback.format_exc()
     recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
     summary = {
         "scenario": choices.get("scenario", ""),
         "solver": choices.get("solver", ""),
         "estimator": choices.get("estimator", ""),
-        "seed": int(cfg.seed) if str(cfg.get("seed", "")).isdigit() else -1,
+        "seed": _seed_or_minus_one(cfg),
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
         "fell": False,
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
     }
     recording.write_json(out_dir / recording.SUMMARY, summary)
     return summary
+
+
+def _seed_or_minus_one(cfg: DictConfig) -> int:
+    """The run's seed for an error summary, -1 when it is not a valid one (``seed=abc``, ``seed=${oops}``)."""
+    try:
+        seed = cfg.get("seed")
+    except Exception:  # noqa: BLE001 - an interpolation error must not hide the job's own error
+        return -1
+    return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
 __all__ = ["Built", "ConfigError", "FrictionMismatch", "check_friction", "run"]

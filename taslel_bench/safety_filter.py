@@ -31,7 +31,7 @@ kernels (:mod:`taslel_bench.jit`) at the end of this module and in :mod:`taslel_
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,12 +48,14 @@ from taslel_bench.constraints import (
     EquationsOfMotion,
     FrictionCone,
     SwingClearanceECBF,
+    SwingObstacleECBF,
     TickInputs,
     U,
 )
 from taslel_bench.equality_solve import FreeBlockSolver, solve_free
-from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution
+from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution, RoundObstacle
 from taslel_bench.jit import kernel
+from taslel_bench.robust import DisturbanceObserver, RobustMargin, RobustSettings
 
 FALLBACKS = ("nominal", "hold_last")
 REGULARIZATION_TARGETS = ("nominal", "zero")
@@ -74,6 +76,8 @@ class FilterSettings:
     fallback: str = "nominal"  # on QP failure: pass u_nom ("nominal") or the last filtered u ("hold_last")
     stance_source: str = "schedule"  # "schedule" (gait) or "contact" (plant contact flags)
     formulation: str = "full"  # "full" (backend sees X = (vdot, u, lambda)) or "condensed" (u only)
+    robust: RobustSettings = field(default_factory=RobustSettings)  # margins for a wrong model (off)
+    control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
 
 
 @dataclass
@@ -85,13 +89,18 @@ class FilterResult:
     used_fallback: bool
     build_time_s: float
     solve: QPSolution | None = field(default=None)
+    ecbf_margin_mps2: float = 0.0  # [m/s²] robust margin the ECBF rows had this tick (0: the paper's rows)
 
 
 class SafetyFilter:
     """Owns the QP layout and the constraint families; one instance per episode."""
 
     def __init__(
-        self, settings: FilterSettings, backend: QPBackend, profile: ClearanceProfile | None = None
+        self,
+        settings: FilterSettings,
+        backend: QPBackend,
+        profile: ClearanceProfile | None = None,
+        obstacles: tuple[RoundObstacle, ...] = (),
     ) -> None:
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
@@ -111,7 +120,16 @@ class SafetyFilter:
             if (profile is not None and settings.ecbf_enabled)
             else None
         )
-        ineq = [self.friction] + ([self.ecbf] if self.ecbf is not None else [])
+        self.obstacle_ecbf = (
+            SwingObstacleECBF(tuple(obstacles), settings.ecbf_alpha1, settings.ecbf_alpha2)
+            if (obstacles and settings.ecbf_enabled)
+            else None
+        )
+        self.barriers = [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
+        self.robust = RobustMargin(settings.robust, settings.ecbf_alpha2, settings.control_dt_s)
+        tau = settings.robust.observer_time_constant_s if settings.robust.enabled else 0.0
+        self.observer = DisturbanceObserver(tau, settings.control_dt_s, NV) if tau > 0.0 else None
+        ineq = [self.friction, *self.barriers]
         m_eq = 0
         for fam in self.eq_families:
             fam.start, m_eq = m_eq, m_eq + fam.n_rows
@@ -200,6 +218,9 @@ class SafetyFilter:
         qp.q[U] = -u_nom
         for fam in self.eq_families:
             fam.write(qp, inputs)
+        if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
+            eom = self.eq_families[0]
+            qp.b[eom.start : eom.start + NV] += self.observer.d_hat
         for fam in self.ineq_families:
             fam.write(qp, inputs)
         if self.condensed is not None:
@@ -218,11 +239,25 @@ class SafetyFilter:
         """Forget the backend's warm start and the last filtered u (a new episode)."""
         self.backend.reset()
         self._last_u = None
+        self.robust.reset()
+        if self.observer is not None:
+            self.observer.reset()
 
     def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
         """Build, solve, and apply the failure policy. Never raises for solver failures."""
         t0 = time.perf_counter()
+        robust = self.settings.robust.enabled
+        if self.observer is not None:
+            self.observer.update(inputs.v, inputs.in_stance)
+        if robust:  # margins sized from the running shortfall of the realised barrier condition
+            margin = self.robust.ecbf_margin_mps2
+            for barrier in self.barriers:
+                barrier.margin_mps2 = margin
+            if self.settings.robust.friction_margin > 0.0:
+                inputs = replace(inputs, mu=inputs.mu * (1.0 - self.settings.robust.friction_margin))
         qp = self.build(inputs, u_nom)
+        if robust:
+            self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
         try:
             if self.condensed is None:
@@ -239,8 +274,23 @@ class SafetyFilter:
             # hold to solver tolerance)
             _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
                             vdot)  # fmt: skip
+            for barrier in self.barriers:  # the ECBF conditions the filter believes it planned
+                barrier.planned(qp, vdot)
+            if robust:
+                self.robust.remember(self.barriers)
+            if self.observer is not None:
+                m = inputs.model
+                jac_t_lambda = np.einsum("ikj,ik->j", m.foot_jac_in_world, lam.reshape(robot.N_LEGS, 3))
+                self.observer.remember(inputs.v, m.M, m.h, u, jac_t_lambda, inputs.in_stance)
             self._last_u = u
-            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol)
+            margin = self.barriers[0].margin_mps2 if self.barriers else 0.0
+            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol, margin)
+        for barrier in self.barriers:  # nothing planned on this tick
+            barrier.psi_planned[:] = np.nan
+        if self.observer is not None:
+            self.observer.remember(inputs.v, inputs.model.M, inputs.model.h, u_nom, None, inputs.in_stance)
+        if robust:
+            self.robust.remember(self.barriers)
         if self.settings.fallback == "hold_last" and self._last_u is not None:
             u = self._last_u.copy()
         else:

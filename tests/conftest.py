@@ -19,3 +19,21 @@ def compose_cfg(overrides: list[str] | None = None) -> DictConfig:
 @pytest.fixture
 def cfg_factory():
     return compose_cfg
+
+
+class NeverSolves:
+    """A QP backend that hits its iteration limit on every tick (as a mis-tuned solver does); tests put it
+    in place of ``taslel_bench.run.build_backend``'s answer to make a filter fail on purpose."""
+
+    name = "never"
+
+    def solve(self, problem):
+        from taslel_bench.interfaces import QPSolution
+
+        return QPSolution(None, "max_iter", 1e-6)
+
+    def reset(self) -> None:
+        pass
+
+    def describe(self) -> dict:
+        return {"name": self.name}

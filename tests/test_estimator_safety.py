@@ -114,10 +114,11 @@ def test_off_tick_inference_applies_the_inline_results_after_a_fixed_latency(tin
     from estimators.learned import LearnedEstimator
 
     delay = 0.01
-    kw = {"checkpoint": tiny_checkpoints / "m", "threads": None, "conservative_k": 0.0, "mu_min": -10.0,
+    kw = {"checkpoint": tiny_checkpoints / "m", "threads": None, "conservative_k": 0.0,
           "drop_detector": {"checkpoint": str(tiny_checkpoints / "s"), "delta": 5.0}}
     inline = LearnedEstimator("mlp", **kw)
     thread = LearnedEstimator("mlp", inference=mode, apply_delay_s=delay, **kw)
+    inline.mu_min = thread.mu_min = -10.0  # no floor: the untrained model's outputs all show
     ticks = round((WINDOW_STEPS + 5) * WINDOW_DT_S / DT)
     rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
     a = [inline.step(_obs(k * DT, rng_a)).mu for k in range(ticks)]

@@ -177,6 +177,53 @@ def test_ecbf_rows_hold_at_the_solution(states):
     assert active > 0, "the 8 cm bump should make the ECBF bind on some swing ticks"
 
 
+def test_obstacle_rows_hold_and_follow_the_geometry(states):
+    """A log 6 cm ahead of each state's first swing foot: the row is the ECBF of the foot sphere's Euclidean
+    clearance, its hddot (n . a + curvature) matches a finite difference of the clearance along the
+    predicted motion, and it holds (and binds on some states) at the tight reference's solution."""
+    from taslel_bench.interfaces import RoundObstacle
+
+    st, pm = states
+    active = 0
+    for s in st:
+        x = inputs_for(pm, s, 1.0)
+        swing = [i for i in range(4) if not s[2].in_stance[i]]
+        if not swing:
+            continue
+        i = swing[0]
+        p0 = pm.foot_pos_in_world[i].copy()
+        log = RoundObstacle(x_m=float(p0[0] + 0.06 + 0.05), z_m=-0.02, radius_m=0.05)
+        f = SafetyFilter(FilterSettings(), TightReference(), None, (log,))
+        res = f.filter(x, s[3])
+        assert res.status == "solved"
+        p = f.problem
+        row = p.row_labels.index(f"{robot.LEGS[i]}_obstacle")
+        xvec = np.concatenate([res.vdot, res.u, res.lam])
+        slack = p.h[row] - p.G[row] @ xvec
+        assert slack >= -1e-6
+        active += int(abs(slack) < 1e-6)
+        v0 = pm.foot_vel_in_world[i]
+        a0 = pm.foot_jac_in_world[i] @ res.vdot + pm.foot_jdotv_in_world[i]
+
+        def clearance(t: float, p0=p0, v0=v0, a0=a0, log=log) -> float:
+            pt = p0 + v0 * t + 0.5 * a0 * t * t
+            return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - robot.FOOT_RADIUS_M)
+
+        dt = 1e-4
+        h, hdot = clearance(0.0), (clearance(dt) - clearance(-dt)) / (2 * dt)
+        hddot = (clearance(dt) - 2 * h + clearance(-dt)) / dt**2
+        a1, a2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
+        # what the kernel wrote: h, h_e = hdot + a1 h, and the row -G vdot = hddot - (J̇v-free part)
+        h_e = f.obstacle_ecbf.h_e[i]
+        hdot_row = h_e - a1 * f.obstacle_ecbf.h[i]
+        hddot_row = -p.G[row, :18] @ res.vdot + p.h[row] - a2 * h_e - a1 * hdot_row
+        assert f.obstacle_ecbf.h[i] == pytest.approx(h, abs=1e-12)
+        assert hdot_row == pytest.approx(hdot, abs=1e-6)
+        assert hddot_row == pytest.approx(hddot, abs=1e-3 * max(1.0, abs(hddot)))  # finite-difference accuracy
+        assert a2 * (hdot + a1 * h) + hddot + a1 * hdot >= -1e-3 * max(1.0, abs(hddot))
+    assert active > 0, "a log 6 cm ahead of a swinging foot should make the row bind"
+
+
 def test_friction_pyramid_binds_on_low_mu(states):
     """On mu = 0.05 the pyramid rows bind and the filter moves u; the bound holds at the solution."""
     st, pm = states

@@ -8,7 +8,7 @@ import pinocchio as pin
 import pytest
 
 from taslel_bench import kinematics, plant, robot
-from taslel_bench.bridge import StateBridge, _quat_wxyz_to_matrix
+from taslel_bench.bridge import StateBridge, quat_wxyz_to_matrix
 from taslel_bench.model import A1Model
 
 
@@ -57,7 +57,7 @@ def test_mass_bias_feet_match_mujoco(setup):
         worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
         # qacc = T vdot + Tdot v; Tdot v is R (w x v_lin) on the linear rows (linear velocity frame change)
         tdot_v = np.zeros(robot.NV)
-        tdot_v[:3] = _quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
+        tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
         worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - pm.h).max())
         for i, foot in enumerate(robot.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
@@ -224,7 +224,7 @@ def test_foot_contact_sensors_match_contact_forces(setup):
     for key, j in (("forces_in_world", 0), ("in_contact", 1), ("slip_velocity_in_world", 2), ("foot_pos_in_world", 3)):
         assert np.array_equal(whole[key], np.array([row[j] for row in per_tick])), key
     # standing still, the feet carry the weight
-    assert reader.non_foot_contact is False
+    assert reader.body_contact is False
 
 
 def test_controller_reference_table_matches_fresh_computation():

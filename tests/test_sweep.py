@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from mcap.reader import make_reader
 
-from taslel_bench.mcap_log import CHANNELS
+from taslel_bench.mcap_log import AFTER_EPISODE, CHANNELS, EVENTS
 from taslel_bench.report import shifted_geometric_mean, write_report
 from taslel_bench.run import Built, run
 from taslel_bench.sweep import aggregate
@@ -33,7 +33,7 @@ def mcap_counts(path: Path) -> dict[str, int]:
 def test_mcap_reads_back_with_every_channel(tmp_path):
     run(compose_cfg(["duration=0.3", "progress=false", "scenario=obstacle"]), tmp_path, {"solver": "daqp"})
     counts = mcap_counts(tmp_path / "episode.mcap")
-    assert set(counts) == set(CHANNELS)
+    assert set(counts) == set(CHANNELS) | set(AFTER_EPISODE) | set(EVENTS)
     assert all(n > 0 for n in counts.values())
     assert counts["/torques"] == 800  # one per control tick (0.5 s stand + 0.3 s)
 
@@ -71,7 +71,7 @@ def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
     assert len(frame) == 3 and (frame["status"] == "error").sum() == 1
     assert pd.read_parquet(tmp_path / "summary.parquet").shape[0] == 3
     report = write_report(tmp_path, frame).read_text()
-    assert "| flat | daqp | oracle | 2 | 0 | 0/2 |" in report
+    assert "| flat | daqp | oracle | 2 | 0 | 0 | 0/2 |" in report  # runs, errors, degraded, falls
     assert "left no summary.json" in report
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
 
@@ -112,7 +112,8 @@ def test_multirun_with_a_failing_job_records_it_and_finishes_the_others(tmp_path
     assert len(table) == 2
     assert sorted(table["status"]) == ["error", "ok"]
     assert "controller.kp" in table.loc[table["status"] == "error", "message"].iloc[0]
-    assert "sweep progress: 2 runs complete" in out.stdout or "sweep progress: 1 runs complete" in out.stdout
+    assert "sweep progress: job #1 (controller.kp=-1,duration=0.3) ended error" in out.stdout
+    assert "sweep progress: job #0 (controller.kp=100,duration=0.3) ended ok" in out.stdout
 
 
 def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
@@ -131,3 +132,28 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
     assert "| scenario | solver | filter_contact_velocity_gain | estimator |" in report
     assert "| flat | daqp | 50 | oracle | 1 | 0 |" in report
     assert "`filter.contact_velocity_gain=0` (the paper's contact constraint) only" in report
+
+
+def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path, monkeypatch):
+    """`scenario.friction=0.3,1.0` are two rows (not one "flat" row); a degraded run is listed with why."""
+    import taslel_bench.run as run_module
+    from tests.conftest import NeverSolves
+
+    for mu in ("0.3", "1.0"):
+        over = ["duration=0.2", "progress=false", "record.mcap=false", f"scenario.friction={mu}"]
+        run(compose_cfg(over), tmp_path / f"mu={mu}", {"scenario": "flat", "solver": "daqp_persistent"},
+            overrides=[f"scenario.friction={mu}", "duration=0.2"])
+    monkeypatch.setattr(run_module, "build_backend", lambda cfg: NeverSolves())  # every tick fails
+    bad = ["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp", "solver.settings.max_iter=1"]
+    run(compose_cfg(bad), tmp_path / "bad", {"scenario": "flat", "solver": "osqp"},
+        overrides=["solver=osqp", "solver.settings.max_iter=1", "duration=0.2"])
+    frame = aggregate(tmp_path)
+    assert sorted(frame["scenario.friction"]) == ["", "0.3", "1.0"]
+    report = write_report(tmp_path, frame).read_text()
+    header = "| scenario | solver | estimator | scenario.friction | solver.settings.max_iter | runs |"
+    assert header in report
+    assert "| flat | daqp_persistent | oracle |  | 0.3 |" not in report  # the override is its own column
+    assert "| flat | daqp_persistent | oracle | 0.3 |  | 1 | 0 | 0 |" in report
+    assert "| flat | daqp_persistent | oracle | 1.0 |  | 1 | 0 | 0 |" in report
+    assert "| flat | osqp | oracle |  | 1 | 1 | 0 | 1 |" in report
+    assert "## Runs that ended degraded" in report and "qp_failed_rate=1 > 0.05" in report
