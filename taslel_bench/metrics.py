@@ -214,4 +214,3 @@ def time_to_safe(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: f
     if last == len(over) - 1:
         return math.inf
     return float(t[k0 + last + 1] - t[k0])
-
