@@ -368,8 +368,8 @@ def inloop_markdown(out: dict[str, object]) -> str:
              ("- `time-to-safe`: after the friction drop, until mu_hat ≤ mu + 0.05 from then on (max over runs). "
              "`tick p99`: wall time of the 1 ms control tick (all parts); `ctrl p99`: its state-read + estimator + "
              "controller part. The 2 cores were shared with other jobs (see the notes), so tick times carry that load."),
-             "- `sliding`: stance contacts with |f_t| ≥ 0.98 mu f_n (plant forces, the true mu under the foot; "
-             "`friction_cone_edge_rate_stance`), mean over runs.", "",
+             ("- `sliding`: stance contacts with |f_t| ≥ 0.98 mu f_n (plant forces, the true mu under the foot; "
+             "`friction_cone_edge_rate_stance`), mean over runs."), "",
              ("| scenario | estimator | runs | falls | over<0.5 % [CI] | startup over % [CI] | useful % [CI] | "
              "time-to-safe [s] | tick p99 [µs] | ctrl p99 [µs] | distance [m] | intervention [N·m] | sliding % | "
              "mean mu_hat |"), "|" + "---|" * 14]
