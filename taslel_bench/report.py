@@ -116,6 +116,10 @@ COST_COLUMNS = {
     "qp_solve_us_p99": "qp_solve_us_p99",
     "estimator_mae": "estimator_mae",
     "estimator_overestimate_rate": "estimator_overestimate_rate",
+    "estimator_low_overestimate_rate": "estimator_low_overestimate_rate",
+    "estimator_useful_rate": "estimator_useful_rate",
+    "estimator_startup_overestimate_rate": "estimator_startup_overestimate_rate",
+    "estimator_time_to_safe_s": "estimator_time_to_safe_s",
     "estimator_settle_s": "estimator_settle_s",
     "real_time_factor": "real_time_factor",
 }
@@ -340,8 +344,11 @@ crossed a health limit and are listed below):
 - `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
   solver, divided by the best solver's; 1.0 = fastest.
 - `estimator_*`: the friction the filter used (mu_hat) vs the true friction under the trunk, every tick:
-  mean |error|, fraction with mu_hat > mu + 0.05 (over-estimation: the dangerous side), and the time from
-  the first friction change until mu_hat stays within 0.05 (inf: never; — : no change in the run).
+  mean |error|, fraction with mu_hat > mu + 0.05 (over-estimation: the dangerous side), the same where
+  mu < 0.5 (`low_`), the share of ticks after the startup window with mu_hat >= min(mu, 0.5) - 0.1
+  (`useful`), over-estimation while the estimator still used its prior (`startup_`), the time from a
+  friction drop until mu_hat <= mu + 0.05 (`time_to_safe_s`), and the time from the first friction change
+  until mu_hat stays within 0.05 (`settle_s`; inf: never; — : no change in the run).
 - `real_time_factor`: simulated time / wall time of the whole episode (jobs ran in parallel, so they
   competed for the cores).
 """
