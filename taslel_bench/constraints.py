@@ -178,9 +178,7 @@ class SwingBarrier:
 
     def planned(self, qp: QPProblem, vdot: np.ndarray) -> None:
         """psi at the solution: the row's slack plus the margin (nan for stance feet)."""
-        rows = slice(self.start, self.start + robot.N_LEGS)
-        psi = qp.h[rows] - qp.G[rows, VDOT] @ vdot + self.margin_mps2
-        self.psi_planned[:] = np.where(np.isfinite(self.h), psi, np.nan)
+        _planned_condition(qp.G, qp.h, self.start, vdot, self.margin_mps2, self.h, self.psi_planned)
 
 
 class SwingClearanceECBF(SwingBarrier):
@@ -289,6 +287,19 @@ def _inactive_barrier_row(G, hvec, r, h_out, he_out, i):
     hvec[r] = INACTIVE_RHS
     h_out[i] = np.nan
     he_out[i] = np.nan
+
+
+@kernel
+def _planned_condition(G, hvec, r0, vdot, margin, h, psi):
+    """psi[i] = hvec[r0 + i] - G[r0 + i, :NV] vdot + margin for swing feet (finite h), nan for stance."""
+    for i in range(h.shape[0]):
+        if np.isfinite(h[i]):
+            acc = hvec[r0 + i] + margin
+            for col in range(NV):
+                acc -= G[r0 + i, col] * vdot[col]
+            psi[i] = acc
+        else:
+            psi[i] = np.nan
 
 
 @kernel

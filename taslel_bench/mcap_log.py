@@ -152,11 +152,13 @@ class McapStream:
                 self._put(topic, t, msg)
         self._writer.flush()
 
-    def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:
-        """Write the ticks not streamed yet, the events and the summary; finish; rename to episode.mcap."""
+    def close(self, trace: EpisodeTrace, events: list[dict], summary: dict, steps: pd.DataFrame | None = None) -> Path:
+        """Write the ticks not streamed yet, the channels computed after the episode (from ``steps``, the
+        whole episode's frame, when the caller has it), the events and the summary; finish; rename to
+        episode.mcap."""
         self(trace, self.ticks_written, trace.n)
         if trace.n:
-            self._write(trace.frame(0, trace.n), AFTER_EPISODE)
+            self._write(steps if steps is not None else trace.frame(0, trace.n), AFTER_EPISODE)
         t_end = float(trace.t_s[trace.n - 1]) if trace.n else 0.0
         for e in [*events, {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}]:
             t = float(e.get("t_s") if e.get("t_s") is not None else t_end)

@@ -144,13 +144,7 @@ def settle_time(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: fl
     if changes.size == 0:
         return math.nan
     k0 = int(changes[0]) + 1
-    outside = np.abs(mu_hat[k0:] - mu_true[k0:]) > band
-    if not outside.any():
-        return 0.0
-    last_out = int(np.flatnonzero(outside)[-1])
-    if last_out == len(outside) - 1:
-        return math.inf
-    return float(t[k0 + last_out + 1] - t[k0])
+    return _time_until_clear(t, k0, np.abs(mu_hat[k0:] - mu_true[k0:]) > band)
 
 
 LOW_FRICTION = 0.5  # [-] the one-sided over-estimation target conditions on mu below this
@@ -207,10 +201,15 @@ def time_to_safe(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: f
     if drops.size == 0:
         return math.nan
     k0 = int(drops[0]) + 1
-    over = mu_hat[k0:] > mu_true[k0:] + band
-    if not over.any():
+    return _time_until_clear(t, k0, mu_hat[k0:] > mu_true[k0:] + band)
+
+
+def _time_until_clear(t: np.ndarray, k0: int, bad: np.ndarray) -> float:
+    """Time [s] from tick ``k0`` until ``bad`` (per tick from k0 on) stays False to the end: 0 if never bad,
+    inf if still bad at the end."""
+    if not bad.any():
         return 0.0
-    last = int(np.flatnonzero(over)[-1])
-    if last == len(over) - 1:
+    last = int(np.flatnonzero(bad)[-1])
+    if last == len(bad) - 1:
         return math.inf
     return float(t[k0 + last + 1] - t[k0])

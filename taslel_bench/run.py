@@ -310,15 +310,16 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
         if "traceback" in res.extras:
             recording.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
+    steps = res.trace.to_frame(dt)
     if sink is not None:
-        _close_mcap(sink, res, events, summary)
+        _close_mcap(sink, res, events, summary, steps)
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.qpset)
         try:
             qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.run"})
             summary["qps_recorded"] = len(qp_recorder)
         except Exception:  # noqa: BLE001 - recording must not lose the run
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
-    recording.write_parquet(out_dir / recording.STEPS, res.trace.to_frame(dt))
+    recording.write_parquet(out_dir / recording.STEPS, steps)
     recording.write_json(out_dir / recording.EVENTS, events)
     recording.write_json(out_dir / recording.SUMMARY, summary)  # written last: marks the run complete
     return summary
@@ -337,11 +338,12 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
     return sink
 
 
-def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict) -> None:
-    """Finish episode.mcap (the last ticks, events, summary); a recording failure is noted in the summary."""
+def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict, steps) -> None:
+    """Finish episode.mcap (the last ticks, the channels from ``steps``, events, summary); a recording
+    failure is noted in the summary."""
     if not sink.error:
         try:
-            sink.stream.close(res.trace, events, summary)
+            sink.stream.close(res.trace, events, summary, steps)
         except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
             sink.error = traceback.format_exc().strip().splitlines()[-1]
             sink.stream.abandon()

@@ -197,8 +197,10 @@ class EpisodeTrace:
         """Derive the named plant quantities of the ``n`` recorded ticks into attributes (idempotent)."""
         if self.finalized:
             return
-        for name, value in self.derive(0, self.n).items():
+        derived = self.derive(0, self.n)
+        for name, value in derived.items():
             setattr(self, name, value)
+        self._derived_names = tuple(derived)
         self.finalized = True
 
     # ------------------------------------------------------------------------------------------ derived
@@ -213,7 +215,11 @@ class EpisodeTrace:
     def frame(self, k0: int, k1: int) -> pd.DataFrame:
         """Rows ``k0:k1`` as :meth:`to_frame` gives them (derived from the raw rows: usable during the
         episode, for streaming)."""
-        d, t = self.derive(k0, k1), slice(k0, k1)
+        t = slice(k0, k1)
+        if self.finalized:  # the derived arrays are already there: slice them
+            d = {name: getattr(self, name)[t] for name in self._derived_names}
+        else:
+            d = self.derive(k0, k1)
         cols: dict[str, np.ndarray] = {"t_s": self.t_s[t]}
         _put(cols, "base_{}_w_m", "xyz", d["base_pos_w"])
         _put(cols, "base_quat_{}", "wxyz", d["base_quat_wxyz"])
