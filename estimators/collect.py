@@ -49,7 +49,9 @@ from estimators.randomisation import (
     ranges_dict,
     shifted_ranges,
 )
-from taslel_bench import api, plant, robot
+from taslel_bench import api
+from taslel_bench.plant.build import PlantOptions, build_plant
+from taslel_bench.robot import a1
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -85,7 +87,7 @@ _WORKER: dict[str, object] = {}
 
 def _worker_model() -> tuple[mujoco.MjModel, api.StateBridge, PlantRandomiser]:
     if "model" not in _WORKER:
-        m = plant.build_plant(plant.PlantOptions())
+        m = build_plant(PlantOptions())
         _WORKER.update(model=m, bridge=api.StateBridge(m), rand=PlantRandomiser(m))
     return _WORKER["model"], _WORKER["bridge"], _WORKER["rand"]  # type: ignore[return-value]
 
@@ -114,14 +116,14 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     )
     d = mujoco.MjData(m)
     a = br.free_qadr
-    d.qpos[a : a + 3] = [0.0, 0.0, gp.stand_height_m + robot.FOOT_RADIUS_M]
+    d.qpos[a : a + 3] = [0.0, 0.0, gp.stand_height_m + a1.FOOT_RADIUS_M]
     d.qpos[a + 3 : a + 7] = [1.0, 0.0, 0.0, 0.0]
     d.qpos[br.joint_qadr] = ctl.stand_configuration()
     mujoco.mj_forward(m, d)
     sf = _worker_filter(cfg.filter_overrides) if filtered else None
     model = api.A1Model() if filtered else None
-    q_pin = np.zeros(robot.NQ)
-    v_pin = np.zeros(robot.NV)
+    q_pin = np.zeros(a1.NQ)
+    v_pin = np.zeros(a1.NV)
     failures = 0
     if not filtered:
         filter_mu = float("nan")
@@ -134,7 +136,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     every = round(WINDOW_DT_S / cfg.timestep_s)
     samples: list[np.ndarray] = []
     fall_t = float("nan")
-    tau_prev = np.zeros(robot.N_JOINTS)  # [N·m] torque commanded on the previous tick (0 at t = 0)
+    tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] torque commanded on the previous tick (0 at t = 0)
     k = 0
     for k in range(n_steps):
         t = k * cfg.timestep_s
@@ -147,7 +149,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
                 fall_t = t
                 break
         u = ctl.compute(t, qj, qd)
-        if sf is not None:  # as taslel_bench.episode feeds the filter each tick
+        if sf is not None:  # as taslel_bench.sim.episode feeds the filter each tick
             gs = ctl.gait_state(t)
             br.q_pin(d.qpos, q_pin)
             br.v_pin(d.qpos, d.qvel, v_pin)

@@ -28,7 +28,7 @@ from estimators.checkpoint import load_checkpoint
 from estimators.data import load_windows
 from estimators.evaluate import markdown_table, predict_all
 from estimators.metrics import OVERESTIMATE_MARGIN
-from taslel_bench.machine import machine_info
+from taslel_bench.util.machine import machine_info
 
 LOW_MU, HIGH_MU = 0.4, 0.9  # [-] friction bands for the signed bias columns
 

@@ -25,7 +25,7 @@ from estimators.data import load_split, load_windows, window_filter_mu
 from estimators.features import with_filter_channels
 from estimators.metrics import regression_metrics
 from estimators.models import VARIANTS, FrictionModel, parameter_count
-from taslel_bench.machine import machine_info
+from taslel_bench.util.machine import machine_info
 
 FIXTURE = CHECKPOINT_DIR / "heldout64.npz"
 K_SWEEP = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # conservative-bound sigmas for the trade-off table

@@ -21,8 +21,9 @@ from estimators.checkpoint import checkpoint_paths
 from estimators.collect import _worker_model
 from estimators.learned import LearnedEstimator
 from estimators.randomisation import EpisodeParams
-from taslel_bench import api, robot
+from taslel_bench import api
 from taslel_bench.interfaces import Proprioception
+from taslel_bench.robot import a1
 
 RESULTS_DIR = Path(__file__).resolve().parents[1] / "results" / "estimators"
 
@@ -43,13 +44,13 @@ def run(est: LearnedEstimator, mu_a: float, mu_b: float, t_switch_s: float, dura
                                        api.PDGains())
     d = mujoco.MjData(m)
     a = br.free_qadr
-    d.qpos[a : a + 3] = [0.0, 0.0, 0.27 + robot.FOOT_RADIUS_M]
+    d.qpos[a : a + 3] = [0.0, 0.0, 0.27 + a1.FOOT_RADIUS_M]
     d.qpos[a + 3 : a + 7] = [1.0, 0.0, 0.0, 0.0]
     d.qpos[br.joint_qadr] = ctl.stand_configuration()
     est.reset()
     ts, truth, mus, means, ready = [], [], [], [], []
     fell = False
-    tau_prev = np.zeros(robot.N_JOINTS)  # [N·m] torque commanded on the previous tick
+    tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] torque commanded on the previous tick
     for k in range(round(duration_s / m.opt.timestep)):
         t = k * m.opt.timestep
         mu_true = mu_a if t < t_switch_s else mu_b

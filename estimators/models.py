@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
-from taslel_bench import robot
+from taslel_bench.robot import a1
 
 VARIANTS = ("mlp", "attention", "linformer")
 TOKENISATIONS = ("joint", "step")
@@ -139,17 +139,17 @@ def window_features(x: torch.Tensor, mode: str) -> torch.Tensor:
 
 
 N_KIN_FEATURES = 24  # foot positions (4 x 3) and velocities (4 x 3)
-_HIPS = torch.tensor(robot.HIP_POSITIONS_IN_TRUNK, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
-_SIDES = torch.tensor(robot.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
+_HIPS = torch.tensor(a1.HIP_POSITIONS_IN_TRUNK, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
+_SIDES = torch.tensor(a1.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
 
 
 def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 24): ``[p_foot (4 x 3) [m], v_foot (4 x 3) [m/s]]``, legs FL, FR, RL,
     RR, foot-sphere centres relative to the trunk origin, in trunk axes; v_foot = J_leg(q) qdot (the foot's
-    velocity relative to the trunk, not in the world). Same chain as :func:`taslel_bench.kinematics.leg_fk`.
+    velocity relative to the trunk, not in the world). Same chain as :func:`taslel_bench.robot.kinematics.leg_fk`.
     A stance foot that holds has v_foot = -(v_trunk + omega x p_foot); feet of one stance pair that disagree
     beyond the rotation term are slipping, whatever the payload or motor strength."""
-    l1, l2, l3 = robot.HIP_OFFSET_Y_M, robot.THIGH_LENGTH_M, robot.CALF_LENGTH_M
+    l1, l2, l3 = a1.HIP_OFFSET_Y_M, a1.THIGH_LENGTH_M, a1.CALF_LENGTH_M
     b, t, _ = x.shape
     q = x[..., :12].reshape(b, t, 4, 3)
     qd = x[..., 12:24].reshape(b, t, 4, 3)

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, fields, replace
 import mujoco
 import numpy as np
 
-from taslel_bench import robot
+from taslel_bench.robot import a1
 
 Range = tuple[float, float]
 
@@ -139,10 +139,10 @@ class PlantRandomiser:
     def __init__(self, model: mujoco.MjModel, floor_geom: str = "floor") -> None:
         self.model = model
         self.floor_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, floor_geom)
-        self.trunk_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.TRUNK_BODY)
+        self.trunk_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
         if self.floor_id < 0 or self.trunk_id < 0:
-            raise ValueError(f"plant has no geom {floor_geom!r} or body {robot.TRUNK_BODY!r}")
-        leg_joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in robot.JOINT_NAMES]
+            raise ValueError(f"plant has no geom {floor_geom!r} or body {a1.TRUNK_BODY!r}")
+        leg_joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in a1.JOINT_NAMES]
         self.leg_dofs = np.array([model.jnt_dofadr[j] for j in leg_joints])
         self._nominal = {
             "body_mass": model.body_mass.copy(),

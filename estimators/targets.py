@@ -153,7 +153,7 @@ def ci_text(r: dict[str, object], name: str) -> str:
 
 
 def offline(a: argparse.Namespace) -> None:
-    from taslel_bench.machine import machine_info
+    from taslel_bench.util.machine import machine_info
 
     fit_sets, sets = parse_sets([a.fit]), parse_sets(a.set)
     (fit_name, fit_paths), = fit_sets.items()
@@ -247,7 +247,7 @@ def run_table(sweeps: list[Path]):
 def inloop(a: argparse.Namespace) -> None:
     import yaml
 
-    from taslel_bench.machine import machine_info
+    from taslel_bench.util.machine import machine_info
 
     groups: dict[tuple[str, str], list[dict]] = {}
     for r in run_table(a.sweeps):
@@ -530,7 +530,7 @@ def latency(a: argparse.Namespace) -> None:
     from omegaconf import OmegaConf
 
     from taslel_bench.interfaces import Proprioception
-    from taslel_bench.machine import machine_info
+    from taslel_bench.util.machine import machine_info
 
     rows = []
     rng = np.random.default_rng(0)

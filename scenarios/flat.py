@@ -5,8 +5,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.fields import number
 from taslel_bench.interfaces import MAX_FRICTION, ClearanceProfile, RoundObstacle
+from taslel_bench.util.fields import number
 
 
 def friction_coefficient(path: str, value: object) -> float:

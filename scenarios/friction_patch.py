@@ -6,9 +6,9 @@ import mujoco
 import numpy as np
 
 from scenarios.flat import friction_coefficient
-from taslel_bench import plant
-from taslel_bench.fields import number
 from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
+from taslel_bench.plant.build import add_terrain_geom
+from taslel_bench.util.fields import number
 
 HALF_LENGTH_M = 50.0  # [m] half-extent of each floor patch
 THICKNESS_M = 0.1  # [m] patch boxes: top face at z = 0
@@ -33,7 +33,7 @@ class FrictionPatch:
             ("floor_before", self.friction, x0 - HALF_LENGTH_M, (0.55, 0.6, 0.65, 1.0)),
             ("floor_after", self.friction_after, x0 + HALF_LENGTH_M, (0.6, 0.75, 0.9, 1.0)),
         ):
-            plant.add_terrain_geom(spec, name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=half, friction=mu,
+            add_terrain_geom(spec, name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=half, friction=mu,
                                    pos=(cx, 0.0, -THICKNESS_M / 2), rgba=rgba)
 
     def friction_at(self, xy_in_world: np.ndarray) -> float:

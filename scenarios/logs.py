@@ -16,9 +16,9 @@ import numpy as np
 
 from scenarios.flat import FlatGround
 from scenarios.obstacle import checked_profile
-from taslel_bench import plant
-from taslel_bench.fields import integer, number
 from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
+from taslel_bench.plant.build import add_round_obstacles
+from taslel_bench.util.fields import integer, number
 
 
 class LogRow(FlatGround):
@@ -47,7 +47,7 @@ class LogRow(FlatGround):
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         super().build(spec, rng)
-        plant.add_round_obstacles(spec, self._obstacles, self.friction)
+        add_round_obstacles(spec, self._obstacles, self.friction)
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return self._profile

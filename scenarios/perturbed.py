@@ -1,6 +1,6 @@
 """Plant perturbations the controller's model does not know about (payload, joint losses, weaker
 motors, actuator delay): applied to the MuJoCo plant only, so the Pinocchio model is wrong the way a real
-robot's is -- unless the ``model`` config group (:mod:`taslel_bench.model_options`) tells the model the same
+robot's is -- unless the ``model`` config group (:mod:`taslel_bench.robot.model_options`) tells the model the same
 values: trunk mass scale, CoM shift, joint damping, armature, joint friction and payload have the same
 meanings and units on both sides."""
 
@@ -14,9 +14,9 @@ import numpy as np
 
 from scenarios.flat import FlatGround
 from scenarios.obstacle import checked_profile
-from taslel_bench import robot
-from taslel_bench.fields import integer, number, number_or_list, numbers
 from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.robot import a1
+from taslel_bench.util.fields import integer, number, number_or_list, numbers
 
 MAX_SCALE = 10.0  # [-] mass and motor-strength factors
 MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)
@@ -55,7 +55,7 @@ class PerturbedPlant(FlatGround):
         shift = numbers(s + "trunk_com_shift_m", trunk_com_shift_m, -MAX_COM_SHIFT_M, MAX_COM_SHIFT_M,
                         length=3, unit="m", why="[x, y, z] in the trunk frame")
         self.trunk_com_shift_m = np.asarray(shift)
-        n = robot.N_JOINTS
+        n = a1.N_JOINTS
         self.joint_damping = number_or_list(s + "joint_damping", joint_damping, 0.0, MAX_JOINT_LOSS, length=n,
                                             unit="N·m·s/rad")
         self.joint_frictionloss = number_or_list(s + "joint_frictionloss", joint_frictionloss, 0.0,
@@ -79,7 +79,7 @@ class PerturbedPlant(FlatGround):
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
         super().build(spec, rng)
-        trunk = spec.body(robot.TRUNK_BODY)
+        trunk = spec.body(a1.TRUNK_BODY)
         trunk.mass *= self.trunk_mass_scale
         trunk.inertia[:] = np.asarray(trunk.inertia) * self.trunk_mass_scale  # URDF import: fullinertia
         trunk.fullinertia[:] = np.asarray(trunk.fullinertia) * self.trunk_mass_scale
@@ -89,7 +89,7 @@ class PerturbedPlant(FlatGround):
             payload.explicitinertial = True
             payload.mass, payload.ipos = self.payload_mass_kg, [0.0] * 3
             payload.inertia = [0.0] * 3  # a point mass
-        for i, name in enumerate(robot.JOINT_NAMES):
+        for i, name in enumerate(a1.JOINT_NAMES):
             joint = spec.joint(name)
             damping = np.array(joint.damping)  # MuJoCo >= 4: [linear, higher-order polynomial terms ...]
             damping[0] += self.joint_damping[i]  # the linear coefficient only: torque -d qdot

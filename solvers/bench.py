@@ -79,7 +79,7 @@ def settings_line(backend: QPBackend) -> str:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episode", type=float, default=0.0, help="record a fresh episode of this many seconds")
-    ap.add_argument("--fixture", type=Path, default=None, help="any QP set (taslel_bench.qpset); default: the fixture")
+    ap.add_argument("--fixture", type=Path, default=None, help="any QP set (taslel_bench.record.qpset); default: the fixture")
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)

@@ -1,4 +1,4 @@
-"""The solver tests' QP fixture: a :mod:`taslel_bench.qpset` file (the format lives in the core, which writes
+"""The solver tests' QP fixture: a :mod:`taslel_bench.record.qpset` file (the format lives in the core, which writes
 it during runs with ``record.qps=true``); this module only names the committed fixture and adds helpers.
 
 ``save(path, problems, x_ref, ticks, tags, meta)`` keeps the old call signature (``tags`` are recomputed from
@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.qpset import QPSet, from_problems
-from taslel_bench.qpset import load as _load
-from taslel_bench.qpset import save as _save
+from taslel_bench.record.qpset import QPSet, from_problems
+from taslel_bench.record.qpset import load as _load
+from taslel_bench.record.qpset import save as _save
 
 DEFAULT_PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "qps_episode.npz"
 

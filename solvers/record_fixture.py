@@ -25,7 +25,7 @@ import numpy as np
 from solvers.fixture import DEFAULT_PATH, save
 from solvers.reference import reference_backend
 from taslel_bench.interfaces import ClearanceProfile, QPProblem
-from taslel_bench.qpset import active_sets, binding_tags
+from taslel_bench.record.qpset import active_sets, binding_tags
 
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
 BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 - s)²
@@ -38,23 +38,25 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
     unless ``backend`` is given."""
     import mujoco
 
-    from taslel_bench import api, plant, robot
+    from taslel_bench import api
+    from taslel_bench.plant.build import build_plant
+    from taslel_bench.robot import a1
 
     cfg = api.compose(["solver=reference"])
     sf = api.build_safety_filter(cfg, ClearanceProfile(BUMP))
     if backend is not None:
         sf.backend = backend
-    m = plant.build_plant()
+    m = build_plant()
     d = mujoco.MjData(m)
     bridge, model = api.StateBridge(m), api.A1Model()
     ctl = api.build_controller(cfg)
     q0 = model.neutral_q()
-    q0[2] = ctl.gait.p.stand_height_m + robot.FOOT_RADIUS_M
+    q0[2] = ctl.gait.p.stand_height_m + a1.FOOT_RADIUS_M
     q0[7:] = ctl.stand_configuration()
     bridge.qpos_mj(q0, d.qpos)
     mujoco.mj_forward(m, d)
     limit = sf.settings.torque_limit_nm
-    q, v = np.zeros(robot.NQ), np.zeros(robot.NV)
+    q, v = np.zeros(a1.NQ), np.zeros(a1.NV)
     qps, xs = [], []
     for k in range(round(seconds * 1000)):
         t = k * 1e-3
@@ -75,7 +77,7 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
 
 def binding(problem: QPProblem, x: np.ndarray) -> list[str]:
     """Constraint families that bind at x: "ecbf", "friction" (pyramid sides), "torque" (the core's rule,
-    :func:`taslel_bench.qpset.binding_tags`, also used for the stored sets)."""
+    :func:`taslel_bench.record.qpset.binding_tags`, also used for the stored sets)."""
     rows, bounds = active_sets(problem, x)
     return binding_tags(problem.row_labels, rows, bounds, problem.layout)
 

@@ -1,7 +1,7 @@
 """``python -m taslel_bench [overrides]`` — one episode; ``-m`` sweeps (joblib launcher, one job per core).
 
 Each run writes its folder (summary.json, steps.parquet, events.json, episode.mcap); at the end of a
-multirun the :class:`taslel_bench.sweep.SweepCallback` aggregates the sweep folder and writes the report.
+multirun the :class:`taslel_bench.sweep.aggregate.SweepCallback` aggregates the sweep folder and writes the report.
 """
 
 from __future__ import annotations
@@ -14,16 +14,15 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from taslel_bench.console import print_summary
-from taslel_bench.launchers import LauncherNotInstalled, check_launcher_overrides
-from taslel_bench.run import record_job_error
+from taslel_bench.config.compose import CONF_DIR
+from taslel_bench.sim.console import print_summary
+from taslel_bench.sim.run import record_job_error
+from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides
 
-CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 
-
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def main(cfg: DictConfig) -> dict:
-    from taslel_bench.run import run
+    from taslel_bench.sim.run import run
 
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
@@ -37,7 +36,7 @@ def main(cfg: DictConfig) -> dict:
         summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
     print_summary(summary, out_dir)
     if hc.mode == RunMode.MULTIRUN:
-        from taslel_bench.sweep import run_folders
+        from taslel_bench.sweep.aggregate import run_folders
 
         sweep_dir = Path(hc.sweep.dir)
         done = sum(1 for d in run_folders(sweep_dir) if (d / "summary.json").is_file())

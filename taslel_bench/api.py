@@ -14,22 +14,18 @@ run as in a benchmark run.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from pathlib import Path
-
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
-from taslel_bench.bridge import StateBridge
-from taslel_bench.constraints import TickInputs
-from taslel_bench.controller import NominalController, PDGains
-from taslel_bench.gait import GaitParams
+from taslel_bench.config.compose import compose
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.filter.constraints import TickInputs
+from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
 from taslel_bench.interfaces import ClearanceProfile
-from taslel_bench.model import A1Model
-from taslel_bench.run import build_controller, filter_settings
-from taslel_bench.safety_filter import FilterResult, SafetyFilter
-
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.robot.model import A1Model
+from taslel_bench.sim.run import build_controller, filter_settings
 
 __all__ = [
     "A1Model",
@@ -46,21 +42,12 @@ __all__ = [
 ]
 
 
-def compose(overrides: Sequence[str] = ()) -> DictConfig:
-    """The project's config (``conf/config.yaml``) with Hydra overrides, outside a Hydra app."""
-    from hydra import compose as hydra_compose
-    from hydra import initialize_config_dir
-
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return hydra_compose(config_name="config", overrides=list(overrides))
-
-
 def build_safety_filter(cfg: DictConfig, profile: ClearanceProfile | None = None) -> SafetyFilter:
     """The ID-CBF-QP filter configured by ``cfg.filter``/``cfg.robot`` with the backend ``cfg.solver``.
 
     ``profile``: swing-foot clearance profile for the ECBF (None: no ECBF rows). Per tick:
     ``safety_filter.filter(TickInputs(model, v, in_stance, mu, swing_phase, swing_phase_rate), u_nom)``
-    with ``model`` an :class:`A1Model` updated at the plant state (see :mod:`taslel_bench.episode`)."""
+    with ``model`` an :class:`A1Model` updated at the plant state (see :mod:`taslel_bench.sim.episode`)."""
     fs = filter_settings(cfg)
     if not fs.enabled:
         raise ValueError("build_safety_filter: cfg.filter.enabled is false")

@@ -4,7 +4,7 @@
 names) from the core; the core builds them from Hydra ``_target_`` entries and talks to them only through
 these protocols and dataclasses.
 
-Joint vectors are in the core order (:data:`taslel_bench.robot.JOINT_NAMES`, legs FL, FR, RL, RR).
+Joint vectors are in the core order (:data:`taslel_bench.robot.a1.JOINT_NAMES`, legs FL, FR, RL, RR).
 """
 
 from __future__ import annotations

@@ -11,8 +11,8 @@ import pytest
 from hydra.errors import ConfigCompositionException, MissingConfigException
 from omegaconf import OmegaConf
 
-from taslel_bench.config import ConfigError, validate
-from taslel_bench.run import Built, run
+from taslel_bench.config.validate import ConfigError, validate
+from taslel_bench.sim.run import Built, run
 from tests.conftest import compose_cfg
 
 
@@ -144,7 +144,7 @@ def test_friction_check_catches_misconfigured_floor():
     OmegaConf.set_struct(cfg, False)
     cfg.scenario["_target_"] = f"{__name__}.LiarForTest"
     globals()["LiarForTest"] = Liar
-    from taslel_bench.run import FrictionMismatch
+    from taslel_bench.sim.run import FrictionMismatch
 
     with pytest.raises(FrictionMismatch, match="0.3"):
         Built(cfg)
@@ -168,7 +168,7 @@ def test_flat_trot_10s_no_fall(tmp_path, seed):
 
 
 def test_settle_time_after_friction_change():
-    from taslel_bench.metrics import settle_time
+    from taslel_bench.metrics.summary import settle_time
 
     t = np.arange(0, 2, 0.01)
     mu = np.where(t < 1.0, 0.8, 0.2)
@@ -179,7 +179,7 @@ def test_settle_time_after_friction_change():
 
 
 def test_one_sided_estimator_metrics_startup_and_time_to_safe():
-    from taslel_bench.metrics import estimator_safety_metrics, time_to_safe
+    from taslel_bench.metrics.summary import estimator_safety_metrics, time_to_safe
 
     t = np.arange(0, 2, 0.01)
     mu = np.where(t < 1.0, 0.8, 0.2)

@@ -434,7 +434,7 @@ def test_model_without_tau_ignores_torques() -> None:
 def test_foot_kinematics_match_leg_fk_and_its_finite_difference() -> None:
     torch = pytest.importorskip("torch")
     from estimators.models import foot_kinematics
-    from taslel_bench import kinematics, robot
+    from taslel_bench.robot import a1, kinematics
 
     rng = np.random.default_rng(4)
     q, qd = rng.uniform(-1.0, 1.0, 12), rng.normal(size=12)
@@ -442,8 +442,8 @@ def test_foot_kinematics_match_leg_fk_and_its_finite_difference() -> None:
     out = foot_kinematics(x)[0, 0].numpy()
     h = 1e-6
     for leg in range(4):
-        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], robot.LEG_SIDE[leg]
-        p = kinematics.leg_fk(ql, side) + robot.HIP_POSITIONS_IN_TRUNK[leg]
+        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], a1.LEG_SIDE[leg]
+        p = kinematics.leg_fk(ql, side) + a1.HIP_POSITIONS_IN_TRUNK[leg]
         v = (kinematics.leg_fk(ql + h * dl, side) - kinematics.leg_fk(ql - h * dl, side)) / (2 * h)
         np.testing.assert_allclose(out[3 * leg : 3 * leg + 3], p, atol=1e-6)
         np.testing.assert_allclose(out[12 + 3 * leg : 15 + 3 * leg], v, atol=1e-6)

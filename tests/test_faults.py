@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from taslel_bench.config import ConfigError
-from taslel_bench.episode import Episode
-from taslel_bench.run import record_job_error, run
+from taslel_bench.config.validate import ConfigError
+from taslel_bench.sim.episode import Episode
+from taslel_bench.sim.run import record_job_error, run
 from tests.conftest import compose_cfg
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -11,14 +11,15 @@ import pinocchio as pin
 import pytest
 import qpsolvers
 
-from taslel_bench import plant, robot
-from taslel_bench.bridge import StateBridge
-from taslel_bench.constraints import LAM, VDOT, TickInputs, U
-from taslel_bench.controller import NominalController, PDGains
-from taslel_bench.gait import GaitParams
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.filter.constraints import LAM, VDOT, TickInputs, U
+from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
 from taslel_bench.interfaces import ClearanceProfile, QPSolution
-from taslel_bench.model import A1Model
-from taslel_bench.safety_filter import FilterSettings, SafetyFilter
+from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.plant.build import PlantOptions, build_plant
+from taslel_bench.robot import a1
+from taslel_bench.robot.model import A1Model
 
 
 class TightReference:
@@ -67,11 +68,11 @@ BUMP = ClearanceProfile((0.0, 0.0, 1.28, -2.56, 1.28))  # 8 cm 4th-order bump
 
 def walking_states(n_states: int, t_start: float = 1.0, friction: float = 1.0):
     """(TickInputs-ready) plant states of the nominal trot after t_start, every 37 ms."""
-    m = plant.build_plant(plant.PlantOptions(floor_friction=friction))
+    m = build_plant(PlantOptions(floor_friction=friction))
     d, br, pm = mujoco.MjData(m), StateBridge(m), A1Model()
     ctl = NominalController(GaitParams(), PDGains())
     q0 = pin.neutral(pm.model)
-    q0[2] = 0.27 + robot.FOOT_RADIUS_M
+    q0[2] = 0.27 + a1.FOOT_RADIUS_M
     q0[7:] = ctl.stand_configuration()
     br.qpos_mj(q0, d.qpos)
     mujoco.mj_forward(m, d)
@@ -147,7 +148,7 @@ def test_solution_satisfies_dynamics_and_cones(states):
                 assert np.abs(acc).max() < 1e-6
             else:
                 assert np.abs(lam[i]).max() < 1e-8
-        assert np.all(np.abs(res.u) <= robot.TORQUE_LIMIT_NM + 1e-9)
+        assert np.all(np.abs(res.u) <= a1.TORQUE_LIMIT_NM + 1e-9)
 
 
 def test_ecbf_rows_hold_at_the_solution(states):
@@ -168,12 +169,12 @@ def test_ecbf_rows_hold_at_the_solution(states):
             if not s[2].in_stance[i]:
                 z, dz, ddz = BUMP(float(s[2].swing_phase[i]))
                 sd = s[2].swing_phase_rate
-                h = pm.foot_pos_in_world[i, 2] - robot.FOOT_RADIUS_M - z
+                h = pm.foot_pos_in_world[i, 2] - a1.FOOT_RADIUS_M - z
                 hdot = pm.foot_vel_in_world[i, 2] - dz * sd
                 acc_z = pm.foot_jac_in_world[i, 2] @ res.vdot + pm.foot_jdotv_in_world[i, 2]
                 hddot = acc_z - ddz * sd**2
-                a1, a2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
-                assert a2 * (hdot + a1 * h) + hddot + a1 * hdot >= -1e-6
+                al1, al2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
+                assert al2 * (hdot + al1 * h) + hddot + al1 * hdot >= -1e-6
     assert active > 0, "the 8 cm bump should make the ECBF bind on some swing ticks"
 
 
@@ -197,7 +198,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
         res = f.filter(x, s[3])
         assert res.status == "solved"
         p = f.problem
-        row = p.row_labels.index(f"{robot.LEGS[i]}_obstacle")
+        row = p.row_labels.index(f"{a1.LEGS[i]}_obstacle")
         xvec = np.concatenate([res.vdot, res.u, res.lam])
         slack = p.h[row] - p.G[row] @ xvec
         assert slack >= -1e-6
@@ -207,20 +208,20 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
 
         def clearance(t: float, p0=p0, v0=v0, a0=a0, log=log) -> float:
             pt = p0 + v0 * t + 0.5 * a0 * t * t
-            return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - robot.FOOT_RADIUS_M)
+            return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - a1.FOOT_RADIUS_M)
 
         dt = 1e-4
         h, hdot = clearance(0.0), (clearance(dt) - clearance(-dt)) / (2 * dt)
         hddot = (clearance(dt) - 2 * h + clearance(-dt)) / dt**2
-        a1, a2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
-        # what the kernel wrote: h, h_e = hdot + a1 h, and the row -G vdot = hddot - (J̇v-free part)
+        al1, al2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
+        # what the kernel wrote: h, h_e = hdot + al1 h, and the row -G vdot = hddot - (J̇v-free part)
         h_e = f.obstacle_ecbf.h_e[i]
-        hdot_row = h_e - a1 * f.obstacle_ecbf.h[i]
-        hddot_row = -p.G[row, :18] @ res.vdot + p.h[row] - a2 * h_e - a1 * hdot_row
+        hdot_row = h_e - al1 * f.obstacle_ecbf.h[i]
+        hddot_row = -p.G[row, :18] @ res.vdot + p.h[row] - al2 * h_e - al1 * hdot_row
         assert f.obstacle_ecbf.h[i] == pytest.approx(h, abs=1e-12)
         assert hdot_row == pytest.approx(hdot, abs=1e-6)
         assert hddot_row == pytest.approx(hddot, abs=1e-3 * max(1.0, abs(hddot)))  # finite-difference accuracy
-        assert a2 * (hdot + a1 * h) + hddot + a1 * hdot >= -1e-3 * max(1.0, abs(hddot))
+        assert al2 * (hdot + al1 * h) + hddot + al1 * hdot >= -1e-3 * max(1.0, abs(hddot))
     assert active > 0, "a log 6 cm ahead of a swinging foot should make the row bind"
 
 
@@ -291,7 +292,7 @@ def test_condensed_formulation_has_the_same_minimiser(states, target):
     kw = {"regularization": 1e-4, "regularization_target": target}
     full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), BUMP)
     cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), BUMP)
-    assert cond.condensed.n == robot.N_JOINTS and cond.condensed.A.shape[0] == 0
+    assert cond.condensed.n == a1.N_JOINTS and cond.condensed.A.shape[0] == 0
     moved = 0
     for s in st:
         for mu in (0.05, 1.0):
@@ -325,7 +326,7 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
     """The leg-by-leg elimination of the (vdot, lambda) block and the dense pivoted LU give the same
     [z0, Z] on walking states (stance and swing feet, 13 right-hand sides), and a stretched stance leg (a
     singular leg block) falls back to the dense LU instead of failing."""
-    from taslel_bench.equality_solve import FreeBlockSolver, solve_dense, solve_tree
+    from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_dense, solve_tree
 
     sts, pm = states
     filt = SafetyFilter(FilterSettings(), TightReference())
@@ -338,7 +339,7 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
         filt.build(inputs_for(pm, st, 0.6), st[3])
         rhs = rng.normal(size=(qp.A.shape[0], 13))
         tree, dense = rhs.copy(), rhs.copy()
-        assert solve_tree(qp.A, tree, 0, robot.NV, K, piv, W, V, S, T, pivS)
+        assert solve_tree(qp.A, tree, 0, a1.NV, K, piv, W, V, S, T, pivS)
         assert solve_dense(qp.A, dense, A_free, piv_dense)
         worst = max(worst, np.abs(tree - dense).max() / np.abs(dense).max())
         A_free_np = np.hstack([qp.A[:, VDOT], qp.A[:, LAM]])
@@ -347,14 +348,14 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
     # a singular leg block: foot 0 in stance with a zero Jacobian on its own joints
     A = qp.A.copy()
     A[:] = 0.0
-    A[: robot.NV, : robot.NV] = np.eye(robot.NV)
-    A[robot.NV : robot.NV + 3, :3] = np.eye(3)  # foot 0's contact rows use only base columns
+    A[: a1.NV, : a1.NV] = np.eye(a1.NV)
+    A[a1.NV : a1.NV + 3, :3] = np.eye(3)  # foot 0's contact rows use only base columns
     for i in range(1, 4):
-        A[robot.NV + 3 * i : robot.NV + 3 * i + 3, 30 + 3 * i : 33 + 3 * i] = np.eye(3)  # swing feet
+        A[a1.NV + 3 * i : a1.NV + 3 * i + 3, 30 + 3 * i : 33 + 3 * i] = np.eye(3)  # swing feet
     A[:3, 30:33] = -np.eye(3)
     rhs = rng.normal(size=(qp.A.shape[0], 1))
-    assert not solve_tree(A, rhs.copy(), 0, robot.NV, K, piv, W, V, S, T, pivS)
-    from taslel_bench.equality_solve import solve_free
+    assert not solve_tree(A, rhs.copy(), 0, a1.NV, K, piv, W, V, S, T, pivS)
+    from taslel_bench.filter.equality_solve import solve_free
 
     y = rhs.copy()
     assert solve_free(A, y, sv.rows, sv.workspace)

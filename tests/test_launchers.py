@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 
-from taslel_bench.launchers import LauncherNotInstalled, check_launcher_overrides
+from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides
 from tests.conftest import CONF_DIR
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -10,13 +10,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from taslel_bench import episode as episode_module
-from taslel_bench import plant
-from taslel_bench.clearance_metrics import clearance_metrics
-from taslel_bench.contact_metrics import contact_metrics, touchdown_window
-from taslel_bench.health import HealthLimits, assess
-from taslel_bench.run import Built, run
-from taslel_bench.trace import EpisodeTrace
+from taslel_bench.metrics.clearance import clearance_metrics
+from taslel_bench.metrics.contacts import contact_metrics, touchdown_window
+from taslel_bench.metrics.health import HealthLimits, assess
+from taslel_bench.plant.contacts import measure_contact_friction
+from taslel_bench.record.trace import EpisodeTrace
+from taslel_bench.sim import episode as episode_module
+from taslel_bench.sim.run import Built, run
 from tests.conftest import NeverSolves, compose_cfg
 
 N = 10  # synthetic ticks, all walking (k0 = 0), dt = 1 ms
@@ -122,7 +122,7 @@ def test_negative_barrier_while_solved_degrades_the_run():
 
 def test_a_filter_that_fails_every_tick_ends_degraded(tmp_path, monkeypatch):
     """The run finishes on fallback torques (u_nom: intervention 0) and must say so, not end `ok`."""
-    import taslel_bench.run as run_module
+    import taslel_bench.sim.run as run_module
 
     monkeypatch.setattr(run_module, "build_backend", lambda cfg: NeverSolves())
     summary = run(compose_cfg(["duration=0.3", "progress=false", "record.mcap=false"]), tmp_path)
@@ -147,7 +147,7 @@ def test_front_feet_on_a_patch_get_the_patch_friction(tmp_path):
     assert ratio.max() <= 0.8 + 1e-6
     front = np.hypot(f[:, :2, 0], f[:, :2, 1])[loaded[:, :2]] / f[:, :2, 2][loaded[:, :2]]
     assert front.max() <= 0.2 + 1e-6  # the plant's cone of the front feet is the patch's
-    in_contact = dict(plant.measure_contact_friction(built.mj_model, built.episode.d))
+    in_contact = dict(measure_contact_friction(built.mj_model, built.episode.d))
     assert in_contact == {"FL_foot": 0.2, "FR_foot": 0.2, "RL_foot": 0.8, "RR_foot": 0.8}
 
 

@@ -10,12 +10,13 @@ import pinocchio as pin
 import pytest
 
 from scenarios.perturbed import PerturbedPlant
-from taslel_bench import plant, robot
-from taslel_bench.bridge import StateBridge, quat_wxyz_to_matrix
-from taslel_bench.config import ConfigError, model_options
-from taslel_bench.model import A1Model
-from taslel_bench.model_options import ModelOptions
-from taslel_bench.run import Built
+from taslel_bench.config.validate import ConfigError, model_options
+from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
+from taslel_bench.plant.build import a1_spec, compile_plant
+from taslel_bench.robot import a1
+from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model_options import ModelOptions
+from taslel_bench.sim.run import Built
 from tests.conftest import compose_cfg
 from tests.test_faults import assert_refused, no_episode  # noqa: F401 - fixture
 from tests.test_model import random_state, velocity_map
@@ -24,9 +25,9 @@ AGREE = 1e-9  # [kg·m², N·m] the issue's bound; measured ~1e-13
 
 
 def perturbed_plant(**kw) -> mujoco.MjModel:
-    spec = plant.a1_spec()
+    spec = a1_spec()
     PerturbedPlant(**kw).build(spec, np.random.default_rng(0))
-    return plant.compile_plant(spec)
+    return compile_plant(spec)
 
 
 def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) -> tuple[float, float]:
@@ -46,7 +47,7 @@ def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) 
         T = velocity_map(br, q)
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
-        tdot_v = np.zeros(robot.NV)
+        tdot_v = np.zeros(a1.NV)
         tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
         worst_m = max(worst_m, float(np.abs(T.T @ M @ T - pm.M).max()))
         worst_h = max(worst_h, float(np.abs(T.T @ (d.qfrc_bias - d.qfrc_passive + M @ tdot_v) - pm.h).max()))
@@ -55,7 +56,7 @@ def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) 
 
 def test_default_model_is_bit_identical_to_the_plain_urdf_model():
     """Default options (in code, from the default config) give exactly Pinocchio's M and nle of the URDF."""
-    ref = pin.buildModelFromUrdf(str(robot.a1_urdf_path()), pin.JointModelFreeFlyer())
+    ref = pin.buildModelFromUrdf(str(a1.a1_urdf_path()), pin.JointModelFreeFlyer())
     ref_data = ref.createData()
     models = [A1Model(), A1Model(ModelOptions()), A1Model(model_options(compose_cfg()))]
     rng = np.random.default_rng(5)

@@ -11,15 +11,16 @@ import numpy as np
 import pytest
 
 from scenarios.perturbed import PerturbedPlant
-from taslel_bench import plant, robot
-from taslel_bench.bridge import StateBridge
-from taslel_bench.config import ConfigError, plant_options
-from taslel_bench.controller import NominalController, PDGains
-from taslel_bench.gait import GaitParams
-from taslel_bench.model import A1Model
-from taslel_bench.model_report import plant_vs_model
-from taslel_bench.plant_adapter import read_record
-from taslel_bench.run import Built, run
+from taslel_bench.config.validate import ConfigError, plant_options
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.plant.adapter import read_record
+from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.plant.build import TERRAIN_PRIORITY, a1_spec, build_plant, compile_plant
+from taslel_bench.plant.comparison import plant_vs_model
+from taslel_bench.robot import a1
+from taslel_bench.robot.model import A1Model
+from taslel_bench.sim.run import Built, run
 from tests.conftest import compose_cfg
 
 MENAGERIE_LIKE = [  # Menagerie-style names as robot.plant_names overrides (Hydra: quote a {pattern})
@@ -43,7 +44,7 @@ def third_party_a1(
     removed, elements renamed (joints ``FL_hip``, actuators ``FL_hip_servo``, feet ``FL``, trunk ``torso``),
     optionally position servos (kp 60, kv 2), a plane ``ground`` of its own (priority 0, friction 0.8) and
     joint losses (damping 1.5, armature 0.01, frictionloss 0.2); a joint sensor refers to a renamed joint."""
-    spec = plant.a1_spec()
+    spec = a1_spec()
     for element in list(spec.sensors) + list(spec.sites):
         spec.delete(element)
     for act in spec.actuators:
@@ -53,13 +54,13 @@ def third_party_a1(
             act.set_to_position(kp=60.0, kv=2.0)
             act.ctrlrange = [-1.5, 1.5]  # [rad] position targets
     for j in spec.joints:
-        if j.name in robot.JOINT_NAMES:
+        if j.name in a1.JOINT_NAMES:
             j.name = "_".join(j.name.split("_")[:2])
             if losses:
                 j.damping, j.armature, j.frictionloss = [1.5, 0.0, 0.0], 0.01, 0.2
-    for foot in robot.FOOT_FRAMES:
+    for foot in a1.FOOT_FRAMES:
         spec.geom(foot).name = foot.split("_")[0]
-    spec.body(robot.TRUNK_BODY).name = "torso"
+    spec.body(a1.TRUNK_BODY).name = "torso"
     ground = spec.geom("floor")
     if floor:
         ground.name, ground.priority, ground.friction[0] = "ground", 0, 0.8
@@ -126,14 +127,14 @@ def test_renamed_servo_plant_with_its_own_floor_runs(tmp_path):
 def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
     """Same Pinocchio state in both plants -> same foot positions and the same state read back."""
     adapted = build(third_party_a1(tmp_path / "a1.xml", losses=False)).mj_model
-    default = plant.build_plant()
+    default = build_plant()
     rng = np.random.default_rng(0)
     for m in (adapted, default):
         m.opt.gravity[:] = 0.0
     for _ in range(3):
         q = np.concatenate([[0.1, -0.2, 0.4], [0.1, 0.0, 0.0, 0.995], rng.uniform(-0.6, 0.6, 12)])
         q[3:7] /= np.linalg.norm(q[3:7])
-        v = rng.normal(0.0, 1.0, robot.NV)
+        v = rng.normal(0.0, 1.0, a1.NV)
         feet, states = [], []
         for m in (adapted, default):
             d, br = mujoco.MjData(m), StateBridge(m)
@@ -141,7 +142,7 @@ def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
             br.qvel_mj(q, v, d.qvel)
             mujoco.mj_forward(m, d)
             feet.append(
-                d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in robot.FOOT_FRAMES]]
+                d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]]
             )
             states.append(np.concatenate([br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)]))
         np.testing.assert_allclose(feet[0], feet[1], atol=1e-12)
@@ -186,7 +187,7 @@ def test_names_without_a_plant_file_and_bad_patterns_are_refused():
 def test_no_floor_in_the_file_gets_the_harness_floor(tmp_path):
     m = build(third_party_a1(tmp_path / "a1.xml", floor=False)).mj_model
     floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
-    assert floor >= 0 and m.geom_priority[floor] == plant.TERRAIN_PRIORITY
+    assert floor >= 0 and m.geom_priority[floor] == TERRAIN_PRIORITY
     assert "added" in read_record(m)["floor"]
 
 
@@ -222,17 +223,17 @@ def test_overrides_are_applied_and_reported(tmp_path):
     ):
         assert text in report["plant_overrides"], report["plant_overrides"]
     # the URDF plant takes the same overrides; with the defaults nothing changes and nothing is recorded
-    urdf_plant = plant.build_plant(plant_options(compose_cfg(overrides)))
+    urdf_plant = build_plant(plant_options(compose_cfg(overrides)))
     assert (
         urdf_plant.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
         and "cone" in read_record(urdf_plant)["overrides"]
     )
-    default = plant.build_plant(plant_options(compose_cfg()))
+    default = build_plant(plant_options(compose_cfg()))
     assert default.ntext == 0 and default.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
 
 
 def test_report_default_plant_agrees_with_the_model():
-    r = plant_vs_model(plant.build_plant(), A1Model(), STAND)
+    r = plant_vs_model(build_plant(), A1Model(), STAND)
     assert r["plant_total_mass_kg"] == pytest.approx(13.741, abs=1e-9) == r["model_total_mass_kg"]
     assert r["plant_trunk_mass_kg"] == pytest.approx(6.001, abs=1e-12) == r["model_trunk_mass_kg"]
     assert r["model_minus_plant_com_stand_m"] < 1e-12 and r["model_minus_plant_foot_pos_stand_max_m"] < 1e-12
@@ -260,9 +261,9 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
         "payload_mass_kg": 1.0,
         "payload_pos_m": (0.1, 0.0, 0.0),
     }
-    spec = plant.a1_spec()
+    spec = a1_spec()
     PerturbedPlant(**kw).build(spec, np.random.default_rng(0))
-    m = plant.compile_plant(spec)
+    m = compile_plant(spec)
     nominal = plant_vs_model(m, A1Model(), STAND)
     assert (
         nominal["plant_joint_damping_nms_per_rad_min"] == 1.5
@@ -273,7 +274,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
     )
     assert nominal["model_minus_plant_total_mass_kg"] == pytest.approx(6.0 * 0.2 - 1.0, abs=1e-12)
     assert nominal["model_minus_plant_com_stand_m"] > 1e-3
-    from taslel_bench.model_options import ModelOptions
+    from taslel_bench.robot.model_options import ModelOptions
 
     matched = plant_vs_model(m, A1Model(ModelOptions(**kw)), STAND)
     assert (

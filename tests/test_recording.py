@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from taslel_bench.mcap_log import PARTIAL_NAME, McapStream, read_messages
-from taslel_bench.report import write_report
-from taslel_bench.run import Built, config_sha256, run
-from taslel_bench.sweep import aggregate
+from taslel_bench.record.mcap import PARTIAL_NAME, McapStream, read_messages
+from taslel_bench.sim.run import Built, config_sha256, run
+from taslel_bench.sweep.aggregate import aggregate
+from taslel_bench.sweep.report import write_report
 from tests.conftest import compose_cfg
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,10 +15,11 @@ import pandas as pd
 import pytest
 import qpsolvers
 
-from taslel_bench import qpset, replay
 from taslel_bench.interfaces import QPSolution
-from taslel_bench.replay_report import compare, summarize, write_report
-from taslel_bench.run import run
+from taslel_bench.qp import replay
+from taslel_bench.qp.replay_report import compare, summarize, write_report
+from taslel_bench.record import qpset
+from taslel_bench.sim.run import run
 from tests.conftest import compose_cfg
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taslel_bench.health import HealthLimits
-from taslel_bench.residuals import residual_metrics
-from taslel_bench.robust import DisturbanceObserver, RobustMargin, RobustSettings
-from taslel_bench.run import Built, run
+from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
+from taslel_bench.metrics.health import HealthLimits
+from taslel_bench.metrics.residuals import residual_metrics
+from taslel_bench.sim.run import Built, run
 from tests.conftest import compose_cfg
 
 PLANT = ["scenario=perturbed", "scenario.joint_damping=0", "scenario.joint_frictionloss=0",

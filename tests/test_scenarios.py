@@ -9,8 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from taslel_bench import plant
-from taslel_bench.run import Built, run
+from taslel_bench.plant.build import a1_spec
+from taslel_bench.plant.contacts import measure_contact_friction
+from taslel_bench.sim.run import Built, run
 from tests.conftest import CONF_DIR, compose_cfg
 
 SCENARIOS = sorted(p.stem for p in (Path(CONF_DIR) / "scenario").glob("*.yaml"))
@@ -32,7 +33,7 @@ def test_friction_patch_changes_the_friction_the_feet_get():
     m, d = built.mj_model, built.episode.d
     d.qpos[0] = 0.6  # move the standing robot onto the second patch
     mujoco.mj_forward(m, d)
-    frictions = [mu for _, mu in plant.measure_contact_friction(m, d)]
+    frictions = [mu for _, mu in measure_contact_friction(m, d)]
     assert frictions and np.allclose(frictions, 0.2)
     assert built.scenario.friction_at(np.array([0.6, 0.0])) == 0.2
 
@@ -77,7 +78,7 @@ def test_actuator_delay_holds_commands_back():
 
 def test_plant_mjcf_override_runs_and_bad_model_is_named(tmp_path):
     xml = tmp_path / "a1_other.xml"
-    xml.write_text(plant.a1_spec().to_xml())
+    xml.write_text(a1_spec().to_xml())
     summary = run(compose_cfg([f"robot.plant_mjcf={xml}", "duration=0.3", "progress=false", "record.mcap=false"]),
                   tmp_path / "run")
     assert summary["status"] == "ok"

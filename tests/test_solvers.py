@@ -215,11 +215,11 @@ def test_persistent_backend_copies_its_data(qps):
 
 
 def test_compiled_residuals_equal_an_independent_numpy_computation():
-    """solvers.checks (compiled, used by every backend) against taslel_bench.replay.kkt_residuals (plain
+    """solvers.checks (compiled, used by every backend) against taslel_bench.qp.replay.kkt_residuals (plain
     numpy, written separately) on recorded filter QPs with perturbed answers and duals, including a zero
     G row, infinite bounds and a NaN."""
-    from taslel_bench.qpset import load
-    from taslel_bench.replay import kkt_residuals
+    from taslel_bench.qp.replay import kkt_residuals
+    from taslel_bench.record.qpset import load
 
     qs = load(Path(__file__).parent / "data" / "qps_episode.npz")
     rng = np.random.default_rng(5)

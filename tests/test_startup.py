@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taslel_bench.run import Built
-from taslel_bench.seed_scan import scan
+from taslel_bench.sim.run import Built
+from taslel_bench.sim.seed_scan import scan
 from tests.conftest import compose_cfg
 
 # seeds that could not start when the stand pose put every foot exactly tangent to the floor

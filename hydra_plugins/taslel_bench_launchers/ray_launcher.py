@@ -19,7 +19,7 @@ from hydra.plugins.launcher import Launcher
 from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench.launchers import require_launcher_package
+from taslel_bench.sweep.launchers import require_launcher_package
 
 log = logging.getLogger(__name__)
 

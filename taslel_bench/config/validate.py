@@ -1,0 +1,504 @@
+"""Validation of a composed run config: every bad value is refused with the field name (dotted config
+path), the value and what is allowed, before anything is built or simulated. (Unknown group options and
+unknown keys are refused by Hydra itself, with the list of valid options.)
+
+Three layers, all run by :class:`taslel_bench.sim.run.Built` before the episode:
+
+1. :func:`validate` -- a generic pass (no NaN or infinity anywhere in the config) and one rule per field of
+   the core groups (top level, ``record``, ``controller``, ``filter``, ``robot``, ``model``); the ranges are
+   the constants below. :func:`model_options` and :func:`plant_options` turn the validated ``model`` and
+   ``robot`` groups into the builders' options.
+2. :func:`build_axis` -- the sweep axes (``scenario``, ``solver``, ``estimator``) check their own
+   constructor arguments (with :mod:`taslel_bench.util.fields`, naming ``scenario.<key>`` ...); an error raised
+   inside Hydra's ``instantiate`` is turned back into a :class:`ConfigError` with that message.
+3. :func:`build_backend` -- the QP backend must solve a trivial QP of the configured formulation's shape,
+   which catches native solver settings the solver itself rejects.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from hydra.errors import InstantiationException
+from hydra.utils import instantiate
+from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
+
+from taslel_bench.filter.robust import RobustSettings
+from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
+from taslel_bench.interfaces import MAX_FRICTION, QPBackend, QPProblem
+from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
+from taslel_bench.plant.build import PlantOptions
+from taslel_bench.robot import a1
+from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model_options import ModelOptions
+from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, number_or_list, numbers
+
+AXES = ("scenario", "solver", "estimator")
+STANCE_SOURCES = ("schedule", "contact")
+MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
+MAX_SEED = 2**63 - 1
+MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
+PHYSICS_RATE_RANGE_HZ = (100, 100_000)  # MuJoCo is unstable on this robot beyond 10 ms steps
+MIN_CONTROL_RATE_HZ = 10
+MIN_PHASE_TICKS = 2  # stance and swing each last at least this many control periods
+MAX_PERIOD_S = 5.0  # [s] gait period
+MAX_SWING_HEIGHT_M = 0.2  # [m]
+MAX_STAND_DURATION_S = 60.0  # [s]
+MAX_KP = 1000.0  # [N·m/rad] joint PD (the default is 100)
+MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
+MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
+MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
+MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
+MAX_BASE_VEL_NOISE_MPS = 2.0  # [m/s]
+# the controller's model (same ranges as the plant perturbations of scenarios/perturbed.py)
+MAX_JOINT_DAMPING = 10.0  # [N·m·s/rad]
+MAX_ARMATURE_KGM2 = 1.0  # [kg·m²]
+MAX_JOINT_FRICTIONLOSS_NM = 10.0  # [N·m] (the motors give 33.5)
+MAX_FRICTION_SMOOTHING_RADPS = 10.0  # [rad/s]
+MAX_MASS_SCALE = 10.0  # [-]
+MAX_COM_SHIFT_M = 0.2  # [m] per axis
+MAX_PAYLOAD_KG = 50.0  # [kg]
+MAX_PAYLOAD_OFFSET_M = 0.5  # [m] per axis
+# plant overrides
+MAX_NOSLIP_ITERATIONS = 1000
+MAX_IMPRATIO = 100.0  # [-]
+MAX_SOLREF_TIMECONST_S = 1.0  # [s]
+MAX_SOLREF_DAMPRATIO = 10.0  # [-]
+MAX_FOOT_MARGIN_M = 0.05  # [m]
+BUILD_ERRORS = (ValueError, TypeError, OSError)  # what an axis class raises for a bad argument or file
+
+
+def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
+    """The value at a dotted path (None, or ``default``, when absent; interpolation errors propagate)."""
+    return OmegaConf.select(cfg, path, default=default, throw_on_missing=True)
+
+
+def _leaves(node: Any, path: str) -> Iterator[tuple[str, Any]]:
+    """(dotted path, value) of every leaf under ``node`` at ``path`` (list entries as ``path[i]``)."""
+    if isinstance(node, DictConfig):
+        for key in node:
+            yield from _leaves(node[key], f"{path}.{key}")
+    elif isinstance(node, ListConfig):
+        for i, item in enumerate(node):
+            yield from _leaves(item, f"{path}[{i}]")
+    else:
+        yield path, node
+
+
+def check_finite(cfg: DictConfig) -> None:
+    """The generic pass: no field anywhere in the run config (axis settings included) may be NaN or
+    infinite -- no field of this harness has a meaning for them; null is the "not set" value."""
+    for group in (key for key in cfg if key != "hydra"):
+        for path, value in _leaves(cfg[group], str(group)):
+            if isinstance(value, float) and not math.isfinite(value):
+                raise fail(path, value, "must be finite (NaN and infinity are refused in every field)")
+
+
+def validate(cfg: DictConfig) -> None:
+    """Raise :class:`ConfigError` on the first invalid field of the core groups (see module doc); a value
+    that cannot be resolved (``seed=${oops}``, a missing ``???``) is one too."""
+    try:
+        _validate(cfg)
+    except (InterpolationResolutionError, MissingMandatoryValue) as exc:
+        path = str(getattr(exc, "full_key", "") or "")
+        raise fail(path, _raw(cfg, path), f"cannot be resolved: {str(exc).splitlines()[0]}") from exc
+
+
+def _raw(cfg: DictConfig, path: str) -> Any:
+    """The unresolved value at ``path`` (``a.b[0].c``), e.g. the text of a broken interpolation."""
+    node: Any = cfg
+    try:
+        for part in re.findall(r"[^.\[\]]+", path):
+            node = node._get_node(int(part) if isinstance(node, ListConfig) else part)
+        return node._value()
+    except Exception:  # noqa: BLE001 - only for the message
+        return "?"
+
+
+def _validate(cfg: DictConfig) -> None:
+    """The generic pass, the core groups' rules, the axes' ``_target_``."""
+    check_finite(cfg)
+    control_rate_hz = _top_level(cfg)
+    stand_height_m = _controller(cfg, control_rate_hz)
+    _filter(cfg, control_rate_hz)
+    _robot(cfg, stand_height_m)
+    _model(cfg)
+    for group in AXES:
+        if not isinstance(_get(cfg, group), DictConfig) or "_target_" not in cfg[group]:
+            raise fail(group, _get(cfg, group), "has no _target_ to build it from")
+    if _get(cfg, "scenario.friction") is not None:  # every scenario has one (the scenario checks it too)
+        number("scenario.friction", cfg.scenario.friction, 0.0, MAX_FRICTION, lo_open=True)
+
+
+def _top_level(cfg: DictConfig) -> int:
+    """Seed, duration, rates, flags, ``record.*``; returns the control rate [Hz]."""
+    integer("seed", _get(cfg, "seed"), 0, MAX_SEED)
+    number("duration", _get(cfg, "duration"), 0.0, MAX_DURATION_S, lo_open=True, unit="s")
+    physics = integer("physics_rate_hz", _get(cfg, "physics_rate_hz"), *PHYSICS_RATE_RANGE_HZ, unit="Hz")
+    control = integer(
+        "control_rate_hz", _get(cfg, "control_rate_hz"), MIN_CONTROL_RATE_HZ, physics, unit="Hz"
+    )
+    if physics % control:
+        raise fail(
+            "control_rate_hz", control, f"must divide physics_rate_hz={physics} (valid: {_divisors(physics)})"
+        )
+    for key in ("force", "progress", "record.mcap", "record.qps"):
+        flag(key, _get(cfg, key, False))
+    integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
+    return control
+
+
+def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
+    """Trot parameters; returns the stand height [m]."""
+    c = "controller"
+    stand = number(
+        f"{c}.stand_height", _get(cfg, f"{c}.stand_height"), 0.1, MAX_LEG_REACH_M, unit="m", why="leg reach"
+    )
+    swing = number(f"{c}.swing_height", _get(cfg, f"{c}.swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
+    if stand + swing > MAX_LEG_REACH_M + 0.1:
+        raise fail(
+            f"{c}.swing_height",
+            swing,
+            f"too high for the leg: stand_height + swing_height must be <= {MAX_LEG_REACH_M + 0.1:g} m",
+        )
+    period = number(f"{c}.period", _get(cfg, f"{c}.period"), 0.0, MAX_PERIOD_S, lo_open=True, unit="s")
+    duty = number(f"{c}.duty", _get(cfg, f"{c}.duty"), 0.0, 1.0, lo_open=True, hi_open=True)
+    shortest_s = period * min(duty, 1.0 - duty)
+    if shortest_s * control_rate_hz < MIN_PHASE_TICKS:
+        blamed = ("duty", duty) if 0.5 * period * control_rate_hz >= MIN_PHASE_TICKS else ("period", period)
+        raise fail(
+            f"{c}.{blamed[0]}",
+            blamed[1],
+            f"at period={period:g} s and duty={duty:g} the shorter of stance "
+            f"and swing lasts {shortest_s:g} s; it must last >= {MIN_PHASE_TICKS} control periods "
+            f"({MIN_PHASE_TICKS / control_rate_hz:g} s)",
+        )
+    max_speed = 2.0 * math.sqrt(MAX_LEG_REACH_M**2 - stand**2) / (period * duty)
+    number(
+        f"{c}.speed",
+        _get(cfg, f"{c}.speed"),
+        0.0,
+        max_speed,
+        unit="m/s",
+        why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
+        f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
+    )
+    number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
+    number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
+    number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
+    return stand
+
+
+def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
+    """The safety filter's settings; gains are bounded by the control rate (gain x control period <= 1)."""
+    f = "filter"
+    flag(f"{f}.enabled", _get(cfg, f"{f}.enabled"))
+    flag(f"{f}.ecbf.enabled", _get(cfg, f"{f}.ecbf.enabled"))
+    number(f"{f}.start_time", _get(cfg, f"{f}.start_time", 0.0), 0.0, MAX_DURATION_S, unit="s")
+    number(f"{f}.regularization", _get(cfg, f"{f}.regularization"), 0.0, 1.0, lo_open=True)
+    number(f"{f}.lambda_min_n", _get(cfg, f"{f}.lambda_min_n"), 0.0, MAX_LAMBDA_MIN_N, unit="N")
+    rate_bound = f"gain x control period <= 1 at control_rate_hz={control_rate_hz}"
+    number(
+        f"{f}.contact_velocity_gain",
+        _get(cfg, f"{f}.contact_velocity_gain", 0.0),
+        0.0,
+        control_rate_hz,
+        unit="1/s",
+        why=rate_bound,
+    )
+    for key in ("alpha1", "alpha2"):
+        number(
+            f"{f}.ecbf.{key}",
+            _get(cfg, f"{f}.ecbf.{key}"),
+            0.0,
+            control_rate_hz,
+            lo_open=True,
+            unit="1/s",
+            why=rate_bound,
+        )
+    choice(f"{f}.fallback", _get(cfg, f"{f}.fallback"), FALLBACKS)
+    choice(
+        f"{f}.regularization_target",
+        _get(cfg, f"{f}.regularization_target", "nominal"),
+        REGULARIZATION_TARGETS,
+    )
+    choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
+    choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
+    _robust(cfg)
+
+
+def _robust(cfg: DictConfig) -> None:
+    """``filter.robust``: the margins of taslel_bench/filter/robust.py."""
+    r = "filter.robust"
+    if _get(cfg, r) is None:
+        return
+    _known_keys(r, _get(cfg, r), RobustSettings)
+    flag(f"{r}.enabled", _get(cfg, f"{r}.enabled", False))
+    number(f"{r}.ecbf_margin_mps2", _get(cfg, f"{r}.ecbf_margin_mps2", 0.0), 0.0, 100.0, unit="m/s²")
+    number(f"{r}.adaptive_gain", _get(cfg, f"{r}.adaptive_gain", 0.0), 0.0, 100.0)
+    number(f"{r}.adaptive_time_constant_s", _get(cfg, f"{r}.adaptive_time_constant_s", 0.5), 0.0, 60.0,
+           lo_open=True, unit="s")
+    number(f"{r}.max_margin_mps2", _get(cfg, f"{r}.max_margin_mps2", 50.0), 0.0, 1000.0, unit="m/s²")
+    number(f"{r}.friction_margin", _get(cfg, f"{r}.friction_margin", 0.0), 0.0, 1.0, hi_open=True,
+           why="the pyramid uses mu (1 - friction_margin)")
+    number(f"{r}.observer_time_constant_s", _get(cfg, f"{r}.observer_time_constant_s", 0.0), 0.0, 10.0,
+           unit="s", why="0: no disturbance observer")
+
+
+def _robot(cfg: DictConfig, stand_height_m: float) -> None:
+    """Torque limit, fall thresholds, initial-state noise, the plant MJCF path (read at build time)."""
+    r = "robot"
+    number(
+        f"{r}.torque_limit_nm",
+        _get(cfg, f"{r}.torque_limit_nm"),
+        0.0,
+        MAX_TORQUE_LIMIT_NM,
+        lo_open=True,
+        unit="N·m",
+    )
+    number(
+        f"{r}.fall_height_m",
+        _get(cfg, f"{r}.fall_height_m"),
+        0.0,
+        stand_height_m,
+        hi_open=True,
+        unit="m",
+        why="below controller.stand_height, else the stand is a fall",
+    )
+    number(f"{r}.fall_tilt_deg", _get(cfg, f"{r}.fall_tilt_deg"), 0.0, 180.0, lo_open=True, unit="deg")
+    number(
+        f"{r}.init_joint_noise_rad",
+        _get(cfg, f"{r}.init_joint_noise_rad"),
+        0.0,
+        MAX_JOINT_NOISE_RAD,
+        unit="rad",
+    )
+    number(
+        f"{r}.init_base_vel_noise_mps",
+        _get(cfg, f"{r}.init_base_vel_noise_mps"),
+        0.0,
+        MAX_BASE_VEL_NOISE_MPS,
+        unit="m/s",
+    )
+    mjcf = _get(cfg, f"{r}.plant_mjcf")
+    if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
+        raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
+    _known_keys(f"{r}.plant_names", _get(cfg, f"{r}.plant_names"), PlantNames)
+    _known_keys(f"{r}.plant_overrides", _get(cfg, f"{r}.plant_overrides"), PlantOverrides)
+    _plant_names(cfg, has_file=mjcf is not None)
+    _plant_overrides(cfg)
+
+
+def _optional_name(path: str, value: Any) -> None:
+    if value is not None and not (isinstance(value, str) and value.strip()):
+        raise fail(path, value, "must be null or a name")
+
+
+def _plant_names(cfg: DictConfig, has_file: bool) -> None:
+    """``robot.plant_names``: per kind null, a pattern with {leg} (and {joint}) or {core name: file name}."""
+    p = "robot.plant_names"
+    kinds = (("joints", a1.JOINT_NAMES), ("actuators", a1.JOINT_NAMES), ("feet", a1.FOOT_FRAMES))
+    for kind, cores in kinds:
+        path, value = f"{p}.{kind}", _get(cfg, f"{p}.{kind}")
+        if value is not None and not has_file:
+            raise fail(path, value, "is only used with robot.plant_mjcf (set it, or leave this null)")
+        if value is None:
+            continue
+        placeholders = "{leg}" + (" and {joint}" if kind != "feet" else "")
+        if isinstance(value, str):
+            try:
+                names = {value.format(leg=c.split("_")[0], joint=c.split("_")[1]) for c in cores}
+            except (KeyError, IndexError, ValueError) as exc:
+                raise fail(path, value, f"a pattern may use only {placeholders} ({exc!r})") from None
+            if len(names) != len(cores):
+                raise fail(path, value, f"a pattern must give {len(cores)} different names: use "
+                                        f"{placeholders}")
+        elif isinstance(value, DictConfig):
+            for core, name in value.items():
+                choice(f"{path} key", core, cores)
+                _optional_name(f"{path}.{core}", name)
+        else:
+            raise fail(path, value, f"must be null, a pattern with {placeholders}, or "
+                                    f"{{core name: name in the file}}")
+    for key in ("trunk", "floor"):
+        value = _get(cfg, f"{p}.{key}")
+        _optional_name(f"{p}.{key}", value)
+        if value is not None and not has_file:
+            raise fail(f"{p}.{key}", value, "is only used with robot.plant_mjcf (set it, or leave this null)")
+
+
+def _plant_overrides(cfg: DictConfig) -> None:
+    """``robot.plant_overrides``: null keeps the plant file's (or the URDF plant's) value."""
+    p = "robot.plant_overrides"
+    if (v := _get(cfg, f"{p}.integrator")) is not None:
+        choice(f"{p}.integrator", v, INTEGRATORS)
+    if (v := _get(cfg, f"{p}.cone")) is not None:
+        choice(f"{p}.cone", v, CONES)
+    if (v := _get(cfg, f"{p}.noslip_iterations")) is not None:
+        integer(f"{p}.noslip_iterations", v, 0, MAX_NOSLIP_ITERATIONS)
+    if (v := _get(cfg, f"{p}.impratio")) is not None:
+        number(f"{p}.impratio", v, 0.0, MAX_IMPRATIO, lo_open=True)
+    if (v := _get(cfg, f"{p}.contact_solref")) is not None:
+        numbers(f"{p}.contact_solref", v, length=2, why="[timeconst s, dampratio]")
+        number(f"{p}.contact_solref[0]", v[0], 0.0, MAX_SOLREF_TIMECONST_S, lo_open=True, unit="s",
+               why="timeconst")
+        number(f"{p}.contact_solref[1]", v[1], 0.0, MAX_SOLREF_DAMPRATIO, lo_open=True, why="dampratio")
+    if (v := _get(cfg, f"{p}.contact_solimp")) is not None:
+        numbers(f"{p}.contact_solimp", v, length=5, why="[dmin, dmax, width m, midpoint, power]")
+        for i, (key, lo, hi, hi_open) in enumerate((("dmin", 0.0, 1.0, True), ("dmax", 0.0, 1.0, True),
+                                                     ("width", 0.0, 1.0, False), ("midpoint", 0.0, 1.0, True),
+                                                     ("power", 1.0, 10.0, False))):  # fmt: skip
+            number(f"{p}.contact_solimp[{i}]", v[i], lo, hi, lo_open=True, hi_open=hi_open, why=key)
+        if v[0] > v[1]:
+            raise fail(f"{p}.contact_solimp", v, "dmin must be <= dmax")
+    if (v := _get(cfg, f"{p}.foot_margin_m")) is not None:
+        number(f"{p}.foot_margin_m", v, 0.0, MAX_FOOT_MARGIN_M, unit="m")
+
+
+def _known_keys(path: str, group: Any, cls: type) -> None:
+    """Refuse keys of ``group`` (a config node or None) that ``cls`` (a dataclass) has no field for."""
+    if isinstance(group, DictConfig):
+        valid = [f.name for f in dataclasses.fields(cls)]
+        for key in group:
+            if key not in valid:
+                raise fail(f"{path}.{key}", _raw(group, str(key)),
+                           f"unknown field; valid: {', '.join(valid)}")
+
+
+def _model(cfg: DictConfig) -> None:
+    """The controller's model (``model`` group; absent = the URDF as is)."""
+    m, n = "model", a1.N_JOINTS
+    _known_keys(m, _get(cfg, m), ModelOptions)
+    urdf = _get(cfg, f"{m}.urdf")
+    if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
+        raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "
+                                      "existing URDF")
+    joint_rule = "one number for all 12 joints or 12 in the core order (legs FL, FR, RL, RR)"
+    joint_fields = (("joint_damping", MAX_JOINT_DAMPING, "N·m·s/rad"),
+                    ("armature", MAX_ARMATURE_KGM2, "kg·m²"),
+                    ("joint_frictionloss", MAX_JOINT_FRICTIONLOSS_NM, "N·m"))
+    for key, hi, unit in joint_fields:
+        number_or_list(f"{m}.{key}", _get(cfg, f"{m}.{key}", 0.0), 0.0, hi, length=n, unit=unit,
+                       why=joint_rule)
+    number(f"{m}.frictionloss_smoothing_radps", _get(cfg, f"{m}.frictionloss_smoothing_radps", 0.05), 0.0,
+           MAX_FRICTION_SMOOTHING_RADPS, lo_open=True, unit="rad/s")
+    number(f"{m}.trunk_mass_scale", _get(cfg, f"{m}.trunk_mass_scale", 1.0), 0.0, MAX_MASS_SCALE,
+           lo_open=True)
+    numbers(f"{m}.trunk_com_shift_m", _get(cfg, f"{m}.trunk_com_shift_m", [0.0] * 3), -MAX_COM_SHIFT_M,
+            MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
+    number(f"{m}.payload_mass_kg", _get(cfg, f"{m}.payload_mass_kg", 0.0), 0.0, MAX_PAYLOAD_KG, unit="kg")
+    number(f"{m}.implicit_damping_dt_s", _get(cfg, f"{m}.implicit_damping_dt_s", 0.0), 0.0, 0.1, unit="s",
+           why="0: continuous model; the plant's time step when it integrates joint damping implicitly")
+    numbers(f"{m}.payload_pos_m", _get(cfg, f"{m}.payload_pos_m", [0.0] * 3), -MAX_PAYLOAD_OFFSET_M,
+            MAX_PAYLOAD_OFFSET_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
+
+
+def _plain(value: Any) -> Any:
+    """OmegaConf containers as plain Python (lists as tuples), other values as they are."""
+    if isinstance(value, (DictConfig, ListConfig)):
+        value = OmegaConf.to_container(value, resolve=True)
+    return tuple(value) if isinstance(value, list) else value
+
+
+def model_options(cfg: DictConfig) -> ModelOptions:
+    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`; absent = defaults."""
+    group = _get(cfg, "model")
+    if group is None:
+        return ModelOptions()
+    return ModelOptions(**{k: _plain(v) for k, v in group.items()})
+
+
+def build_model(cfg: DictConfig) -> A1Model:
+    """The controller's model; a URDF Pinocchio cannot read or that lacks the A1's joints raises a
+    :class:`ConfigError` naming ``model.urdf``."""
+    options = model_options(cfg)
+    try:
+        return A1Model(options)
+    except (ValueError, RuntimeError) as exc:
+        if options.urdf is None:
+            raise
+        reason = " ".join(str(exc).split())
+        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") \
+            from exc
+
+
+def plant_options(cfg: DictConfig) -> PlantOptions:
+    """The plant builder's options from the validated config (time step, torque limit, names, overrides)."""
+    names = _get(cfg, "robot.plant_names")
+    overrides = _get(cfg, "robot.plant_overrides")
+    return PlantOptions(
+        timestep_s=1.0 / float(cfg.physics_rate_hz),
+        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        names=PlantNames(**{k: _plain(v) for k, v in names.items()}) if names is not None else PlantNames(),
+        overrides=(PlantOverrides(**{k: _plain(v) for k, v in overrides.items()}) if overrides is not None
+                   else PlantOverrides()),
+    )
+
+
+def _divisors(n: int) -> str:
+    divs = [k for k in range(1, n + 1) if n % k == 0]
+    return ", ".join(map(str, divs[:12])) + (" ..." if len(divs) > 12 else "")
+
+
+# ------------------------------------------------------------------------------------------ the axes
+
+
+def build_axis(cfg: DictConfig, group: str) -> Any:
+    """``instantiate(cfg[group])``. Hydra wraps what the constructor raises in an
+    ``InstantiationException`` whose text is the repr of the error; a bad argument or file (ValueError,
+    TypeError, OSError) comes back as a :class:`ConfigError` with the axis' own message, which names the
+    field (``scenario.coefficients=[]: ...``), prefixed with the group and its target when it does not."""
+    try:
+        return instantiate(cfg[group])
+    except InstantiationException as exc:
+        cause = exc.__cause__
+        if isinstance(cause, ConfigError) and str(cause).startswith(f"{group}."):
+            raise cause from None  # already names the field: shown once, where it was raised
+        if not isinstance(cause, BUILD_ERRORS):
+            raise
+        message = str(cause) if str(cause) else type(cause).__name__
+        if not message.startswith(f"{group}."):
+            message = f"{group} ({cfg[group].get('_target_')}): {type(cause).__name__}: {message}"
+        raise ConfigError(message) from cause
+
+
+def build_backend(cfg: DictConfig) -> QPBackend:
+    """The ``solver`` axis, checked on a trivial QP of the configured formulation's shape (with the 30
+    equality rows of ``full``, without them for ``condensed``): settings that make the backend fail there
+    (``solver.settings.eps_abs=-1``: OSQP rejects it at every setup) fail every tick of a run."""
+    backend = build_axis(cfg, "solver")
+    with_equalities = _get(cfg, "filter.formulation", "full") == "full"
+    solution = backend.solve(probe_problem(with_equalities))
+    backend.reset()
+    if not solution.ok:
+        path = "solver.settings" if "settings" in cfg.solver else "solver"
+        raise fail(
+            path,
+            _get(cfg, path),
+            f"{cfg.solver.get('_target_')} fails a trivial 3-variable QP with "
+            f"these settings: status {solution.status!r}",
+        )
+    return backend
+
+
+def probe_problem(with_equalities: bool) -> QPProblem:
+    """min 0.5 |x|^2 + q'x over 3 variables, one active inequality (x0 <= 0.8), a box on x0 and, with
+    ``with_equalities``, x0 + x1 + x2 = 1. Solution (with equalities): (0.8, -0.15, 0.35)."""
+    n = 3
+    P, q = np.eye(n), np.array([-1.0, 0.5, 0.0])
+    A = np.ones((1 if with_equalities else 0, n))
+    b = np.ones(A.shape[0])
+    G, h = np.array([[1.0, 0.0, 0.0]]), np.array([0.8])
+    lb, ub = np.array([-2.0, -np.inf, -np.inf]), np.array([2.0, np.inf, np.inf])
+    return QPProblem(P, q, A, b, G, h, lb, ub, P != 0, A != 0, G != 0, {"u": slice(0, n)}, ["probe"])
+
+
+__all__ = ["ConfigError", "build_axis", "build_backend", "build_model", "check_finite", "model_options",
+           "plant_options", "probe_problem", "validate"]

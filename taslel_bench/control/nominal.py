@@ -1,0 +1,151 @@
+"""Nominal controller (paper, "Quadruped Implementation"): trot, open-loop feet, analytic IK, joint PD."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from taslel_bench.control.gait import GaitParams, GaitState, TrotGait
+from taslel_bench.robot import a1
+from taslel_bench.robot.kinematics import legs_ik, legs_ik_list
+from taslel_bench.util.jit import kernel
+
+
+@dataclass(frozen=True)
+class PDGains:
+    kp: float = 100.0  # [N·m/rad]
+    kd: float = 3.0  # [N·m·s/rad]
+
+
+class NominalController:
+    """``u_nom = Kp (q_des - q) + Kd (qdot_des - qdot)``, clipped to the torque limit.
+
+    ``q_des`` comes from IK of the gait's foot targets; ``qdot_des`` is its time derivative by a central
+    difference over ``fd_dt_s`` (the IK is smooth within a gait phase). Set ``fd_dt_s`` to the control
+    period: the IK at t + h is then reused as the IK at t - h of the next tick.
+
+    The references are open loop and periodic in the gait time (period T). When T and the walking start
+    are whole numbers of ``fd_dt_s`` (the default 0.4 s and 0.5 s at 1 kHz), the references of each tick of
+    the first period are kept in a table and looked up afterwards: the tick then costs only the PD law.
+    Looked-up values equal a fresh computation to float rounding (tested).
+    """
+
+    def __init__(
+        self,
+        gait: GaitParams,
+        gains: PDGains,
+        stand_duration_s: float = 0.5,
+        torque_limit_nm: float = a1.TORQUE_LIMIT_NM,
+        fd_dt_s: float = 1e-3,
+    ) -> None:
+        self.gait = TrotGait(gait)
+        self.gains = gains
+        self.stand_duration_s = stand_duration_s
+        self.torque_limit_nm = torque_limit_nm
+        self.fd_dt_s = fd_dt_s
+        self.q_des = np.zeros(a1.N_JOINTS)
+        self.qd_des = np.zeros(a1.N_JOINTS)
+        self._cache_t: float = float("nan")
+        self._cache_list: list[float] = []
+        # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
+        n_period = gait.period_s / fd_dt_s
+        self._period_ticks = round(n_period) if abs(n_period - round(n_period)) < 1e-9 else 0
+        self._table = np.zeros((max(self._period_ticks, 1), 2, a1.N_JOINTS))
+        self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
+        self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
+        self._stand_q: np.ndarray | None = None  # q_des while standing (the same IK every tick)
+        self._stand_state: GaitState | None = None  # gait state while standing (all feet in stance)
+        self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
+
+    def gait_time(self, t: float) -> float:
+        """Time since walking started [s] (negative while standing)."""
+        return t - self.stand_duration_s
+
+    def gait_state(self, t: float) -> GaitState:
+        """Gait schedule at episode time ``t`` [s] (from the per-period table when on the tick grid; its
+        arrays are then shared and read-only)."""
+        if self.use_tables and t < self.stand_duration_s:  # standing: one constant state
+            if self._stand_state is None:
+                self._stand_state = self.gait.state(self.gait_time(t))
+                self._stand_state.in_stance.flags.writeable = False
+                self._stand_state.swing_phase.flags.writeable = False
+            return self._stand_state
+        if self._period_ticks and self.use_tables:
+            x = self.gait_time(t) / self.fd_dt_s
+            j = round(x)
+            if j >= 0 and abs(x - j) < 1e-6:
+                row = j % self._period_ticks
+                gs = self._gait_table[row]
+                if gs is None:
+                    # exact gait time of the row: t - stand_duration would put a switch tick a rounding
+                    # error before the switch (phase 0.9999999999999998 instead of 0)
+                    gs = self._gait_table[row] = self.gait.state(row * self.fd_dt_s)
+                    gs.in_stance.flags.writeable = False
+                    gs.swing_phase.flags.writeable = False
+                return gs
+        return self.gait.state(self.gait_time(t))
+
+    def desired_joints(self, t: float) -> np.ndarray:
+        """IK of the gait's foot targets at episode time ``t`` [s] -> (12,) [rad]."""
+        return np.array(self._desired_list(t))
+
+    def _desired_list(self, t: float) -> list[float]:
+        return legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
+
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray) -> np.ndarray:
+        """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]."""
+        self.update_references(t)
+        u = np.empty(a1.N_JOINTS)
+        _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
+        return u
+
+    def update_references(self, t: float) -> None:
+        """Set ``q_des`` [rad] and ``qd_des`` [rad/s] for episode time ``t`` [s] (table lookup once walking
+        has gone one tick past its start, see class doc)."""
+        if not self.use_tables:
+            self._compute_references(t)
+            return
+        if self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0:  # standing: constant references
+            if self._stand_q is None:
+                self._compute_references(t)
+                self._stand_q = self.q_des.copy()
+            self.q_des[:] = self._stand_q
+            self.qd_des[:] = 0.0
+            return
+        if self._period_ticks:
+            x = self.gait_time(t) / self.fd_dt_s
+            j = round(x)
+            if j >= 1 and abs(x - j) < 1e-6:
+                row = j % self._period_ticks
+                if self._table_filled[row]:
+                    self.q_des[:], self.qd_des[:] = self._table[row]
+                    return
+                self._compute_references(t)
+                self._table[row, 0], self._table[row, 1] = self.q_des, self.qd_des
+                self._table_filled[row] = True
+                return
+        self._compute_references(t)
+
+    def _compute_references(self, t: float) -> None:
+        h = 0.5 * self.fd_dt_s
+        t_minus = round(t - h, 9)
+        # q_des(t - h) was this controller's q_des(t + h) one tick ago when ticks are fd_dt_s apart.
+        before = self._cache_list if self._cache_t == t_minus else self._desired_list(t_minus)
+        after = self._desired_list(t + h)
+        self._cache_t, self._cache_list = round(t + h, 9), after
+        self.q_des[:] = self._desired_list(t)
+        self.qd_des[:] = after
+        self.qd_des -= before
+        self.qd_des *= 1.0 / self.fd_dt_s
+
+    def stand_configuration(self) -> np.ndarray:
+        """Joint angles [rad] of the initial stand (nominal feet under the hips)."""
+        return legs_ik(self.gait.nominal_foot_in_hip)
+
+
+@kernel
+def _pd(q_des, qd_des, q, qd, kp, kd, limit, u):
+    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m]."""
+    for j in range(u.shape[0]):
+        u[j] = min(max(kp * (q_des[j] - q[j]) + kd * (qd_des[j] - qd[j]), -limit), limit)

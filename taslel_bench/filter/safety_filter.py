@@ -1,0 +1,382 @@
+"""ID-CBF-QP safety filter (paper, "Inverse Dynamics Formulation with CBF Constraints").
+
+    min_X 0.5 ||u - u_nom||² + 0.5 eps (||vdot - vdot_nom||² + ||lambda - lambda_nom||²)
+    s.t. equations of motion, stance-contact acceleration, unilateral + friction pyramid (mu / sqrt 2),
+         torque limits (as bounds on u), swing-foot ground-clearance ECBF rows.
+
+:meth:`SafetyFilter.build` writes the QP into one preallocated :class:`QPProblem`; a backend
+(:class:`taslel_bench.interfaces.QPBackend`) solves it; :meth:`SafetyFilter.filter` does both and applies
+the failure policy. Build time and solve time are measured separately.
+
+Regularisation: the equality constraints determine (vdot, lambda) uniquely from u, so eps only makes P
+positive definite for the solvers. Regularising towards zero biases u by eps * (B'vdot + D'lambda) — up
+to ~4 N·m at eps = 1e-5 on swing legs (measured: swing-joint accelerations reach 1e3 rad/s²). The default
+target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one solve of the equality rows
+per tick): when no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives
+the textbook form.
+
+Formulation (``formulation``): ``full`` (default, the paper's) hands the backend the QP in X = (vdot, u,
+lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one solve
+with the (vdot, lambda) columns of the equality rows (:mod:`taslel_bench.filter.equality_solve`, leg by leg)
+gives (vdot, lambda) = z0 - Z u, so the backend sees a 12-variable QP in u (P = I + eps Z'Z, the G rows
+and the torque bounds), and (vdot, lambda) is recovered from its u. Both have the same minimiser (tested
+to 1e-6 N·m); the full QP is still written every tick (``problem``); ``record.qps`` saves the one the
+backend got. ``condensed`` exists because the backend's cost grows with the rows and variables it sees:
+it is the faster formulation for every backend (``results/bench/tick.md``).
+
+The numeric work of a tick (rows, equality solve, condensation, splitting the answer) runs in compiled
+kernels (:mod:`taslel_bench.util.jit`) at the end of this module and in :mod:`taslel_bench.filter.constraints`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from taslel_bench.filter.constraints import (
+    LAM,
+    N_VARS,
+    NL,
+    NU,
+    NV,
+    VDOT,
+    ContactOrSwing,
+    EqualityFamily,
+    EquationsOfMotion,
+    FrictionCone,
+    SwingClearanceECBF,
+    SwingObstacleECBF,
+    TickInputs,
+    U,
+)
+from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_free
+from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
+from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution, RoundObstacle
+from taslel_bench.robot import a1
+from taslel_bench.util.jit import kernel
+
+FALLBACKS = ("nominal", "hold_last")
+REGULARIZATION_TARGETS = ("nominal", "zero")
+FORMULATIONS = ("full", "condensed")
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    enabled: bool = True
+    regularization: float = 1e-5  # eps on vdot and lambda (keeps P positive definite)
+    regularization_target: str = "nominal"  # "nominal" (vdot_nom, lambda_nom) or "zero"
+    lambda_min_n: float = 1.0  # [N] minimum normal force of a stance foot
+    contact_velocity_gain: float = 0.0  # [1/s] k_v in J vdot + J̇v = -k_v J v (0 = paper's eq. 3)
+    torque_limit_nm: float = a1.TORQUE_LIMIT_NM  # [N·m]
+    ecbf_enabled: bool = True  # only used when the scenario provides a clearance profile
+    ecbf_alpha1: float = 20.0  # [1/s]
+    ecbf_alpha2: float = 20.0  # [1/s]
+    fallback: str = "nominal"  # on QP failure: pass u_nom ("nominal") or the last filtered u ("hold_last")
+    stance_source: str = "schedule"  # "schedule" (gait) or "contact" (plant contact flags)
+    formulation: str = "full"  # "full" (backend sees X = (vdot, u, lambda)) or "condensed" (u only)
+    robust: RobustSettings = field(default_factory=RobustSettings)  # margins for a wrong model (off)
+    control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
+
+
+@dataclass
+class FilterResult:
+    u: np.ndarray  # [N·m] torques sent to the plant (core order)
+    lam: np.ndarray  # [N] (12,) predicted contact forces on the robot, world axes (nan on failure)
+    vdot: np.ndarray  # (18,) predicted acceleration (nan on failure)
+    status: str
+    used_fallback: bool
+    build_time_s: float
+    solve: QPSolution | None = field(default=None)
+    ecbf_margin_mps2: float = 0.0  # [m/s²] robust margin the ECBF rows had this tick (0: the paper's rows)
+
+
+class SafetyFilter:
+    """Owns the QP layout and the constraint families; one instance per episode."""
+
+    def __init__(
+        self,
+        settings: FilterSettings,
+        backend: QPBackend,
+        profile: ClearanceProfile | None = None,
+        obstacles: tuple[RoundObstacle, ...] = (),
+    ) -> None:
+        if settings.fallback not in FALLBACKS:
+            raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
+        if settings.regularization_target not in REGULARIZATION_TARGETS:
+            raise ValueError(
+                f"filter.regularization_target={settings.regularization_target!r}; "
+                f"valid: {', '.join(REGULARIZATION_TARGETS)}"
+            )
+        if settings.formulation not in FORMULATIONS:
+            raise ValueError(f"filter.formulation={settings.formulation!r}; valid: {', '.join(FORMULATIONS)}")
+        self.settings = settings
+        self.backend = backend
+        self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
+        self.friction = FrictionCone(settings.lambda_min_n)
+        self.ecbf = (
+            SwingClearanceECBF(profile, settings.ecbf_alpha1, settings.ecbf_alpha2)
+            if (profile is not None and settings.ecbf_enabled)
+            else None
+        )
+        self.obstacle_ecbf = (
+            SwingObstacleECBF(tuple(obstacles), settings.ecbf_alpha1, settings.ecbf_alpha2)
+            if (obstacles and settings.ecbf_enabled)
+            else None
+        )
+        self.barriers = [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
+        self.robust = RobustMargin(settings.robust, settings.ecbf_alpha2, settings.control_dt_s)
+        tau = settings.robust.observer_time_constant_s if settings.robust.enabled else 0.0
+        self.observer = DisturbanceObserver(tau, settings.control_dt_s, NV) if tau > 0.0 else None
+        ineq = [self.friction, *self.barriers]
+        m_eq = 0
+        for fam in self.eq_families:
+            fam.start, m_eq = m_eq, m_eq + fam.n_rows
+        m_in = 0
+        for fam in ineq:
+            fam.start, m_in = m_in, m_in + fam.n_rows
+        self.ineq_families = ineq
+        self.problem = self._allocate(m_eq, m_in)
+        for fam in [*self.eq_families, *self.ineq_families]:
+            fam.init(self.problem)
+        # the equality rows solved for (vdot, lambda): condensed -> [z0, Z] from [b, A_u] (13 right-hand
+        # sides); full -> (vdot_nom, lambda_nom) from b - A_u u_nom (1), for the regularisation target
+        n_rhs = 1 + a1.N_JOINTS if settings.formulation == "condensed" else 1
+        self._equalities = FreeBlockSolver(n_rhs, self.eq_families[0].start, self.eq_families[1].start)
+        self._rhs = np.zeros((m_eq, n_rhs))
+        self._last_u: np.ndarray | None = None
+        self.condensed: QPProblem | None = None
+        if settings.formulation == "condensed":
+            self._allocate_condensed(m_eq, m_in)
+
+    def _allocate(self, m_eq: int, m_in: int) -> QPProblem:
+        s = self.settings
+        P = np.zeros((N_VARS, N_VARS))
+        np.fill_diagonal(P, s.regularization)
+        P[U, U] = np.eye(a1.N_JOINTS)
+        lb = np.full(N_VARS, -np.inf)
+        ub = np.full(N_VARS, np.inf)
+        lb[U], ub[U] = -s.torque_limit_nm, s.torque_limit_nm
+        A_pattern = np.zeros((m_eq, N_VARS), bool)
+        G_pattern = np.zeros((m_in, N_VARS), bool)
+        for fam in self.eq_families:
+            fam.pattern(A_pattern)
+        for fam in self.ineq_families:
+            fam.pattern(G_pattern)
+        labels = [lab for fam in self.ineq_families for lab in fam.labels()]
+        return QPProblem(
+            P=P,
+            q=np.zeros(N_VARS),
+            A=np.zeros((m_eq, N_VARS)),
+            b=np.zeros(m_eq),
+            G=np.zeros((m_in, N_VARS)),
+            h=np.zeros(m_in),
+            lb=lb,
+            ub=ub,
+            P_pattern=P != 0.0,
+            A_pattern=A_pattern,
+            G_pattern=G_pattern,
+            layout={"vdot": VDOT, "u": U, "lambda": LAM},
+            row_labels=labels,
+        )
+
+    @property
+    def backend_problem(self) -> QPProblem:
+        """The QP the backend is given: :attr:`condensed` (formulation "condensed") or :attr:`problem`."""
+        return self.condensed if self.condensed is not None else self.problem
+
+    def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
+        s, nu = self.settings, a1.N_JOINTS
+        self.condensed = QPProblem(
+            P=np.eye(nu),
+            q=np.zeros(nu),
+            A=np.zeros((0, nu)),
+            b=np.zeros(0),
+            G=np.zeros((m_in, nu)),
+            h=np.zeros(m_in),
+            lb=np.full(nu, -s.torque_limit_nm),
+            ub=np.full(nu, s.torque_limit_nm),
+            P_pattern=np.ones((nu, nu), bool),
+            A_pattern=np.zeros((0, nu), bool),
+            G_pattern=np.ones((m_in, nu), bool),
+            layout={"u": slice(0, nu)},
+            row_labels=list(self.problem.row_labels),
+        )
+
+    def _condense(self, qp: QPProblem, u_nom: np.ndarray) -> bool:
+        """Write :attr:`condensed` from the full ``qp``: (vdot, lambda) = z0 - Z u from the equality rows.
+        Returns False if the (vdot, lambda) block is singular."""
+        c, sv = self.condensed, self._equalities
+        return _condense(qp.A, qp.b, qp.G, qp.h, u_nom, self.settings.regularization,
+                         self.settings.regularization_target == "nominal", sv.rows, sv.workspace, self._rhs,
+                         c.P, c.q, c.G, c.h)  # fmt: skip
+
+    def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
+        """Write this tick's QP (in place) and return it."""
+        qp = self.problem
+        qp.q[U] = -u_nom
+        for fam in self.eq_families:
+            fam.write(qp, inputs)
+        if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
+            eom = self.eq_families[0]
+            qp.b[eom.start : eom.start + NV] += self.observer.d_hat
+        for fam in self.ineq_families:
+            fam.write(qp, inputs)
+        if self.condensed is not None:
+            self._condensed_ok = self._condense(qp, u_nom)
+        elif self.settings.regularization_target == "nominal":
+            self._regularize_towards_nominal(qp, u_nom)
+        return qp
+
+    def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
+        """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom (zero target
+        this tick if the contact Jacobian makes the (vdot, lambda) block singular)."""
+        sv, eps = self._equalities, self.settings.regularization
+        _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
+
+    def reset(self) -> None:
+        """Forget the backend's warm start and the last filtered u (a new episode)."""
+        self.backend.reset()
+        self._last_u = None
+        self.robust.reset()
+        if self.observer is not None:
+            self.observer.reset()
+
+    def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
+        """Build, solve, and apply the failure policy. Never raises for solver failures."""
+        t0 = time.perf_counter()
+        robust = self.settings.robust.enabled
+        if self.observer is not None:
+            self.observer.update(inputs.v, inputs.in_stance)
+        if robust:  # margins sized from the running shortfall of the realised barrier condition
+            margin = self.robust.ecbf_margin_mps2
+            for barrier in self.barriers:
+                barrier.margin_mps2 = margin
+            if self.settings.robust.friction_margin > 0.0:
+                inputs = replace(inputs, mu=inputs.mu * (1.0 - self.settings.robust.friction_margin))
+        qp = self.build(inputs, u_nom)
+        if robust:
+            self.robust.observe(self.barriers)
+        build_s = time.perf_counter() - t0
+        try:
+            if self.condensed is None:
+                sol = self.backend.solve(qp)
+            elif self._condensed_ok:
+                sol = self.backend.solve(self.condensed)
+            else:
+                sol = QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
+        except Exception as exc:  # noqa: BLE001 - a backend bug must not end the episode: record it
+            sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
+        if sol.ok:
+            u, lam, vdot = np.empty(a1.N_JOINTS), np.empty(NL), np.empty(NV)
+            # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
+            # hold to solver tolerance)
+            _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
+                            vdot)  # fmt: skip
+            for barrier in self.barriers:  # the ECBF conditions the filter believes it planned
+                barrier.planned(qp, vdot)
+            if robust:
+                self.robust.remember(self.barriers)
+            if self.observer is not None:
+                m = inputs.model
+                jac_t_lambda = np.einsum("ikj,ik->j", m.foot_jac_in_world, lam.reshape(a1.N_LEGS, 3))
+                self.observer.remember(inputs.v, m.M, m.h, u, jac_t_lambda, inputs.in_stance)
+            self._last_u = u
+            margin = self.barriers[0].margin_mps2 if self.barriers else 0.0
+            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol, margin)
+        for barrier in self.barriers:  # nothing planned on this tick
+            barrier.psi_planned[:] = np.nan
+        if self.observer is not None:
+            self.observer.remember(inputs.v, inputs.model.M, inputs.model.h, u_nom, None, inputs.in_stance)
+        if robust:
+            self.robust.remember(self.barriers)
+        if self.settings.fallback == "hold_last" and self._last_u is not None:
+            u = self._last_u.copy()
+        else:
+            u = u_nom.copy()
+        status = sol.status if sol.status != "solved" else "non-finite solution"
+        return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
+
+
+# ----------------------------------------------------------------------------------- compiled kernels
+# The equality rows A X = b determine (vdot, lambda) from u: (vdot, lambda) = A_free^-1 (b - A_u u), with
+# A_free the (vdot, lambda) columns of A (:mod:`taslel_bench.filter.equality_solve`).
+
+
+@kernel
+def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
+    """q[vdot, lambda] = -eps (vdot_nom, lambda_nom) with (vdot_nom, lambda_nom) = A_free^-1 (b - A_u u_nom);
+    0 if A_free is singular."""
+    for r in range(A.shape[0]):
+        acc = b[r]
+        for j in range(NU):
+            acc -= A[r, NV + j] * u_nom[j]
+        rhs[r, 0] = acc
+    ok = solve_free(A, rhs, rows, ws)
+    for c in range(NV):
+        q[c] = -eps * rhs[c, 0] if ok else 0.0
+    for c in range(NL):
+        q[NV + NU + c] = -eps * rhs[NV + c, 0] if ok else 0.0
+
+
+@kernel
+def _condense(A, b, G, h, u_nom, eps, nominal_target, rows, ws, rhs, Pc, qc, Gc, hc):
+    """The 12-variable QP in u with (vdot, lambda) = z0 - Z u eliminated ([z0, Z] = A_free^-1 [b, A_u],
+    kept in ``rhs``): Gc = G_u - G_free Z, hc = h - G_free z0, Pc = I + eps Z'Z, and qc = -Pc u_nom
+    (target (vdot_nom, lambda_nom)) or -u_nom - eps Z'z0 (target 0). False if A_free is singular."""
+    m_eq, nz = A.shape[0], NV + NL
+    for r in range(m_eq):
+        rhs[r, 0] = b[r]
+        for j in range(NU):
+            rhs[r, 1 + j] = A[r, NV + j]
+    if not solve_free(A, rhs, rows, ws):
+        return False
+    for r in range(G.shape[0]):  # G rows are sparse (3 lambda entries, or a vdot row): skip zeros
+        acc_h = h[r]
+        for j in range(NU):
+            Gc[r, j] = G[r, NV + j]
+        for k in range(nz):
+            g = G[r, k] if k < NV else G[r, NU + k]
+            if g != 0.0:
+                acc_h -= g * rhs[k, 0]
+                for j in range(NU):
+                    Gc[r, j] -= g * rhs[k, 1 + j]
+        hc[r] = acc_h
+    for i in range(NU):
+        for j in range(i, NU):
+            acc = 0.0
+            for k in range(nz):
+                acc += rhs[k, 1 + i] * rhs[k, 1 + j]
+            Pc[i, j] = eps * acc + (1.0 if i == j else 0.0)
+            Pc[j, i] = Pc[i, j]
+    for i in range(NU):
+        acc = 0.0
+        if nominal_target:
+            for j in range(NU):
+                acc -= Pc[i, j] * u_nom[j]
+        else:
+            acc = -u_nom[i]
+            for k in range(nz):
+                acc -= eps * rhs[k, 1 + i] * rhs[k, 0]
+        qc[i] = acc
+    return True
+
+
+@kernel
+def _split_solution(x, condensed, rhs, torque_limit, u, lam, vdot):
+    """(u, lambda, vdot) of a backend's solution ``x``: the blocks of X, or for the condensed QP u = x and
+    (vdot, lambda) = z0 - Z u from ``rhs`` = [z0, Z]; u clipped to +-torque_limit."""
+    for j in range(NU):
+        u[j] = min(max(x[j] if condensed else x[NV + j], -torque_limit), torque_limit)
+    for k in range(NV + NL):
+        if condensed:
+            z = rhs[k, 0]
+            for j in range(NU):
+                z -= rhs[k, 1 + j] * x[j]
+        else:
+            z = x[k] if k < NV else x[NU + k]
+        if k < NV:
+            vdot[k] = z
+        else:
+            lam[k - NV] = z

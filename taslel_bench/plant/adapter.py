@@ -1,0 +1,401 @@
+"""Fitting another A1 MJCF (``robot.plant_mjcf``) to the harness: names, actuators, floor, overrides.
+
+The harness finds plant elements by the core's names (:mod:`taslel_bench.robot.a1`): joints ``FL_hip_joint``
+.. ``RR_calf_joint``, one actuator per joint named like the joint, sphere foot geoms ``FL_foot`` ..
+``RR_foot``, the ``trunk`` body, a ``floor`` geom. :func:`adapt` renames a file's elements to those names
+(and every reference to them: actuator targets, sensors, equalities, contact pairs and excludes), so the
+state bridge, the scenarios and the contact reader work unchanged; turns servo actuators into torque
+motors; finds the file's own floor. :func:`apply_overrides` sets the contact and integrator options the
+config asks for. Both return a record of what they changed, kept in the compiled model as the custom text
+:data:`RECORD_TEXT` (JSON) for the build-time report (:mod:`taslel_bench.plant.comparison`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from taslel_bench.robot import a1
+from taslel_bench.util.fields import ConfigError
+
+RECORD_TEXT = "taslel_plant_adapter"  # custom text element holding the adapter's record (JSON)
+FLOOR = "floor"
+INTEGRATORS = {
+    "Euler": mujoco.mjtIntegrator.mjINT_EULER,
+    "RK4": mujoco.mjtIntegrator.mjINT_RK4,
+    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+}
+CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
+NameMap = Mapping[str, str] | str | None  # {core name: file name}, a "{leg}_{joint}" pattern, or None (same)
+_KINDS = ("joints", "actuators", "feet")
+_CORE_NAMES = {"joints": a1.JOINT_NAMES, "actuators": a1.JOINT_NAMES, "feet": a1.FOOT_FRAMES}
+
+
+@dataclass(frozen=True)
+class PlantNames:
+    """Names of the plant file's elements where they differ from the core's.
+
+    ``joints``, ``actuators``, ``feet``: a mapping {core name: name in the file} (core names not listed keep
+    their name), or a pattern with ``{leg}`` (FL, FR, RL, RR) and ``{joint}`` (hip, thigh, calf), e.g.
+    ``"{leg}_{joint}"`` for MuJoCo Menagerie's actuators and ``"{leg}"`` for its feet, or None (the core
+    names). Actuators are keyed by the core joint name; None finds the one actuator driving each joint,
+    whatever its name. ``trunk``: the body of the free joint. ``floor``: a geom of the world body to use as
+    the floor (None: the only plane geom of the world body, if any; with none, the harness adds one)."""
+
+    joints: NameMap = None
+    actuators: NameMap = None
+    feet: NameMap = None
+    trunk: str | None = None
+    floor: str | None = None
+
+    def file_name(self, kind: str, core: str) -> str:
+        """The name in the file of the core element ``core`` of ``kind`` (joints, actuators, feet)."""
+        rule = getattr(self, kind)
+        if rule is None:
+            return core
+        if isinstance(rule, str):
+            leg, _, rest = core.partition("_")
+            return rule.format(leg=leg, joint=rest.split("_")[0])
+        return str(rule.get(core, core))
+
+
+@dataclass(frozen=True)
+class PlantOverrides:
+    """The plant's contact and integrator settings the config sets (None: keep the file's, or the URDF
+    plant's). ``contact_solref`` [timeconst s, dampratio] and ``contact_solimp`` [dmin, dmax, width m,
+    midpoint, power] go to the four foot geoms *and* the floor: a contact takes them from the geom of higher
+    priority, which is the terrain. ``foot_margin_m`` [m] is the foot geoms' contact margin."""
+
+    integrator: str | None = None  # a key of INTEGRATORS
+    cone: str | None = "elliptic"  # a key of CONES
+    noslip_iterations: int | None = None
+    impratio: float | None = None  # [-] elliptic cone: ratio of frictional to normal impedance
+    contact_solref: tuple[float, float] | None = None
+    contact_solimp: tuple[float, float, float, float, float] | None = None
+    foot_margin_m: float | None = None
+
+
+def _fmt(values) -> str:
+    """Numbers as compact text: ``0.02 1``."""
+    return " ".join(f"{float(x):g}" for x in np.atleast_1d(values))
+
+
+# ------------------------------------------------------------------------------------------- renaming
+
+
+def _rename(
+    spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, object], new_names: dict[str, str]
+) -> None:
+    """Give each element (``elements[old] -> element``) its name ``new_names[old]`` -- through unique
+    temporary names, so swaps work -- and rewrite the string references of that type to it."""
+    for i, element in enumerate(elements.values()):
+        element.name = f"__taslel_rename_{objtype.name}_{i}"
+    for old, element in elements.items():
+        try:
+            element.name = new_names[old]
+        except ValueError as exc:
+            raise ValueError(
+                f"renaming {objtype.name} {old!r} to {new_names[old]!r}: another element of the file "
+                f"already has that name"
+            ) from exc
+    mapping = {old: new_names[old] for old in elements}
+
+    def swap(name: str) -> str:
+        return mapping.get(name, name)
+
+    for s in spec.sensors:
+        if s.objtype == objtype:
+            s.objname = swap(s.objname)
+        if s.reftype == objtype:
+            s.refname = swap(s.refname)
+    if objtype == mujoco.mjtObj.mjOBJ_JOINT:
+        for a in spec.actuators:
+            if a.trntype in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT):
+                a.target = swap(a.target)
+    if objtype in (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_GEOM):
+        for e in spec.equalities:
+            if e.objtype == objtype:
+                e.name1, e.name2 = swap(e.name1), swap(e.name2)
+    if objtype == mujoco.mjtObj.mjOBJ_GEOM:
+        for p in spec.pairs:
+            p.geomname1, p.geomname2 = swap(p.geomname1), swap(p.geomname2)
+    if objtype == mujoco.mjtObj.mjOBJ_BODY:
+        for x in spec.excludes:
+            x.bodyname1, x.bodyname2 = swap(x.bodyname1), swap(x.bodyname2)
+        for a in spec.actuators:
+            if a.trntype == mujoco.mjtTrn.mjTRN_BODY:
+                a.target = swap(a.target)
+
+
+def _available(names) -> str:
+    names = sorted(n for n in names if n)
+    return ", ".join(names[:24]) + (" ..." if len(names) > 24 else "") if names else "(none named)"
+
+
+# -------------------------------------------------------------------------------------------- adapting
+
+
+def adapt(
+    spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where: str
+) -> tuple[mujoco.MjsGeom | None, dict]:
+    """Rename the file's joints, actuators, foot geoms and trunk to the core's names, make the 12 actuators
+    torque motors, find the floor. Returns (the floor geom or None, record). Raises :class:`ConfigError`
+    (prefixed ``where``) naming *joints*, *actuators*, *feet*, *trunk* or *floor* for each thing missing."""
+    problems: list[str] = []
+    joints = {j.name: j for j in spec.joints if j.name}
+    geoms = {g.name: g for g in spec.geoms if g.name}
+    bodies = {b.name: b for b in spec.bodies if b.name}
+
+    file_joint = {core: names.file_name("joints", core) for core in a1.JOINT_NAMES}
+    missing = [
+        f"{core} (as {f!r})" if f != core else core for core, f in file_joint.items() if f not in joints
+    ]
+    if missing:
+        problems.append(
+            f"joints: no joint {', '.join(missing)} (robot.plant_names.joints); "
+            f"joints in the file: {_available(joints)}"
+        )
+    feet = {core: names.file_name("feet", core) for core in a1.FOOT_FRAMES}
+    bad_feet = [
+        f"{core} (as {f!r})" if f != core else core
+        for core, f in feet.items()
+        if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE
+    ]
+    if bad_feet:
+        problems.append(
+            f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
+            f"sphere geoms in the file: "
+            f"{_available(n for n, g in geoms.items() if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)}"
+        )
+    trunk = names.trunk or a1.TRUNK_BODY
+    if trunk not in bodies:
+        problems.append(
+            f"trunk: no body {trunk!r} (robot.plant_names.trunk); bodies in the file: {_available(bodies)}"
+        )
+    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
+        problems.append("trunk: no free joint (the floating base)")
+    chosen, act_problems = _find_actuators(spec, names, file_joint)
+    problems += act_problems
+    floor, floor_problem = _find_floor(spec, names)
+    if floor_problem:
+        problems.append(floor_problem)
+    if problems:
+        raise ConfigError(f"{where} does not fit the A1 controller:\n  " + "\n  ".join(problems))
+
+    # torque motors first (it deletes the other actuators on the leg joints), then the core's names
+    record: dict[str, object] = _torque_motors(spec, chosen, torque_limit_nm)
+    renamed: dict[str, object] = {}
+    for kind, objtype, table, wanted in (
+        ("joints", mujoco.mjtObj.mjOBJ_JOINT, joints, file_joint),
+        ("feet", mujoco.mjtObj.mjOBJ_GEOM, geoms, feet),
+        ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {a1.TRUNK_BODY: trunk}),
+        (
+            "actuators",
+            mujoco.mjtObj.mjOBJ_ACTUATOR,
+            {a.name: a for a in chosen.values() if a.name},
+            {core: a.name for core, a in chosen.items() if a.name},
+        ),
+    ):
+        to_core = {f: core for core, f in wanted.items() if f != core}
+        if to_core:
+            _rename(spec, objtype, {f: table[f] for f in to_core}, to_core)
+            renamed[kind] = {core: f for f, core in to_core.items()}
+    for core, act in chosen.items():  # unnamed actuators (nothing can refer to them) get the joint's name
+        act.name = act.name or core
+    if floor is not None and floor.name != FLOOR:
+        renamed["floor"] = floor.name or "(unnamed plane)"
+        if floor.name:
+            _rename(spec, mujoco.mjtObj.mjOBJ_GEOM, {floor.name: floor}, {floor.name: FLOOR})
+        else:
+            floor.name = FLOOR
+    if renamed:
+        record["renamed"] = renamed
+    return floor, record
+
+
+def _find_actuators(
+    spec: mujoco.MjSpec, names: PlantNames, file_joint: dict[str, str]
+) -> tuple[dict[str, mujoco.MjsActuator], list[str]]:
+    """The actuator of each core joint (by name with ``names.actuators``, else the one driving the joint)."""
+    by_name = {a.name: a for a in spec.actuators if a.name}
+    joint_names = {j.name for j in spec.joints}
+    driving: dict[str, list] = {}
+    for a in spec.actuators:
+        if a.trntype in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT):
+            driving.setdefault(a.target, []).append(a)
+    chosen, missing, ambiguous, wrong = {}, [], [], []
+    for core, fj in file_joint.items():
+        if names.actuators is not None:
+            fa = names.file_name("actuators", core)
+            if fa not in by_name:
+                missing.append(f"{core} (as {fa!r})")
+                continue
+            act = by_name[fa]
+            if (
+                act.trntype not in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT)
+                or act.target != fj
+            ):
+                wrong.append(f"{fa!r} drives {act.target!r}, not joint {fj!r}")
+                continue
+        elif fj not in joint_names:
+            continue  # reported under joints
+        else:
+            acts = driving.get(fj, [])
+            if len(acts) != 1:
+                (missing if not acts else ambiguous).append(
+                    f"{core}"
+                    + (f" (joint {fj!r})" if fj != core else "")
+                    + (f": {', '.join(repr(a.name) for a in acts)}" if acts else "")
+                )
+                continue
+            act = acts[0]
+        chosen[core] = act
+    problems = []
+    if missing:
+        problems.append(
+            f"actuators: none for {', '.join(missing)} (robot.plant_names.actuators); "
+            f"actuators in the file: {_available(by_name)}"
+        )
+    if ambiguous:
+        problems.append(
+            f"actuators: several drive {'; '.join(ambiguous)}: name the one to command in "
+            f"robot.plant_names.actuators"
+        )
+    if wrong:
+        problems.append(f"actuators: {'; '.join(wrong)}")
+    for core, act in chosen.items():
+        if (
+            act.dyntype != mujoco.mjtDyn.mjDYN_NONE
+            or act.gaintype != mujoco.mjtGain.mjGAIN_FIXED
+            or act.biastype not in (mujoco.mjtBias.mjBIAS_NONE, mujoco.mjtBias.mjBIAS_AFFINE)
+        ):
+            problems.append(
+                f"actuators: {act.name or core!r} is neither a torque motor nor a position/velocity "
+                f"servo (dyntype {act.dyntype.name}, gaintype {act.gaintype.name}, "
+                f"biastype {act.biastype.name})"
+            )
+    return chosen, problems
+
+
+def _torque_motors(
+    spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], torque_limit_nm: float
+) -> dict:
+    """Make each chosen actuator a torque motor taking joint torque [N·m] as ctrl (gain 1, gear 1); delete
+    other actuators on the 12 joints. A servo (affine bias: tau = kp (ctrl - q) - kv qdot) becomes a motor
+    with ctrlrange +-``torque_limit_nm`` (the URDF effort limit by default); a motor with gear x gain g != 1
+    gets gear 1 and its ctrlrange scaled by g. Returns the record: ``actuators_converted`` [[core joint,
+    what], ...], ``actuators_removed`` [names]."""
+    converted, removed = [], []
+    for core, act in chosen.items():
+        gain = float(act.gainprm[0]) * float(act.gear[0])
+        if act.biastype == mujoco.mjtBias.mjBIAS_AFFINE:
+            kp, kv = float(act.gainprm[0]), -float(act.biasprm[2])
+            converted.append([core, f"servo kp={kp:g} kv={kv:g} -> motor +-{torque_limit_nm:g} N·m"])
+            act.set_to_motor()
+            act.gear = [1.0, 0, 0, 0, 0, 0]
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.ctrlrange = [-torque_limit_nm, torque_limit_nm]
+        elif gain != 1.0:
+            converted.append([core, f"motor gear x gain {gain:g} -> 1 (ctrlrange scaled)"])
+            act.ctrlrange = np.asarray(act.ctrlrange) * gain
+            act.gainprm[0], act.gear = 1.0, [1.0, 0, 0, 0, 0, 0]
+    kept = list(chosen.values())
+    targets = {a.target for a in kept}
+    for act in list(spec.actuators):
+        if act.target in targets and not any(act == k for k in kept):  # MjSpec elements compare by identity
+            removed.append(act.name or f"(unnamed, on {act.target})")
+            spec.delete(act)
+    record: dict[str, object] = {}
+    if converted:
+        record["actuators_converted"] = converted
+    if removed:
+        record["actuators_removed"] = removed
+    return record
+
+
+def _find_floor(spec: mujoco.MjSpec, names: PlantNames) -> tuple[mujoco.MjsGeom | None, str]:
+    """(the file's floor geom or None, a problem or ""): ``names.floor``, else the only plane geom of the
+    world body (the one named ``floor`` when there are several)."""
+    world = [g for g in spec.geoms if g.parent == spec.worldbody]
+    if names.floor is not None:
+        found = [g for g in world if g.name == names.floor]
+        if not found:
+            return None, (
+                f"floor: no geom {names.floor!r} on the world body (robot.plant_names.floor); "
+                f"world geoms: {_available(g.name for g in world)}"
+            )
+        return found[0], ""
+    planes = [g for g in world if g.type == mujoco.mjtGeom.mjGEOM_PLANE]
+    if len(planes) > 1:
+        named = [g for g in planes if g.name == FLOOR]
+        if named:
+            return named[0], ""
+        return None, (
+            f"floor: {len(planes)} plane geoms on the world body ({_available(g.name for g in planes)}): "
+            f"name the floor in robot.plant_names.floor"
+        )
+    return (planes[0] if planes else None), ""
+
+
+# ------------------------------------------------------------------------------------------- overrides
+
+
+def apply_overrides(spec: mujoco.MjSpec, overrides: PlantOverrides, timestep_s: float) -> dict[str, list]:
+    """Set the time step [s] (always: the config's physics rate) and each override that is not None on the
+    spec's options, foot geoms (core names) and ``floor`` geom. Returns {setting: [before, after]} for the
+    settings whose value changed (numbers as text)."""
+    changes: dict[str, list] = {}
+
+    def note(key: str, before, after) -> None:
+        if before != after:
+            changes[key] = [before, after]
+
+    note("timestep_s", f"{spec.option.timestep:g}", f"{timestep_s:g}")
+    spec.option.timestep = timestep_s
+    o = overrides
+    if o.integrator is not None:
+        note("integrator", mujoco.mjtIntegrator(spec.option.integrator).name, INTEGRATORS[o.integrator].name)
+        spec.option.integrator = INTEGRATORS[o.integrator]
+    if o.cone is not None:
+        note("cone", mujoco.mjtCone(spec.option.cone).name, CONES[o.cone].name)
+        spec.option.cone = CONES[o.cone]
+    if o.noslip_iterations is not None:
+        note("noslip_iterations", spec.option.noslip_iterations, int(o.noslip_iterations))
+        spec.option.noslip_iterations = int(o.noslip_iterations)
+    if o.impratio is not None:
+        note("impratio", f"{spec.option.impratio:g}", f"{o.impratio:g}")
+        spec.option.impratio = float(o.impratio)
+    feet = [spec.geom(f) for f in a1.FOOT_FRAMES]
+    floor = [g for g in [spec.geom(FLOOR)] if g is not None]
+    for attr, value, geoms in (
+        ("solref", o.contact_solref, feet + floor),
+        ("solimp", o.contact_solimp, feet + floor),
+        ("margin", o.foot_margin_m, feet),
+    ):
+        if value is None:
+            continue
+        for g in geoms:
+            note(f"{g.name}.{attr}", _fmt(getattr(g, attr)), _fmt(value))
+            setattr(g, attr, list(np.atleast_1d(value)) if attr != "margin" else float(value))
+    return changes
+
+
+def store_record(spec: mujoco.MjSpec, record: dict) -> None:
+    """Keep ``record`` in the model as the custom text :data:`RECORD_TEXT` (JSON), if it holds anything."""
+    if record:
+        spec.add_text(name=RECORD_TEXT, data=json.dumps(record, sort_keys=True))
+
+
+def read_record(model: mujoco.MjModel) -> dict:
+    """The adapter's record stored by :func:`store_record` ({} when the model has none)."""
+    tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, RECORD_TEXT)
+    if tid < 0:
+        return {}
+    start = model.text_adr[tid]
+    raw = bytes(model.text_data[start : start + model.text_size[tid]]).rstrip(b"\x00")
+    return json.loads(raw.decode())

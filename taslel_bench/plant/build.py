@@ -1,0 +1,246 @@
+"""The MuJoCo plant: the A1 URDF turned into an ``MjSpec`` with a free joint, a floor and torque motors.
+
+Frames: MuJoCo world is z-up, the floor is the plane z = 0. ``qpos[:3]`` is the trunk-frame origin in
+world [m], ``qpos[3:7]`` its orientation as a wxyz quaternion; ``qvel[:3]`` is the trunk linear velocity
+in **world** axes [m/s], ``qvel[3:6]`` the angular velocity in the **trunk** frame [rad/s].
+
+Friction: terrain geoms get ``priority=1`` so a contact uses the terrain's friction, not MuJoCo's
+max(foot, floor); the cone is elliptic, so the friction configured is the friction the feet get (checked
+from contact data by :func:`measure_contact_friction`). Robot geoms collide only with terrain geoms
+(``contype=1, conaffinity=0`` on the robot, ``contype=0, conaffinity=1`` on terrain).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from taslel_bench.interfaces import RoundObstacle
+from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, store_record
+from taslel_bench.robot import a1
+from taslel_bench.util.fields import ConfigError
+
+TERRAIN_PRIORITY = 1
+
+
+@dataclass(frozen=True)
+class PlantOptions:
+    """What the plant builder needs; validated by :mod:`taslel_bench.config.validate` before use."""
+
+    timestep_s: float = 0.001  # [s] physics step
+    floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
+    torque_limit_nm: float = a1.TORQUE_LIMIT_NM  # [N·m] motor ctrlrange
+    names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
+    overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
+
+
+def _strip_visuals(spec: mujoco.MjSpec) -> None:
+    """Delete mesh geoms (the URDF visuals; MuJoCo cannot read the .dae files) and their mesh assets."""
+    for geom in list(spec.geoms):
+        if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+            spec.delete(geom)
+    for mesh in list(spec.meshes):
+        spec.delete(mesh)
+
+
+def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+    """Uncompiled A1 plant: URDF collision geometry, free joint on the trunk, floor, 12 motors.
+
+    Scenarios edit the returned spec (terrain, obstacles, perturbations) before :func:`compile_plant`.
+    """
+    # Parse from a string with visuals removed: the URDF's package:// .dae meshes are not loadable.
+    import re
+
+    urdf_text = a1.a1_urdf_path().read_text()
+    urdf_text = re.sub(r"<visual>.*?</visual>", "", urdf_text, flags=re.DOTALL)
+    spec = mujoco.MjSpec.from_string(urdf_text)
+    _strip_visuals(spec)
+    spec.compiler.fusestatic = True  # the massless `base` root and fixed links are fused away
+    spec.option.timestep = options.timestep_s
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+
+    trunk = spec.body(a1.TRUNK_BODY)
+    trunk.add_freejoint(name="root")
+    for geom in spec.geoms:
+        geom.contype, geom.conaffinity = 1, 0
+        geom.condim = 3
+    for leg in a1.LEGS:
+        foot_body = spec.body(f"{leg}_foot")
+        for geom in foot_body.geoms:
+            if geom.type == mujoco.mjtGeom.mjGEOM_SPHERE:
+                geom.name = f"{leg}_foot"
+        foot_body.add_site(name=f"{leg}_foot", pos=[0, 0, 0])
+    spec.body(a1.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])
+
+    add_terrain_geom(
+        spec,
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        friction=options.floor_friction,
+    )
+    add_foot_contact_sensors(spec)
+    for name in a1.JOINT_NAMES:
+        act = spec.add_actuator(name=name, target=name)
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_motor()
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = [-options.torque_limit_nm, options.torque_limit_nm]
+    changes = apply_overrides(spec, options.overrides, options.timestep_s)  # the defaults change nothing here
+    store_record(spec, {"overrides": changes} if changes else {})
+    return spec
+
+
+# MuJoCo contact-sensor parameters (as the MJCF <contact data="found force torque pos" reduce="netforce"
+# num="1">): intprm = (data bits, reduction: netforce, num). netforce merges a foot's contacts into one at
+# the force-weighted centroid of the contact points, with the net force and torque (world axes).
+_CONTACT_SENSOR_INTPRM = (1 | 2 | 4 | 16, 3, 1)  # data: found, force, torque, pos
+_CONTACT_SENSOR_OBSTACLE_INTPRM = (1 | 2, 3, 1)  # found, force (obstacle contacts only need a count)
+
+
+def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
+    """Per foot: a contact sensor (number of contacts; net force and torque in world axes exerted *by* the
+    foot on what it touches, at the centroid of its contact points, which it also gives) and the foot site's
+    position, linear and angular velocity in world axes — read in one slice of ``sensordata`` instead of
+    looping over ``data.contact``. The force, torque and point give the generalised contact force exactly
+    (J(point)' f + J_rot' torque = MuJoCo's qfrc_constraint of the contacts). Requires a site named like the
+    foot."""
+    for foot in a1.FOOT_FRAMES:
+        sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                                 objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
+        sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
+        for kind, typ in (("pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+                          ("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+                          ("angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL)):
+            spec.add_sensor(name=f"{foot}_{kind}", type=typ, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=foot)
+
+
+def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+    """Plant from another A1 MJCF: a free joint, 12 leg joints, one torque motor or servo per joint, sphere
+    foot geoms; names as the core's or mapped by ``options.names`` (:mod:`taslel_bench.plant.adapter`
+    renames them to the core's, converts servos to torque motors, finds the file's floor).
+
+    Adds what the harness needs if absent (foot sites, foot sensors, a floor if the file has no plane on its
+    world body), sets the time step and ``options.overrides``, and makes terrain friction win (the floor
+    gets terrain priority and condim 3; the feet priority 0). What was changed is kept in the model
+    (:func:`taslel_bench.plant.adapter.read_record`). Raises :class:`ConfigError` naming the field and what
+    is missing (joints, actuators, feet, trunk, floor).
+    """
+    path = Path(path)
+    where = f"robot.plant_mjcf={str(path)!r}"
+    if not path.is_file():
+        raise ConfigError(f"{where}: no such file")
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # MuJoCo's parse error names neither the file nor the config field
+        reason = " ".join(str(exc).split())
+        raise ConfigError(f"{where}: MuJoCo cannot read this file as MJCF: {reason}") from exc
+    try:
+        floor, record = adapt(spec, options.names, options.torque_limit_nm, where)
+    except ValueError as exc:
+        raise ConfigError(str(exc) if str(exc).startswith(where) else f"{where}: {exc}") from exc
+    sites = {s.name for s in spec.sites}
+    for foot in a1.FOOT_FRAMES:
+        g = spec.geom(foot)
+        if foot not in sites:
+            g.parent.add_site(name=foot, pos=list(g.pos))
+        g.priority = 0
+    if floor is None:
+        add_terrain_geom(spec, name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
+                         friction=options.floor_friction)
+        record["floor"] = "added (the file has no plane on its world body)"
+    else:
+        before = f"priority {floor.priority}, condim {floor.condim}, friction {floor.friction[0]:g}"
+        floor.priority, floor.condim, floor.friction[0] = TERRAIN_PRIORITY, 3, options.floor_friction
+        record["floor"] = f"the file's ({before} -> terrain priority {TERRAIN_PRIORITY}, condim 3)"
+        _check_feet_touch(spec, floor, where)
+    changes = apply_overrides(spec, options.overrides, options.timestep_s)
+    if changes:
+        record["overrides"] = changes
+    sensors = {s.name for s in spec.sensors}
+    if f"{a1.FOOT_FRAMES[0]}_contact" not in sensors:
+        add_foot_contact_sensors(spec)
+    store_record(spec, record)
+    return spec
+
+
+def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) -> None:
+    """Raise naming *feet* if a foot geom's contype/conaffinity bits exclude collisions with ``floor``."""
+    blind = [f for f in a1.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
+                                                 or (floor.contype & spec.geom(f).conaffinity))]
+    if blind:
+        raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
+                          f"with the floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
+                          f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
+
+
+def add_terrain_geom(
+    spec: mujoco.MjSpec,
+    *,
+    name: str,
+    type: mujoco.mjtGeom,
+    size: list[float],
+    friction: float,
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    rgba: tuple[float, float, float, float] = (0.5, 0.55, 0.6, 1.0),
+) -> mujoco.MjsGeom:
+    """Add a static terrain geom on the world body whose friction wins every foot contact."""
+    geom = spec.worldbody.add_geom(name=name, type=type, size=size, pos=list(pos), rgba=list(rgba))
+    geom.friction = [friction, 0.005, 0.0001]
+    geom.priority = TERRAIN_PRIORITY
+    geom.contype, geom.conaffinity = 0, 1
+    geom.condim = 3
+    return geom
+
+
+OBSTACLE_BODY = "obstacles"  # static (mocap) body holding every physical obstacle geom
+OBSTACLE_SENSOR_SUFFIX = "obstacle"  # per foot: contacts of the foot sphere with the obstacles body
+
+
+def add_round_obstacles(spec: mujoco.MjSpec, obstacles: Sequence[RoundObstacle], friction: float) -> None:
+    """Put each :class:`RoundObstacle` in the plant as a capsule along world y (exact sphere-capsule
+    collision, so the contact geometry is the barrier's geometry), on one static body
+    :data:`OBSTACLE_BODY` (mocap: not fused into the world, so contact sensors can name it), plus one
+    contact sensor per foot counting that foot's contacts with the obstacles (:class:`FootContactReader`).
+    Obstacle geoms are terrain (their friction wins, robot geoms collide with them)."""
+    if not obstacles:
+        return
+    body = spec.worldbody.add_body(name=OBSTACLE_BODY, mocap=True)
+    axis_along_y = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # capsule axis: local z -> world y
+    for i, ob in enumerate(obstacles):
+        geom = body.add_geom(name=f"{OBSTACLE_BODY}_{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                             size=[ob.radius_m, ob.half_width_m, 0.0], pos=[ob.x_m, 0.0, ob.z_m],
+                             quat=axis_along_y, rgba=[0.55, 0.4, 0.25, 1.0])  # fmt: skip
+        geom.friction = [friction, 0.005, 0.0001]
+        geom.priority = TERRAIN_PRIORITY
+        geom.contype, geom.conaffinity = 0, 1
+        geom.condim = 3
+    for foot in a1.FOOT_FRAMES:
+        sensor = spec.add_sensor(name=f"{foot}_{OBSTACLE_SENSOR_SUFFIX}", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                                 objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot, reftype=mujoco.mjtObj.mjOBJ_BODY,
+                                 refname=OBSTACLE_BODY)  # fmt: skip
+        sensor.intprm[:3] = _CONTACT_SENSOR_OBSTACLE_INTPRM
+
+
+def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    """Compile with a clear error if the spec lost what the harness relies on."""
+    model = spec.compile()
+    missing = [
+        n for n in a1.JOINT_NAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) < 0
+    ]
+    missing += [
+        f"geom {f}" for f in a1.FOOT_FRAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) < 0
+    ]
+    if missing:
+        raise ValueError(f"plant model is missing {', '.join(missing)}")
+    return model
+
+
+def build_plant(options: PlantOptions = PlantOptions()) -> mujoco.MjModel:
+    """The default flat-floor plant."""
+    return compile_plant(a1_spec(options))

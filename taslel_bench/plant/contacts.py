@@ -1,0 +1,159 @@
+"""Plant-side contact readings: which foot touches what, with which force, friction and slip.
+
+:class:`FootContactReader` reads the foot sensors that :func:`taslel_bench.plant.build.add_foot_contact_sensors`
+adds (one slice of ``sensordata`` per physics step) and classifies the other robot-terrain contacts (a fall,
+a lower leg on the floor, a trip on an obstacle). Frames: world axes, forces on the robot [N].
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from taslel_bench.plant.build import OBSTACLE_BODY, OBSTACLE_SENSOR_SUFFIX
+from taslel_bench.robot import a1
+
+
+def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
+    """(ngeom,) bool: geoms of the :data:`OBSTACLE_BODY` (all False when the plant has none)."""
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
+    return model.geom_bodyid == body if body >= 0 else np.zeros(model.ngeom, bool)
+
+
+
+def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
+    """MuJoCo geom ids of the four foot spheres, in :data:`a1.LEGS` order."""
+    return np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES])
+
+
+def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, float]]:
+    """(foot name, sliding friction coefficient) of every active foot contact, read from ``data.contact``."""
+    feet = {int(g): name for g, name in zip(foot_geom_ids(model), a1.FOOT_FRAMES)}
+    out = []
+    for i in range(data.ncon):
+        c = data.contact[i]
+        for g in (int(c.geom1), int(c.geom2)):
+            if g in feet:
+                out.append((feet[g], float(c.friction[0])))
+    return out
+
+
+class FootContactReader:
+    """Plant-side contact quantities of the four feet after a step, from the foot sensors.
+
+    ``forces_in_world`` (4, 3): net contact force **on** each foot [N], world axes (0 without contact) —
+    the constraint forces MuJoCo applied in the last physics step. ``in_contact`` (4,) bool.
+    Robot geoms other than the feet, touching terrain (checked through ``data.contact`` only when the
+    contact count exceeds the feet's; a contact counts only at distance <= 0, a contact inside a geom margin
+    is not a touch; ``data.contact`` after ``mj_step`` holds the contacts of the step's *starting* state):
+    ``body_contact``: the trunk, a hip or a thigh (anything above the knee) touches any terrain: a fall;
+    ``shin_contact``: a lower leg (the other geoms of the body that carries a foot sphere) touches the
+    floor; ``non_foot_obstacle_contact``: a lower leg touches a physical obstacle (:data:`OBSTACLE_BODY`):
+    a trip. ``non_foot_contact_name``: the body of the first such geom.
+    ``slip_velocity_in_world`` (4, 2): horizontal velocity [m/s] of the sphere's lowest point (the contact
+    point on flat ground): v_centre + omega x (-r z) — the centre of a rolling, non-slipping foot moves.
+    ``foot_pos_in_world`` (4, 3): foot-sphere centres [m].
+    Positions and velocities are the sensors' values, i.e. at the start of the last physics step.
+
+    :meth:`read` fills these from one ``data``; :meth:`from_sensor_log` computes the same quantities for a
+    whole log of ``sensordata`` rows at once (the episode trace records raw rows in the control loop).
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.foot_geoms = foot_geom_ids(model)
+
+        def sensor_adr(kind: str) -> np.ndarray:
+            ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_{kind}") for f in a1.FOOT_FRAMES]
+            if min(ids) < 0:
+                raise ValueError(
+                    f"plant model has no foot {kind} sensors; build it with plant.add_foot_contact_sensors"
+                )
+            return model.sensor_adr[ids]
+
+        adr = sensor_adr("contact")
+        self._found_rows = adr.copy()  # number of contacts per foot
+        self._found_rows_list = [int(r) for r in adr]
+        self._force_rows = adr[:, None] + np.arange(1, 4)  # fx, fy, fz (by the foot), world axes
+        self._torque_rows = adr[:, None] + np.arange(4, 7)  # net torque about the contact point, world axes
+        self._point_rows = adr[:, None] + np.arange(7, 10)  # force-weighted centroid of the contact points
+        self._pos_rows = sensor_adr("pos")[:, None] + np.arange(3)
+        self._lin_rows = sensor_adr("linvel")[:, None] + np.arange(2)  # vx, vy
+        self._ang_rows = sensor_adr("angvel")[:, None] + np.array([1, 0])  # wy, wx
+        self._radius_sign = a1.FOOT_RADIUS_M * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
+        self._is_foot = np.zeros(model.ngeom, bool)
+        self._is_foot[self.foot_geoms] = True
+        robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
+        foot_bodies = model.geom_bodyid[self.foot_geoms]
+        self._is_lower_leg = np.isin(model.geom_bodyid, foot_bodies) & ~self._is_foot  # calves (knee to foot)
+        self._is_obstacle = obstacle_geom_mask(model)
+        self.has_obstacles = bool(self._is_obstacle.any())
+        if self.has_obstacles:  # per foot: number of contacts with the obstacles body
+            self._obstacle_rows = sensor_adr(OBSTACLE_SENSOR_SUFFIX)
+        self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+        self.non_foot_contact_name = ""
+        self.forces_in_world = np.zeros((a1.N_LEGS, 3))
+        self.in_contact = np.zeros(a1.N_LEGS, bool)
+        self.slip_velocity_in_world = np.zeros((a1.N_LEGS, 2))
+        self.foot_pos_in_world = np.zeros((a1.N_LEGS, 3))
+        self._data: mujoco.MjData | None = None
+        self._sensordata = np.zeros(0)
+
+    def read(self, data: mujoco.MjData) -> None:
+        """All quantities from ``data`` after a step."""
+        sd = data.sensordata
+        found = sd[self._found_rows]
+        np.negative(sd[self._force_rows], out=self.forces_in_world)  # sensor: force by the foot; we want on it
+        np.greater(found, 0.0, out=self.in_contact)
+        np.multiply(sd[self._ang_rows], self._radius_sign, out=self.slip_velocity_in_world)
+        self.slip_velocity_in_world += sd[self._lin_rows]
+        self.foot_pos_in_world[:] = sd[self._pos_rows]
+        self.check_non_foot_contact(data)
+
+    def check_non_foot_contact(self, data: mujoco.MjData) -> bool:
+        """Only ``body_contact``, ``shin_contact`` and ``non_foot_obstacle_contact`` (cheap unless there are
+        more contacts than foot contacts). Returns ``body_contact`` (a fall)."""
+        if data is not self._data:  # keep the sensordata view of this data (a new wrapper per attribute read)
+            self._data, self._sensordata = data, data.sensordata
+        sd, (r0, r1, r2, r3) = self._sensordata, self._found_rows_list
+        n_found = sd[r0] + sd[r1] + sd[r2] + sd[r3]  # 4 scalar reads: cheaper than a fancy index + sum
+        if data.ncon > n_found:
+            self._classify_other_contacts(data)
+        else:
+            self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+        return self.body_contact
+
+    def from_sensor_log(self, sensors: np.ndarray) -> dict[str, np.ndarray]:
+        """(n, nsensordata) rows -> ``forces_in_world`` (n, 4, 3), ``in_contact`` (n, 4),
+        ``slip_velocity_in_world`` (n, 4, 2), ``foot_pos_in_world`` (n, 4, 3); same definitions as :meth:`read`."""
+        n = sensors.shape[0]
+        return {
+            "forces_in_world": -sensors[:, self._force_rows],
+            "torques_in_world": -sensors[:, self._torque_rows],
+            "contact_point_in_world": sensors[:, self._point_rows],
+            "in_contact": sensors[:, self._found_rows] > 0.0,
+            "slip_velocity_in_world": sensors[:, self._lin_rows] + sensors[:, self._ang_rows] * self._radius_sign,
+            "foot_pos_in_world": sensors[:, self._pos_rows],
+            "obstacle_contact": (sensors[:, self._obstacle_rows] > 0.0 if self.has_obstacles
+                                 else np.zeros((n, a1.N_LEGS), bool)),
+        }
+
+    def _classify_other_contacts(self, data: mujoco.MjData) -> None:
+        """Non-foot robot geoms touching terrain at distance <= 0 (see the class doc)."""
+        con = data.contact
+        geom = con.geom
+        robot_side = self._is_robot_geom[geom]
+        other = (con.dist <= 0.0) & ~(self._is_foot[geom[:, 0]] | self._is_foot[geom[:, 1]])
+        other &= robot_side[:, 0] != robot_side[:, 1]
+        if not other.any():
+            self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+            return
+        pairs = geom[other]
+        robot_geom = np.where(robot_side[other, 0], pairs[:, 0], pairs[:, 1])
+        on_obstacle = self._is_obstacle[np.where(robot_side[other, 0], pairs[:, 1], pairs[:, 0])]
+        lower = self._is_lower_leg[robot_geom]
+        body, shin, trip = ~lower, lower & ~on_obstacle, lower & on_obstacle
+        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = bool(body.any()), bool(shin.any()), bool(trip.any())
+        first = robot_geom[np.argmax(body)] if self.body_contact else robot_geom[0]
+        self.non_foot_contact_name = self.model.body(self.model.geom_bodyid[first]).name

@@ -1,0 +1,170 @@
+"""Per-tick cost and real-time factor of an episode, with a breakdown of the tick's parts.
+
+    python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp_persistent] [--scenario obstacle]
+
+Prints, for the nominal-only loop and for the filter with each solver and formulation: median tick time,
+real-time factor, the median cost of each part of the tick measured inside the loop, and the same parts
+measured in isolation on the episode's final state. Runs share one process and are reported side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from datetime import datetime
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from taslel_bench.api import compose
+from taslel_bench.filter.constraints import TickInputs
+from taslel_bench.record.trace import TICK_PARTS
+from taslel_bench.sim.run import Built
+
+
+def _median_us(fn, n: int = 2000) -> float:
+    times = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        fn()
+        times[i] = time.perf_counter() - t0
+    return float(np.median(times) * 1e6)
+
+
+def part_costs(built: Built) -> dict[str, float]:
+    """Median µs of each tick part at the episode's final state."""
+    e = built.episode
+    m, d, br = e.m, e.d, e.bridge
+    qj, qdj = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
+    q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
+    t = [e.controller.stand_duration_s + 1.0]
+
+    def ctrl():
+        t[0] += 1e-3
+        e.controller.compute(t[0], qj, qdj)
+
+    d_copy = mujoco.MjData(m)
+    d_copy.qpos[:], d_copy.qvel[:] = d.qpos, d.qvel
+    costs = {
+        "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
+        "controller": _median_us(ctrl),
+        "pinocchio_update": _median_us(lambda: e.model.update(q, v)),
+        "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
+    }
+    if built.filter is not None:
+        gs = e.controller.gait_state(t[0])
+        u = e.controller.compute(t[0], qj, qdj)
+        inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
+        costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
+        backend_qp = built.filter.backend_problem
+        costs["qp_solve"] = _median_us(lambda: built.backend.solve(backend_qp), 500)
+    return costs
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=5.0, help="walking time per episode [s]")
+    ap.add_argument("--solvers", default="daqp,osqp_persistent,osqp", help="comma-separated solver options")
+    ap.add_argument("--formulations", default="full,condensed",
+                    help="filter.formulation values to run for each solver (full, condensed)")
+    ap.add_argument("--scenario", default="flat")
+    ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
+    args = ap.parse_args(argv)
+    rows = []
+    load_before = os.getloadavg()[0]
+    configs = [("nominal only", ["filter.enabled=false"])] + [
+        (f"filter ({form}) + {s}", [f"solver={s}", f"filter.formulation={form}"])
+        for s in args.solvers.split(",") if s
+        for form in args.formulations.split(",") if form
+    ]
+    for label, extra in configs:
+        cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
+        built = Built(cfg)
+        res = built.episode.run()
+        tr, n = res.trace, res.trace.n
+        rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
+        in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
+        if built.filter is None:
+            del in_loop["model"], in_loop["filter"]
+        rows.append((label, float(np.median(tr.tick_us[:n])), rtf, res.status, res.fell, in_loop, part_costs(built)))
+
+    def fmt(parts: dict[str, float]) -> str:
+        return ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
+
+    cols = ("loop", "tick µs (median)", "real-time factor", "status", "fell", "in the loop µs (median)",
+            "isolated µs (median)")  # fmt: skip
+    table = Table(title=f"tick cost, {args.scenario}, {args.duration} s walk, 1 kHz control "
+                  f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
+    for col in cols:
+        table.add_column(col)
+    for label, tick, rtf, status, fell, in_loop, isolated in rows:
+        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), fmt(in_loop), fmt(isolated))
+    Console(width=220).print(table)
+    if args.out is not None:
+        from taslel_bench.record.run_files import atomic_write
+        from taslel_bench.sweep.report import machine_info
+
+        info = machine_info()
+        lines = [
+            "# Control-tick cost\n",
+            (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
+            f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n"),
+            (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
+            f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
+            f"Packages: {info['packages']}\n"),
+            ("Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
+            "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
+            "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "
+            "fall checks). In the loop = median of each part of the tick timed inside the episode "
+            "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
+            "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
+            "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
+            "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+            "Other processes on the machine inflate all numbers alike.\n"),
+            "| " + " | ".join(cols) + " |",
+            "|" + "---|" * len(cols),
+        ]
+        for label, tick, rtf, status, fell, in_loop, isolated in rows:
+            lines.append(f"| {label} | {tick:.1f} | {rtf:.1f}x | {status} | {fell} | {fmt(in_loop)} | {fmt(isolated)} |")
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        figure = args.out.with_suffix(".png")
+        lines += ["", f"![tick parts in the loop]({figure.name})"]
+        atomic_write(figure, lambda p: _plot_parts(rows, args.scenario, p))
+        atomic_write(args.out, lambda p: p.write_text("\n".join(lines) + "\n"))
+        print(f"wrote {args.out}, {figure}")
+
+
+def _plot_parts(rows: list, scenario: str, path: Path) -> None:
+    """Stacked bars: the median in-loop cost of each tick part per loop, real-time factor on top."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 0.6 * len(rows) + 2.0))
+    labels = [r[0] for r in rows]
+    left = np.zeros(len(rows))
+    for part in TICK_PARTS:
+        widths = np.array([r[5].get(part, 0.0) for r in rows])
+        ax.barh(labels, widths, left=left, label=part)
+        left += widths
+    for i, r in enumerate(rows):
+        ax.text(left[i] + 3, i, f"{r[2]:.1f}x real time", va="center", fontsize=8)
+    ax.axvline(100.0, color="k", lw=0.8, ls="--")
+    ax.text(100.0, -0.45, " 100 µs: 10x real time", fontsize=8, va="top")
+    ax.invert_yaxis()
+    ax.set_xlabel("median wall time per 1 kHz tick, timed inside the loop [µs]")
+    ax.set_title(f"where the control tick's time goes ({scenario})")
+    ax.set_xlim(0, max(left.max() * 1.35, 120))
+    ax.legend(ncol=len(TICK_PARTS), loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=120)
+    plt.close(fig)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,327 @@
+"""Per-tick record of an episode in preallocated arrays, turned into a typed table at the end.
+
+Timing of the column groups within the row of tick k (control period dt, physics step dt_p):
+
+* ``t_s`` = k dt: the tick's start; the controller and filter read the plant state at ``t_s``;
+* commands (``u_nom_*``, ``u_*``), the filter's answer (``*_grf_filter_*``, ``qp_*``, ``*_barrier_*``), the
+  gait schedule (``gait_phase``, ``*_stance``, ``*_swing_phase``) and ``mu_hat``/``mu_true``: computed at
+  ``t_s`` from that state; ``u`` is held over [t_s, t_s + dt);
+* the plant state (``base_*``, ``q_*``, ``qd_*``): the state at the end of the tick, t_s + dt (the state
+  the next tick reads). ``base_*`` position and quaternion (wxyz), linear velocity in world axes, angular
+  velocity in trunk axes, ``q``/``qd``: together a full MuJoCo (qpos, qvel), enough to restart the plant;
+* contact and foot quantities (``*_contact``, ``*_grf_plant_*``, ``*_foot_*``, ``*_contact_point_speed``,
+  ``*_obstacle_contact``, ``*_mu_foot``, ``*_clearance_m``, ``*_obstacle_clearance_m``): MuJoCo's sensors of
+  the tick's last physics step, i.e. of its starting state at t_s + dt - dt_p (contact forces are the
+  constraint forces applied during that step).
+
+Frames in the column names: ``_w`` = world axes, ``_b`` = trunk axes; joint vectors in core order.
+
+In the control loop :meth:`EpisodeTrace.record` only copies raw rows (``qpos``, ``qvel``, ``sensordata``,
+the controller's and filter's vectors); :meth:`EpisodeTrace.finalize` derives the named quantities for all
+ticks at once after the episode (vectorised: the same definitions, a fraction of the per-tick cost).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.robot import a1
+
+TICK_PARTS = ("controller", "model", "filter", "physics")
+QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
+
+
+class EpisodeTrace:
+    """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`)."""
+
+    def __init__(self, capacity: int, filter_on: bool, nq: int = a1.NQ, nv: int = a1.NV,
+                 nsensordata: int = 0) -> None:  # fmt: skip
+        c, nl = capacity, a1.N_LEGS
+        self.n = 0
+        self.filter_on = filter_on
+        self.finalized = False
+        # --- raw rows written in the loop
+        self.t_s = np.zeros(c)
+        self.qpos_mj = np.zeros((c, nq))  # MuJoCo qpos / qvel / sensordata after the tick
+        self.qvel_mj = np.zeros((c, nv))
+        self.sensordata_mj = np.zeros((c, nsensordata))
+        self.u_nom = np.zeros((c, 12))  # [N·m]
+        self.u = np.zeros((c, 12))  # [N·m] applied
+        self.gait_phase = np.zeros(c)
+        self.in_stance = np.zeros((c, nl), bool)  # stance set used by the filter
+        self.swing_phase = np.zeros((c, nl))
+        self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
+        self._grf_filter_flat = self.grf_filter_w.reshape(c, 3 * nl)
+        self.qp_status = np.full(c, -1, np.int8)
+        self.qp_fallback = np.zeros(c, bool)
+        self.qp_build_us = np.full(c, np.nan)
+        self.qp_solve_us = np.full(c, np.nan)
+        self.qp_iterations = np.full(c, -1, np.int32)
+        self.barrier_h_m = np.full((c, nl), np.nan)  # phase-profile ECBF h per foot (nan in stance / no ECBF)
+        self.barrier_he_mps = np.full((c, nl), np.nan)
+        self.barrier_obstacle_h_m = np.full((c, nl), np.nan)  # obstacle ECBF h per foot (the filter's model)
+        self.barrier_obstacle_he_mps = np.full((c, nl), np.nan)
+        # [m/s²] ECBF condition psi = hdot_e + a2 h_e the filter planned (its vdot), per family and foot
+        self.barrier_psi_planned = np.full((c, nl), np.nan)
+        self.barrier_obstacle_psi_planned = np.full((c, nl), np.nan)
+        self.vdot_filter = np.full((c, a1.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
+        self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
+        self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
+        self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
+        self.mu_hat = np.zeros(c)
+        self.mu_true = np.zeros(c)
+        self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
+        self.tick_us = np.zeros(c)
+        # wall time of the tick's parts [s]: state read + estimator + controller, controller model (bridge +
+        # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
+        self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
+        self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
+        self._context: tuple | None = None  # (bridge, contact reader, profile, scenario): see bind()
+        # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
+        self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
+        self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
+        self.barrier_psi_realized = np.zeros((0, nl))  # [m/s²] realised ECBF condition, per family
+        self.barrier_obstacle_psi_realized = np.zeros((0, nl))
+        # --- derived by finalize() (empty until then)
+        self.tick_parts_us = np.zeros((0, len(TICK_PARTS)))  # [µs]
+        self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
+        self.base_quat_wxyz = np.zeros((0, 4))
+        self.base_linvel_w = np.zeros((0, 3))  # [m/s]
+        self.base_angvel_b = np.zeros((0, 3))  # [rad/s] trunk axes
+        self.q = np.zeros((0, 12))  # [rad]
+        self.qd = np.zeros((0, 12))  # [rad/s]
+        self.foot_pos_w = np.zeros((0, nl, 3))  # [m] foot-sphere centres
+        self.grf_plant_w = np.zeros((0, nl, 3))  # [N] contact force on each foot
+        self.in_contact = np.zeros((0, nl), bool)
+        self.slip_w = np.zeros((0, nl, 2))  # [m/s] horizontal velocity of each foot's contact point
+        self.clearance_m = np.zeros((0, nl))  # swing foot bottom - z(s) [m] (nan in stance)
+        self.obstacle_contact = np.zeros((0, nl), bool)  # foot sphere touches a physical obstacle
+        self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
+        self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
+
+    def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
+               barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
+        """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
+        outputs). ``barriers``: the filter's (phase-profile ECBF, obstacle ECBF), either may be None."""
+        self.t_s[k] = t
+        self.qpos_mj[k] = qpos
+        self.qvel_mj[k] = qvel
+        self.sensordata_mj[k] = sensordata
+        self.u_nom[k] = u_nom
+        self.u[k] = u
+        self.gait_phase[k] = gs.phi
+        self.in_stance[k] = in_stance
+        self.swing_phase[k] = gs.swing_phase
+        self.mu_hat[k] = mu_hat
+        self.mu_true[k] = mu_true
+        self.tick_us[k] = tick_s * 1e6
+        if fres is not None:
+            self._grf_filter_flat[k] = fres.lam
+            if fres.used_fallback:
+                self.qp_status[k] = 1
+                self.qp_fallback[k] = True
+                self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
+            else:
+                self.qp_status[k] = 0
+            self.qp_build_us[k] = fres.build_time_s * 1e6
+            sol = fres.solve
+            if sol is not None:
+                self.qp_solve_us[k] = sol.solve_time_s * 1e6
+                if sol.iterations is not None:
+                    self.qp_iterations[k] = sol.iterations
+            self.vdot_filter[k] = fres.vdot
+            self.ecbf_margin_mps2[k] = fres.ecbf_margin_mps2
+            ecbf, obstacle_ecbf = barriers
+            if ecbf is not None:
+                self.barrier_h_m[k] = ecbf.h
+                self.barrier_he_mps[k] = ecbf.h_e
+                self.barrier_psi_planned[k] = ecbf.psi_planned if not fres.used_fallback else np.nan
+            if obstacle_ecbf is not None:
+                self.barrier_obstacle_h_m[k] = obstacle_ecbf.h
+                self.barrier_obstacle_he_mps[k] = obstacle_ecbf.h_e
+                self.barrier_obstacle_psi_planned[k] = obstacle_ecbf.psi_planned if not fres.used_fallback else np.nan
+        self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
+        self.shin_floor_contact[k] = shin_floor_contact
+        self.n = k + 1
+
+    def bind(self, br: StateBridge, contacts, profile, scenario=None) -> None:
+        """What deriving the named quantities needs: the state bridge (index maps), the episode's
+        :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout), the scenario's clearance profile or
+        None (then ``clearance_m`` is all nan) and the scenario (friction under each foot, physical
+        obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles)."""
+        self._context = (br, contacts, profile, scenario)
+
+    def contact_reader(self):
+        """The episode's :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout of ``sensordata_mj``)."""
+        if self._context is None:
+            raise RuntimeError("EpisodeTrace.bind() must be called first")
+        return self._context[1]
+
+    def derive(self, k0: int, k1: int) -> dict[str, np.ndarray]:
+        """The named plant quantities of ticks ``k0:k1`` from their raw rows (vectorised; the same
+        definitions for a chunk written during the episode as for the whole episode after it)."""
+        if self._context is None:
+            raise RuntimeError("EpisodeTrace.bind() must be called before deriving quantities")
+        br, contacts, profile, scenario = self._context
+        a, dv, ticks = br.free_qadr, br.free_dadr, slice(k0, k1)
+        qpos, qvel = self.qpos_mj[ticks], self.qvel_mj[ticks]
+        plant_side = contacts.from_sensor_log(self.sensordata_mj[ticks])
+        foot_pos = plant_side["foot_pos_in_world"]
+        out = {
+            "tick_parts_us": self.tick_parts_s[ticks] * 1e6,
+            "base_pos_w": qpos[:, a : a + 3].copy(),
+            "base_quat_wxyz": qpos[:, a + 3 : a + 7].copy(),
+            "base_linvel_w": qvel[:, dv : dv + 3].copy(),
+            "base_angvel_b": qvel[:, dv + 3 : dv + 6].copy(),
+            "q": qpos[:, br.joint_qadr],
+            "qd": qvel[:, br.joint_dadr],
+            "foot_pos_w": foot_pos,
+            "grf_plant_w": plant_side["forces_in_world"],
+            "in_contact": plant_side["in_contact"],
+            "slip_w": plant_side["slip_velocity_in_world"],
+            "obstacle_contact": plant_side["obstacle_contact"],
+            "mu_foot": friction_under_feet(scenario, foot_pos, self.mu_true[ticks]),
+            "obstacle_clearance_m": obstacle_clearance(scenario.obstacles() if scenario is not None else (), foot_pos),
+        }
+        clearance = np.full((k1 - k0, a1.N_LEGS), np.nan)
+        if profile is not None and k1 > k0:
+            swing = ~self.in_stance[ticks]
+            z_obstacle = profile.evaluate(self.swing_phase[ticks][swing])[0]
+            clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
+        out["clearance_m"] = clearance
+        return out
+
+    def finalize(self) -> None:
+        """Derive the named plant quantities of the ``n`` recorded ticks into attributes (idempotent)."""
+        if self.finalized:
+            return
+        derived = self.derive(0, self.n)
+        for name, value in derived.items():
+            setattr(self, name, value)
+        self._derived_names = tuple(derived)
+        self.finalized = True
+
+    # ------------------------------------------------------------------------------------------ derived
+    def base_rpy(self) -> np.ndarray:
+        """(n, 3) roll, pitch, yaw [rad] of the trunk (ZYX convention)."""
+        return rpy_from_quat(self.base_quat_wxyz[: self.n])
+
+    def to_frame(self, dt: float | None = None) -> pd.DataFrame:
+        """One row per control tick, typed columns, units in the names (all ``n`` ticks)."""
+        return self.frame(0, self.n)
+
+    def frame(self, k0: int, k1: int) -> pd.DataFrame:
+        """Rows ``k0:k1`` as :meth:`to_frame` gives them (derived from the raw rows: usable during the
+        episode, for streaming)."""
+        t = slice(k0, k1)
+        if self.finalized:  # the derived arrays are already there: slice them
+            d = {name: getattr(self, name)[t] for name in self._derived_names}
+        else:
+            d = self.derive(k0, k1)
+        cols: dict[str, np.ndarray] = {"t_s": self.t_s[t]}
+        _put(cols, "base_{}_w_m", "xyz", d["base_pos_w"])
+        _put(cols, "base_quat_{}", "wxyz", d["base_quat_wxyz"])
+        _put(cols, "base_v{}_w_mps", "xyz", d["base_linvel_w"])
+        _put(cols, "base_w{}_b_radps", "xyz", d["base_angvel_b"])
+        _put(cols, "base_{}_rad", ("roll", "pitch", "yaw"), rpy_from_quat(d["base_quat_wxyz"]))
+        for j, jn in enumerate(a1.JOINT_NAMES):
+            short = jn.removesuffix("_joint")
+            cols[f"q_{short}_rad"] = d["q"][:, j]
+            cols[f"qd_{short}_radps"] = d["qd"][:, j]
+            cols[f"u_nom_{short}_nm"] = self.u_nom[t, j]
+            cols[f"u_{short}_nm"] = self.u[t, j]
+        cols["gait_phase"] = self.gait_phase[t]
+        slip = np.hypot(d["slip_w"][..., 0], d["slip_w"][..., 1])
+        for i, leg in enumerate(a1.LEGS):
+            cols[f"{leg}_stance"] = self.in_stance[t, i]
+            cols[f"{leg}_contact"] = d["in_contact"][:, i]
+            cols[f"{leg}_swing_phase"] = self.swing_phase[t, i]
+            _put(cols, leg + "_foot_{}_w_m", "xyz", d["foot_pos_w"][:, i])
+            cols[f"{leg}_contact_point_speed_mps"] = slip[:, i]
+            _put(cols, leg + "_grf_plant_{}_w_n", "xyz", d["grf_plant_w"][:, i])
+            _put(cols, leg + "_grf_filter_{}_w_n", "xyz", self.grf_filter_w[t, i])
+            cols[f"{leg}_barrier_h_m"] = self.barrier_h_m[t, i]
+            cols[f"{leg}_barrier_he_mps"] = self.barrier_he_mps[t, i]
+            cols[f"{leg}_clearance_m"] = d["clearance_m"][:, i]
+            cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
+            cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
+            cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
+            cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[t, i]
+        residual = _rows(self.model_residual, k0, k1, a1.NV)
+        cols["residual_trunk_force_n"] = np.linalg.norm(residual[:, :3], axis=1)
+        cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
+        cols["residual_joint_nm_max"] = np.abs(residual[:, 6:]).max(axis=1)
+        acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, a1.N_LEGS, 3), axis=2)
+        psi_real = _rows(self.barrier_psi_realized, k0, k1, a1.N_LEGS)
+        psi_obstacle_real = _rows(self.barrier_obstacle_psi_realized, k0, k1, a1.N_LEGS)
+        for i, leg in enumerate(a1.LEGS):
+            cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
+            cols[f"{leg}_barrier_psi_planned_mps2"] = np.fmin(self.barrier_psi_planned[t, i],
+                                                              self.barrier_obstacle_psi_planned[t, i])
+            cols[f"{leg}_barrier_psi_realized_mps2"] = np.fmin(psi_real[:, i], psi_obstacle_real[:, i])
+        cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
+        cols["shin_floor_contact"] = self.shin_floor_contact[t]
+        cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
+        cols["qp_status"] = self.qp_status[t]
+        cols["qp_fallback"] = self.qp_fallback[t]
+        cols["qp_build_us"] = self.qp_build_us[t]
+        cols["qp_solve_us"] = self.qp_solve_us[t]
+        cols["qp_iterations"] = self.qp_iterations[t]
+        cols["mu_hat"] = self.mu_hat[t]
+        cols["mu_true"] = self.mu_true[t]
+        cols["mu_hat_ready"] = self.mu_hat_ready[t]
+        cols["tick_us"] = self.tick_us[t]
+        _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
+        return pd.DataFrame(cols)
+
+
+def _rows(values: np.ndarray, k0: int, k1: int, *shape: int) -> np.ndarray:
+    """Rows k0:k1 of an array filled after the episode, or nan rows while it is not filled yet."""
+    return values[k0:k1] if values.shape[0] >= k1 else np.full((k1 - k0, *shape), np.nan)
+
+
+def _put(cols: dict[str, np.ndarray], pattern: str, names, values: np.ndarray) -> None:
+    """cols[pattern.format(name)] = values[:, j] for each name."""
+    for j, name in enumerate(names):
+        cols[pattern.format(name)] = values[:, j]
+
+
+def rpy_from_quat(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(n, 3) roll, pitch, yaw [rad] (ZYX convention) of (n, 4) unit quaternions (w, x, y, z)."""
+    w, x, y, z = quat_wxyz.T
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=1)
+
+
+def friction_under_feet(scenario, foot_pos_w: np.ndarray, mu_trunk: np.ndarray) -> np.ndarray:
+    """(n, 4) true friction coefficient [-] of the terrain under each foot-sphere centre (the scenario's
+    :meth:`friction_at` at the foot's world (x, y)); without a scenario the trunk's, for every foot."""
+    n = foot_pos_w.shape[0]
+    if scenario is None:
+        return np.repeat(mu_trunk[:, None], a1.N_LEGS, axis=1)
+    flat = foot_pos_w[:, :, :2].reshape(-1, 2)
+    cache: dict[tuple[float, float], float] = {}
+    out = np.empty(flat.shape[0])
+    for j, xy in enumerate(flat):  # a few 10k calls per episode, once after it
+        key = (float(xy[0]), float(xy[1]))
+        if key not in cache:
+            cache[key] = float(scenario.friction_at(xy))
+        out[j] = cache[key]
+    return out.reshape(n, a1.N_LEGS)
+
+
+def obstacle_clearance(obstacles, foot_pos_w: np.ndarray) -> np.ndarray:
+    """(n, 4) signed distance [m] from each foot sphere to the nearest physical obstacle (a log with its axis
+    along world y, :class:`taslel_bench.interfaces.RoundObstacle`): <= 0 means touching. NaN without
+    obstacles."""
+    n = foot_pos_w.shape[0]
+    if not obstacles:
+        return np.full((n, a1.N_LEGS), np.nan)
+    geo = np.array([[ob.x_m, ob.z_m, ob.radius_m] for ob in obstacles])  # (m, 3)
+    dx = foot_pos_w[:, :, 0, None] - geo[:, 0]  # (n, 4, m)
+    dz = foot_pos_w[:, :, 2, None] - geo[:, 1]
+    return (np.hypot(dx, dz) - geo[:, 2]).min(axis=2) - a1.FOOT_RADIUS_M

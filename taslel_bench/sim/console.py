@@ -1,0 +1,48 @@
+"""Compact terminal output of a run summary (rich table)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+KEY_METRICS = (
+    "status", "degraded_reasons", "fell", "time_to_fall_s", "fall_reason", "distance_m", "mean_speed_mps",
+    "real_time_factor", "tick_us_median", "intervention_nm_mean", "u_nom_nm_mean", "qp_failed_rate",
+    "qp_solve_us_median", "qp_solve_us_p99", "grf_mae_z_n", "grf_mae_z_n_stance", "friction_cone_edge_rate",
+    "filter_demand_beyond_cone_rate", "slip_mps_mean", "sliding_distance_m", "clearance_violation_rate",
+    "clearance_min_m", "trips", "barrier_negative_rate", "estimator_mae",
+)
+# what the plant is against what the controller's model believes (taslel_bench.plant.comparison) and how wrong
+# the model was in the episode (taslel_bench.metrics.residuals)
+MODEL_METRICS = (
+    "plant_total_mass_kg", "model_total_mass_kg", "model_minus_plant_com_stand_m",
+    "plant_joint_damping_nms_per_rad_max", "model_joint_damping_nms_per_rad_max", "plant_joint_armature_kgm2_max",
+    "model_joint_armature_kgm2_max", "plant_joint_frictionloss_nm_max", "model_joint_frictionloss_nm_max",
+    "plant_integrator", "residual_trunk_force_n_rms", "residual_joint_nm_rms", "residual_alarm_rate",
+)
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "—" if v is None else str(v)
+
+
+def print_summary(summary: dict, out_dir: Path) -> None:
+    title = f"{summary.get('scenario')} · solver={summary.get('solver')} · estimator={summary.get('estimator')}"
+    title += f" · seed={summary.get('seed')}"
+    table = Table(title=title, show_header=True, header_style="bold")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for k in (*KEY_METRICS, *MODEL_METRICS):
+        if k in summary and summary[k] not in ("", None):
+            table.add_row(k, _fmt(summary[k]))
+    if summary.get("message"):
+        table.add_row("message", str(summary["message"]))
+    console = Console(stderr=False)
+    console.print(table)
+    console.print(f"run folder: {out_dir}")
+    if summary.get("skipped"):
+        console.print("already complete, skipped (force=true reruns it)")

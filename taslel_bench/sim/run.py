@@ -1,0 +1,408 @@
+"""Build one run from a composed config, run the episode, write the run folder.
+
+Works with or without Hydra's runtime (tests compose configs directly): ``choices`` names the option of
+each config group (``{"scenario": "flat", "solver": "daqp", ...}``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+import traceback
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from taslel_bench.config.validate import (
+    ConfigError,
+    build_axis,
+    build_backend,
+    build_model,
+    plant_options,
+    validate,
+)
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.filter.robust import RobustSettings
+from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
+from taslel_bench.interfaces import Estimator, QPBackend, Scenario
+from taslel_bench.metrics.health import HealthLimits
+from taslel_bench.metrics.residuals import alarm_events
+from taslel_bench.metrics.summary import summarize
+from taslel_bench.plant.build import a1_spec, compile_plant, mjcf_spec
+from taslel_bench.plant.comparison import plant_vs_model
+from taslel_bench.plant.contacts import measure_contact_friction
+from taslel_bench.record import qpset, run_files
+from taslel_bench.robot import a1
+from taslel_bench.sim.episode import Episode, EpisodeResult, EpisodeSettings
+from taslel_bench.sweep.aggregate import OVERRIDE_SEPARATOR
+
+FRICTION_CHECK_TOL = 1e-9
+
+
+class FrictionMismatch(RuntimeError):
+    """The plant's foot contacts do not get the friction the scenario configured."""
+
+
+def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
+    options = plant_options(cfg)
+    if cfg.robot.get("plant_mjcf"):
+        spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options)
+    else:
+        spec = a1_spec(options)
+    scenario.build(spec, rng)
+    return compile_plant(spec)
+
+
+def build_controller(cfg: DictConfig) -> NominalController:
+    c = cfg.controller
+    gait = GaitParams(
+        period_s=float(c.period),
+        duty=float(c.duty),
+        swing_height_m=float(c.swing_height),
+        stand_height_m=float(c.stand_height),
+        speed_mps=float(c.speed),
+    )
+    return NominalController(
+        gait,
+        PDGains(kp=float(c.kp), kd=float(c.kd)),
+        stand_duration_s=float(c.stand_duration),
+        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        fd_dt_s=1.0 / float(cfg.control_rate_hz),
+    )
+
+
+def filter_settings(cfg: DictConfig) -> FilterSettings:
+    f = cfg.filter
+    return FilterSettings(
+        enabled=bool(f.enabled),
+        regularization=float(f.regularization),
+        regularization_target=str(f.get("regularization_target", "nominal")),
+        lambda_min_n=float(f.lambda_min_n),
+        contact_velocity_gain=float(f.get("contact_velocity_gain", 0.0)),
+        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        ecbf_enabled=bool(f.ecbf.enabled),
+        ecbf_alpha1=float(f.ecbf.alpha1),
+        ecbf_alpha2=float(f.ecbf.alpha2),
+        fallback=str(f.fallback),
+        stance_source=str(f.stance_source),
+        formulation=str(f.get("formulation", "full")),
+        robust=robust_settings(f.get("robust")),
+        control_dt_s=1.0 / float(cfg.control_rate_hz),
+    )
+
+
+def robust_settings(node) -> RobustSettings:
+    """``filter.robust`` (absent: off)."""
+    if not node:
+        return RobustSettings()
+    return RobustSettings(enabled=bool(node.get("enabled", False)),
+                          **{k: float(v) for k, v in node.items() if k != "enabled"})
+
+
+def episode_settings(cfg: DictConfig) -> EpisodeSettings:
+    return EpisodeSettings(
+        duration_s=float(cfg.duration),
+        physics_dt_s=1.0 / float(cfg.physics_rate_hz),
+        control_dt_s=1.0 / float(cfg.control_rate_hz),
+        fall_height_m=float(cfg.robot.fall_height_m),
+        fall_tilt_rad=float(np.radians(cfg.robot.fall_tilt_deg)),
+        init_joint_noise_rad=float(cfg.robot.init_joint_noise_rad),
+        init_base_vel_noise_mps=float(cfg.robot.init_base_vel_noise_mps),
+        filter_start_s=float(cfg.filter.get("start_time", 0.0)),
+    )
+
+
+def check_friction(episode: Episode) -> list[tuple[str, float, float]]:
+    """Compare, on the initial stand, the friction of every foot contact (MuJoCo contact data) with the
+    scenario's friction under that foot. Raises :class:`FrictionMismatch`; returns the triples checked."""
+    m, d = episode.m, episode.d
+    checked = []
+    for foot, mu_plant in measure_contact_friction(m, d):
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
+        mu_cfg = episode.scenario.friction_at(d.site_xpos[site, :2])
+        checked.append((foot, mu_plant, mu_cfg))
+        if abs(mu_plant - mu_cfg) > FRICTION_CHECK_TOL:
+            raise FrictionMismatch(
+                f"scenario {episode.scenario.name!r} configures friction {mu_cfg} under {foot} but the plant "
+                f"contact has {mu_plant} (check terrain geom priority and friction)"
+            )
+    if not checked:
+        raise FrictionMismatch("no foot touches the ground in the initial stand; cannot check friction")
+    return checked
+
+
+class Built:
+    """Everything one run needs, built (and validated) before simulation starts."""
+
+    def __init__(self, cfg: DictConfig) -> None:
+        validate(cfg)
+        self.cfg = cfg
+        self.rng = np.random.default_rng(int(cfg.seed))
+        self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
+        self.estimator: Estimator = build_axis(cfg, "estimator")
+        fs = filter_settings(cfg)
+        self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
+        self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
+        self.controller = build_controller(cfg)
+        self.filter = (
+            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.obstacles())
+            if self.backend is not None
+            else None
+        )
+        self.episode = Episode(
+            episode_settings(cfg),
+            self.scenario,
+            self.mj_model,
+            self.controller,
+            self.filter,
+            self.estimator,
+            self.rng,
+            stance_from_contact=fs.stance_source == "contact",
+            model=build_model(cfg),
+        )
+        self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
+
+
+def health_limits(cfg: DictConfig) -> HealthLimits:
+    h = cfg.get("health") or {}
+    return HealthLimits(**{k: float(v) for k, v in h.items()})
+
+
+def file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
+    """What was simulated and what the controller believed: the plant source (the URDF of
+    example-robot-data or ``robot.plant_mjcf``) and the controller model's URDF, with their content hashes
+    (masses, inertias, joint losses: :func:`taslel_bench.plant.comparison.plant_vs_model`)."""
+    mjcf = cfg.robot.get("plant_mjcf")
+    plant_src = Path(mjcf) if mjcf else a1.a1_urdf_path()
+    model_src = Path(built.episode.model.urdf_path)
+    return {
+        "plant_source": str(plant_src),
+        "plant_sha256": file_sha256(plant_src),
+        "model_source": str(model_src),
+        "model_sha256": file_sha256(model_src),
+    }
+
+
+def _progress_printer(duration: float, enabled: bool):
+    if not enabled:
+        return None
+
+    def show(t: float) -> None:
+        print(f"\r  simulated {t:6.2f} / {duration:.2f} s", end="", file=sys.stderr, flush=True)
+
+    return show
+
+
+def config_sha256(cfg: DictConfig) -> str:
+    """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
+    only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
+    ``model.urdf``)."""
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    for key in ("progress", "force"):
+        plain.pop(key, None)
+    h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
+    for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
+        if source and Path(source).is_file():
+            h.update(Path(source).read_bytes())
+    return h.hexdigest()
+
+
+def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[dict | None, dict[str, object]]:
+    """(summary of a complete run to skip, or None; notes for the new run's summary). A complete run of the
+    same config is skipped unless ``force``; any other result in the folder (a complete run of another
+    config, a forced rerun, a killed run's partial MCAP) is moved to ``superseded/`` first, never
+    overwritten; files of interrupted writes are removed and named."""
+    from taslel_bench.record.mcap import PARTIAL_NAME
+
+    previous = run_files.completed_summary(out_dir)
+    same = previous is not None and previous.get("config_sha256") == config_hash
+    if same and not cfg.get("force", False):
+        return {**previous, "skipped": True}, {}
+    notes: dict[str, object] = {}
+    stale = run_files.remove_stale(out_dir)
+    if stale:
+        notes["stale_files_removed"] = ",".join(stale)
+    if previous is not None or (out_dir / PARTIAL_NAME).exists():
+        if previous is None:
+            tag = "killed"
+        else:
+            tag = "forced" if same else f"config-{str(previous.get('config_sha256', 'unknown'))[:8]}"
+        moved = run_files.supersede(out_dir, tag)
+        if moved is not None:
+            notes["superseded"] = str(moved.relative_to(out_dir))
+            print(f"{out_dir}: held a {tag} run; moved to {moved}", file=sys.stderr)
+    return None, notes
+
+
+class _GuardedSink:
+    """The MCAP stream as the episode's chunk sink: a recording failure is noted and stops the streaming,
+    it never ends the episode."""
+
+    def __init__(self, stream) -> None:
+        self.stream, self.error = stream, ""
+
+    def __call__(self, trace, k0: int, k1: int) -> None:
+        if self.error:
+            return
+        try:
+            self.stream(trace, k0, k1)
+        except Exception:  # noqa: BLE001 - recording must not lose the run
+            self.error = traceback.format_exc().strip().splitlines()[-1]
+            self.stream.abandon()
+
+
+def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
+        overrides: list[str] | None = None) -> dict[str, object]:  # fmt: skip
+    """Run one episode and write ``out_dir``. Returns the summary. Config errors raise before simulating;
+    faults during the episode give ``status: "error"`` in the summary. ``overrides``: the command-line
+    overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
+    validate(cfg)  # every bad value is refused (naming it) before the folder is touched
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    config_hash = config_sha256(cfg)
+    skipped, notes = prepare_folder(cfg, out_dir, config_hash)
+    if skipped is not None:
+        return skipped
+    built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
+    choices = dict(choices or {})
+    run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
+    qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
+    sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
+    show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
+    res: EpisodeResult = built.episode.run(progress=show)
+    if show is not None:
+        print(file=sys.stderr)
+    dt = 1.0 / float(cfg.control_rate_hz)
+    summary: dict[str, object] = {
+        "scenario": choices.get("scenario", built.scenario.name),
+        "solver": choices.get("solver", "") if built.backend is not None else "none",
+        "estimator": choices.get("estimator", getattr(built.estimator, "name", "")),
+        "filter_enabled": built.filter is not None,
+        "filter_formulation": built.filter.settings.formulation if built.filter is not None else "none",
+        "filter_contact_velocity_gain": (  # [1/s] k_v of the stance-contact rows (nan: filter off)
+            float(built.filter.settings.contact_velocity_gain) if built.filter is not None else math.nan
+        ),
+        "seed": int(cfg.seed),
+        "duration_s": float(cfg.duration),
+        "control_rate_hz": float(cfg.control_rate_hz),
+        "physics_rate_hz": float(cfg.physics_rate_hz),
+        "commanded_speed_mps": float(cfg.controller.speed),
+        "friction_true": float(built.scenario.friction_at(np.zeros(2))),
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
+        "config_sha256": config_hash,
+        **notes,
+    }
+    summary.update(plant_identity(cfg, built))
+    summary.update(plant_vs_model(built.mj_model, built.episode.model,
+                                  built.controller.stand_configuration()))
+    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
+    summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
+    summary["recording_s"] = float(res.extras.get("recording_s", 0.0))
+    diagnostics = getattr(built.estimator, "diagnostics", None)  # optional: counters of the estimator's own
+    if callable(diagnostics):
+        summary.update({f"estimator_{k}": v for k, v in diagnostics().items()})
+    if built.backend is not None:
+        summary["solver_settings"] = str(built.backend.describe())
+    events = list(res.trace.events)
+    k0 = min(round(float(cfg.controller.stand_duration) / dt), res.trace.n)
+    events += alarm_events(res.trace, k0, health_limits(cfg))
+    if res.fell:
+        events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
+    if res.status == "error":
+        events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
+        if "traceback" in res.extras:
+            run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
+    steps = res.trace.to_frame(dt)
+    if sink is not None:
+        _close_mcap(sink, res, events, summary, steps)
+    if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.record.qpset)
+        try:
+            qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.sim.run"})
+            summary["qps_recorded"] = len(qp_recorder)
+        except Exception:  # noqa: BLE001 - recording must not lose the run
+            summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
+    run_files.write_parquet(out_dir / run_files.STEPS, steps)
+    run_files.write_json(out_dir / run_files.EVENTS, events)
+    run_files.write_json(out_dir / run_files.SUMMARY, summary)  # written last: marks the run complete
+    return summary
+
+
+def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
+    """record.mcap: an :class:`taslel_bench.record.mcap.McapStream` fed by the episode every second of
+    simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
+    if not cfg.record.mcap:
+        return None
+    from taslel_bench.record.mcap import McapStream
+
+    sink = _GuardedSink(McapStream(out_dir))
+    built.episode.chunk_sink = sink
+    built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
+    return sink
+
+
+def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict, steps) -> None:
+    """Finish episode.mcap (the last ticks, the channels from ``steps``, events, summary); a recording
+    failure is noted in the summary."""
+    if not sink.error:
+        try:
+            sink.stream.close(res.trace, events, summary, steps)
+        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
+            sink.error = traceback.format_exc().strip().splitlines()[-1]
+            sink.stream.abandon()
+    if sink.error:
+        summary["mcap_error"] = sink.error
+
+
+def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
+    """A :class:`taslel_bench.record.qpset.QPRecorder` hooked into the episode when ``record.qps`` is on."""
+    if not cfg.record.get("qps", False) or built.filter is None:
+        return None
+    info = {
+        "scenario": choices.get("scenario", built.scenario.name), "solver": choices.get("solver", ""),
+        "estimator": choices.get("estimator", getattr(built.estimator, "name", "")), "seed": int(cfg.seed),
+        "control_rate_hz": float(cfg.control_rate_hz), "backend": str(built.backend.describe()),
+    }  # fmt: skip
+    rec = qpset.QPRecorder(info, every=int(cfg.record.get("qps_every", 1)))
+    built.episode.qp_recorder = rec
+    return rec
+
+
+def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException,
+                     overrides: list[str] | None = None) -> dict:  # fmt: skip
+    """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run_files.supersede(out_dir, "before-error")  # a result already in the folder is put aside, not overwritten
+    tb = traceback.format_exc()
+    run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
+    summary = {
+        "scenario": choices.get("scenario", ""),
+        "solver": choices.get("solver", ""),
+        "estimator": choices.get("estimator", ""),
+        "seed": _seed_or_minus_one(cfg),
+        "status": "error",
+        "message": f"{type(exc).__name__}: {exc}",
+        "fell": False,
+        "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
+    }
+    run_files.write_json(out_dir / run_files.SUMMARY, summary)
+    return summary
+
+
+def _seed_or_minus_one(cfg: DictConfig) -> int:
+    """The run's seed for an error summary, -1 when it is not a valid one (``seed=abc``, ``seed=${oops}``)."""
+    try:
+        seed = cfg.get("seed")
+    except Exception:  # noqa: BLE001 - an interpolation error must not hide the job's own error
+        return -1
+    return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
+
+
+__all__ = ["Built", "ConfigError", "FrictionMismatch", "check_friction", "run"]

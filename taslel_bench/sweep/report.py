@@ -1,0 +1,414 @@
+"""Sweep report: ``python -m taslel_bench.report <sweep folder>`` (also run by the sweep callback).
+
+Writes ``report.md``, ``table.csv``, ``table.tex`` and PNG figures into the sweep folder: per scenario x
+solver x estimator (runs pooled over seeds) the fall rate with counts, violations, intervention, GRF error,
+QP timings with the shifted geometric mean relative to the best backend (as qpbenchmark reports it), and
+the machine and package versions. Every number says how it was measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from taslel_bench.record import run_files
+from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
+from taslel_bench.sweep.claims import paper_claims
+from taslel_bench.util.machine import machine_info
+
+SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
+GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
+OPTIONAL_GROUP = ("filter_formulation", "filter_contact_velocity_gain")  # columns only when the sweep varies them
+
+
+def override_columns(frame: pd.DataFrame) -> list[str]:
+    """Columns of overridden config keys (``scenario.friction``, ...; :func:`sweep.expand_overrides`)."""
+    return override_keys(frame)
+
+
+def group_columns(frame: pd.DataFrame) -> list[str]:
+    """The columns that tell the rows of a sweep apart: scenario, solver, estimator, and every setting the
+    sweep varies (optional columns and overridden keys only when they take more than one value)."""
+    def varies(c: str) -> bool:  # among runs that have the setting at all ("none": filter off)
+        return frame.loc[frame[c] != "none", c].astype(str).nunique() > 1
+
+    cols = [c for c in GROUP if c in frame.columns and (c not in OPTIONAL_GROUP or varies(c))]
+    return cols + [c for c in override_columns(frame) if varies(c)]
+
+
+def solver_label(row: pd.Series | dict, frame: pd.DataFrame) -> str:
+    """The backend, with the filter formulation when the sweep compares formulations (they hand the
+    backend different QPs, so their solve times are separate distributions)."""
+    solver = str(row.get("solver", ""))
+    if "filter_formulation" in group_columns(frame) and isinstance(row.get("filter_formulation"), str):
+        return f"{solver} ({row['filter_formulation']})"
+    return solver
+
+
+def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT_US) -> float:
+    """exp(mean(log(t + shift))) - shift over all solve times [µs]; robust to a few huge outliers and to
+    tiny times, as in qpbenchmark."""
+    v = np.asarray(values_us, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return float("nan")
+    return float(np.exp(np.mean(np.log(v + shift_us))) - shift_us)
+
+
+FINISHED = ("ok", "degraded")  # runs that simulated to their end or to a fall
+
+
+def _finished(frame: pd.DataFrame) -> pd.DataFrame:
+    return frame[frame["status"].isin(FINISHED)] if "status" in frame else frame.iloc[0:0]
+
+
+def _fall_rate(frame: pd.DataFrame) -> str:
+    ok = _finished(frame)
+    return f"{int(ok['fell'].astype(bool).sum())}/{len(ok)}" if len(ok) else "—"
+
+
+def _mean(frame: pd.DataFrame, col: str) -> float:
+    return float(frame[col].astype(float).mean()) if col in frame and frame[col].notna().any() else float("nan")
+
+
+def solve_times(sweep_dir: Path, frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Per solver: every tick's solve time [µs] from the runs' steps.parquet."""
+    out: dict[str, list[np.ndarray]] = {}
+    for _, row in frame.iterrows():
+        if row.get("solver") in (None, "none") or not isinstance(row.get("run_dir"), str):
+            continue
+        steps = sweep_dir / row["run_dir"] / run_files.STEPS
+        if steps.is_file():
+            t = pd.read_parquet(steps, columns=["qp_solve_us"])["qp_solve_us"].to_numpy()
+            out.setdefault(solver_label(row, frame), []).append(t[np.isfinite(t)])
+    return {k: np.concatenate(v) for k, v in out.items() if v}
+
+
+COUNT_COLUMNS = ("runs", "errors", "degraded", "fall_rate")
+# report column -> summary key, per table; every number is the mean over the row's runs
+SAFETY_COLUMNS = {
+    "speed_mps": "mean_speed_mps",
+    "intervention_nm": "intervention_nm_mean",
+    "u_nom_nm": "u_nom_nm_mean",
+    "qp_failed_rate": "qp_failed_rate",
+    "grf_mae_z_n": "grf_mae_z_n",
+    "grf_mae_z_n_stance": "grf_mae_z_n_stance",
+    "grf_mae_xy_n": "grf_mae_xy_n",
+    "cone_edge_rate": "friction_cone_edge_rate",
+    "demand_beyond_cone_rate": "filter_demand_beyond_cone_rate",
+    "slip_mps_mean": "slip_mps_mean",
+    "sliding_distance_m": "sliding_distance_m",
+    "touchdown_slip_mps": "touchdown_slip_mps_mean",
+    "clearance_violation_rate": "clearance_violation_rate",
+    "clearance_depth_p95_m": "clearance_violation_depth_p95_m",
+    "trips": "trips",
+    "barrier_negative_rate": "barrier_negative_rate",
+    "residual_joint_nm": "residual_joint_nm_rms",
+    "residual_trunk_force_n": "residual_trunk_force_n_rms",
+    "residual_alarm_rate": "residual_alarm_rate",
+}
+COST_COLUMNS = {
+    "qp_solve_us_median": "qp_solve_us_median",
+    "qp_solve_us_p99": "qp_solve_us_p99",
+    "estimator_mae": "estimator_mae",
+    "estimator_overestimate_rate": "estimator_overestimate_rate",
+    "estimator_low_overestimate_rate": "estimator_low_overestimate_rate",
+    "estimator_useful_rate": "estimator_useful_rate",
+    "estimator_startup_overestimate_rate": "estimator_startup_overestimate_rate",
+    "estimator_time_to_safe_s": "estimator_time_to_safe_s",
+    "estimator_settle_s": "estimator_settle_s",
+    "real_time_factor": "real_time_factor",
+}
+
+
+def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
+    """One row per group of runs (:func:`group_columns`; seeds pooled): counts, fall rate, and the mean of
+    each metric over the row's runs that finished (``ok`` or ``degraded``; errors are counted apart)."""
+    times = solve_times(sweep_dir, frame)
+    shgeom = {s: shifted_geometric_mean(t) for s, t in times.items()}
+    best = min(shgeom.values()) if shgeom else float("nan")
+    rows = []
+    cols = group_columns(frame)
+    groups = frame.groupby(cols, dropna=False) if cols else [((), frame)]
+    status = frame["status"] if "status" in frame else pd.Series("error", index=frame.index)
+    for keys, g in groups:
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        row = dict(zip(cols, keys))
+        solver = solver_label(row, frame)
+        done = _finished(g)
+        row.update({
+            "runs": len(g),
+            "errors": int((status[g.index] == "error").sum()),
+            "degraded": int((status[g.index] == "degraded").sum()),
+            "fall_rate": _fall_rate(g),
+        })  # fmt: skip
+        row.update({name: _mean(done, key) for name, key in {**SAFETY_COLUMNS, **COST_COLUMNS}.items()})
+        row["qp_shgeom_rel_best"] = shgeom.get(solver, float("nan")) / best if solver in shgeom else float("nan")
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    made = []
+    times = solve_times(sweep_dir, frame)
+    if times:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        names = sorted(times)
+        ax.boxplot([times[n] for n in names], showfliers=False)
+        ax.set_xticks(range(1, len(names) + 1), names, rotation=20)
+        ax.set_yscale("log")
+        ax.set_ylabel("QP solve time per tick [µs]")
+        ax.set_title("QP solve-time distribution (backend timer, whiskers 1.5 IQR)")
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "qp_solve_times.png", dpi=120)
+        plt.close(fig)
+        made.append("qp_solve_times.png")
+    if "scenario" in table and len(table):
+        ok = _finished(frame)
+        rates = ok.groupby("scenario")["fell"].mean() if len(ok) else pd.Series(dtype=float)
+        if len(rates):
+            fig, ax = plt.subplots(figsize=(6, 3))
+            ax.bar(rates.index.astype(str), rates.to_numpy())
+            ax.set_ylim(0, 1)
+            ax.set_ylabel("fall rate")
+            ax.set_title("Fall rate per scenario (all solvers/estimators/seeds pooled)")
+            fig.tight_layout()
+            fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
+            plt.close(fig)
+            made.append("fall_rates.png")
+    if "run_dir" in frame:
+        made += _episode_figures(sweep_dir, frame, plt)
+    return made
+
+
+def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series | None:
+    if "filter_enabled" not in frame or "scenario" not in frame:
+        return None
+    done = _finished(frame)
+    sel = done[(done["scenario"] == scenario) & (done["filter_enabled"] == filter_on)]
+    return sel.sort_values("seed").iloc[0] if len(sel) else None
+
+
+def _steps(sweep_dir: Path, row: pd.Series | None) -> pd.DataFrame | None:
+    if row is None:
+        return None
+    path = sweep_dir / str(row["run_dir"]) / run_files.STEPS
+    return pd.read_parquet(path) if path.is_file() else None
+
+
+def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
+    """The paper's figures where the sweep has the runs: lateral GRF of one stance foot without and with
+    the filter (low_friction, else the first scenario); swing-foot bottom height vs the obstacle profile."""
+    made = []
+    leg = "FL"
+    scenarios = list(dict.fromkeys(frame.get("scenario", pd.Series(dtype=str)).dropna()))
+    grf_scenario = "low_friction" if "low_friction" in scenarios else (scenarios[0] if scenarios else None)
+    runs = {on: _steps(sweep_dir, _first_run(frame, grf_scenario, on)) for on in (False, True)}
+    if any(r is not None for r in runs.values()):
+        fig, ax = plt.subplots(figsize=(8, 3.2))
+        for on, steps in runs.items():
+            if steps is None:
+                continue
+            window = steps[(steps["t_s"] >= 3.0) & (steps["t_s"] <= 5.0)]
+            label = "filter on" if on else "nominal only"
+            ax.plot(window["t_s"], window[f"{leg}_grf_plant_y_w_n"], label=f"{label}: MuJoCo contact force")
+            if on:
+                ax.plot(window["t_s"], window[f"{leg}_grf_filter_y_w_n"], ":", label="filter on: predicted lambda")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"{leg} lateral force y [N]")
+        ax.set_title(f"{leg} lateral ground reaction force, {grf_scenario}")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "grf_lateral.png", dpi=120)
+        plt.close(fig)
+        made.append("grf_lateral.png")
+    logs_figure = _logs_figure(sweep_dir, frame, plt)
+    made += [logs_figure] if logs_figure else []
+    clearance = {on: _steps(sweep_dir, _first_run(frame, "obstacle", on)) for on in (False, True)}
+    if any(r is not None for r in clearance.values()):
+        fig, ax = plt.subplots(figsize=(8, 3.2))
+        for on, steps in clearance.items():
+            if steps is None:
+                continue
+            window = steps[(steps["t_s"] >= 3.0) & (steps["t_s"] <= 4.0)]
+            bottom = window[f"{leg}_foot_z_w_m"] - 0.02
+            ax.plot(window["t_s"], bottom, label=("ECBF on" if on else "nominal only") + ": foot-sphere bottom")
+            if on:
+                swing = window[f"{leg}_clearance_m"].notna()
+                ax.plot(window["t_s"][swing], (bottom - window[f"{leg}_clearance_m"])[swing], "k.", ms=1.5,
+                        label="obstacle profile z(s)")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("height [m]")
+        ax.set_title(f"{leg} swing-foot height vs obstacle profile")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(sweep_dir / "clearance.png", dpi=120)
+        plt.close(fig)
+        made.append("clearance.png")
+    return made
+
+
+def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
+    """The physical obstacles of a run, rebuilt from its config.yaml (Hydra builds the scenario)."""
+    path = sweep_dir / str(row["run_dir"]) / "config.yaml" if row is not None else None
+    if path is None or not path.is_file():
+        return ()
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    return tuple(instantiate(OmegaConf.load(path).scenario).obstacles())
+
+
+def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
+    """FL foot-sphere centre path (world x-z) over the logs, nominal vs filtered (first seed of each), with
+    the logs and the trunk's progress."""
+    rows = {on: _first_run(frame, "logs", on) for on in (False, True)}
+    runs = {on: _steps(sweep_dir, row) for on, row in rows.items()}
+    if all(r is None for r in runs.values()):
+        return None
+    fig, (ax, ax_x) = plt.subplots(2, 1, figsize=(8, 5.2), gridspec_kw={"height_ratios": [2, 1]})
+    for ob in _run_obstacles(sweep_dir, rows[True] if rows[True] is not None else rows[False]):
+        x = np.linspace(ob.x_m - ob.radius_m, ob.x_m + ob.radius_m, 101)
+        top = ob.z_m + np.sqrt(np.maximum(ob.radius_m**2 - (x - ob.x_m) ** 2, 0.0))  # the log's upper outline
+        ax.fill_between(x, 0.0, np.maximum(top, 0.0), color="saddlebrown", alpha=0.5, lw=0)
+    for on, steps in runs.items():
+        if steps is None:
+            continue
+        label = "ECBF on" if on else "nominal only"
+        ax.plot(steps["FL_foot_x_w_m"], steps["FL_foot_z_w_m"] - 0.02, lw=0.7, label=f"{label}: FL foot bottom")
+        touch = steps["FL_obstacle_contact"].to_numpy(bool)
+        ax.plot(steps["FL_foot_x_w_m"][touch], steps["FL_foot_z_w_m"][touch] - 0.02, "x", ms=3,
+                label=f"{label}: foot on or against a log")
+        ax_x.plot(steps["t_s"], steps["base_x_w_m"], label=label)
+    reach = max(float(r["FL_foot_x_w_m"].max()) for r in runs.values() if r is not None)
+    ax.set_xlim(0.1, reach + 0.3)
+    ax.set_ylim(-0.005, 0.16)
+    ax.set_xlabel("world x [m]")
+    ax.set_ylabel("z [m] (not to scale)")
+    ax.set_title("FL foot path over the logs (brown: the logs; x: foot in contact with one)")
+    ax.legend(fontsize=7)
+    ax_x.set_xlabel("t [s]")
+    ax_x.set_ylabel("trunk x [m]")
+    ax_x.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(sweep_dir / "logs.png", dpi=120)
+    plt.close(fig)
+    return "logs.png"
+
+
+def _md_table(table: pd.DataFrame) -> str:
+    def fmt(v: object) -> str:
+        if isinstance(v, float):
+            return "—" if not np.isfinite(v) else f"{v:.3g}"
+        return str(v)
+
+    head = "| " + " | ".join(table.columns) + " |\n|" + "---|" * len(table.columns) + "\n"
+    return head + "".join("| " + " | ".join(fmt(v) for v in row) + " |\n" for row in table.itertuples(index=False))
+
+
+HOW_MEASURED = """
+How each column is measured (all plant quantities in MuJoCo, per run over the walking time, then averaged
+over the row's finished runs, `ok` or `degraded`; `fall_rate` counts falls over those runs; `degraded` runs
+crossed a health limit and are listed below):
+- `speed_mps`: world-x displacement of the trunk from the start of walking / walking time.
+- `intervention_nm`: mean over ticks of ||u - u_nom||₂; `u_nom_nm`: mean ||u_nom||₂, its reference size.
+- *Loaded* contacts: every (tick, foot) with a MuJoCo normal force >= 1 N or a filter lambda_z >= 1 N (early
+  touchdowns in the scheduled swing and lift-off lag included); `_stance`: the filter's stance set with
+  plant load (the definition used before, and the paper's selection).
+- `grf_mae_*`: |filter lambda - MuJoCo contact force| (world axes) over loaded contacts (lambda = 0 where the
+  filter treats the foot as swing).
+- `cone_edge_rate`: share of plant-loaded contacts with |f_t| >= 0.98 mu f_n, mu = the friction under that
+  foot: sliding or about to. `demand_beyond_cone_rate`: share of filter-loaded contacts whose planned
+  |lambda_t| exceeds mu lambda_z with the true mu under the foot (what the plant had to refuse).
+- `slip_mps_mean`: mean horizontal speed of the contact point over plant-loaded contacts;
+  `sliding_distance_m`: its integral over time, summed over the feet; `touchdown_slip_mps`: the mean over
+  the first 10 % of the stance duration after each touchdown.
+- `clearance_violation_rate`: unloaded swing ticks with the foot-sphere bottom more than 1 mm below the
+  virtual profile z(s); `clearance_depth_p95_m`: 95th percentile of how far below.
+- `trips`: onsets of a swing foot or a lower leg touching a physical obstacle (MuJoCo contacts, distance <= 0).
+- `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
+- `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
+  |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows
+  [N·m] and trunk-force rows [N]; 0 up to rounding when the model is the plant. `residual_alarm_rate`:
+  share of ticks beyond `health.residual_trunk_force_n_max` / `health.residual_joint_nm_max`.
+- `qp_solve_us_*`: the backend's own timer around the solver call (matrix building excluded), per tick.
+- `qp_shgeom_rel_best`: shifted geometric mean (shift {shift} µs) of all ticks' solve times of the
+  solver, divided by the best solver's; 1.0 = fastest.
+- `estimator_*`: the friction the filter used (mu_hat) vs the true friction under the trunk, every tick:
+  mean |error|, fraction with mu_hat > mu + 0.05 (over-estimation: the dangerous side), the same where
+  mu < 0.5 (`low_`), the share of ticks after the startup window with mu_hat >= min(mu, 0.5) - 0.1
+  (`useful`), over-estimation while the estimator still used its prior (`startup_`), the time from a
+  friction drop until mu_hat <= mu + 0.05 (`time_to_safe_s`), and the time from the first friction change
+  until mu_hat stays within 0.05 (`settle_s`; inf: never; — : no change in the run).
+- `real_time_factor`: simulated time / wall time of the whole episode (jobs ran in parallel, so they
+  competed for the cores).
+"""
+
+
+def _run_list(frame: pd.DataFrame, status: str, detail: str, title: str) -> list[str]:
+    if frame.empty or "status" not in frame:
+        return []
+    sel = frame[frame["status"] == status]
+    if sel.empty:
+        return []
+    return [f"## {title}\n"] + [f"- `{r.get('run_dir')}`: {r.get(detail)}\n" for _, r in sel.iterrows()]
+
+
+def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
+    sweep_dir = Path(sweep_dir)
+    if frame is None:
+        frame = pd.read_parquet(sweep_dir / SUMMARY_TABLE) if (sweep_dir / SUMMARY_TABLE).is_file() else aggregate(sweep_dir)
+    table = summary_table(sweep_dir, frame) if not frame.empty else pd.DataFrame()
+    run_files.atomic_write(sweep_dir / "table.csv", lambda p: table.to_csv(p, index=False))
+    run_files.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
+    figures = _figures(sweep_dir, frame, table) if not frame.empty else []
+    info = machine_info()
+    keys = [c for c in group_columns(frame) if c in table]
+    safety = table[[*keys, *COUNT_COLUMNS, *SAFETY_COLUMNS]] if len(table) else table
+    cost = table[[*keys, "runs", *COST_COLUMNS, "qp_shgeom_rel_best"]] if len(table) else table
+    lines = [
+        "# taslel_bench sweep report\n",
+        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
+        f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
+        f"Packages: {info['packages']}\n",
+        "## Safety and physics per group of runs (seeds pooled)\n",
+        _md_table(safety) if len(table) else "_no runs found_\n",
+        "## Cost per group of runs\n" if len(table) else "",
+        _md_table(cost) if len(table) else "",
+        HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
+        paper_claims(_finished(frame)) if not frame.empty else "",
+    ]
+    lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
+    lines += _run_list(frame, "error", "message", "Runs that ended in an error")
+    if figures:
+        lines.append("## Figures\n")
+        lines += [f"![{f}]({f})\n" for f in figures]
+    path = sweep_dir / "report.md"
+    run_files.atomic_write(path, lambda p: p.write_text("\n".join(lines)))
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Aggregate a sweep folder and write its report.")
+    ap.add_argument("sweep_dir", type=Path)
+    args = ap.parse_args(argv)
+    if not args.sweep_dir.is_dir():
+        raise SystemExit(f"not a folder: {args.sweep_dir}")
+    if not run_folders(args.sweep_dir):
+        raise SystemExit(f"no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
+                         ".hydra/ (a sweep folder, outputs/sweeps/<time>/)")
+    frame = aggregate(args.sweep_dir)
+    print(write_report(args.sweep_dir, frame))
+
+
+if __name__ == "__main__":
+    main()
