@@ -3,7 +3,7 @@
 Each log is a cylinder with its axis along world y, partly sunk into the floor (its top ``height_m`` above
 the floor). The plant gets them as capsules (exact sphere-capsule contact); the safety filter gets the same
 geometry as its swing-foot obstacle barrier (the Euclidean clearance of the foot sphere,
-:class:`taslel_bench.interfaces.RoundObstacle`), so a violated clearance is a real contact: a trip.
+:class:`taslel_bench.terrain.parts.Log`), so a violated clearance is a real contact: a trip.
 The paper's virtual phase profile z(s) can be added on top (``coefficients``); by default there is none.
 """
 
@@ -11,14 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import mujoco
-import numpy as np
-
 from scenarios.flat import FlatGround
 from scenarios.obstacle import checked_profile
-from taslel_bench.interfaces import ClearanceProfile, RoundObstacle
-from taslel_bench.plant.build import add_round_obstacles
-from taslel_bench.util.fields import integer, number
+from taslel_bench.interfaces import ClearanceProfile, Log, Plane, Terrain, integer, number
 
 
 class LogRow(FlatGround):
@@ -39,18 +34,10 @@ class LogRow(FlatGround):
                          why="logs must not overlap: > 2 radius_m")
         n = integer("scenario.count", count, 1, 200)
         half = number("scenario.half_width_m", half_width_m, 0.2, 5.0, unit="m")
-        self._obstacles = tuple(
-            RoundObstacle(x_m=first + i * spacing, z_m=height - radius, radius_m=radius, half_width_m=half)
-            for i in range(n)
-        )
+        logs = tuple(Log(x_m=first + i * spacing, z_m=height - radius, radius_m=radius, half_width_m=half,
+                         friction=self.friction) for i in range(n))
+        self.terrain = Terrain((Plane(self.friction), *logs))
         self._profile = checked_profile(coefficients) if coefficients is not None else None
-
-    def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
-        super().build(spec, rng)
-        add_round_obstacles(spec, self._obstacles, self.friction)
 
     def clearance_profile(self) -> ClearanceProfile | None:
         return self._profile
-
-    def obstacles(self) -> tuple[RoundObstacle, ...]:
-        return self._obstacles

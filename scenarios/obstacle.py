@@ -5,8 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from scenarios.flat import FlatGround
-from taslel_bench.interfaces import ClearanceProfile
-from taslel_bench.util.fields import fail, number, numbers
+from taslel_bench.interfaces import ClearanceProfile, fail, number, numbers
 
 MAX_HEIGHT_M = 0.2  # [m] highest obstacle under a swing foot (the trot lifts the feet 6 cm; legs are 0.4 m)
 

@@ -14,9 +14,7 @@ import numpy as np
 
 from scenarios.flat import FlatGround
 from scenarios.obstacle import checked_profile
-from taslel_bench.interfaces import ClearanceProfile
-from taslel_bench.robot import a1
-from taslel_bench.util.fields import integer, number, number_or_list, numbers
+from taslel_bench.interfaces import ClearanceProfile, a1, integer, number, number_or_list, numbers
 
 MAX_SCALE = 10.0  # [-] mass and motor-strength factors
 MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)

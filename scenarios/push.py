@@ -8,8 +8,7 @@ import mujoco
 import numpy as np
 
 from scenarios.flat import FlatGround
-from taslel_bench.robot import a1
-from taslel_bench.util.fields import fail, number, numbers
+from taslel_bench.interfaces import a1, fail, number, numbers
 
 MAX_FORCE_N = 1000.0  # [N] per axis (about 8 times the A1's weight)
 MAX_TIME_S = 3600.0  # [s] push start and duration

@@ -1,8 +1,9 @@
-"""The small interface the three sweep axes implement (DESIGN.md, dependency rule).
+"""The contract of the three sweep axes (DESIGN.md, dependency rule): what ``scenarios``, ``solvers`` and
+``estimators`` implement and the types they exchange with the core.
 
-``scenarios``, ``solvers`` and ``estimators`` import only this module (and the constants/plant helpers it
-names) from the core; the core builds them from Hydra ``_target_`` entries and talks to them only through
-these protocols and dataclasses.
+The axis packages import from the core only this module (types, protocols, the terrain vocabulary, the
+A1's constants, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
+the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
 
 Joint vectors are in the core order (:data:`taslel_bench.robot.a1.JOINT_NAMES`, legs FL, FR, RL, RR).
 """
@@ -15,6 +16,22 @@ from typing import Protocol, runtime_checkable
 
 import mujoco
 import numpy as np
+
+from taslel_bench.robot import a1
+from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
+from taslel_bench.terrain.profile import ClearanceProfile
+from taslel_bench.terrain.terrain import Terrain
+from taslel_bench.util.fields import (
+    ConfigError,
+    choice,
+    fail,
+    flag,
+    integer,
+    is_number,
+    number,
+    number_or_list,
+    numbers,
+)
 
 # ----------------------------------------------------------------------------------------------- QP
 
@@ -98,92 +115,25 @@ class QPBackend(Protocol):
 # ----------------------------------------------------------------------------------------- scenario
 
 
-@dataclass(frozen=True)
-class ClearanceProfile:
-    """Obstacle height under a swing foot as a polynomial of the swing phase s in [0, 1]:
-    z(s) = sum_k coeffs[k] s^k  [m, world z of the foot-sphere *bottom*]."""
-
-    coeffs: tuple[float, ...]
-
-    def __call__(self, s: float) -> tuple[float, float, float]:
-        """(z, dz/ds, d²z/ds²) at phase ``s``."""
-        z = dz = ddz = 0.0
-        for k, c in enumerate(self.coeffs):
-            z += c * s**k
-            if k >= 1:
-                dz += k * c * s ** (k - 1)
-            if k >= 2:
-                ddz += k * (k - 1) * c * s ** (k - 2)
-        return z, dz, ddz
-
-    def evaluate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Vectorised (z, dz/ds, d²z/ds²) for an array of phases (one Vandermonde matrix, three dots)."""
-        powers = np.asarray(s, float)[:, None] ** self._k  # (n, K): s^0 .. s^(K-1)
-        return powers @ self._c, powers @ self._c1, powers @ self._c2
-
-    def __post_init__(self) -> None:
-        c = np.asarray(self.coeffs, float)
-        k = np.arange(len(c))
-        c1 = np.zeros_like(c)
-        c1[: len(c) - 1] = c[1:] * k[1:]  # coefficients of dz/ds, padded to K
-        c2 = np.zeros_like(c)
-        c2[: len(c) - 2] = c[2:] * k[2:] * k[1:-1]  # coefficients of d²z/ds²
-        for name, value in (("_k", k), ("_c", c), ("_c1", c1), ("_c2", c2)):
-            object.__setattr__(self, name, value)  # frozen dataclass: cached derived arrays
-
-    def coefficient_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The coefficients of z, dz/ds and d²z/ds² (ascending powers, all of length K)."""
-        return self._c, self._c1, self._c2
-
-    @property
-    def peak_m(self) -> float:
-        return float(max(self(s)[0] for s in np.linspace(0.0, 1.0, 201)))
-
-
-@dataclass(frozen=True)
-class RoundObstacle:
-    """A log (cylinder) lying across the path on the floor: its axis is parallel to world y, through
-    (x_m, z_m) [m, world], radius ``radius_m`` [m]; it spans y in [-half_width_m, half_width_m]. Its top is
-    at ``z_m + radius_m`` above the floor. Real geometry in the plant (a capsule), and the swing-foot
-    barrier's obstacle: the foot sphere of radius r is clear of it iff
-    sqrt((x - x_m)² + (z - z_m)²) >= radius_m + r for the foot-sphere centre (x, z)."""
-
-    x_m: float
-    z_m: float
-    radius_m: float
-    half_width_m: float = 0.5
-
-    @property
-    def top_m(self) -> float:
-        return self.z_m + self.radius_m
-
-
 @runtime_checkable
 class Scenario(Protocol):
-    """A world: what the plant looks like and what is true about it."""
+    """A world: its terrain (the one source of geometry and friction for the plant, the filter's barriers
+    and the metrics), what else it changes in the plant, and what happens during the run."""
 
     name: str
+    terrain: Terrain
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
-        """Edit the plant spec in place (terrain geoms, frictions, obstacles, perturbations)."""
-        ...
-
-    def friction_at(self, xy_in_world: np.ndarray) -> float:
-        """True Coulomb friction coefficient [-] of the ground at a world (x, y) [m]."""
+        """Plant edits other than the terrain (perturbations); the core builds the terrain into ``spec``
+        first. Most scenarios do nothing."""
         ...
 
     def clearance_profile(self) -> ClearanceProfile | None:
-        """z(s) for the swing-foot ECBF, or None when the scenario has no obstacle profile (a *virtual*
-        obstacle: no geometry in the plant)."""
-        ...
-
-    def obstacles(self) -> tuple[RoundObstacle, ...]:
-        """Physical obstacles the scenario puts in the plant (empty for most scenarios); the filter's
-        obstacle barrier and the clearance metrics use them."""
+        """The paper's virtual obstacle z(s) under every swing foot, or None (no geometry in the plant)."""
         ...
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
-        """Per control tick hook (pushes, friction patches ...); most scenarios do nothing."""
+        """Per physics step hook (pushes, actuator delay ...); most scenarios do nothing."""
         ...
 
 
@@ -228,3 +178,16 @@ class Estimator(Protocol):
     def step(self, obs: Proprioception) -> FrictionEstimate:
         """Called every control tick; the estimator decides when to recompute (its own rate)."""
         ...
+
+
+__all__ = [  # noqa: RUF022 - grouped by topic
+    # QP
+    "SOLVED", "QPBackend", "QPProblem", "QPSolution",
+    # scenario and terrain
+    "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "Log", "Plane", "Scenario", "Terrain",
+    "TerrainPart",
+    # estimator
+    "MAX_FRICTION", "Estimator", "FrictionEstimate", "Proprioception",
+    # the robot and config values
+    "ConfigError", "a1", "choice", "fail", "flag", "integer", "is_number", "number", "number_or_list", "numbers",
+]  # fmt: skip

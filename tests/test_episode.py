@@ -136,10 +136,16 @@ def test_friction_check_catches_misconfigured_floor():
     """A scenario that claims mu = 0.3 but leaves the feet on the default 1.0 floor is refused."""
     cfg = compose_cfg(["scenario=low_friction", "scenario.friction=0.3"])
     from scenarios.flat import FlatGround
+    from taslel_bench.interfaces import Plane, Terrain
+
+    class LiarPlane(Plane):
+        def add_to(self, spec, body, name, rng):  # forgets to set the floor friction
+            return None
 
     class Liar(FlatGround):
-        def build(self, spec, rng):  # forgets to set the floor friction
-            return None
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.terrain = Terrain((LiarPlane(self.friction),))
 
     OmegaConf.set_struct(cfg, False)
     cfg.scenario["_target_"] = f"{__name__}.LiarForTest"

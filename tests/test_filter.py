@@ -182,7 +182,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
     """A log 6 cm ahead of each state's first swing foot: the row is the ECBF of the foot sphere's Euclidean
     clearance, its hddot (n . a + curvature) matches a finite difference of the clearance along the
     predicted motion, and it holds (and binds on some states) at the tight reference's solution."""
-    from taslel_bench.interfaces import RoundObstacle
+    from taslel_bench.interfaces import Log
 
     st, pm = states
     active = 0
@@ -193,7 +193,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
             continue
         i = swing[0]
         p0 = pm.foot_pos_in_world[i].copy()
-        log = RoundObstacle(x_m=float(p0[0] + 0.06 + 0.05), z_m=-0.02, radius_m=0.05)
+        log = Log(x_m=float(p0[0] + 0.06 + 0.05), z_m=-0.02, radius_m=0.05)
         f = SafetyFilter(FilterSettings(), TightReference(), None, (log,))
         res = f.filter(x, s[3])
         assert res.status == "solved"

@@ -16,11 +16,12 @@ from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.plant.adapter import read_record
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.plant.build import TERRAIN_PRIORITY, a1_spec, build_plant, compile_plant
+from taslel_bench.plant.build import a1_spec, build_plant, compile_plant
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
 from taslel_bench.sim.run import Built, run
+from taslel_bench.terrain.geoms import TERRAIN_PRIORITY
 from tests.conftest import compose_cfg
 
 MENAGERIE_LIKE = [  # Menagerie-style names as robot.plant_names overrides (Hydra: quote a {pattern})

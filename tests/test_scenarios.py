@@ -35,7 +35,7 @@ def test_friction_patch_changes_the_friction_the_feet_get():
     mujoco.mj_forward(m, d)
     frictions = [mu for _, mu in measure_contact_friction(m, d)]
     assert frictions and np.allclose(frictions, 0.2)
-    assert built.scenario.friction_at(np.array([0.6, 0.0])) == 0.2
+    assert built.scenario.terrain.friction_at(np.array([0.6, 0.0])) == 0.2
 
 
 def test_push_moves_the_trunk_sideways(tmp_path):

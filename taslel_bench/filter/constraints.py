@@ -17,9 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.interfaces import ClearanceProfile, QPProblem, RoundObstacle
+from taslel_bench.interfaces import QPProblem
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
+from taslel_bench.terrain.parts import Log
+from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.util.jit import kernel
 
 NV, NU, NL = a1.NV, a1.N_JOINTS, 3 * a1.N_LEGS
@@ -223,7 +225,7 @@ class SwingObstacleECBF(SwingBarrier):
 
     name, suffix = "obstacle", "obstacle"
 
-    def __init__(self, obstacles: tuple[RoundObstacle, ...], alpha1: float, alpha2: float) -> None:
+    def __init__(self, obstacles: tuple[Log, ...], alpha1: float, alpha2: float) -> None:
         if not obstacles:
             raise ValueError("SwingObstacleECBF needs at least one obstacle")
         super().__init__(alpha1, alpha2)

@@ -53,8 +53,10 @@ from taslel_bench.filter.constraints import (
 )
 from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_free
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
-from taslel_bench.interfaces import ClearanceProfile, QPBackend, QPProblem, QPSolution, RoundObstacle
+from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import a1
+from taslel_bench.terrain.parts import Log
+from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.util.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
@@ -100,7 +102,7 @@ class SafetyFilter:
         settings: FilterSettings,
         backend: QPBackend,
         profile: ClearanceProfile | None = None,
-        obstacles: tuple[RoundObstacle, ...] = (),
+        obstacles: tuple[Log, ...] = (),
     ) -> None:
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")

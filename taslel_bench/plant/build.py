@@ -12,19 +12,15 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
-from taslel_bench.interfaces import RoundObstacle
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, store_record
 from taslel_bench.robot import a1
+from taslel_bench.terrain.geoms import TERRAIN_PRIORITY, add_terrain_geom
 from taslel_bench.util.fields import ConfigError
-
-TERRAIN_PRIORITY = 1
 
 
 @dataclass(frozen=True)
@@ -100,7 +96,6 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
 # num="1">): intprm = (data bits, reduction: netforce, num). netforce merges a foot's contacts into one at
 # the force-weighted centroid of the contact points, with the net force and torque (world axes).
 _CONTACT_SENSOR_INTPRM = (1 | 2 | 4 | 16, 3, 1)  # data: found, force, torque, pos
-_CONTACT_SENSOR_OBSTACLE_INTPRM = (1 | 2, 3, 1)  # found, force (obstacle contacts only need a count)
 
 
 def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
@@ -177,54 +172,6 @@ def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) ->
         raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
                           f"with the floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
                           f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
-
-
-def add_terrain_geom(
-    spec: mujoco.MjSpec,
-    *,
-    name: str,
-    type: mujoco.mjtGeom,
-    size: list[float],
-    friction: float,
-    pos: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    rgba: tuple[float, float, float, float] = (0.5, 0.55, 0.6, 1.0),
-) -> mujoco.MjsGeom:
-    """Add a static terrain geom on the world body whose friction wins every foot contact."""
-    geom = spec.worldbody.add_geom(name=name, type=type, size=size, pos=list(pos), rgba=list(rgba))
-    geom.friction = [friction, 0.005, 0.0001]
-    geom.priority = TERRAIN_PRIORITY
-    geom.contype, geom.conaffinity = 0, 1
-    geom.condim = 3
-    return geom
-
-
-OBSTACLE_BODY = "obstacles"  # static (mocap) body holding every physical obstacle geom
-OBSTACLE_SENSOR_SUFFIX = "obstacle"  # per foot: contacts of the foot sphere with the obstacles body
-
-
-def add_round_obstacles(spec: mujoco.MjSpec, obstacles: Sequence[RoundObstacle], friction: float) -> None:
-    """Put each :class:`RoundObstacle` in the plant as a capsule along world y (exact sphere-capsule
-    collision, so the contact geometry is the barrier's geometry), on one static body
-    :data:`OBSTACLE_BODY` (mocap: not fused into the world, so contact sensors can name it), plus one
-    contact sensor per foot counting that foot's contacts with the obstacles (:class:`FootContactReader`).
-    Obstacle geoms are terrain (their friction wins, robot geoms collide with them)."""
-    if not obstacles:
-        return
-    body = spec.worldbody.add_body(name=OBSTACLE_BODY, mocap=True)
-    axis_along_y = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # capsule axis: local z -> world y
-    for i, ob in enumerate(obstacles):
-        geom = body.add_geom(name=f"{OBSTACLE_BODY}_{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                             size=[ob.radius_m, ob.half_width_m, 0.0], pos=[ob.x_m, 0.0, ob.z_m],
-                             quat=axis_along_y, rgba=[0.55, 0.4, 0.25, 1.0])  # fmt: skip
-        geom.friction = [friction, 0.005, 0.0001]
-        geom.priority = TERRAIN_PRIORITY
-        geom.contype, geom.conaffinity = 0, 1
-        geom.condim = 3
-    for foot in a1.FOOT_FRAMES:
-        sensor = spec.add_sensor(name=f"{foot}_{OBSTACLE_SENSOR_SUFFIX}", type=mujoco.mjtSensor.mjSENS_CONTACT,
-                                 objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot, reftype=mujoco.mjtObj.mjOBJ_BODY,
-                                 refname=OBSTACLE_BODY)  # fmt: skip
-        sensor.intprm[:3] = _CONTACT_SENSOR_OBSTACLE_INTPRM
 
 
 def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:

@@ -10,8 +10,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.plant.build import OBSTACLE_BODY, OBSTACLE_SENSOR_SUFFIX
 from taslel_bench.robot import a1
+from taslel_bench.terrain.geoms import OBSTACLE_BODY, OBSTACLE_SENSOR_SUFFIX
 
 
 def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:

@@ -28,6 +28,7 @@ import pandas as pd
 
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.robot import a1
+from taslel_bench.terrain.terrain import Terrain
 
 TICK_PARTS = ("controller", "model", "filter", "physics")
 QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
@@ -78,7 +79,7 @@ class EpisodeTrace:
         # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
         self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
-        self._context: tuple | None = None  # (bridge, contact reader, profile, scenario): see bind()
+        self._context: tuple | None = None  # (bridge, contact reader, profile, terrain): see bind()
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
         self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
         self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
@@ -146,12 +147,12 @@ class EpisodeTrace:
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
 
-    def bind(self, br: StateBridge, contacts, profile, scenario=None) -> None:
+    def bind(self, br: StateBridge, contacts, profile, terrain: Terrain | None = None) -> None:
         """What deriving the named quantities needs: the state bridge (index maps), the episode's
-        :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout), the scenario's clearance profile or
-        None (then ``clearance_m`` is all nan) and the scenario (friction under each foot, physical
+        :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout), the scenario's clearance
+        profile or None (then ``clearance_m`` is all nan) and the terrain (friction under each foot,
         obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles)."""
-        self._context = (br, contacts, profile, scenario)
+        self._context = (br, contacts, profile, terrain)
 
     def contact_reader(self):
         """The episode's :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout of ``sensordata_mj``)."""
@@ -164,7 +165,7 @@ class EpisodeTrace:
         definitions for a chunk written during the episode as for the whole episode after it)."""
         if self._context is None:
             raise RuntimeError("EpisodeTrace.bind() must be called before deriving quantities")
-        br, contacts, profile, scenario = self._context
+        br, contacts, profile, terrain = self._context
         a, dv, ticks = br.free_qadr, br.free_dadr, slice(k0, k1)
         qpos, qvel = self.qpos_mj[ticks], self.qvel_mj[ticks]
         plant_side = contacts.from_sensor_log(self.sensordata_mj[ticks])
@@ -182,8 +183,8 @@ class EpisodeTrace:
             "in_contact": plant_side["in_contact"],
             "slip_w": plant_side["slip_velocity_in_world"],
             "obstacle_contact": plant_side["obstacle_contact"],
-            "mu_foot": friction_under_feet(scenario, foot_pos, self.mu_true[ticks]),
-            "obstacle_clearance_m": obstacle_clearance(scenario.obstacles() if scenario is not None else (), foot_pos),
+            "mu_foot": friction_under_feet(terrain, foot_pos, self.mu_true[ticks]),
+            "obstacle_clearance_m": obstacle_clearance(terrain, foot_pos),
         }
         clearance = np.full((k1 - k0, a1.N_LEGS), np.nan)
         if profile is not None and k1 > k0:
@@ -297,31 +298,19 @@ def rpy_from_quat(quat_wxyz: np.ndarray) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=1)
 
 
-def friction_under_feet(scenario, foot_pos_w: np.ndarray, mu_trunk: np.ndarray) -> np.ndarray:
-    """(n, 4) true friction coefficient [-] of the terrain under each foot-sphere centre (the scenario's
-    :meth:`friction_at` at the foot's world (x, y)); without a scenario the trunk's, for every foot."""
-    n = foot_pos_w.shape[0]
-    if scenario is None:
+def friction_under_feet(terrain: Terrain | None, foot_pos_w: np.ndarray, mu_trunk: np.ndarray) -> np.ndarray:
+    """(n, 4) true friction coefficient [-] of the terrain under each foot-sphere centre (the terrain's
+    friction at the foot's world (x, y)); without a terrain the trunk's, for every foot."""
+    if terrain is None:
         return np.repeat(mu_trunk[:, None], a1.N_LEGS, axis=1)
-    flat = foot_pos_w[:, :, :2].reshape(-1, 2)
-    cache: dict[tuple[float, float], float] = {}
-    out = np.empty(flat.shape[0])
-    for j, xy in enumerate(flat):  # a few 10k calls per episode, once after it
-        key = (float(xy[0]), float(xy[1]))
-        if key not in cache:
-            cache[key] = float(scenario.friction_at(xy))
-        out[j] = cache[key]
-    return out.reshape(n, a1.N_LEGS)
+    return terrain.friction_under(foot_pos_w[:, :, :2])
 
 
-def obstacle_clearance(obstacles, foot_pos_w: np.ndarray) -> np.ndarray:
-    """(n, 4) signed distance [m] from each foot sphere to the nearest physical obstacle (a log with its axis
-    along world y, :class:`taslel_bench.interfaces.RoundObstacle`): <= 0 means touching. NaN without
-    obstacles."""
+def obstacle_clearance(terrain: Terrain | None, foot_pos_w: np.ndarray) -> np.ndarray:
+    """(n, 4) signed distance [m] from each foot sphere to the nearest obstacle of the terrain (a log, ...):
+    <= 0 means touching. NaN without obstacles."""
     n = foot_pos_w.shape[0]
-    if not obstacles:
+    if terrain is None or not terrain.has_obstacles:
         return np.full((n, a1.N_LEGS), np.nan)
-    geo = np.array([[ob.x_m, ob.z_m, ob.radius_m] for ob in obstacles])  # (m, 3)
-    dx = foot_pos_w[:, :, 0, None] - geo[:, 0]  # (n, 4, m)
-    dz = foot_pos_w[:, :, 2, None] - geo[:, 1]
-    return (np.hypot(dx, dz) - geo[:, 2]).min(axis=2) - a1.FOOT_RADIUS_M
+    d, _, _ = terrain.obstacle_distance(foot_pos_w.reshape(-1, 3), a1.FOOT_RADIUS_M)
+    return d.reshape(n, a1.N_LEGS)

@@ -86,6 +86,7 @@ class Episode:
     ) -> None:
         self.s = settings
         self.scenario = scenario
+        self.terrain = scenario.terrain
         self.m = mj_model
         self.d = mujoco.MjData(mj_model)
         self.bridge = StateBridge(mj_model)
@@ -172,7 +173,7 @@ class Episode:
         self.initial_state()
         self.estimator.reset()
         profile = self.scenario.clearance_profile()
-        trace.bind(br, self.contacts, profile, self.scenario)
+        trace.bind(br, self.contacts, profile, self.terrain)
         sink, chunk = self.chunk_sink, max(1, int(self.chunk_ticks))
         recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
         q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
@@ -197,7 +198,7 @@ class Episode:
                 t = k * s.control_dt_s
                 br.state_pin(qpos, qvel, q, v)  # also fills qj, qdj
                 trunk_xy = qpos[a : a + 2]
-                true_mu = self.scenario.friction_at(trunk_xy)
+                true_mu = self.terrain.friction_at(trunk_xy)
                 est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu, mu_filter_prev))
                 u_nom = self.controller.compute(t, qj, qdj)
                 gs = self.controller.gait_state(t)

@@ -48,13 +48,22 @@ class FrictionMismatch(RuntimeError):
 
 
 def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
+    """The MuJoCo plant: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other edits.
+    The terrain draws from its own stream of the seed (a random terrain does not shift the initial-state
+    draws of ``rng``)."""
     options = plant_options(cfg)
-    if cfg.robot.get("plant_mjcf"):
-        spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options)
-    else:
-        spec = a1_spec(options)
+    spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options) if cfg.robot.get("plant_mjcf") else a1_spec(options)
+    scenario.terrain.build(spec, terrain_rng(int(cfg.seed)))
     scenario.build(spec, rng)
     return compile_plant(spec)
+
+
+def terrain_rng(seed: int) -> np.random.Generator:
+    """The generator a random terrain draws from: a stream of ``seed`` apart from the run's main one."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(TERRAIN_STREAM,)))
+
+
+TERRAIN_STREAM = 1
 
 
 def build_controller(cfg: DictConfig) -> NominalController:
@@ -123,7 +132,7 @@ def check_friction(episode: Episode) -> list[tuple[str, float, float]]:
     checked = []
     for foot, mu_plant in measure_contact_friction(m, d):
         site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
-        mu_cfg = episode.scenario.friction_at(d.site_xpos[site, :2])
+        mu_cfg = episode.terrain.friction_at(d.site_xpos[site, :2])
         checked.append((foot, mu_plant, mu_cfg))
         if abs(mu_plant - mu_cfg) > FRICTION_CHECK_TOL:
             raise FrictionMismatch(
@@ -149,7 +158,7 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
-            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.obstacles())
+            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.terrain.logs())
             if self.backend is not None
             else None
         )
@@ -295,7 +304,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "control_rate_hz": float(cfg.control_rate_hz),
         "physics_rate_hz": float(cfg.physics_rate_hz),
         "commanded_speed_mps": float(cfg.controller.speed),
-        "friction_true": float(built.scenario.friction_at(np.zeros(2))),
+        "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
         **notes,

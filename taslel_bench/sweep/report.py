@@ -265,7 +265,7 @@ def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
-    return tuple(instantiate(OmegaConf.load(path).scenario).obstacles())
+    return instantiate(OmegaConf.load(path).scenario).terrain.logs()
 
 
 def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
