@@ -43,7 +43,7 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
     from taslel_bench.robot import a1
 
     cfg = api.compose(["solver=reference"])
-    sf = api.build_safety_filter(cfg, ClearanceProfile(BUMP))
+    sf = api.build_safety_filter(cfg, profile=ClearanceProfile(BUMP))
     if backend is not None:
         sf.backend = backend
     m = build_plant()

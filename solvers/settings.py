@@ -12,7 +12,7 @@ method. What can be said without knowing the solver is checked here, naming ``so
 * a time limit (a key containing ``time_limit``) is > 0.
 
 The rest (unknown keys, solver-specific ranges) is left to the solver; the harness refuses a backend that
-fails a trivial QP before a run (:func:`taslel_bench.config.validate.build_backend`).
+fails a trivial QP before a run (:func:`taslel_bench.config.axes.build_backend`).
 """
 
 from __future__ import annotations

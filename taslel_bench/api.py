@@ -18,14 +18,14 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from taslel_bench.config.compose import compose
+from taslel_bench.config.settings import build_barriers, build_controller, filter_settings
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
-from taslel_bench.filter.constraints import TickInputs
+from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
-from taslel_bench.interfaces import ClearanceProfile
+from taslel_bench.interfaces import ClearanceProfile, Terrain
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.robot.model import A1Model
-from taslel_bench.sim.run import build_controller, filter_settings
 
 __all__ = [
     "A1Model",
@@ -42,13 +42,15 @@ __all__ = [
 ]
 
 
-def build_safety_filter(cfg: DictConfig, profile: ClearanceProfile | None = None) -> SafetyFilter:
-    """The ID-CBF-QP filter configured by ``cfg.filter``/``cfg.robot`` with the backend ``cfg.solver``.
-
-    ``profile``: swing-foot clearance profile for the ECBF (None: no ECBF rows). Per tick:
+def build_safety_filter(cfg: DictConfig, terrain: Terrain | None = None,
+                        profile: ClearanceProfile | None = None) -> SafetyFilter:
+    """The ID-CBF-QP filter configured by ``cfg.filter``/``cfg.robot`` with the backend ``cfg.solver`` and the
+    barrier families of ``cfg.filter.barriers`` that apply to ``terrain`` (default: the flat floor) and the
+    virtual ``profile`` (None: no phase-profile rows). Per tick:
     ``safety_filter.filter(TickInputs(model, v, in_stance, mu, swing_phase, swing_phase_rate), u_nom)``
     with ``model`` an :class:`A1Model` updated at the plant state (see :mod:`taslel_bench.sim.episode`)."""
     fs = filter_settings(cfg)
     if not fs.enabled:
         raise ValueError("build_safety_filter: cfg.filter.enabled is false")
-    return SafetyFilter(fs, instantiate(cfg.solver), profile)
+    barriers = build_barriers(cfg, terrain if terrain is not None else Terrain(), profile)
+    return SafetyFilter(fs, instantiate(cfg.solver), barriers)

@@ -23,7 +23,7 @@ def cfg_factory():
 
 class NeverSolves:
     """A QP backend that hits its iteration limit on every tick (as a mis-tuned solver does); tests put it
-    in place of ``taslel_bench.sim.run.build_backend``'s answer to make a filter fail on purpose."""
+    in place of ``taslel_bench.sim.build.build_backend``'s answer to make a filter fail on purpose."""
 
     name = "never"
 

@@ -12,7 +12,8 @@ from hydra.errors import ConfigCompositionException, MissingConfigException
 from omegaconf import OmegaConf
 
 from taslel_bench.config.validate import ConfigError, validate
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from tests.conftest import compose_cfg
 
 
@@ -150,7 +151,7 @@ def test_friction_check_catches_misconfigured_floor():
     OmegaConf.set_struct(cfg, False)
     cfg.scenario["_target_"] = f"{__name__}.LiarForTest"
     globals()["LiarForTest"] = Liar
-    from taslel_bench.sim.run import FrictionMismatch
+    from taslel_bench.sim.build import FrictionMismatch
 
     with pytest.raises(FrictionMismatch, match="0.3"):
         Built(cfg)

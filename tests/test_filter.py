@@ -13,9 +13,12 @@ import qpsolvers
 
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
-from taslel_bench.filter.constraints import LAM, VDOT, TickInputs, U
+from taslel_bench.filter.barriers.base import BarrierWorld
+from taslel_bench.filter.barriers.obstacle import ObstacleClearance
+from taslel_bench.filter.barriers.phase_profile import PhaseProfileClearance
+from taslel_bench.filter.layout import LAM, VDOT, TickInputs, U
 from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
-from taslel_bench.interfaces import ClearanceProfile, QPSolution
+from taslel_bench.interfaces import ClearanceProfile, Plane, QPSolution, Terrain
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import PlantOptions, build_plant
 from taslel_bench.robot import a1
@@ -64,6 +67,15 @@ class Broken:
 
 
 BUMP = ClearanceProfile((0.0, 0.0, 1.28, -2.56, 1.28))  # 8 cm 4th-order bump
+
+
+def world(terrain: Terrain | None = None, profile: ClearanceProfile | None = None) -> BarrierWorld:
+    return BarrierWorld(terrain if terrain is not None else Terrain(), profile, 20.0, 20.0)
+
+
+def clearance_rows(profile: ClearanceProfile = BUMP) -> list:
+    """The paper's swing-foot clearance family on ``profile`` (the filter's barrier list)."""
+    return [PhaseProfileClearance(world(profile=profile))]
 
 
 def walking_states(n_states: int, t_start: float = 1.0, friction: float = 1.0):
@@ -127,7 +139,7 @@ def test_filter_returns_u_nom_when_no_inequality_is_active(states):
 
 def test_solution_satisfies_dynamics_and_cones(states):
     st, pm = states
-    f = SafetyFilter(FilterSettings(lambda_min_n=2.0), TightReference(), BUMP)
+    f = SafetyFilter(FilterSettings(lambda_min_n=2.0), TightReference(), clearance_rows())
     mu = 0.3
     for s in st:
         x = inputs_for(pm, s, mu)
@@ -153,7 +165,7 @@ def test_solution_satisfies_dynamics_and_cones(states):
 
 def test_ecbf_rows_hold_at_the_solution(states):
     st, pm = states
-    f = SafetyFilter(FilterSettings(), TightReference(), BUMP)
+    f = SafetyFilter(FilterSettings(), TightReference(), clearance_rows())
     active = 0
     for s in st:
         x = inputs_for(pm, s, 1.0)
@@ -194,7 +206,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
         i = swing[0]
         p0 = pm.foot_pos_in_world[i].copy()
         log = Log(x_m=float(p0[0] + 0.06 + 0.05), z_m=-0.02, radius_m=0.05)
-        f = SafetyFilter(FilterSettings(), TightReference(), None, (log,))
+        f = SafetyFilter(FilterSettings(), TightReference(), [ObstacleClearance(world(Terrain((Plane(), log))))])
         res = f.filter(x, s[3])
         assert res.status == "solved"
         p = f.problem
@@ -215,10 +227,10 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
         hddot = (clearance(dt) - 2 * h + clearance(-dt)) / dt**2
         al1, al2 = f.settings.ecbf_alpha1, f.settings.ecbf_alpha2
         # what the kernel wrote: h, h_e = hdot + al1 h, and the row -G vdot = hddot - (J̇v-free part)
-        h_e = f.obstacle_ecbf.h_e[i]
-        hdot_row = h_e - al1 * f.obstacle_ecbf.h[i]
+        h_e = f.barriers[0].h_e[i]
+        hdot_row = h_e - al1 * f.barriers[0].h[i]
         hddot_row = -p.G[row, :18] @ res.vdot + p.h[row] - al2 * h_e - al1 * hdot_row
-        assert f.obstacle_ecbf.h[i] == pytest.approx(h, abs=1e-12)
+        assert f.barriers[0].h[i] == pytest.approx(h, abs=1e-12)
         assert hdot_row == pytest.approx(hdot, abs=1e-6)
         assert hddot_row == pytest.approx(hddot, abs=1e-3 * max(1.0, abs(hddot)))  # finite-difference accuracy
         assert al2 * (hdot + al1 * h) + hddot + al1 * hdot >= -1e-3 * max(1.0, abs(hddot))
@@ -266,7 +278,7 @@ def test_bad_fallback_name():
 
 def test_layout_is_fixed(states):
     st, pm = states
-    f = SafetyFilter(FilterSettings(), TightReference(), BUMP)
+    f = SafetyFilter(FilterSettings(), TightReference(), clearance_rows())
     p = f.problem
     assert p.n == 42 and p.A.shape == (30, 42) and p.G.shape == (24, 42)
     assert (p.layout["vdot"], p.layout["u"], p.layout["lambda"]) == (VDOT, U, LAM)
@@ -290,8 +302,8 @@ def test_condensed_formulation_has_the_same_minimiser(states, target):
     with binding friction and ECBF rows, for both regularisation targets."""
     st, pm = states
     kw = {"regularization": 1e-4, "regularization_target": target}
-    full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), BUMP)
-    cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), BUMP)
+    full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), clearance_rows())
+    cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), clearance_rows())
     assert cond.condensed.n == a1.N_JOINTS and cond.condensed.A.shape[0] == 0
     moved = 0
     for s in st:
@@ -314,8 +326,8 @@ def test_api_builds_the_configured_filter(states):
     from taslel_bench import api
 
     st, pm = states
-    f = api.build_safety_filter(api.compose(["solver=quadprog", "filter.formulation=condensed"]), BUMP)
-    assert f.settings.formulation == "condensed" and f.ecbf is not None
+    f = api.build_safety_filter(api.compose(["solver=quadprog", "filter.formulation=condensed"]), profile=BUMP)
+    assert f.settings.formulation == "condensed" and [b.name for b in f.barriers] == ["clearance"]
     res = f.filter(inputs_for(pm, st[0], 0.3), st[0][3])
     assert res.status == "solved" and res.u.shape == (12,)
     with pytest.raises(ValueError, match="filter.enabled is false"):
@@ -370,7 +382,7 @@ def test_persistent_osqp_leaves_out_vacuous_rows_and_keeps_its_setup(states):
 
     sts, pm = states
     osqp_b, daqp_b = make_backend("osqp_persistent"), make_backend("daqp_persistent")
-    f = SafetyFilter(FilterSettings(formulation="condensed"), TightReference(), BUMP)
+    f = SafetyFilter(FilterSettings(formulation="condensed"), TightReference(), clearance_rows())
     stance_sets = set()
     for st in sts:
         f.build(inputs_for(pm, st, 0.5), st[3])
@@ -390,7 +402,7 @@ def test_contact_velocity_gain_brakes_stance_feet(states, formulation):
     J vdot + J̇v = -k_v J v (both formulations), and the equations of motion still hold."""
     st, pm = states
     kv = 50.0
-    f = SafetyFilter(FilterSettings(contact_velocity_gain=kv, formulation=formulation), TightReference(), BUMP)
+    f = SafetyFilter(FilterSettings(contact_velocity_gain=kv, formulation=formulation), TightReference(), clearance_rows())
     for s in st:
         res = f.filter(inputs_for(pm, s, 0.6), s[3])
         assert res.status == "solved"

@@ -16,7 +16,8 @@ from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.sim import episode as episode_module
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from tests.conftest import NeverSolves, compose_cfg
 
 N = 10  # synthetic ticks, all walking (k0 = 0), dt = 1 ms
@@ -24,7 +25,7 @@ N = 10  # synthetic ticks, all walking (k0 = 0), dt = 1 ms
 
 def synthetic_trace(filter_on: bool = True) -> EpisodeTrace:
     """Four feet in the filter's stance set on flat ground (mu 1), each carrying 50 N, predicted exactly."""
-    tr = EpisodeTrace(N, filter_on=filter_on)
+    tr = EpisodeTrace(N, filter_on=filter_on, barrier_names=["clearance"] if filter_on else [])
     tr.n = N
     tr.in_stance[:] = True
     tr.in_contact = np.ones((N, 4), bool)
@@ -108,7 +109,7 @@ def test_trips_are_contact_onsets_in_swing_and_lower_leg_contacts():
 def test_negative_barrier_while_solved_degrades_the_run():
     tr = synthetic_trace()
     tr.in_stance[:, 0] = False
-    tr.barrier_h_m[:N, 0] = [0.01] * 8 + [-0.01, -0.02]  # the filter's own h < 0 on 2 of 10 swing ticks
+    tr.barriers["clearance"].h_m[:N, 0] = [0.01] * 8 + [-0.01, -0.02]  # the filter's own h < 0 on 2 of 10 swing ticks
     m = clearance_metrics(tr, 0)
     assert m["barrier_negative_rate"] == pytest.approx(0.2)
     status, why = assess({"status": "ok", **m}, HealthLimits(barrier_negative_rate_max=0.05))
@@ -122,7 +123,7 @@ def test_negative_barrier_while_solved_degrades_the_run():
 
 def test_a_filter_that_fails_every_tick_ends_degraded(tmp_path, monkeypatch):
     """The run finishes on fallback torques (u_nom: intervention 0) and must say so, not end `ok`."""
-    import taslel_bench.sim.run as run_module
+    import taslel_bench.sim.build as run_module
 
     monkeypatch.setattr(run_module, "build_backend", lambda cfg: NeverSolves())
     summary = run(compose_cfg(["duration=0.3", "progress=false", "record.mcap=false"]), tmp_path)

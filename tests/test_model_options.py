@@ -10,13 +10,14 @@ import pinocchio as pin
 import pytest
 
 from scenarios.perturbed import PerturbedPlant
-from taslel_bench.config.validate import ConfigError, model_options
+from taslel_bench.config.settings import model_options
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
 from taslel_bench.plant.build import a1_spec, compile_plant
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
 from taslel_bench.robot.model_options import ModelOptions
-from taslel_bench.sim.run import Built
+from taslel_bench.sim.build import Built
+from taslel_bench.util.fields import ConfigError
 from tests.conftest import compose_cfg
 from tests.test_faults import assert_refused, no_episode  # noqa: F401 - fixture
 from tests.test_model import random_state, velocity_map

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from scenarios.perturbed import PerturbedPlant
-from taslel_bench.config.validate import ConfigError, plant_options
+from taslel_bench.config.settings import plant_options
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.plant.adapter import read_record
@@ -20,8 +20,10 @@ from taslel_bench.plant.build import a1_spec, build_plant, compile_plant
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from taslel_bench.terrain.geoms import TERRAIN_PRIORITY
+from taslel_bench.util.fields import ConfigError
 from tests.conftest import compose_cfg
 
 MENAGERIE_LIKE = [  # Menagerie-style names as robot.plant_names overrides (Hydra: quote a {pattern})

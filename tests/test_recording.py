@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 
 from taslel_bench.record.mcap import PARTIAL_NAME, McapStream, read_messages
-from taslel_bench.sim.run import Built, config_sha256, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import config_sha256, run
 from taslel_bench.sweep.aggregate import aggregate
 from taslel_bench.sweep.report import write_report
 from tests.conftest import compose_cfg

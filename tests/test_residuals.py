@@ -10,7 +10,8 @@ import pytest
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
 from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.metrics.residuals import residual_metrics
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from tests.conftest import compose_cfg
 
 PLANT = ["scenario=perturbed", "scenario.joint_damping=0", "scenario.joint_frictionloss=0",
@@ -126,9 +127,9 @@ def test_robust_option_tightens_the_ecbf_rows_by_its_margin():
     tight = fixed.episode.run().trace
     assert np.all(plain.ecbf_margin_mps2[: plain.n] == 0.0) and np.all(tight.ecbf_margin_mps2[: tight.n] == 30.0)
     # the planned condition of every swing foot the QP solved is >= the margin
-    psi = tight.barrier_psi_planned[: tight.n]
+    psi = tight.barriers["clearance"].psi_planned_mps2[: tight.n]
     assert np.nanmin(psi) >= 30.0 - 1e-6
-    assert np.nanmin(plain.barrier_psi_planned[: plain.n]) < 30.0
+    assert np.nanmin(plain.barriers["clearance"].psi_planned_mps2[: plain.n]) < 30.0
 
 
 @pytest.mark.parametrize("case", ["none", "damping", "armature", "frictionloss", "mass", "com", "lossy", "combined"])

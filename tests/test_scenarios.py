@@ -11,7 +11,8 @@ import pytest
 
 from taslel_bench.plant.build import a1_spec
 from taslel_bench.plant.contacts import measure_contact_friction
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from tests.conftest import CONF_DIR, compose_cfg
 
 SCENARIOS = sorted(p.stem for p in (Path(CONF_DIR) / "scenario").glob("*.yaml"))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taslel_bench.sim.run import Built
+from taslel_bench.sim.build import Built
 from taslel_bench.sim.seed_scan import scan
 from tests.conftest import compose_cfg
 

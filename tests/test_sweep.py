@@ -13,7 +13,8 @@ import pytest
 from mcap.reader import make_reader
 
 from taslel_bench.record.mcap import AFTER_EPISODE, CHANNELS, EVENTS
-from taslel_bench.sim.run import Built, run
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.run import run
 from taslel_bench.sweep.aggregate import aggregate
 from taslel_bench.sweep.report import shifted_geometric_mean, write_report
 from tests.conftest import compose_cfg
@@ -136,7 +137,7 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
 
 def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path, monkeypatch):
     """`scenario.friction=0.3,1.0` are two rows (not one "flat" row); a degraded run is listed with why."""
-    import taslel_bench.sim.run as run_module
+    import taslel_bench.sim.build as run_module
     from tests.conftest import NeverSolves
 
     for mu in ("0.3", "1.0"):

@@ -2,7 +2,7 @@
 path), the value and what is allowed, before anything is built or simulated. (Unknown group options and
 unknown keys are refused by Hydra itself, with the list of valid options.)
 
-Three layers, all run by :class:`taslel_bench.sim.run.Built` before the episode:
+Three layers, all run by :class:`taslel_bench.sim.build.Built` before the episode:
 
 1. :func:`validate` -- a generic pass (no NaN or infinity anywhere in the config) and one rule per field of
    the core groups (top level, ``record``, ``controller``, ``filter``, ``robot``, ``model``); the ranges are
@@ -24,19 +24,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from hydra.errors import InstantiationException
-from hydra.utils import instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
-from taslel_bench.interfaces import MAX_FRICTION, QPBackend, QPProblem
+from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
-from taslel_bench.plant.build import PlantOptions
 from taslel_bench.robot import a1
-from taslel_bench.robot.model import A1Model
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, number_or_list, numbers
 
@@ -72,7 +67,6 @@ MAX_IMPRATIO = 100.0  # [-]
 MAX_SOLREF_TIMECONST_S = 1.0  # [s]
 MAX_SOLREF_DAMPRATIO = 10.0  # [-]
 MAX_FOOT_MARGIN_M = 0.05  # [m]
-BUILD_ERRORS = (ValueError, TypeError, OSError)  # what an axis class raises for a bad argument or file
 
 
 def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
@@ -400,48 +394,6 @@ def _model(cfg: DictConfig) -> None:
             MAX_PAYLOAD_OFFSET_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
 
 
-def _plain(value: Any) -> Any:
-    """OmegaConf containers as plain Python (lists as tuples), other values as they are."""
-    if isinstance(value, (DictConfig, ListConfig)):
-        value = OmegaConf.to_container(value, resolve=True)
-    return tuple(value) if isinstance(value, list) else value
-
-
-def model_options(cfg: DictConfig) -> ModelOptions:
-    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`; absent = defaults."""
-    group = _get(cfg, "model")
-    if group is None:
-        return ModelOptions()
-    return ModelOptions(**{k: _plain(v) for k, v in group.items()})
-
-
-def build_model(cfg: DictConfig) -> A1Model:
-    """The controller's model; a URDF Pinocchio cannot read or that lacks the A1's joints raises a
-    :class:`ConfigError` naming ``model.urdf``."""
-    options = model_options(cfg)
-    try:
-        return A1Model(options)
-    except (ValueError, RuntimeError) as exc:
-        if options.urdf is None:
-            raise
-        reason = " ".join(str(exc).split())
-        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") \
-            from exc
-
-
-def plant_options(cfg: DictConfig) -> PlantOptions:
-    """The plant builder's options from the validated config (time step, torque limit, names, overrides)."""
-    names = _get(cfg, "robot.plant_names")
-    overrides = _get(cfg, "robot.plant_overrides")
-    return PlantOptions(
-        timestep_s=1.0 / float(cfg.physics_rate_hz),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
-        names=PlantNames(**{k: _plain(v) for k, v in names.items()}) if names is not None else PlantNames(),
-        overrides=(PlantOverrides(**{k: _plain(v) for k, v in overrides.items()}) if overrides is not None
-                   else PlantOverrides()),
-    )
-
-
 def _divisors(n: int) -> str:
     divs = [k for k in range(1, n + 1) if n % k == 0]
     return ", ".join(map(str, divs[:12])) + (" ..." if len(divs) > 12 else "")
@@ -450,55 +402,4 @@ def _divisors(n: int) -> str:
 # ------------------------------------------------------------------------------------------ the axes
 
 
-def build_axis(cfg: DictConfig, group: str) -> Any:
-    """``instantiate(cfg[group])``. Hydra wraps what the constructor raises in an
-    ``InstantiationException`` whose text is the repr of the error; a bad argument or file (ValueError,
-    TypeError, OSError) comes back as a :class:`ConfigError` with the axis' own message, which names the
-    field (``scenario.coefficients=[]: ...``), prefixed with the group and its target when it does not."""
-    try:
-        return instantiate(cfg[group])
-    except InstantiationException as exc:
-        cause = exc.__cause__
-        if isinstance(cause, ConfigError) and str(cause).startswith(f"{group}."):
-            raise cause from None  # already names the field: shown once, where it was raised
-        if not isinstance(cause, BUILD_ERRORS):
-            raise
-        message = str(cause) if str(cause) else type(cause).__name__
-        if not message.startswith(f"{group}."):
-            message = f"{group} ({cfg[group].get('_target_')}): {type(cause).__name__}: {message}"
-        raise ConfigError(message) from cause
-
-
-def build_backend(cfg: DictConfig) -> QPBackend:
-    """The ``solver`` axis, checked on a trivial QP of the configured formulation's shape (with the 30
-    equality rows of ``full``, without them for ``condensed``): settings that make the backend fail there
-    (``solver.settings.eps_abs=-1``: OSQP rejects it at every setup) fail every tick of a run."""
-    backend = build_axis(cfg, "solver")
-    with_equalities = _get(cfg, "filter.formulation", "full") == "full"
-    solution = backend.solve(probe_problem(with_equalities))
-    backend.reset()
-    if not solution.ok:
-        path = "solver.settings" if "settings" in cfg.solver else "solver"
-        raise fail(
-            path,
-            _get(cfg, path),
-            f"{cfg.solver.get('_target_')} fails a trivial 3-variable QP with "
-            f"these settings: status {solution.status!r}",
-        )
-    return backend
-
-
-def probe_problem(with_equalities: bool) -> QPProblem:
-    """min 0.5 |x|^2 + q'x over 3 variables, one active inequality (x0 <= 0.8), a box on x0 and, with
-    ``with_equalities``, x0 + x1 + x2 = 1. Solution (with equalities): (0.8, -0.15, 0.35)."""
-    n = 3
-    P, q = np.eye(n), np.array([-1.0, 0.5, 0.0])
-    A = np.ones((1 if with_equalities else 0, n))
-    b = np.ones(A.shape[0])
-    G, h = np.array([[1.0, 0.0, 0.0]]), np.array([0.8])
-    lb, ub = np.array([-2.0, -np.inf, -np.inf]), np.array([2.0, np.inf, np.inf])
-    return QPProblem(P, q, A, b, G, h, lb, ub, P != 0, A != 0, G != 0, {"u": slice(0, n)}, ["probe"])
-
-
-__all__ = ["ConfigError", "build_axis", "build_backend", "build_model", "check_finite", "model_options",
-           "plant_options", "probe_problem", "validate"]
+__all__ = ["ConfigError", "check_finite", "validate"]

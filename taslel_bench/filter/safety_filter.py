@@ -31,32 +31,18 @@ kernels (:mod:`taslel_bench.util.jit`) at the end of this module and in :mod:`ta
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from taslel_bench.filter.constraints import (
-    LAM,
-    N_VARS,
-    NL,
-    NU,
-    NV,
-    VDOT,
-    ContactOrSwing,
-    EqualityFamily,
-    EquationsOfMotion,
-    FrictionCone,
-    SwingClearanceECBF,
-    SwingObstacleECBF,
-    TickInputs,
-    U,
-)
+from taslel_bench.filter.barriers.base import Barrier
+from taslel_bench.filter.constraints import ContactOrSwing, EqualityFamily, EquationsOfMotion, FrictionCone
 from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_free
+from taslel_bench.filter.layout import LAM, N_VARS, NL, NU, NV, VDOT, TickInputs, U
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import a1
-from taslel_bench.terrain.parts import Log
-from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.util.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
@@ -101,9 +87,10 @@ class SafetyFilter:
         self,
         settings: FilterSettings,
         backend: QPBackend,
-        profile: ClearanceProfile | None = None,
-        obstacles: tuple[Log, ...] = (),
+        barriers: Sequence[Barrier] = (),
     ) -> None:
+        """``barriers``: the barrier families (rows in this order after the friction rows); with
+        ``settings.ecbf_enabled`` false the filter has none."""
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
         if settings.regularization_target not in REGULARIZATION_TARGETS:
@@ -117,17 +104,7 @@ class SafetyFilter:
         self.backend = backend
         self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
         self.friction = FrictionCone(settings.lambda_min_n)
-        self.ecbf = (
-            SwingClearanceECBF(profile, settings.ecbf_alpha1, settings.ecbf_alpha2)
-            if (profile is not None and settings.ecbf_enabled)
-            else None
-        )
-        self.obstacle_ecbf = (
-            SwingObstacleECBF(tuple(obstacles), settings.ecbf_alpha1, settings.ecbf_alpha2)
-            if (obstacles and settings.ecbf_enabled)
-            else None
-        )
-        self.barriers = [fam for fam in (self.ecbf, self.obstacle_ecbf) if fam is not None]
+        self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
         self.robust = RobustMargin(settings.robust, settings.ecbf_alpha2, settings.control_dt_s)
         tau = settings.robust.observer_time_constant_s if settings.robust.enabled else 0.0
         self.observer = DisturbanceObserver(tau, settings.control_dt_s, NV) if tau > 0.0 else None

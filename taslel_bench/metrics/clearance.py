@@ -85,7 +85,7 @@ def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray) -> dict[str,
     condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow)."""
     if not tr.filter_on:
         return {"barrier_negative_rate": math.nan}
-    h = np.fmin(tr.barrier_h_m[w], tr.barrier_obstacle_h_m[w])  # the smaller where both exist
+    h = tr.barrier_h_min(w)  # the smallest over the barrier families
     judged = swing & np.isfinite(h)
     if not judged.any():
         return {"barrier_negative_rate": math.nan}

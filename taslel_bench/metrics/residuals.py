@@ -47,7 +47,7 @@ def _skew(d: np.ndarray) -> np.ndarray:
 
 def compute(trace: EpisodeTrace, setup: ResidualSetup) -> None:
     """Fill ``trace.model_residual`` (n, 18), ``trace.foot_acc_error_w`` (n, 4, 3) and
-    ``trace.barrier_psi_realized`` / ``trace.barrier_obstacle_psi_realized`` (n, 4) (nan where undefined)."""
+    every barrier family's ``psi_realized_mps2`` (n, 4) (nan where undefined)."""
     n, br, m, dt = trace.n, setup.bridge, setup.model, setup.control_dt_s
     qpos = np.vstack([setup.initial_qpos[None], trace.qpos_mj[:n]])  # state before tick k: row k
     qvel = np.vstack([setup.initial_qvel[None], trace.qvel_mj[:n]])
@@ -78,8 +78,8 @@ def compute(trace: EpisodeTrace, setup: ResidualSetup) -> None:
             acc_error[k] = m.foot_jac_in_world @ (trace.vdot_filter[k] - vdot_all[k])
     trace.model_residual = residual
     trace.foot_acc_error_w = acc_error
-    trace.barrier_psi_realized = realised_condition(trace.barrier_he_mps[:n], dt, setup.alpha2)
-    trace.barrier_obstacle_psi_realized = realised_condition(trace.barrier_obstacle_he_mps[:n], dt, setup.alpha2)
+    for log in trace.barriers.values():
+        log.psi_realized_mps2 = realised_condition(log.he_mps[:n], dt, setup.alpha2)
 
 
 def realised_acceleration(br: StateBridge, qpos: np.ndarray, qvel: np.ndarray, v: np.ndarray,
@@ -149,13 +149,12 @@ def residual_metrics(trace: EpisodeTrace, k0: int, limits) -> dict[str, float]:
         out["foot_acc_error_swing_mps2_rms"] = _rms(acc[~stance])
         errors, negative, judged = [], 0, 0
         solved = (trace.qp_status[k0:n] == 0)[:, None]
-        for real, plan in ((trace.barrier_psi_realized, trace.barrier_psi_planned),
-                           (trace.barrier_obstacle_psi_realized, trace.barrier_obstacle_psi_planned)):
+        for real, plan in ((log.psi_realized_mps2, log.psi_planned_mps2) for log in trace.barriers.values()):
             both = np.isfinite(real[k0:n]) & np.isfinite(plan[k0:n]) & solved
             errors.append((real[k0:n] - plan[k0:n])[both])
             negative += int((real[k0:n][both] < -PSI_TOLERANCE_MPS2).sum())
             judged += int(both.sum())
-        out["barrier_psi_error_mps2_rms"] = _rms(np.concatenate(errors))
+        out["barrier_psi_error_mps2_rms"] = _rms(np.concatenate(errors)) if errors else math.nan
         out["barrier_psi_realized_negative_rate"] = negative / judged if judged else math.nan
     return out
 

@@ -22,9 +22,9 @@ from rich.console import Console
 from rich.table import Table
 
 from taslel_bench.api import compose
-from taslel_bench.filter.constraints import TickInputs
+from taslel_bench.filter.layout import TickInputs
 from taslel_bench.record.trace import TICK_PARTS
-from taslel_bench.sim.run import Built
+from taslel_bench.sim.build import Built
 
 
 def _median_us(fn, n: int = 2000) -> float:

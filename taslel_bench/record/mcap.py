@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -70,12 +70,10 @@ CHANNELS: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
             "solve_us": (_NUM, ["qp_solve_us"]), "build_us": (_NUM, ["qp_build_us"]),
             "iterations": (_NUM, ["qp_iterations"])},
     "/tick": {"tick_us": (_NUM, ["tick_us"]), **{f"{p}_us": (_NUM, [f"tick_{p}_us"]) for p in TICK_PARTS}},
-    "/barrier": {
+    "/barrier": {  # + {name}_h_m, {name}_h_e_mps of every barrier family (barrier_channel)
         "foot": (_NAMES, None),
         "h_m": (_ARR, _legs("{leg}_barrier_h_m")),
-        "h_e_mps": (_ARR, _legs("{leg}_barrier_he_mps")),
         "clearance_m": (_ARR, _legs("{leg}_clearance_m")),
-        "obstacle_h_m": (_ARR, _legs("{leg}_barrier_obstacle_h_m")),
         "obstacle_clearance_m": (_ARR, _legs("{leg}_obstacle_clearance_m")),
         "obstacle_contact": (_BOOLS, _legs("{leg}_obstacle_contact")),
     },
@@ -94,6 +92,16 @@ AFTER_EPISODE: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
     },
 }
 CONSTANTS = {"name": _SHORT, "foot": _LEGS}
+
+
+def channels(barrier_names: Sequence[str] = ()) -> dict[str, dict[str, tuple[dict, list[str] | None]]]:
+    """:data:`CHANNELS` with the ``/barrier`` channel's fields of each barrier family: ``<name>_h_m`` and
+    ``<name>_h_e_mps`` per foot (``h_m``: the smallest h over the families)."""
+    out = {topic: dict(fields) for topic, fields in CHANNELS.items()}
+    for name in barrier_names:
+        out["/barrier"][f"{name}_h_m"] = (_ARR, _legs("{leg}_barrier_%s_h_m" % name))
+        out["/barrier"][f"{name}_h_e_mps"] = (_ARR, _legs("{leg}_barrier_%s_he_mps" % name))
+    return out
 EVENTS = {"/events": {"t_s": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
           "/summary": {"summary": {"type": "object"}}}  # fmt: skip
 
@@ -115,14 +123,15 @@ class McapStream:
     """The episode's chunk sink: ``stream(trace, k0, k1)`` writes ticks k0..k1 as one flushed MCAP chunk to
     ``<run>/episode.partial.mcap``; :meth:`close` finishes the file and renames it ``episode.mcap``."""
 
-    def __init__(self, run_dir: Path) -> None:
+    def __init__(self, run_dir: Path, barrier_names: Sequence[str] = ()) -> None:
         self.partial = Path(run_dir) / PARTIAL_NAME
         self.final = Path(run_dir) / FINAL_NAME
         self._file = open(self.partial, "wb")  # noqa: SIM115 - kept open for the episode, closed in close()
         self._writer = Writer(self._file)
         self._writer.start(profile="", library="taslel_bench")
         self._channels: dict[str, int] = {}
-        for topic, fields in {**CHANNELS, **AFTER_EPISODE}.items():
+        self.channels = channels(barrier_names)
+        for topic, fields in {**self.channels, **AFTER_EPISODE}.items():
             self._register(topic, {name: schema for name, (schema, _) in fields.items()})
         for topic, props in EVENTS.items():
             self._register(topic, props)
@@ -140,7 +149,7 @@ class McapStream:
         """Write ticks ``k0:k1`` (the rows steps.parquet will hold) and flush them to disk."""
         if k1 <= k0:
             return
-        self._write(trace.frame(k0, k1), CHANNELS)
+        self._write(trace.frame(k0, k1), self.channels)
         self.ticks_written = k1
 
     def _write(self, frame: pd.DataFrame, channels: dict) -> None:

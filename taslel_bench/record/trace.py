@@ -23,6 +23,8 @@ ticks at once after the episode (vectorised: the same definitions, a fraction of
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pandas as pd
 
@@ -34,11 +36,26 @@ TICK_PARTS = ("controller", "model", "filter", "physics")
 QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
 
 
+class BarrierLog:
+    """One barrier family's values per tick and leg (nan where its row was inactive): h [m], h_e [m/s], the
+    ECBF condition psi = hdot_e + a2 h_e [m/s²] the filter planned, and the one realised (filled after the
+    episode by :mod:`taslel_bench.metrics.residuals`)."""
+
+    def __init__(self, name: str, capacity: int) -> None:
+        shape = (capacity, a1.N_LEGS)
+        self.name = name
+        self.h_m = np.full(shape, np.nan)
+        self.he_mps = np.full(shape, np.nan)
+        self.psi_planned_mps2 = np.full(shape, np.nan)
+        self.psi_realized_mps2 = np.zeros((0, a1.N_LEGS))
+
+
 class EpisodeTrace:
-    """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`)."""
+    """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`).
+    ``barrier_names``: the filter's barrier families, in its order (one :class:`BarrierLog` each)."""
 
     def __init__(self, capacity: int, filter_on: bool, nq: int = a1.NQ, nv: int = a1.NV,
-                 nsensordata: int = 0) -> None:  # fmt: skip
+                 nsensordata: int = 0, barrier_names: Sequence[str] = ()) -> None:  # fmt: skip
         c, nl = capacity, a1.N_LEGS
         self.n = 0
         self.filter_on = filter_on
@@ -60,13 +77,7 @@ class EpisodeTrace:
         self.qp_build_us = np.full(c, np.nan)
         self.qp_solve_us = np.full(c, np.nan)
         self.qp_iterations = np.full(c, -1, np.int32)
-        self.barrier_h_m = np.full((c, nl), np.nan)  # phase-profile ECBF h per foot (nan in stance / no ECBF)
-        self.barrier_he_mps = np.full((c, nl), np.nan)
-        self.barrier_obstacle_h_m = np.full((c, nl), np.nan)  # obstacle ECBF h per foot (the filter's model)
-        self.barrier_obstacle_he_mps = np.full((c, nl), np.nan)
-        # [m/s²] ECBF condition psi = hdot_e + a2 h_e the filter planned (its vdot), per family and foot
-        self.barrier_psi_planned = np.full((c, nl), np.nan)
-        self.barrier_obstacle_psi_planned = np.full((c, nl), np.nan)
+        self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
         self.vdot_filter = np.full((c, a1.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
         self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
@@ -83,8 +94,6 @@ class EpisodeTrace:
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
         self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
         self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
-        self.barrier_psi_realized = np.zeros((0, nl))  # [m/s²] realised ECBF condition, per family
-        self.barrier_obstacle_psi_realized = np.zeros((0, nl))
         # --- derived by finalize() (empty until then)
         self.tick_parts_us = np.zeros((0, len(TICK_PARTS)))  # [µs]
         self.base_pos_w = np.zeros((0, 3))  # [m] trunk origin
@@ -105,7 +114,7 @@ class EpisodeTrace:
     def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
                barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
         """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
-        outputs). ``barriers``: the filter's (phase-profile ECBF, obstacle ECBF), either may be None."""
+        outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
         self.t_s[k] = t
         self.qpos_mj[k] = qpos
         self.qvel_mj[k] = qvel
@@ -134,15 +143,11 @@ class EpisodeTrace:
                     self.qp_iterations[k] = sol.iterations
             self.vdot_filter[k] = fres.vdot
             self.ecbf_margin_mps2[k] = fres.ecbf_margin_mps2
-            ecbf, obstacle_ecbf = barriers
-            if ecbf is not None:
-                self.barrier_h_m[k] = ecbf.h
-                self.barrier_he_mps[k] = ecbf.h_e
-                self.barrier_psi_planned[k] = ecbf.psi_planned if not fres.used_fallback else np.nan
-            if obstacle_ecbf is not None:
-                self.barrier_obstacle_h_m[k] = obstacle_ecbf.h
-                self.barrier_obstacle_he_mps[k] = obstacle_ecbf.h_e
-                self.barrier_obstacle_psi_planned[k] = obstacle_ecbf.psi_planned if not fres.used_fallback else np.nan
+            for barrier in barriers:
+                log = self.barriers[barrier.name]
+                log.h_m[k] = barrier.h
+                log.he_mps[k] = barrier.h_e
+                log.psi_planned_mps2[k] = barrier.psi_planned if not fres.used_fallback else np.nan
         self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
@@ -204,6 +209,11 @@ class EpisodeTrace:
         self._derived_names = tuple(derived)
         self.finalized = True
 
+    def barrier_h_min(self, ticks: slice = slice(None)) -> np.ndarray:
+        """(n, 4) the smallest h [m] over the barrier families per tick and leg (nan where none is active)."""
+        rows = self.t_s[ticks].shape[0]
+        return _fmin([log.h_m[ticks] for log in self.barriers.values()], rows)
+
     # ------------------------------------------------------------------------------------------ derived
     def base_rpy(self) -> np.ndarray:
         """(n, 3) roll, pitch, yaw [rad] of the trunk (ZYX convention)."""
@@ -243,25 +253,25 @@ class EpisodeTrace:
             cols[f"{leg}_contact_point_speed_mps"] = slip[:, i]
             _put(cols, leg + "_grf_plant_{}_w_n", "xyz", d["grf_plant_w"][:, i])
             _put(cols, leg + "_grf_filter_{}_w_n", "xyz", self.grf_filter_w[t, i])
-            cols[f"{leg}_barrier_h_m"] = self.barrier_h_m[t, i]
-            cols[f"{leg}_barrier_he_mps"] = self.barrier_he_mps[t, i]
+            cols[f"{leg}_barrier_h_m"] = self.barrier_h_min(t)[:, i]
             cols[f"{leg}_clearance_m"] = d["clearance_m"][:, i]
             cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
-            cols[f"{leg}_barrier_obstacle_h_m"] = self.barrier_obstacle_h_m[t, i]
+            for name, log in self.barriers.items():
+                cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
+                cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
         residual = _rows(self.model_residual, k0, k1, a1.NV)
         cols["residual_trunk_force_n"] = np.linalg.norm(residual[:, :3], axis=1)
         cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
         cols["residual_joint_nm_max"] = np.abs(residual[:, 6:]).max(axis=1)
         acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, a1.N_LEGS, 3), axis=2)
-        psi_real = _rows(self.barrier_psi_realized, k0, k1, a1.N_LEGS)
-        psi_obstacle_real = _rows(self.barrier_obstacle_psi_realized, k0, k1, a1.N_LEGS)
+        psi_planned = _fmin([log.psi_planned_mps2[t] for log in self.barriers.values()], k1 - k0)
+        psi_real = _fmin([_rows(log.psi_realized_mps2, k0, k1, a1.N_LEGS) for log in self.barriers.values()], k1 - k0)
         for i, leg in enumerate(a1.LEGS):
             cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
-            cols[f"{leg}_barrier_psi_planned_mps2"] = np.fmin(self.barrier_psi_planned[t, i],
-                                                              self.barrier_obstacle_psi_planned[t, i])
-            cols[f"{leg}_barrier_psi_realized_mps2"] = np.fmin(psi_real[:, i], psi_obstacle_real[:, i])
+            cols[f"{leg}_barrier_psi_planned_mps2"] = psi_planned[:, i]
+            cols[f"{leg}_barrier_psi_realized_mps2"] = psi_real[:, i]
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
         cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
@@ -276,6 +286,14 @@ class EpisodeTrace:
         cols["tick_us"] = self.tick_us[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
         return pd.DataFrame(cols)
+
+
+def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:
+    """Element-wise minimum ignoring nan of (n, 4) arrays (all nan when there are none)."""
+    out = np.full((n, a1.N_LEGS), np.nan)
+    for a in arrays:
+        out = np.fmin(out, a)
+    return out
 
 
 def _rows(values: np.ndarray, k0: int, k1: int, *shape: int) -> np.ndarray:

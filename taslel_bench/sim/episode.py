@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.control.nominal import NominalController
-from taslel_bench.filter.constraints import TickInputs
+from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import SafetyFilter
 from taslel_bench.interfaces import Estimator, Proprioception, Scenario
 from taslel_bench.metrics import residuals
@@ -167,8 +167,9 @@ class Episode:
 
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         s, m, d, br = self.s, self.m, self.d, self.bridge
+        barriers = self.filter.barriers if self.filter is not None else []
         trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                             nsensordata=self.m.nsensordata)
+                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in barriers])
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
@@ -183,7 +184,6 @@ class Episode:
         mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         need_model = self.filter is not None
         res.extras["warmup_s"] = self._warm_up(q, v)
-        barriers = (self.filter.ecbf, self.filter.obstacle_ecbf) if self.filter is not None else (None, None)
         cos_tilt_min = math.cos(s.fall_tilt_rad)
         vmax_sq = s.max_speed**2
         t0_plant = d.time

@@ -12,173 +12,21 @@ import sys
 import traceback
 from pathlib import Path
 
-import mujoco
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from taslel_bench.config.settings import health_limits
 from taslel_bench.config.validate import (
-    ConfigError,
-    build_axis,
-    build_backend,
-    build_model,
-    plant_options,
     validate,
 )
-from taslel_bench.control.gait import GaitParams
-from taslel_bench.control.nominal import NominalController, PDGains
-from taslel_bench.filter.robust import RobustSettings
-from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
-from taslel_bench.interfaces import Estimator, QPBackend, Scenario
-from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.metrics.residuals import alarm_events
 from taslel_bench.metrics.summary import summarize
-from taslel_bench.plant.build import a1_spec, compile_plant, mjcf_spec
 from taslel_bench.plant.comparison import plant_vs_model
-from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.record import qpset, run_files
 from taslel_bench.robot import a1
-from taslel_bench.sim.episode import Episode, EpisodeResult, EpisodeSettings
+from taslel_bench.sim.build import Built
+from taslel_bench.sim.episode import EpisodeResult
 from taslel_bench.sweep.aggregate import OVERRIDE_SEPARATOR
-
-FRICTION_CHECK_TOL = 1e-9
-
-
-class FrictionMismatch(RuntimeError):
-    """The plant's foot contacts do not get the friction the scenario configured."""
-
-
-def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    """The MuJoCo plant: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other edits.
-    The terrain draws from its own stream of the seed (a random terrain does not shift the initial-state
-    draws of ``rng``)."""
-    options = plant_options(cfg)
-    spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options) if cfg.robot.get("plant_mjcf") else a1_spec(options)
-    scenario.terrain.build(spec, terrain_rng(int(cfg.seed)))
-    scenario.build(spec, rng)
-    return compile_plant(spec)
-
-
-def terrain_rng(seed: int) -> np.random.Generator:
-    """The generator a random terrain draws from: a stream of ``seed`` apart from the run's main one."""
-    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(TERRAIN_STREAM,)))
-
-
-TERRAIN_STREAM = 1
-
-
-def build_controller(cfg: DictConfig) -> NominalController:
-    c = cfg.controller
-    gait = GaitParams(
-        period_s=float(c.period),
-        duty=float(c.duty),
-        swing_height_m=float(c.swing_height),
-        stand_height_m=float(c.stand_height),
-        speed_mps=float(c.speed),
-    )
-    return NominalController(
-        gait,
-        PDGains(kp=float(c.kp), kd=float(c.kd)),
-        stand_duration_s=float(c.stand_duration),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
-        fd_dt_s=1.0 / float(cfg.control_rate_hz),
-    )
-
-
-def filter_settings(cfg: DictConfig) -> FilterSettings:
-    f = cfg.filter
-    return FilterSettings(
-        enabled=bool(f.enabled),
-        regularization=float(f.regularization),
-        regularization_target=str(f.get("regularization_target", "nominal")),
-        lambda_min_n=float(f.lambda_min_n),
-        contact_velocity_gain=float(f.get("contact_velocity_gain", 0.0)),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
-        ecbf_enabled=bool(f.ecbf.enabled),
-        ecbf_alpha1=float(f.ecbf.alpha1),
-        ecbf_alpha2=float(f.ecbf.alpha2),
-        fallback=str(f.fallback),
-        stance_source=str(f.stance_source),
-        formulation=str(f.get("formulation", "full")),
-        robust=robust_settings(f.get("robust")),
-        control_dt_s=1.0 / float(cfg.control_rate_hz),
-    )
-
-
-def robust_settings(node) -> RobustSettings:
-    """``filter.robust`` (absent: off)."""
-    if not node:
-        return RobustSettings()
-    return RobustSettings(enabled=bool(node.get("enabled", False)),
-                          **{k: float(v) for k, v in node.items() if k != "enabled"})
-
-
-def episode_settings(cfg: DictConfig) -> EpisodeSettings:
-    return EpisodeSettings(
-        duration_s=float(cfg.duration),
-        physics_dt_s=1.0 / float(cfg.physics_rate_hz),
-        control_dt_s=1.0 / float(cfg.control_rate_hz),
-        fall_height_m=float(cfg.robot.fall_height_m),
-        fall_tilt_rad=float(np.radians(cfg.robot.fall_tilt_deg)),
-        init_joint_noise_rad=float(cfg.robot.init_joint_noise_rad),
-        init_base_vel_noise_mps=float(cfg.robot.init_base_vel_noise_mps),
-        filter_start_s=float(cfg.filter.get("start_time", 0.0)),
-    )
-
-
-def check_friction(episode: Episode) -> list[tuple[str, float, float]]:
-    """Compare, on the initial stand, the friction of every foot contact (MuJoCo contact data) with the
-    scenario's friction under that foot. Raises :class:`FrictionMismatch`; returns the triples checked."""
-    m, d = episode.m, episode.d
-    checked = []
-    for foot, mu_plant in measure_contact_friction(m, d):
-        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
-        mu_cfg = episode.terrain.friction_at(d.site_xpos[site, :2])
-        checked.append((foot, mu_plant, mu_cfg))
-        if abs(mu_plant - mu_cfg) > FRICTION_CHECK_TOL:
-            raise FrictionMismatch(
-                f"scenario {episode.scenario.name!r} configures friction {mu_cfg} under {foot} but the plant "
-                f"contact has {mu_plant} (check terrain geom priority and friction)"
-            )
-    if not checked:
-        raise FrictionMismatch("no foot touches the ground in the initial stand; cannot check friction")
-    return checked
-
-
-class Built:
-    """Everything one run needs, built (and validated) before simulation starts."""
-
-    def __init__(self, cfg: DictConfig) -> None:
-        validate(cfg)
-        self.cfg = cfg
-        self.rng = np.random.default_rng(int(cfg.seed))
-        self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
-        self.estimator: Estimator = build_axis(cfg, "estimator")
-        fs = filter_settings(cfg)
-        self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
-        self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
-        self.controller = build_controller(cfg)
-        self.filter = (
-            SafetyFilter(fs, self.backend, self.scenario.clearance_profile(), self.scenario.terrain.logs())
-            if self.backend is not None
-            else None
-        )
-        self.episode = Episode(
-            episode_settings(cfg),
-            self.scenario,
-            self.mj_model,
-            self.controller,
-            self.filter,
-            self.estimator,
-            self.rng,
-            stance_from_contact=fs.stance_source == "contact",
-            model=build_model(cfg),
-        )
-        self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
-
-
-def health_limits(cfg: DictConfig) -> HealthLimits:
-    h = cfg.get("health") or {}
-    return HealthLimits(**{k: float(v) for k, v in h.items()})
 
 
 def file_sha256(path: Path) -> str:
@@ -351,7 +199,8 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
         return None
     from taslel_bench.record.mcap import McapStream
 
-    sink = _GuardedSink(McapStream(out_dir))
+    names = [b.name for b in built.filter.barriers] if built.filter is not None else []
+    sink = _GuardedSink(McapStream(out_dir, names))
     built.episode.chunk_sink = sink
     built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
     return sink
@@ -414,4 +263,4 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
-__all__ = ["Built", "ConfigError", "FrictionMismatch", "check_friction", "run"]
+__all__ = ["record_job_error", "run"]

@@ -1,5 +1,5 @@
 """``python -m taslel_bench.seed_scan --seeds 0:2000 [overrides] --out results/startup/seed_scan.md``: build
-every seed's run exactly as a run would (:class:`taslel_bench.sim.run.Built`: initial state, friction check on
+every seed's run exactly as a run would (:class:`taslel_bench.sim.build.Built`: initial state, friction check on
 that state) and simulate its stand; report the seeds that cannot start or fall while standing.
 
 A seed *starts* when building raises nothing (the friction check found at least one foot contact, with the
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from taslel_bench.record import run_files
-from taslel_bench.sim.run import Built
+from taslel_bench.sim.build import Built
 from taslel_bench.util.machine import machine_info
 
 

@@ -1,0 +1,104 @@
+"""Everything one run needs, built from a validated config before anything is simulated: the axes, the
+MuJoCo plant (URDF or another MJCF, the terrain, the scenario's edits), the controller and its model, the
+safety filter with its barrier list, and the episode; the plant's foot friction is checked against the
+terrain's before the first step."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from omegaconf import DictConfig
+
+from taslel_bench.config.axes import build_axis, build_backend
+from taslel_bench.config.settings import (
+    build_barriers,
+    build_controller,
+    build_model,
+    episode_settings,
+    filter_settings,
+    plant_options,
+)
+from taslel_bench.config.validate import validate
+from taslel_bench.filter.safety_filter import SafetyFilter
+from taslel_bench.interfaces import Estimator, QPBackend, Scenario
+from taslel_bench.plant.build import a1_spec, compile_plant, mjcf_spec
+from taslel_bench.plant.contacts import measure_contact_friction
+from taslel_bench.sim.episode import Episode
+
+FRICTION_CHECK_TOL = 1e-9
+
+
+class FrictionMismatch(RuntimeError):
+    """The plant's foot contacts do not get the friction the scenario configured."""
+
+
+def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
+    """The MuJoCo plant: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other edits.
+    The terrain draws from its own stream of the seed (a random terrain does not shift the initial-state
+    draws of ``rng``)."""
+    options = plant_options(cfg)
+    spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options) if cfg.robot.get("plant_mjcf") else a1_spec(options)
+    scenario.terrain.build(spec, terrain_rng(int(cfg.seed)))
+    scenario.build(spec, rng)
+    return compile_plant(spec)
+
+
+def terrain_rng(seed: int) -> np.random.Generator:
+    """The generator a random terrain draws from: a stream of ``seed`` apart from the run's main one."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(TERRAIN_STREAM,)))
+
+
+TERRAIN_STREAM = 1
+
+
+def check_friction(episode: Episode) -> list[tuple[str, float, float]]:
+    """Compare, on the initial stand, the friction of every foot contact (MuJoCo contact data) with the
+    scenario's friction under that foot. Raises :class:`FrictionMismatch`; returns the triples checked."""
+    m, d = episode.m, episode.d
+    checked = []
+    for foot, mu_plant in measure_contact_friction(m, d):
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
+        mu_cfg = episode.terrain.friction_at(d.site_xpos[site, :2])
+        checked.append((foot, mu_plant, mu_cfg))
+        if abs(mu_plant - mu_cfg) > FRICTION_CHECK_TOL:
+            raise FrictionMismatch(
+                f"scenario {episode.scenario.name!r} configures friction {mu_cfg} under {foot} but the plant "
+                f"contact has {mu_plant} (check terrain geom priority and friction)"
+            )
+    if not checked:
+        raise FrictionMismatch("no foot touches the ground in the initial stand; cannot check friction")
+    return checked
+
+
+class Built:
+    """Everything one run needs, built (and validated) before simulation starts."""
+
+    def __init__(self, cfg: DictConfig) -> None:
+        validate(cfg)
+        self.cfg = cfg
+        self.rng = np.random.default_rng(int(cfg.seed))
+        self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
+        self.estimator: Estimator = build_axis(cfg, "estimator")
+        fs = filter_settings(cfg)
+        self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
+        self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
+        self.controller = build_controller(cfg)
+        self.filter = (
+            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()))
+            if self.backend is not None
+            else None
+        )
+        self.episode = Episode(
+            episode_settings(cfg),
+            self.scenario,
+            self.mj_model,
+            self.controller,
+            self.filter,
+            self.estimator,
+            self.rng,
+            stance_from_contact=fs.stance_source == "contact",
+            model=build_model(cfg),
+        )
+        self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
