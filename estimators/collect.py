@@ -6,9 +6,9 @@ PD at 1 kHz) on a flat floor whose friction and plant parameters are drawn by
 joint order; tau is the torque commanded on the previous tick, exactly what the core episode runner passes
 as ``Proprioception.tau_joints``) are sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples from
 ``first_window_s`` on, are labelled with the floor friction. Splits are by episode (train / val / test
-from the training ranges, ``shifted`` from :data:`SHIFTED_RANGES`). A fall (trunk below 0.15 m or tilted
-more than ~53 deg) ends the episode; windows ending later than ``fall_margin_s`` before the fall are
-dropped. Episodes run in parallel processes; the throughput is printed in env-steps/s (physics steps).
+from the training ranges, ``shifted`` from :data:`SHIFTED_RANGES`). Episodes run in the core episode loop
+(:mod:`taslel_bench.api`), so a fall is the benchmark's (:mod:`taslel_bench.sim.terminations`) and ends the
+episode; windows ending later than ``fall_margin_s`` before the fall are dropped. Episodes run in parallel processes; the throughput is printed in env-steps/s (physics steps).
 
 With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
 the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
@@ -36,7 +36,6 @@ import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
@@ -44,14 +43,12 @@ from estimators.randomisation import (
     PLANT_FACTORS,
     TRAIN_RANGES,
     EpisodeParams,
-    PlantRandomiser,
     draw,
     ranges_dict,
     shifted_ranges,
 )
 from taslel_bench import api
-from taslel_bench.plant.build import PlantOptions, build_plant
-from taslel_bench.robot import a1
+from taslel_bench.interfaces import FrictionEstimate, Plane, Proprioception, Terrain
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -63,8 +60,6 @@ class EpisodeConfig:
     stand_duration_s: float = 0.5  # [s] standing before the trot starts
     first_window_s: float = 0.3  # [s] earliest window start
     stride: int = 4  # [samples] between window starts
-    fall_height_m: float = 0.15  # [m] trunk origin height below which the robot has fallen
-    fall_upz: float = 0.6  # [-] trunk z axis . world z below which the robot has fallen
     fall_margin_s: float = 0.3  # [s] windows must end this long before a fall
     filter_overrides: tuple[str, ...] = ()  # Hydra overrides of the project config for the safety filter
 
@@ -85,94 +80,86 @@ class EpisodeResult:
 _WORKER: dict[str, object] = {}
 
 
-def _worker_model() -> tuple[mujoco.MjModel, api.StateBridge, PlantRandomiser]:
-    if "model" not in _WORKER:
-        m = build_plant(PlantOptions())
-        _WORKER.update(model=m, bridge=api.StateBridge(m), rand=PlantRandomiser(m))
-    return _WORKER["model"], _WORKER["bridge"], _WORKER["rand"]  # type: ignore[return-value]
-
-
-def _worker_filter(overrides: tuple[str, ...]) -> api.SafetyFilter:
-    """A fresh safety filter (one instance per episode), config composed once per worker process."""
-    key = ("filter_cfg", overrides)
+def _worker_config(overrides: tuple[str, ...]):
+    """The project config (composed once per worker process and overrides)."""
+    key = ("cfg", overrides)
     if key not in _WORKER:
         _WORKER[key] = api.compose(list(overrides))
-    return api.build_safety_filter(_WORKER[key])  # type: ignore[arg-type]
+    return _WORKER[key]
+
+
+class WindowSampler:
+    """The estimator slot of the core episode loop, used to record: every ``every_ticks`` control ticks it
+    keeps the 36 features the loop hands estimators (q, qdot, the torque applied on the previous tick), and
+    it gives the filter the friction ``mu`` [-] the episode assumes."""
+
+    name = "window_sampler"
+
+    def __init__(self, every_ticks: int, mu: float) -> None:
+        self.every, self.mu = every_ticks, mu
+        self.reset()
+
+    def reset(self) -> None:
+        self.samples: list[np.ndarray] = []
+        self._tick = 0
+
+    def step(self, obs: Proprioception) -> FrictionEstimate:
+        if self._tick % self.every == 0:
+            self.samples.append(sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints))
+        self._tick += 1
+        return FrictionEstimate(self.mu)
+
+
+def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False):
+    """The core episode of one draw: the flat floor with the draw's friction and plant perturbation, the
+    draw's gait and gains, the benchmark's loop and fall rule (``api.episode_settings`` of the project config),
+    no initial-state noise, ``estimator`` in the estimator slot, the project's safety filter if ``filtered``."""
+    project = _worker_config(cfg.filter_overrides)
+    world = api.StaticWorld(Terrain((Plane(p.friction),)), perturbation=p.perturbation())
+    plant = api.build_plant(world, api.PlantOptions(timestep_s=cfg.timestep_s), seed=p.seed)
+    gait = api.GaitParams(period_s=p.period_s, swing_height_m=p.swing_height_m, speed_mps=p.speed_mps)
+    controller = api.NominalController(gait, api.PDGains(kp=100.0 * p.kp_scale, kd=3.0 * p.kd_scale),
+                                       stand_duration_s=cfg.stand_duration_s, fd_dt_s=cfg.timestep_s)
+    settings = replace(api.episode_settings(project), duration_s=cfg.duration_s - cfg.stand_duration_s,
+                       physics_dt_s=cfg.timestep_s, control_dt_s=cfg.timestep_s, init_joint_noise_rad=0.0,
+                       init_base_vel_noise_mps=0.0, filter_start_s=0.0, analyse=False)
+    safety_filter = api.build_safety_filter(project) if filtered else None
+    return api.Episode(settings, world, plant, controller, safety_filter, estimator, np.random.default_rng(p.seed))
 
 
 def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
                 filter_mu: float | None = None) -> EpisodeResult:
-    """Simulate one episode and cut its windows (see the module docstring); ``filtered``: run the safety
-    filter between the nominal controller and the plant, assuming friction ``filter_mu`` [-] (None: the
-    true floor friction)."""
+    """Simulate one episode (:func:`build_episode`) and cut its windows (see the module docstring);
+    ``filtered``: the safety filter between the nominal controller and the plant, assuming friction
+    ``filter_mu`` [-] (None: the true floor friction)."""
     wall0 = time.perf_counter()
-    m, br, rand = _worker_model()
-    rand.apply(p)
-    m.opt.timestep = cfg.timestep_s
-    gp = api.GaitParams(period_s=p.period_s, swing_height_m=p.swing_height_m, speed_mps=p.speed_mps)
-    gains = api.PDGains(kp=100.0 * p.kp_scale, kd=3.0 * p.kd_scale)
-    ctl = api.NominalController(
-        gp, gains, stand_duration_s=cfg.stand_duration_s, fd_dt_s=cfg.timestep_s
-    )
-    d = mujoco.MjData(m)
-    a = br.free_qadr
-    d.qpos[a : a + 3] = [0.0, 0.0, gp.stand_height_m + a1.FOOT_RADIUS_M]
-    d.qpos[a + 3 : a + 7] = [1.0, 0.0, 0.0, 0.0]
-    d.qpos[br.joint_qadr] = ctl.stand_configuration()
-    mujoco.mj_forward(m, d)
-    sf = _worker_filter(cfg.filter_overrides) if filtered else None
-    model = api.A1Model() if filtered else None
-    q_pin = np.zeros(a1.NQ)
-    v_pin = np.zeros(a1.NV)
-    failures = 0
     if not filtered:
         filter_mu = float("nan")
     elif filter_mu is None:
         filter_mu = float(p.friction)
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
-
-    n_steps = round(cfg.duration_s / cfg.timestep_s)
-    every = round(WINDOW_DT_S / cfg.timestep_s)
-    samples: list[np.ndarray] = []
-    fall_t = float("nan")
-    tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] torque commanded on the previous tick (0 at t = 0)
-    k = 0
-    for k in range(n_steps):
-        t = k * cfg.timestep_s
-        qj, qd = d.qpos[br.joint_qadr], d.qvel[br.joint_dadr]
-        if k % every == 0:  # sampled before this tick's control, as the episode runner feeds estimators
-            samples.append(sample_vector(qj, qd, tau_prev))
-            qx, qy = d.qpos[a + 4], d.qpos[a + 5]
-            upz = 1.0 - 2.0 * (qx * qx + qy * qy)
-            if d.qpos[a + 2] < cfg.fall_height_m or upz < cfg.fall_upz or not np.isfinite(d.qpos).all():
-                fall_t = t
-                break
-        u = ctl.compute(t, qj, qd)
-        if sf is not None:  # as taslel_bench.sim.episode feeds the filter each tick
-            gs = ctl.gait_state(t)
-            br.q_pin(d.qpos, q_pin)
-            br.v_pin(d.qpos, d.qvel, v_pin)
-            model.update(q_pin, v_pin)  # type: ignore[union-attr]
-            inputs = api.TickInputs(model, v_pin, gs.in_stance, filter_mu, gs.swing_phase, gs.swing_phase_rate)
-            fres = sf.filter(inputs, u)
-            failures += int(fres.used_fallback)
-            u = fres.u
-        br.ctrl_mj(u, d.ctrl)
-        tau_prev = u
-        mujoco.mj_step(m, d)
-
-    s = np.stack(samples)
-    first = int(np.ceil(cfg.first_window_s / WINDOW_DT_S))
-    last_end = len(s) if np.isnan(fall_t) else int((fall_t - cfg.fall_margin_s) / WINDOW_DT_S)
-    starts = list(range(first, last_end - WINDOW_STEPS + 1, cfg.stride))
-    w = (
-        np.stack([s[i : i + WINDOW_STEPS] for i in starts])
-        if starts
-        else np.zeros((0, WINDOW_STEPS, N_FEATURES), np.float32)
-    )
-    return EpisodeResult(w, not np.isnan(fall_t), fall_t, k + 1, p, filtered, failures, filter_mu,
+    sampler = WindowSampler(round(WINDOW_DT_S / cfg.timestep_s), filter_mu if filtered else float(p.friction))
+    episode = build_episode(p, cfg, sampler, filtered)
+    res = episode.run()
+    if res.status == "error":
+        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {res.message}")
+    fall_t = res.time_to_fall_s if res.fell else float("nan")
+    failures = int(res.trace.qp_fallback[: res.trace.n].sum())
+    return EpisodeResult(_cut_windows(np.stack(sampler.samples), fall_t, cfg), res.fell, fall_t,
+                         res.n_ticks * episode.physics_per_tick, p, filtered, failures, filter_mu,
                          time.perf_counter() - wall0)
+
+
+def _cut_windows(samples: np.ndarray, fall_t: float, cfg: EpisodeConfig) -> np.ndarray:
+    """Windows of WINDOW_STEPS samples, one every ``cfg.stride`` samples from ``first_window_s`` on, each
+    ending at least ``fall_margin_s`` before a fall (``fall_t`` [s], nan: none)."""
+    first = int(np.ceil(cfg.first_window_s / WINDOW_DT_S))
+    last_end = len(samples) if np.isnan(fall_t) else int((fall_t - cfg.fall_margin_s) / WINDOW_DT_S)
+    starts = list(range(first, last_end - WINDOW_STEPS + 1, cfg.stride))
+    if not starts:
+        return np.zeros((0, WINDOW_STEPS, N_FEATURES), np.float32)
+    return np.stack([samples[i : i + WINDOW_STEPS] for i in starts])
 
 
 def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float | None]) -> EpisodeResult:

@@ -1,20 +1,21 @@
-"""Domain randomisation for data collection: ranges, per-episode draws, and how they edit the plant.
+"""Domain randomisation for data collection: ranges and per-episode draws.
 
 One :class:`EpisodeParams` is one world + one controller: ground friction, what a real A1 varies
-(payload / trunk mass and CoM, joint damping and friction loss, motor strength) and what the operator
-varies (PD gains, commanded speed, gait period, swing height). Draws use an explicit
-``np.random.Generator``. The *shifted* ranges lie outside the training ranges (heavier payload, larger CoM
-offset, more joint damping / friction loss, weaker motors) to test robustness, never friction itself.
+(payload / trunk mass and CoM, joint damping and friction loss, motor strength: the fields of the core's
+:class:`taslel_bench.interfaces.PlantPerturbation`, with its names and units, applied by its one
+implementation) and what the operator varies (PD gains, commanded speed, gait period, swing height). Draws
+use an explicit ``np.random.Generator``. The *shifted* ranges lie outside the training ranges (heavier
+payload, larger CoM offset, more joint damping / friction loss, weaker motors) to test robustness, never
+friction itself.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
 
-import mujoco
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.interfaces import PlantPerturbation
 
 Range = tuple[float, float]
 
@@ -25,10 +26,10 @@ class Ranges:
 
     friction: Range = (0.1, 1.2)  # [-] floor Coulomb coefficient
     trunk_mass_scale: Range = (0.85, 1.5)  # [-] trunk mass and inertia x scale (payload up to +3 kg)
-    com_shift_xy_m: Range = (-0.03, 0.03)  # [m] trunk CoM offset, x and y drawn independently
+    trunk_com_shift_xy_m: Range = (-0.03, 0.03)  # [m] trunk CoM offset, x and y drawn independently
     joint_damping: Range = (0.0, 0.2)  # [N·m·s/rad] every leg joint
     joint_frictionloss: Range = (0.0, 0.3)  # [N·m] every leg joint
-    motor_strength: Range = (0.85, 1.1)  # [-] actuator gear scale (delivered / commanded torque)
+    motor_strength_scale: Range = (0.85, 1.1)  # [-] actuator gear scale (delivered / commanded torque)
     kp_scale: Range = (0.8, 1.2)  # [-] x nominal Kp (100 N·m/rad)
     kd_scale: Range = (0.7, 1.3)  # [-] x nominal Kd (3 N·m·s/rad)
     speed_mps: Range = (0.1, 0.5)  # [m/s] commanded forward speed
@@ -41,10 +42,10 @@ TRAIN_RANGES = Ranges()
 # Outside the training ranges in every plant-side quantity (friction and operator settings unchanged).
 SHIFTED_RANGES = Ranges(
     trunk_mass_scale=(1.6, 1.8),
-    com_shift_xy_m=(0.03, 0.05),  # magnitude; the sign is drawn separately
+    trunk_com_shift_xy_m=(0.03, 0.05),  # magnitude; the sign is drawn separately
     joint_damping=(0.2, 0.35),
     joint_frictionloss=(0.3, 0.5),
-    motor_strength=(0.75, 0.85),
+    motor_strength_scale=(0.75, 0.85),
 )
 
 
@@ -55,16 +56,26 @@ class EpisodeParams:
     seed: int
     friction: float
     trunk_mass_scale: float
-    com_shift_x_m: float
-    com_shift_y_m: float
+    trunk_com_shift_x_m: float
+    trunk_com_shift_y_m: float
     joint_damping: float
     joint_frictionloss: float
-    motor_strength: float
+    motor_strength_scale: float
     kp_scale: float
     kd_scale: float
     speed_mps: float
     period_s: float
     swing_height_m: float
+
+    def perturbation(self) -> PlantPerturbation:
+        """The plant edits of this draw (on the URDF's values, which are 0 for the joint losses)."""
+        return PlantPerturbation(
+            trunk_mass_scale=self.trunk_mass_scale,
+            trunk_com_shift_m=(self.trunk_com_shift_x_m, self.trunk_com_shift_y_m, 0.0),
+            joint_damping=(self.joint_damping,) * 12,
+            joint_frictionloss=(self.joint_frictionloss,) * 12,
+            motor_strength_scale=self.motor_strength_scale,
+        )
 
     def as_row(self) -> list[float]:
         return [float(getattr(self, f.name)) for f in fields(self)]
@@ -74,7 +85,8 @@ class EpisodeParams:
         return [f.name for f in fields(EpisodeParams)]
 
 
-PLANT_FACTORS = ("trunk_mass_scale", "com_shift_xy_m", "joint_damping", "joint_frictionloss", "motor_strength")
+PLANT_FACTORS = ("trunk_mass_scale", "trunk_com_shift_xy_m", "joint_damping", "joint_frictionloss",
+                 "motor_strength_scale")
 
 
 def shifted_ranges(factors: tuple[str, ...] | list[str] = PLANT_FACTORS) -> Ranges:
@@ -86,14 +98,14 @@ def shifted_ranges(factors: tuple[str, ...] | list[str] = PLANT_FACTORS) -> Rang
     if not factors:
         raise ValueError(f"give at least one plant factor to shift; valid factors: {', '.join(PLANT_FACTORS)}")
     moved = {f: getattr(SHIFTED_RANGES, f) for f in factors}
-    if "com_shift_xy_m" not in moved:
-        moved["com_shift_xy_m"] = (0.0, TRAIN_RANGES.com_shift_xy_m[1])
+    if "trunk_com_shift_xy_m" not in moved:
+        moved["trunk_com_shift_xy_m"] = (0.0, TRAIN_RANGES.trunk_com_shift_xy_m[1])
     return replace(TRAIN_RANGES, **moved)
 
 
 def draw(rng: np.random.Generator, ranges: Ranges, seed: int, symmetric_com: bool = True,
          plant_beta: float = 1.0) -> EpisodeParams:
-    """Draw one episode. ``symmetric_com=False`` reads ``com_shift_xy_m`` as a magnitude range and draws
+    """Draw one episode. ``symmetric_com=False`` reads ``trunk_com_shift_xy_m`` as a magnitude range and draws
     the sign (used for the shifted set, whose offsets lie outside the symmetric training band).
 
     ``plant_beta`` = a: the :data:`PLANT_FACTORS` are drawn as lo + (hi - lo) x Beta(a, a) instead of
@@ -110,62 +122,24 @@ def draw(rng: np.random.Generator, ranges: Ranges, seed: int, symmetric_com: boo
         return u(r) if plant_beta == 1.0 else float(r[0] + (r[1] - r[0]) * rng.beta(plant_beta, plant_beta))
 
     if symmetric_com:
-        cx, cy = plant(ranges.com_shift_xy_m), plant(ranges.com_shift_xy_m)
+        cx, cy = plant(ranges.trunk_com_shift_xy_m), plant(ranges.trunk_com_shift_xy_m)
     else:
-        cx, cy = (plant(ranges.com_shift_xy_m) * float(rng.choice([-1.0, 1.0])) for _ in range(2))
+        cx, cy = (plant(ranges.trunk_com_shift_xy_m) * float(rng.choice([-1.0, 1.0])) for _ in range(2))
     return EpisodeParams(
         seed=seed,
         friction=u(ranges.friction),
         trunk_mass_scale=plant(ranges.trunk_mass_scale),
-        com_shift_x_m=cx,
-        com_shift_y_m=cy,
+        trunk_com_shift_x_m=cx,
+        trunk_com_shift_y_m=cy,
         joint_damping=plant(ranges.joint_damping),
         joint_frictionloss=plant(ranges.joint_frictionloss),
-        motor_strength=plant(ranges.motor_strength),
+        motor_strength_scale=plant(ranges.motor_strength_scale),
         kp_scale=u(ranges.kp_scale),
         kd_scale=u(ranges.kd_scale),
         speed_mps=u(ranges.speed_mps),
-        period_s=u(ranges.period_s),
+        period_s=round(u(ranges.period_s), 3),  # a whole number of 1 kHz ticks: the controller's tables apply
         swing_height_m=u(ranges.swing_height_m),
     )
-
-
-class PlantRandomiser:
-    """Applies :class:`EpisodeParams` to a compiled plant in place (no recompilation per episode).
-
-    Keeps the nominal values of every field it touches so each episode starts from the nominal plant.
-    """
-
-    def __init__(self, model: mujoco.MjModel, floor_geom: str = "floor") -> None:
-        self.model = model
-        self.floor_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, floor_geom)
-        self.trunk_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
-        if self.floor_id < 0 or self.trunk_id < 0:
-            raise ValueError(f"plant has no geom {floor_geom!r} or body {a1.TRUNK_BODY!r}")
-        leg_joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in a1.JOINT_NAMES]
-        self.leg_dofs = np.array([model.jnt_dofadr[j] for j in leg_joints])
-        self._nominal = {
-            "body_mass": model.body_mass.copy(),
-            "body_inertia": model.body_inertia.copy(),
-            "body_ipos": model.body_ipos.copy(),
-            "dof_damping": model.dof_damping.copy(),
-            "dof_frictionloss": model.dof_frictionloss.copy(),
-            "actuator_gear": model.actuator_gear.copy(),
-            "geom_friction": model.geom_friction.copy(),
-        }
-
-    def apply(self, p: EpisodeParams) -> None:
-        m, b = self.model, self.trunk_id
-        for name, value in self._nominal.items():
-            getattr(m, name)[:] = value
-        m.geom_friction[self.floor_id, 0] = p.friction
-        m.body_mass[b] *= p.trunk_mass_scale
-        m.body_inertia[b] *= p.trunk_mass_scale
-        m.body_ipos[b, 0] += p.com_shift_x_m
-        m.body_ipos[b, 1] += p.com_shift_y_m
-        m.dof_damping[self.leg_dofs] = p.joint_damping
-        m.dof_frictionloss[self.leg_dofs] = p.joint_frictionloss
-        m.actuator_gear[:, 0] = p.motor_strength
 
 
 def ranges_dict(r: Ranges) -> dict[str, list[float]]:

@@ -6,7 +6,6 @@ meanings and units on both sides."""
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Sequence
 
 import mujoco
@@ -14,30 +13,13 @@ import numpy as np
 
 from scenarios.flat import FlatGround
 from scenarios.obstacle import checked_profile
-from taslel_bench.interfaces import ClearanceProfile, a1, integer, number, number_or_list, numbers
-
-MAX_SCALE = 10.0  # [-] mass and motor-strength factors
-MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)
-MAX_JOINT_LOSS = 10.0  # [N·m·s/rad] damping, [N·m] dry friction (the motors give 33.5 N·m)
-MAX_ARMATURE_KGM2 = 1.0  # [kg·m²] (real leg rotors reflect ~0.005-0.05 through their gearbox)
-MAX_PAYLOAD_KG = 50.0  # [kg] (the A1 weighs 13.7 kg)
-MAX_PAYLOAD_OFFSET_M = 0.5  # [m] per axis, trunk frame
-MAX_DELAY_STEPS = 1000  # [physics steps]
-PAYLOAD_BODY = "payload"
+from taslel_bench.interfaces import ActuatorDelay, ClearanceProfile, PlantPerturbation
 
 
 class PerturbedPlant(FlatGround):
-    """Flat floor + plant changes. Scales are multiplicative on the URDF values; 1.0 / 0 = unchanged.
-
-    * ``trunk_mass_scale`` (the trunk link's mass and inertia about its CoM scaled together),
-      ``trunk_com_shift_m`` [m] in the trunk frame;
-    * ``payload_mass_kg`` [kg]: a point mass fixed to the trunk at ``payload_pos_m`` [m, trunk frame];
-    * ``joint_damping`` [N·m·s/rad], ``armature`` [kg·m²] and ``joint_frictionloss`` [N·m] added to the
-      leg joints: one number for all 12 or 12 numbers in the core joint order (legs FL, FR, RL, RR);
-    * ``motor_strength_scale`` (actuator gear: the torque the plant applies per commanded N·m);
-    * ``actuator_delay_steps``: commands reach the plant this many physics steps late;
-    * ``coefficients``: an optional virtual swing-foot profile z(s) as in ``obstacle`` (null: none).
-    """
+    """Flat floor + plant changes (:class:`taslel_bench.interfaces.PlantPerturbation`: the fields, their
+    units and ranges, and the one implementation of each edit), plus ``coefficients``: an optional virtual
+    swing-foot profile z(s) as in ``obstacle`` (null: none)."""
 
     def __init__(self, name: str = "perturbed", friction: float = 1.0, trunk_mass_scale: float = 1.0,
                  trunk_com_shift_m: Sequence[float] = (0.0, 0.0, 0.0),
@@ -48,27 +30,12 @@ class PerturbedPlant(FlatGround):
                  payload_pos_m: Sequence[float] = (0.0, 0.0, 0.0),
                  coefficients: Sequence[float] | None = None) -> None:
         super().__init__(name=name, friction=friction)
-        s = "scenario."
-        self.trunk_mass_scale = number(s + "trunk_mass_scale", trunk_mass_scale, 0.0, MAX_SCALE, lo_open=True)
-        shift = numbers(s + "trunk_com_shift_m", trunk_com_shift_m, -MAX_COM_SHIFT_M, MAX_COM_SHIFT_M,
-                        length=3, unit="m", why="[x, y, z] in the trunk frame")
-        self.trunk_com_shift_m = np.asarray(shift)
-        n = a1.N_JOINTS
-        self.joint_damping = number_or_list(s + "joint_damping", joint_damping, 0.0, MAX_JOINT_LOSS, length=n,
-                                            unit="N·m·s/rad")
-        self.joint_frictionloss = number_or_list(s + "joint_frictionloss", joint_frictionloss, 0.0,
-                                                 MAX_JOINT_LOSS, length=n, unit="N·m")
-        self.armature = number_or_list(s + "armature", armature, 0.0, MAX_ARMATURE_KGM2, length=n,
-                                       unit="kg·m²")
-        self.payload_mass_kg = number(s + "payload_mass_kg", payload_mass_kg, 0.0, MAX_PAYLOAD_KG, unit="kg")
-        self.payload_pos_m = numbers(s + "payload_pos_m", payload_pos_m, -MAX_PAYLOAD_OFFSET_M,
-                                     MAX_PAYLOAD_OFFSET_M, length=3, unit="m",
-                                     why="[x, y, z] in the trunk frame")
-        self.motor_strength_scale = number(s + "motor_strength_scale", motor_strength_scale, 0.0, MAX_SCALE,
-                                           lo_open=True)
-        self.actuator_delay_steps = integer(s + "actuator_delay_steps", actuator_delay_steps, 0,
-                                            MAX_DELAY_STEPS, unit="physics steps")
-        self._queue: deque[np.ndarray] = deque()
+        self.perturbation = PlantPerturbation.checked(
+            "scenario", trunk_mass_scale=trunk_mass_scale, trunk_com_shift_m=trunk_com_shift_m,
+            joint_damping=joint_damping, joint_frictionloss=joint_frictionloss, armature=armature,
+            payload_mass_kg=payload_mass_kg, payload_pos_m=payload_pos_m,
+            motor_strength_scale=motor_strength_scale, actuator_delay_steps=actuator_delay_steps)
+        self._delay = ActuatorDelay(self.perturbation.actuator_delay_steps)
         # optional virtual obstacle under every swing foot (the paper's z(s)): clearance under mismatch
         self._profile = checked_profile(coefficients) if coefficients is not None else None
 
@@ -76,31 +43,7 @@ class PerturbedPlant(FlatGround):
         return self._profile
 
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
-        super().build(spec, rng)
-        trunk = spec.body(a1.TRUNK_BODY)
-        trunk.mass *= self.trunk_mass_scale
-        trunk.inertia[:] = np.asarray(trunk.inertia) * self.trunk_mass_scale  # URDF import: fullinertia
-        trunk.fullinertia[:] = np.asarray(trunk.fullinertia) * self.trunk_mass_scale
-        trunk.ipos[:] = np.asarray(trunk.ipos) + self.trunk_com_shift_m
-        if self.payload_mass_kg > 0.0:  # a body without joints: MuJoCo fuses it into the trunk (fusestatic)
-            payload = trunk.add_body(name=PAYLOAD_BODY, pos=list(self.payload_pos_m))
-            payload.explicitinertial = True
-            payload.mass, payload.ipos = self.payload_mass_kg, [0.0] * 3
-            payload.inertia = [0.0] * 3  # a point mass
-        for i, name in enumerate(a1.JOINT_NAMES):
-            joint = spec.joint(name)
-            damping = np.array(joint.damping)  # MuJoCo >= 4: [linear, higher-order polynomial terms ...]
-            damping[0] += self.joint_damping[i]  # the linear coefficient only: torque -d qdot
-            joint.damping = damping
-            joint.frictionloss += self.joint_frictionloss[i]
-            joint.armature += self.armature[i]
-        for act in spec.actuators:
-            act.gear[0] *= self.motor_strength_scale
+        self.perturbation.apply(spec)
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
-        if self.actuator_delay_steps == 0:
-            return
-        if not self._queue:  # first call: the plant starts with the first command, then lags
-            self._queue.extend(data.ctrl.copy() for _ in range(self.actuator_delay_steps))
-        self._queue.append(data.ctrl.copy())
-        data.ctrl[:] = self._queue.popleft()
+        self._delay.apply(data)

@@ -1,7 +1,8 @@
-"""The core's services for axis packages (``scenarios/``, ``solvers/``, ``estimators/``).
+"""The core's services for the axis packages (``scenarios/``, ``solvers/``, ``estimators/``) and studies.
 
-Axis packages import :mod:`taslel_bench.interfaces` for types and this module for the few core services
-they need beyond them (e.g. data collection with the safety filter in the loop). Everything here is built
+Axis packages import :mod:`taslel_bench.interfaces` for types and this module for the core services they
+need beyond them: the project config, the safety filter, the controller, the plant and the one episode loop
+(data collection and in-loop studies run the benchmark's loop, fall rule included). Everything here is built
 from the project's Hydra config, so a solver or filter setting means the same thing in a data-collection
 run as in a benchmark run.
 
@@ -9,7 +10,10 @@ run as in a benchmark run.
     safety_filter = api.build_safety_filter(cfg)          # SafetyFilter with cfg.solver's backend
     controller = api.build_controller(cfg)                # NominalController (trot, IK, joint PD)
     controller = api.NominalController(api.GaitParams(speed_mps=0.3), api.PDGains())  # or set by hand
-    bridge, model = api.StateBridge(mj_model), api.A1Model()  # plant state -> the controller's model
+    world = api.StaticWorld(Terrain((Plane(0.4),)), perturbation=PlantPerturbation(trunk_mass_scale=1.2))
+    plant = api.build_plant(world)                        # compiled MuJoCo model
+    episode = api.Episode(api.episode_settings(cfg), world, plant, controller, None, estimator, rng)
+    result = episode.run()                                # result.trace, result.fell, result.time_to_fall_s
 """
 
 from __future__ import annotations
@@ -18,27 +22,51 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from taslel_bench.config.compose import compose
-from taslel_bench.config.settings import build_barriers, build_controller, filter_settings
+from taslel_bench.config.settings import build_barriers, build_controller, episode_settings, filter_settings
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
 from taslel_bench.interfaces import ClearanceProfile, Terrain
 from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.plant.build import PlantOptions
+from taslel_bench.record.qpset import QPRecorder, QPSet, active_sets, binding_tags, from_problems
+from taslel_bench.record.qpset import load as load_qpset
+from taslel_bench.record.qpset import save as save_qpset
+from taslel_bench.record.result import EpisodeResult
 from taslel_bench.robot.model import A1Model
+from taslel_bench.sim.build import build_plant
+from taslel_bench.sim.episode import Episode, EpisodeSettings
+from taslel_bench.sim.world import StaticWorld
+from taslel_bench.util.machine import machine_info
 
 __all__ = [
     "A1Model",
+    "Episode",
+    "EpisodeResult",
+    "EpisodeSettings",
     "FilterResult",
     "GaitParams",
     "NominalController",
     "PDGains",
+    "PlantOptions",
+    "QPRecorder",
+    "QPSet",
     "SafetyFilter",
     "StateBridge",
+    "StaticWorld",
     "TickInputs",
+    "active_sets",
+    "binding_tags",
     "build_controller",
+    "build_plant",
     "build_safety_filter",
     "compose",
+    "episode_settings",
+    "from_problems",
+    "load_qpset",
+    "machine_info",
+    "save_qpset",
 ]
 
 

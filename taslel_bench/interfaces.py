@@ -17,6 +17,7 @@ from typing import Protocol, runtime_checkable
 import mujoco
 import numpy as np
 
+from taslel_bench.plant.perturbation import ActuatorDelay, PlantPerturbation
 from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
@@ -188,6 +189,8 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     "TerrainPart",
     # estimator
     "MAX_FRICTION", "Estimator", "FrictionEstimate", "Proprioception",
+    # the plant's perturbations
+    "ActuatorDelay", "PlantPerturbation",
     # the robot and config values
     "ConfigError", "a1", "choice", "fail", "flag", "integer", "is_number", "number", "number_or_list", "numbers",
 ]  # fmt: skip

@@ -181,8 +181,8 @@ def test_staged_prediction_equals_the_forward_pass() -> None:
 
 
 def test_targets_choose_keeps_the_fit_sets_upper_ci_under_five_percent(monkeypatch: pytest.MonkeyPatch) -> None:
-    from estimators import targets
-    from estimators.targets import choose, deployed, estimator_label, group_name
+    from studies import estimator_targets as targets
+    from studies.estimator_targets import choose, deployed, estimator_label, group_name
 
     monkeypatch.setattr(targets, "K_GRID", (0.0, 1.0))
     rng = np.random.default_rng(2)

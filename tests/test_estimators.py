@@ -366,7 +366,7 @@ def test_hold_min_drops_at_once_and_rises_late(tmp_path: Path) -> None:
 def test_shipped_checkpoint_reaches_recorded_mae(variant: str) -> None:
     pytest.importorskip("torch")
     from estimators.checkpoint import CHECKPOINT_DIR, load_checkpoint
-    from estimators.evaluate import FIXTURE, fixture_mae
+    from studies.estimator_evaluate import FIXTURE, fixture_mae
 
     if not (CHECKPOINT_DIR / f"{variant}.pt").is_file():
         pytest.skip(f"no shipped {variant} checkpoint")
@@ -399,22 +399,23 @@ def test_learned_configs_instantiate(variant: str) -> None:
 
 
 def test_inloop_window_matches_collected_window(tmp_path: Path) -> None:
-    """The window the in-loop estimator feeds its model is exactly the one collection labels (same
-    sample instants, previous-tick torque, core joint order)."""
+    """The window a learned estimator feeds its model in the core loop is exactly the one collection labels
+    in the same episode (same sample instants, previous-tick torque, core joint order)."""
     torch = pytest.importorskip("torch")
     from estimators.checkpoint import save_checkpoint
-    from estimators.collect import EpisodeConfig, run_episode
-    from estimators.inloop import nominal_params, run
+    from estimators.collect import EpisodeConfig, build_episode, run_episode
     from estimators.learned import LearnedEstimator
     from estimators.models import ModelConfig, build_model
+    from studies.estimator_friction_switch import nominal_params
 
     save_checkpoint(build_model(ModelConfig(variant="mlp", mlp_hidden=[8])).eval(), tmp_path / "m")
-    est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", threads=None)
+    est = LearnedEstimator("mlp", checkpoint=tmp_path / "m", threads=None, inference="inline")
     seen: list[torch.Tensor] = []
     predict = est.model.predict
     est.model.predict = lambda x: (seen.append(x.clone()), predict(x))[1]  # type: ignore[method-assign]
-    run(est, 0.6, 0.6, t_switch_s=10.0, duration_s=1.2)
-    collected = run_episode(nominal_params(0.6), EpisodeConfig(duration_s=1.2, first_window_s=0.0, stride=1))
+    cfg = EpisodeConfig(duration_s=1.2, first_window_s=0.0, stride=1)
+    build_episode(nominal_params(0.6), cfg, est).run()
+    collected = run_episode(nominal_params(0.6), cfg)
     assert len(seen) == 1 and collected.windows.shape[0] == 1
     np.testing.assert_allclose(seen[0][0].numpy(), collected.windows[0], rtol=0, atol=1e-6)
 
@@ -478,10 +479,10 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
     rng_u, rng_b = np.random.default_rng(0), np.random.default_rng(0)
     uni = [draw(rng_u, TRAIN_RANGES, seed=i) for i in range(2000)]
     edge = [draw(rng_b, TRAIN_RANGES, seed=i, plant_beta=0.4) for i in range(2000)]
-    lo, hi = TRAIN_RANGES.motor_strength
+    lo, hi = TRAIN_RANGES.motor_strength_scale
     for draws in (uni, edge):
-        assert all(lo <= d.motor_strength <= hi for d in draws)
-    near = lambda ds: np.mean([min(d.motor_strength - lo, hi - d.motor_strength) < 0.1 * (hi - lo) for d in ds])
+        assert all(lo <= d.motor_strength_scale <= hi for d in draws)
+    near = lambda ds: np.mean([min(d.motor_strength_scale - lo, hi - d.motor_strength_scale) < 0.1 * (hi - lo) for d in ds])
     assert near(uni) == pytest.approx(0.2, abs=0.03) and near(edge) > 0.35
     # friction and operator settings are still uniform
     assert np.mean([d.friction for d in edge]) == pytest.approx(np.mean(TRAIN_RANGES.friction), abs=0.03)
@@ -489,9 +490,9 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
         draw(np.random.default_rng(0), TRAIN_RANGES, seed=0, plant_beta=0.0)
 
     assert shifted_ranges(PLANT_FACTORS) == SHIFTED_RANGES
-    one = shifted_ranges(["motor_strength"])
-    assert one.motor_strength == SHIFTED_RANGES.motor_strength
-    assert one.trunk_mass_scale == TRAIN_RANGES.trunk_mass_scale and one.com_shift_xy_m == (0.0, 0.03)
+    one = shifted_ranges(["motor_strength_scale"])
+    assert one.motor_strength_scale == SHIFTED_RANGES.motor_strength_scale
+    assert one.trunk_mass_scale == TRAIN_RANGES.trunk_mass_scale and one.trunk_com_shift_xy_m == (0.0, 0.03)
     with pytest.raises(ValueError, match="valid factors: trunk_mass_scale"):
         shifted_ranges(["payload"])
 
@@ -499,8 +500,8 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
 def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
     from estimators.checkpoint import save_checkpoint
-    from estimators.compare import compare, main, score
     from estimators.models import ModelConfig, build_model
+    from studies.estimator_compare import compare, main, score
 
     err = score(np.array([0.5, 0.2, 1.0]), np.array([0.4, 0.2, 1.2]), np.array([False, False, True]))
     assert err["mae[all]"] == pytest.approx(0.1) and err["over[all]"] == pytest.approx(1 / 3)
@@ -521,7 +522,7 @@ def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("config", ["mlp", "attention_step", "linformer_step", "attention", "linformer"])
 def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> None:
-    """conf/estimator/<config>.yaml deploys the bound that ``estimators.targets offline`` chose on the shifted
+    """conf/estimator/<config>.yaml deploys the bound that ``studies.estimator_targets offline`` chose on the shifted
     validation set for the checkpoint it loads (metrics.safety_calibration: bound, k, band margin), so a
     retrained checkpoint cannot silently keep the previous calibration."""
     cfg = OmegaConf.load(CONF / f"{config}.yaml")
@@ -605,7 +606,7 @@ def test_merge_drops_the_filtered_episodes_of_named_folders(tmp_path: Path) -> N
     assert train["episodes"] == a_nominal.sum() + 2 and train["episodes_filtered"] == 2
     assert man["sources"][0]["dropped_filtered"]["episodes"] == 6 - a_nominal.sum()  # type: ignore[index]
     assert man["sources"][1]["filter_mu_range"] == [0.1, 1.2]  # type: ignore[index]
-    from estimators.evaluate import _source_text  # the report's line per training source
+    from studies.estimator_evaluate import _source_text  # the report's line per training source
 
     texts = [_source_text(src) for src in man["sources"]]  # type: ignore[union-attr]
     assert texts[0].startswith(f"{a_nominal.sum()} episodes (seed 3") and "filtered episodes left out" in texts[0]
@@ -670,8 +671,8 @@ def test_evaluate_chooses_the_bound_on_the_bound_set(tmp_path: Path) -> None:
     the choice is recorded with the set it was made on."""
     pytest.importorskip("torch")
     from estimators.checkpoint import save_checkpoint
-    from estimators.evaluate import K_SWEEP, evaluate
     from estimators.models import ModelConfig, build_model
+    from studies.estimator_evaluate import K_SWEEP, evaluate
 
     data = tmp_path / "data"
     data.mkdir()

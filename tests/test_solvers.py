@@ -1,4 +1,4 @@
-"""QP backends on real filter QPs (tests/data/qps_episode.npz, regenerate: python -m solvers.record_fixture).
+"""QP backends on real filter QPs (tests/data/qps_episode.npz, regenerate: python -m studies.record_solver_fixture).
 
 The fixture holds 100 QPs of a 2 s closed-loop trot with the filter's mu = 0.3 (friction rows bind) and an
 8 cm clearance bump (ECBF rows bind), plus the reference solution of each (quadprog cross-checked by DAQP).
@@ -14,9 +14,9 @@ import pytest
 
 from solvers import make_backend
 from solvers.checks import residuals
-from solvers.fixture import DEFAULT_PATH, load, without_rows
 from solvers.persistent import NativeResult
 from solvers.registry import available_backends
+from tests.solver_fixture import DEFAULT_PATH, load, without_rows
 
 # Max |u - u_ref| [N·m] accepted per backend: ~10-30x what was measured on this fixture with the settings of
 # conf/solver/*.yaml (measured: quadprog/daqp ~1e-13, daqp_persistent 1e-10, proxqp 2e-8, proxqp_persistent

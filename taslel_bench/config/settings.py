@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
@@ -21,6 +20,7 @@ from taslel_bench.plant.build import PlantOptions
 from taslel_bench.robot.model import A1Model
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.episode import EpisodeSettings
+from taslel_bench.sim.terminations import FallRule
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.fields import fail
@@ -81,8 +81,7 @@ def episode_settings(cfg: DictConfig) -> EpisodeSettings:
         duration_s=float(cfg.duration),
         physics_dt_s=1.0 / float(cfg.physics_rate_hz),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
-        fall_height_m=float(cfg.robot.fall_height_m),
-        fall_tilt_rad=float(np.radians(cfg.robot.fall_tilt_deg)),
+        fall=FallRule(height_m=float(cfg.robot.fall_height_m), tilt_deg=float(cfg.robot.fall_tilt_deg)),
         init_joint_noise_rad=float(cfg.robot.init_joint_noise_rad),
         init_base_vel_noise_mps=float(cfg.robot.init_base_vel_noise_mps),
         filter_start_s=float(cfg.filter.get("start_time", 0.0)),

@@ -31,9 +31,10 @@ from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
+from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import a1
 from taslel_bench.robot.model_options import ModelOptions
-from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, number_or_list, numbers
+from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
 AXES = ("scenario", "solver", "estimator")
 STANCE_SOURCES = ("schedule", "contact")
@@ -52,15 +53,8 @@ MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot c
 MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
 MAX_BASE_VEL_NOISE_MPS = 2.0  # [m/s]
-# the controller's model (same ranges as the plant perturbations of scenarios/perturbed.py)
-MAX_JOINT_DAMPING = 10.0  # [N·m·s/rad]
-MAX_ARMATURE_KGM2 = 1.0  # [kg·m²]
-MAX_JOINT_FRICTIONLOSS_NM = 10.0  # [N·m] (the motors give 33.5)
+# the controller's model: the fields it shares with the plant are checked by taslel_bench/plant/perturbation.py
 MAX_FRICTION_SMOOTHING_RADPS = 10.0  # [rad/s]
-MAX_MASS_SCALE = 10.0  # [-]
-MAX_COM_SHIFT_M = 0.2  # [m] per axis
-MAX_PAYLOAD_KG = 50.0  # [kg]
-MAX_PAYLOAD_OFFSET_M = 0.5  # [m] per axis
 # plant overrides
 MAX_NOSLIP_ITERATIONS = 1000
 MAX_IMPRATIO = 100.0  # [-]
@@ -368,31 +362,20 @@ def _known_keys(path: str, group: Any, cls: type) -> None:
 
 def _model(cfg: DictConfig) -> None:
     """The controller's model (``model`` group; absent = the URDF as is)."""
-    m, n = "model", a1.N_JOINTS
+    m = "model"
     _known_keys(m, _get(cfg, m), ModelOptions)
     urdf = _get(cfg, f"{m}.urdf")
     if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
         raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "
                                       "existing URDF")
-    joint_rule = "one number for all 12 joints or 12 in the core order (legs FL, FR, RL, RR)"
-    joint_fields = (("joint_damping", MAX_JOINT_DAMPING, "N·m·s/rad"),
-                    ("armature", MAX_ARMATURE_KGM2, "kg·m²"),
-                    ("joint_frictionloss", MAX_JOINT_FRICTIONLOSS_NM, "N·m"))
-    for key, hi, unit in joint_fields:
-        number_or_list(f"{m}.{key}", _get(cfg, f"{m}.{key}", 0.0), 0.0, hi, length=n, unit=unit,
-                       why=joint_rule)
+    shared = ("trunk_mass_scale", "trunk_com_shift_m", "payload_mass_kg", "payload_pos_m", "joint_damping",
+              "armature", "joint_frictionloss")  # the plant perturbation's fields, checked by the same rules
+    given = {key: _get(cfg, f"{m}.{key}") for key in shared}
+    check_trunk_and_joints(m, {key: value for key, value in given.items() if value is not None})
     number(f"{m}.frictionloss_smoothing_radps", _get(cfg, f"{m}.frictionloss_smoothing_radps", 0.05), 0.0,
            MAX_FRICTION_SMOOTHING_RADPS, lo_open=True, unit="rad/s")
-    number(f"{m}.trunk_mass_scale", _get(cfg, f"{m}.trunk_mass_scale", 1.0), 0.0, MAX_MASS_SCALE,
-           lo_open=True)
-    numbers(f"{m}.trunk_com_shift_m", _get(cfg, f"{m}.trunk_com_shift_m", [0.0] * 3), -MAX_COM_SHIFT_M,
-            MAX_COM_SHIFT_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
-    number(f"{m}.payload_mass_kg", _get(cfg, f"{m}.payload_mass_kg", 0.0), 0.0, MAX_PAYLOAD_KG, unit="kg")
     number(f"{m}.implicit_damping_dt_s", _get(cfg, f"{m}.implicit_damping_dt_s", 0.0), 0.0, 0.1, unit="s",
            why="0: continuous model; the plant's time step when it integrates joint damping implicitly")
-    numbers(f"{m}.payload_pos_m", _get(cfg, f"{m}.payload_pos_m", [0.0] * 3), -MAX_PAYLOAD_OFFSET_M,
-            MAX_PAYLOAD_OFFSET_M, length=3, unit="m", why="[x, y, z] in the trunk frame")
-
 
 def _divisors(n: int) -> str:
     divs = [k for k in range(1, n + 1) if n % k == 0]

@@ -13,8 +13,8 @@ from taslel_bench.metrics.clearance import clearance_metrics
 from taslel_bench.metrics.contacts import contact_metrics
 from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.metrics.residuals import residual_metrics
+from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import TICK_PARTS
-from taslel_bench.sim.episode import EpisodeResult
 
 
 def _pct(x: np.ndarray, p: float) -> float:

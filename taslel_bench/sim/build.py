@@ -23,7 +23,7 @@ from taslel_bench.config.settings import (
 from taslel_bench.config.validate import validate
 from taslel_bench.filter.safety_filter import SafetyFilter
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
-from taslel_bench.plant.build import a1_spec, compile_plant, mjcf_spec
+from taslel_bench.plant.build import PlantOptions, a1_spec, compile_plant, mjcf_spec
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.sim.episode import Episode
 
@@ -35,13 +35,19 @@ class FrictionMismatch(RuntimeError):
 
 
 def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    """The MuJoCo plant: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other edits.
-    The terrain draws from its own stream of the seed (a random terrain does not shift the initial-state
-    draws of ``rng``)."""
-    options = plant_options(cfg)
-    spec = mjcf_spec(Path(cfg.robot.plant_mjcf), options) if cfg.robot.get("plant_mjcf") else a1_spec(options)
-    scenario.terrain.build(spec, terrain_rng(int(cfg.seed)))
-    scenario.build(spec, rng)
+    """The MuJoCo plant of a run: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other
+    edits (:func:`build_plant`)."""
+    mjcf = cfg.robot.get("plant_mjcf")
+    return build_plant(scenario, plant_options(cfg), int(cfg.seed), rng, Path(mjcf) if mjcf else None)
+
+
+def build_plant(scenario: Scenario, options: PlantOptions = PlantOptions(), seed: int = 0,
+                rng: np.random.Generator | None = None, mjcf: Path | None = None) -> mujoco.MjModel:
+    """The URDF plant (or the A1 MJCF ``mjcf``) with the scenario's terrain (drawn from its own stream of
+    ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's other edits."""
+    spec = mjcf_spec(mjcf, options) if mjcf is not None else a1_spec(options)
+    scenario.terrain.build(spec, terrain_rng(seed))
+    scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))
     return compile_plant(spec)
 
 

@@ -1,19 +1,16 @@
 """One episode: initial stand, then walk for ``duration_s`` under the nominal controller, the safety filter
-(optional) and an estimator, in the MuJoCo plant. Returns per-tick arrays and a status; never raises for
-faults inside the episode (NaN state, solver exceptions): they end or mark the run instead.
+(optional) and an estimator, in the MuJoCo plant. The one closed loop of the project: the benchmark, the
+estimators' data collection and the in-loop studies all run it. Returns per-tick arrays and a status; never
+raises for faults inside the episode (NaN state, solver exceptions): they end or mark the run instead.
 
 Time: ``t`` [s] is episode time from the start of the stand; walking starts at ``stand_duration_s``.
-The control tick reads the plant state, computes u_nom, filters it, holds u for ``physics_per_tick``
-physics steps (zero-order hold), then reads plant contact forces of the last physics step.
+A control tick (:meth:`Episode._tick`) reads the plant state, lets the estimator see it, computes u_nom,
+filters it, holds u for ``physics_per_tick`` physics steps (zero-order hold) with the fall terms checked
+after each (:mod:`taslel_bench.sim.terminations`), and records the tick.
 
 Initial state: built once per episode object from the seeded rng (stand pose + joint and trunk-velocity
-noise), placed so that the lowest foot sphere touches the floor (z = 0) by :data:`INITIAL_PENETRATION_M`;
+noise), placed so that the lowest foot sphere touches the terrain under it by :data:`INITIAL_PENETRATION_M`;
 every :meth:`Episode.run` starts from that same state (the friction check of the run sees it too).
-
-Falls are checked after *every* physics step on the state that step produced (trunk height and tilt read
-from ``qpos``, not from ``xpos``/``xmat``, which ``mj_step`` leaves at the step's starting state), and on the
-contacts MuJoCo found for the step's starting state (a non-foot robot geom touching the floor at distance
-<= 0). ``time_to_fall_s`` is the episode time of the first state past a threshold.
 """
 
 from __future__ import annotations
@@ -22,51 +19,42 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.filter.layout import TickInputs
-from taslel_bench.filter.safety_filter import SafetyFilter
-from taslel_bench.interfaces import Estimator, Proprioception, Scenario
+from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
+from taslel_bench.interfaces import Estimator, FrictionEstimate, Proprioception, Scenario
 from taslel_bench.metrics import residuals
 from taslel_bench.metrics.residuals import ResidualSetup
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.contacts import FootContactReader
+from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
+from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 
-INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the floor: touching
+INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
+PROGRESS_EVERY_TICKS = 500
 
 
 @dataclass(frozen=True)
 class EpisodeSettings:
+    """Built from the run config by :func:`taslel_bench.config.settings.episode_settings`; the defaults are the
+    config's (``conf/config.yaml``, ``conf/robot/a1.yaml``; a test checks they agree)."""
+
     duration_s: float = 10.0  # [s] walking time after the stand
     physics_dt_s: float = 0.001  # [s]
     control_dt_s: float = 0.001  # [s] an integer multiple of physics_dt_s
-    fall_height_m: float = 0.12  # [m] trunk origin below this -> fall
-    fall_tilt_rad: float = 1.0  # [rad] angle between trunk z and world z above this -> fall
-    max_speed: float = 200.0  # [rad/s, m/s] ||qvel||_2 beyond this (or non-finite) -> "exploding state" error
+    fall: FallRule = FallRule(height_m=0.12, tilt_deg=57.0)
     init_joint_noise_rad: float = 0.02  # [rad] std of the initial joint-angle perturbation (seeded)
     init_base_vel_noise_mps: float = 0.05  # [m/s] std of the initial trunk velocity perturbation
-    clearance_tolerance_m: float = 0.001  # [m] swing-foot bottom below z(s) - tol counts as a violation
     filter_start_s: float = 0.0  # [s] episode time before which u_nom passes unfiltered (paper's figure)
-
-
-@dataclass
-class EpisodeResult:
-    trace: EpisodeTrace
-    status: str = "ok"  # "ok" or "error"
-    message: str = ""
-    fell: bool = False
-    time_to_fall_s: float = math.nan
-    fall_reason: str = ""
-    n_ticks: int = 0
-    wall_time_s: float = 0.0
-    extras: dict[str, object] = field(default_factory=dict)
+    analyse: bool = True  # derive the trace's named quantities and the model residuals after the episode
 
 
 class Episode:
@@ -97,6 +85,7 @@ class Episode:
         self.rng = rng
         self.stance_from_contact = stance_from_contact
         self.contacts = FootContactReader(mj_model)
+        self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
@@ -108,10 +97,12 @@ class Episode:
         self.initial_qpos, self.initial_qvel = self._draw_initial_state()
         self.initial_state()
 
+    # ------------------------------------------------------------------------------------ initial state
     def _draw_initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """MuJoCo (qpos, qvel) of the stand pose perturbed by the seeded rng (drawn once per episode): joint
         angles + N(0, init_joint_noise_rad), trunk linear velocity + N(0, init_base_vel_noise_mps) [world
-        axes], trunk height set so the lowest foot-sphere bottom is INITIAL_PENETRATION_M below z = 0."""
+        axes], trunk height set so the lowest foot-sphere bottom is INITIAL_PENETRATION_M below the terrain
+        under it."""
         s, m, d = self.s, self.m, self.d
         q = np.zeros(a1.NQ)
         q[6] = 1.0
@@ -123,7 +114,8 @@ class Episode:
         self.bridge.qpos_mj(q, d.qpos)
         mujoco.mj_kinematics(m, d)
         feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]
-        lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0]))
+        ground = np.array([self.terrain.height_at(x, y) for x, y in d.geom_xpos[feet, :2]])
+        lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0] - ground))
         q[2] -= lowest_bottom + INITIAL_PENETRATION_M
         self.bridge.qpos_mj(q, d.qpos)
         self.bridge.qvel_mj(q, v, d.qvel)
@@ -136,10 +128,11 @@ class Episode:
         self.d.qvel[:] = self.initial_qvel
         mujoco.mj_forward(self.m, self.d)
 
-    def _warm_up(self, q: np.ndarray, v: np.ndarray) -> float:
+    def _warm_up(self) -> float:
         """Run the tick's compiled kernels once on the initial state, before the episode clock starts (the
         first call of a kernel in a process loads or compiles it). Returns the time it took [s]."""
         t0 = time.perf_counter()
+        q, v = self._q, self._v
         self.bridge.state_pin(self.d.qpos, self.d.qvel, q, v)
         if self.filter is not None:
             self.model.update(q, v)
@@ -154,6 +147,126 @@ class Episode:
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
         return time.perf_counter() - t0
 
+    # -------------------------------------------------------------------------------------------- run
+    def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
+        """Reset, run every tick until the end, a fall or an error, then analyse the trace."""
+        trace, res = self._start()
+        wall0 = time.perf_counter()
+        try:
+            for k in range(self.n_ticks):
+                if self._tick(k, trace, res):
+                    break
+                self._between_ticks(k, trace, progress)
+        except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
+            res.status, res.message = "error", f"{type(exc).__name__}: {exc}"
+            res.extras["traceback"] = traceback.format_exc()
+        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s
+        res.n_ticks = trace.n
+        res.extras["recording_s"] = self._recording_s
+        if self.s.analyse:
+            trace.finalize()
+            self._residuals(trace, res)
+        return res
+
+    def _start(self) -> tuple[EpisodeTrace, EpisodeResult]:
+        """A fresh trace and result, the plant at its initial state, the per-run buffers, warmed kernels."""
+        self._barriers = self.filter.barriers if self.filter is not None else []
+        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
+                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
+        res = EpisodeResult(trace=trace)
+        self.initial_state()
+        self.estimator.reset()
+        trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain)
+        self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
+        self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
+        self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
+        self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
+        self._t0_plant = self.d.time
+        self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
+        res.extras["warmup_s"] = self._warm_up()
+        return trace, res
+
+    def _tick(self, k: int, trace: EpisodeTrace, res: EpisodeResult) -> bool:
+        """Control tick ``k``: sense and estimate, control, filter, step the plant, record. True when the
+        episode ends here (a fall or a non-finite state)."""
+        tick0 = time.perf_counter()
+        t = k * self.s.control_dt_s
+        d, q, v = self.d, self._q, self._v
+        self.bridge.state_pin(d.qpos, d.qvel, q, v)
+        true_mu = self.terrain.friction_at(d.qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
+        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev))
+        u_nom = self.controller.compute(t, q[7:], v[6:])
+        gs = self.controller.gait_state(t)
+        in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+        tick1 = time.perf_counter()
+        u, fres, tick2, tick3 = self._filter(k, t, u_nom, gs, in_stance, est, tick1)
+        fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
+        self._tau_prev[:] = u
+        tick4 = time.perf_counter()
+        trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
+        trace.record(k, t, d.qpos, d.qvel, d.sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
+                     tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
+        trace.mu_hat_ready[k] = est.ready
+        return self._ended(t, fall, unstable, res)
+
+    def _filter(self, k: int, t: float, u_nom: np.ndarray, gs, in_stance: np.ndarray, est: FrictionEstimate,
+                tick1: float) -> tuple[np.ndarray, FilterResult | None, float, float]:
+        """(u, the filter's result or None, the times the model update and the filter ended) for this tick:
+        u_nom while no filter is in the loop (none, or before ``filter_start_s``: both times are ``tick1``)."""
+        if self.filter is None or t < self.s.filter_start_s:
+            self._mu_filter_prev = math.nan
+            return u_nom, None, tick1, tick1
+        self.model.update(self._q, self._v)
+        tick2 = time.perf_counter()
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
+        fres = self.filter.filter(inputs, u_nom)
+        self._mu_filter_prev = est.mu
+        if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
+            self.qp_recorder.on_tick(k, t, self.filter.backend_problem, fres)
+        return fres.u, fres, tick2, time.perf_counter()
+
+    def _step_plant(self, u: np.ndarray, t: float) -> tuple[Fall | None, bool, bool, bool]:
+        """Hold ``u`` for the tick's physics steps, checking the fall terms after each. Returns (the fall or
+        None, a lower leg touched an obstacle, a lower leg touched the floor, MuJoCo reset the data)."""
+        m, d, contacts = self.m, self.d, self.contacts
+        obstacle_touch = shin_touch = False
+        for _ in range(self.physics_per_tick):
+            self.bridge.ctrl_mj(u, d.ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
+            self.scenario.on_tick(m, d, t)
+            t_before = d.time
+            mujoco.mj_step(m, d)
+            if d.time <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
+                return None, obstacle_touch, shin_touch, True
+            fall = self.terminations.after_step(d.qpos, d, d.time - self._t0_plant)
+            obstacle_touch |= contacts.non_foot_obstacle_contact
+            shin_touch |= contacts.shin_contact
+            if fall is not None:
+                return fall, obstacle_touch, shin_touch, False
+        if self.stance_from_contact:  # next tick's stance set
+            contacts.read(d)
+        return None, obstacle_touch, shin_touch, False
+
+    def _ended(self, t: float, fall: Fall | None, unstable: bool, res: EpisodeResult) -> bool:
+        """Mark ``res`` if the tick ended the episode: a non-finite or exploding state (an error), a fall."""
+        if unstable or self.terminations.state_is_bad(self.d.qpos, self.d.qvel):
+            res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
+            return True
+        if fall is not None:
+            res.fell, res.time_to_fall_s, res.fall_reason = True, self.terminations.on_grid(fall.t_s), fall.reason
+            res.extras["fall_term"] = fall.term
+            return True
+        return False
+
+    def _between_ticks(self, k: int, trace: EpisodeTrace, progress: Callable[[float], None] | None) -> None:
+        """Progress and streaming recording, outside the tick's timers."""
+        if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
+            progress(k * self.s.control_dt_s)
+        chunk = max(1, int(self.chunk_ticks))
+        if self.chunk_sink is not None and (k + 1) % chunk == 0:
+            rec0 = time.perf_counter()
+            self.chunk_sink(trace, k + 1 - chunk, k + 1)
+            self._recording_s += time.perf_counter() - rec0
+
     def _residuals(self, trace: EpisodeTrace, res: EpisodeResult) -> None:
         """The controller model's residuals against the recorded plant motion (after the episode)."""
         t0 = time.perf_counter()
@@ -164,116 +277,3 @@ class Episode:
         except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
             res.extras["residuals_error"] = traceback.format_exc().strip().splitlines()[-1]
         res.extras["residuals_s"] = time.perf_counter() - t0
-
-    def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
-        s, m, d, br = self.s, self.m, self.d, self.bridge
-        barriers = self.filter.barriers if self.filter is not None else []
-        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in barriers])
-        res = EpisodeResult(trace=trace)
-        self.initial_state()
-        self.estimator.reset()
-        profile = self.scenario.clearance_profile()
-        trace.bind(br, self.contacts, profile, self.terrain)
-        sink, chunk = self.chunk_sink, max(1, int(self.chunk_ticks))
-        recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
-        q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
-        v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
-        qj, qdj = q[7:], v[6:]  # views: joint angles [rad] and velocities [rad/s], core order
-        tau_prev = np.zeros(a1.N_JOINTS)
-        mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
-        need_model = self.filter is not None
-        res.extras["warmup_s"] = self._warm_up(q, v)
-        cos_tilt_min = math.cos(s.fall_tilt_rad)
-        vmax_sq = s.max_speed**2
-        t0_plant = d.time
-        qpos, qvel, ctrl, sensordata = d.qpos, d.qvel, d.ctrl, d.sensordata  # views, valid for the episode
-        a = br.free_qadr  # trunk origin z [m] at qpos[a + 2], orientation (w, x, y, z) at qpos[a + 3 : a + 7]
-        contacts = self.contacts
-        wall0 = time.perf_counter()
-        k = 0
-        try:
-            for k in range(self.n_ticks):
-                tick0 = time.perf_counter()
-                t = k * s.control_dt_s
-                br.state_pin(qpos, qvel, q, v)  # also fills qj, qdj
-                trunk_xy = qpos[a : a + 2]
-                true_mu = self.terrain.friction_at(trunk_xy)
-                est = self.estimator.step(Proprioception(t, qj, qdj, tau_prev, true_mu, mu_filter_prev))
-                u_nom = self.controller.compute(t, qj, qdj)
-                gs = self.controller.gait_state(t)
-                in_stance = contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
-                tick1 = tick2 = tick3 = time.perf_counter()
-                if need_model and t >= s.filter_start_s:
-                    self.model.update(q, v)
-                    tick2 = time.perf_counter()
-                    inputs = TickInputs(self.model, v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
-                    fres = self.filter.filter(inputs, u_nom)
-                    u = fres.u
-                    mu_filter_prev = est.mu
-                    if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
-                        self.qp_recorder.on_tick(k, t, self.filter.backend_problem, fres)
-                    tick3 = time.perf_counter()
-                else:
-                    fres = None
-                    u = u_nom
-                    mu_filter_prev = math.nan
-                reason, t_fall, obstacle_touch, shin_touch, unstable = "", math.nan, False, False, False
-                for _ in range(self.physics_per_tick):
-                    br.ctrl_mj(u, ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
-                    self.scenario.on_tick(m, d, t)
-                    t_before = d.time
-                    mujoco.mj_step(m, d)
-                    if d.time <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
-                        unstable = True
-                        break
-                    # --- fall checks on this step's result: trunk pose from qpos (the new state) ...
-                    z = qpos[a + 2]
-                    cos_tilt = 1.0 - 2.0 * (qpos[a + 4] * qpos[a + 4] + qpos[a + 5] * qpos[a + 5])  # trunk z . world z
-                    if z < s.fall_height_m:
-                        reason, t_fall = f"trunk height {z:.3f} m < {s.fall_height_m} m", d.time - t0_plant
-                    elif cos_tilt < cos_tilt_min:
-                        tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
-                        reason, t_fall = f"trunk tilt {tilt:.0f} deg", d.time - t0_plant
-                    # ... and contacts, which MuJoCo found for the step's starting state (one step earlier)
-                    elif contacts.check_non_foot_contact(d):
-                        reason = f"{contacts.non_foot_contact_name} (above the knee) touched the terrain"
-                        t_fall = d.time - s.physics_dt_s - t0_plant
-                    obstacle_touch |= contacts.non_foot_obstacle_contact
-                    shin_touch |= contacts.shin_contact
-                    if reason:
-                        break
-                if self.stance_from_contact:  # next tick's stance set
-                    contacts.read(d)
-                tau_prev[:] = u
-                tick4 = time.perf_counter()
-                trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
-                trace.record(k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
-                             tick4 - tick0, barriers, obstacle_touch, shin_touch)  # fmt: skip
-                trace.mu_hat_ready[k] = est.ready
-                # --- termination: a non-finite / exploding state (one dot product catches NaN/inf anywhere in
-                # the state and bounds the joint speeds; a MuJoCo reset is caught by its clock above), then a fall
-                vel_sq, pos_sq = float(qvel @ qvel), float(qpos @ qpos)
-                if not (vel_sq < vmax_sq and math.isfinite(pos_sq)) or unstable:
-                    res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
-                    break
-                if reason:  # the time of the first physics state past a threshold, on the physics-step grid
-                    t_fall = round(t_fall / s.physics_dt_s) * s.physics_dt_s
-                    res.fell, res.time_to_fall_s, res.fall_reason = True, t_fall, reason
-                    break
-                if progress is not None and k % 500 == 0:
-                    progress(t)
-                if sink is not None and (k + 1) % chunk == 0:  # streaming recording, between two ticks
-                    rec0 = time.perf_counter()
-                    sink(trace, k + 1 - chunk, k + 1)
-                    recording_s += time.perf_counter() - rec0
-        except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
-            res.status = "error"
-            res.message = f"{type(exc).__name__}: {exc}"
-            res.extras["traceback"] = traceback.format_exc()
-        res.wall_time_s = time.perf_counter() - wall0 - recording_s
-        trace.finalize()
-        self._residuals(trace, res)
-        res.n_ticks = trace.n
-        res.extras["recording_s"] = recording_s
-        return res

@@ -23,9 +23,9 @@ from taslel_bench.metrics.residuals import alarm_events
 from taslel_bench.metrics.summary import summarize
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.record import qpset, run_files
+from taslel_bench.record.result import EpisodeResult
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
-from taslel_bench.sim.episode import EpisodeResult
 from taslel_bench.sweep.aggregate import OVERRIDE_SEPARATOR
 
 

@@ -1,7 +1,7 @@
 """Record real filter QPs from a closed-loop episode and write the test fixture.
 
-    python -m solvers.record_fixture                      # -> tests/data/qps_episode.npz
-    python -m solvers.record_fixture --seconds 2 --count 100 --mu 0.3 --out /tmp/qps.npz
+    python -m studies.record_solver_fixture                      # -> tests/data/qps_episode.npz
+    python -m studies.record_solver_fixture --seconds 2 --count 100 --mu 0.3 --out /tmp/qps.npz
 
 The A1 trots on the default plant under the nominal controller, its torques filtered by the ID-CBF-QP
 (solved by the cross-checked reference, :mod:`solvers.reference`) with a low assumed friction (mu = 0.3, so
@@ -9,10 +9,8 @@ pyramid rows bind) and the paper's 8 cm clearance bump z(s) = 0.08 * 16 s²(1 - 
 swing). Every tick's QP is copied; ``--count`` of them are kept: the ticks where ECBF rows, friction rows
 or torque limits bind first (spread over the episode), then evenly spaced others.
 
-This script is the one place in ``solvers/`` that drives a closed loop; it does so through the core's
-façade for axis packages (:mod:`taslel_bench.api`: config, controller, filter, model, state bridge) and the
-plant builder, and stores the set with the core's QP-set tools. The backends only use
-:mod:`taslel_bench.interfaces`.
+The episode is the core's one loop (:class:`taslel_bench.api.Episode`, initial state and fall rule of a run
+with seed 0); a hook on the filter copies each tick's QP and the solution the reference returned.
 """
 
 from __future__ import annotations
@@ -22,57 +20,68 @@ from pathlib import Path
 
 import numpy as np
 
-from solvers.fixture import DEFAULT_PATH, save
 from solvers.reference import reference_backend
 from taslel_bench.interfaces import ClearanceProfile, QPProblem
 from taslel_bench.record.qpset import active_sets, binding_tags
+from tests.solver_fixture import DEFAULT_PATH, save
 
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
 BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 - s)²
 
 
-def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProblem], np.ndarray]:
-    """Run the closed loop for ``seconds`` at 1 kHz; return every tick's QP (copies) and solution x.
+class _Recorder:
+    """The episode's QP hook: a copy of every tick's QP and the solution used."""
 
-    The filter is the project's (``conf/filter``) with the tight reference backend (``solver=reference``)
-    unless ``backend`` is given."""
-    import mujoco
+    def __init__(self) -> None:
+        self.qps: list[QPProblem] = []
+        self.xs: list[np.ndarray] = []
+
+    def on_tick(self, k: int, t: float, problem: QPProblem, result) -> None:
+        if result.used_fallback or result.solve is None:
+            raise RuntimeError(f"reference failed at tick {k}: {result.status}")
+        self.qps.append(problem.copy())
+        self.xs.append(result.solve.x.copy())
+
+
+class _AssumedFriction:
+    """Gives the filter the friction ``mu`` every tick (an estimator that knows nothing else)."""
+
+    name = "assumed"
+
+    def __init__(self, mu: float) -> None:
+        self.mu = mu
+
+    def reset(self) -> None:
+        return None
+
+    def step(self, obs):
+        from taslel_bench.interfaces import FrictionEstimate
+
+        return FrictionEstimate(self.mu)
+
+
+def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProblem], np.ndarray]:
+    """Run the core episode loop for ``seconds`` (stand included) at 1 kHz; return every tick's QP (copies)
+    and solution x. The filter is the project's (``conf/filter``) with the tight reference backend
+    (``solver=reference``) unless ``backend`` is given."""
+    from dataclasses import replace
 
     from taslel_bench import api
-    from taslel_bench.plant.build import build_plant
-    from taslel_bench.robot import a1
 
     cfg = api.compose(["solver=reference"])
-    sf = api.build_safety_filter(cfg, profile=ClearanceProfile(BUMP))
+    world = api.StaticWorld(profile=ClearanceProfile(BUMP))
+    sf = api.build_safety_filter(cfg, world.terrain, world.profile)
     if backend is not None:
         sf.backend = backend
-    m = build_plant()
-    d = mujoco.MjData(m)
-    bridge, model = api.StateBridge(m), api.A1Model()
-    ctl = api.build_controller(cfg)
-    q0 = model.neutral_q()
-    q0[2] = ctl.gait.p.stand_height_m + a1.FOOT_RADIUS_M
-    q0[7:] = ctl.stand_configuration()
-    bridge.qpos_mj(q0, d.qpos)
-    mujoco.mj_forward(m, d)
-    limit = sf.settings.torque_limit_nm
-    q, v = np.zeros(a1.NQ), np.zeros(a1.NV)
-    qps, xs = [], []
-    for k in range(round(seconds * 1000)):
-        t = k * 1e-3
-        bridge.state_pin(d.qpos, d.qvel, q, v)
-        u_nom = ctl.compute(t, q[7:], v[6:])
-        model.update(q, v)
-        gs = ctl.gait_state(t)
-        qp = sf.build(api.TickInputs(model, v, gs.in_stance, mu, gs.swing_phase, gs.swing_phase_rate), u_nom)
-        qps.append(qp.copy())
-        sol = sf.backend.solve(qp)
-        if not sol.ok:
-            raise RuntimeError(f"reference failed at tick {k}: {sol.status}")
-        xs.append(sol.x.copy())
-        bridge.ctrl_mj(np.clip(sol.x[qp.layout["u"]], -limit, limit), d.ctrl)
-        mujoco.mj_step(m, d)
-    return qps, np.array(xs)
+    controller = api.build_controller(cfg)
+    settings = replace(api.episode_settings(cfg), duration_s=seconds - controller.stand_duration_s, analyse=False)
+    episode = api.Episode(settings, world, api.build_plant(world), controller, sf, _AssumedFriction(mu),
+                          np.random.default_rng(0))
+    episode.qp_recorder = recorder = _Recorder()
+    res = episode.run()
+    if res.status != "ok" or res.fell:
+        raise RuntimeError(f"the fixture episode did not run to its end: {res.message or res.fall_reason}")
+    return recorder.qps, np.array(recorder.xs)
 
 
 def binding(problem: QPProblem, x: np.ndarray) -> list[str]:
@@ -112,7 +121,7 @@ def main(argv: list[str] | None = None) -> None:
         "binding_counts": {f: sum(f in t for t in tags) for f in ("ecbf", "friction", "torque", "none")},
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    run = {"scenario": f"fixture_bump_mu{args.mu:g}", "source": "solvers.record_fixture"}
+    run = {"scenario": f"fixture_bump_mu{args.mu:g}", "source": "studies.record_solver_fixture"}
     save(args.out, [qps[i] for i in keep], xs[keep], keep, None, meta, run)
     kept = {f: sum(f in tags[i] for i in keep) for f in ("ecbf", "friction", "torque", "none")}
     print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB): {len(keep)} QPs, binding {kept}; "

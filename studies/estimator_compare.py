@@ -1,4 +1,4 @@
-"""Compare friction-estimator checkpoints on named window sets (``python -m estimators.compare``).
+"""Compare friction-estimator checkpoints on named window sets (``python -m studies.estimator_compare``).
 
 For design choices (features, augmentation, data) without touching the test sets: each checkpoint is run
 on every ``--set NAME=PATH.npz`` (files written by :mod:`estimators.collect`, any split) and its raw mean
@@ -10,7 +10,7 @@ the lowest (mu < 0.4) and highest (mu >= 0.9) friction bands. The table goes to 
 Example (a shifted *validation* set collected with its own seed, never the shifted test split)::
 
     python -m estimators.collect --out /work/data/shiftval --train 0 --val 0 --test 0 --shifted 150 --seed 11
-    python -m estimators.compare attention_step /work/data/exp/ckpt/E_kin \\
+    python -m studies.estimator_compare attention_step /work/data/exp/ckpt/E_kin \\
         --set val=/work/data/estimators_f_big/val.npz --set shifted_val=/work/data/shiftval/shifted.npz
 """
 
@@ -26,8 +26,8 @@ import torch
 
 from estimators.checkpoint import load_checkpoint
 from estimators.data import load_windows
-from estimators.evaluate import markdown_table, predict_all
 from estimators.metrics import OVERESTIMATE_MARGIN
+from studies.estimator_evaluate import markdown_table, predict_all
 from taslel_bench.util.machine import machine_info
 
 LOW_MU, HIGH_MU = 0.4, 0.9  # [-] friction bands for the signed bias columns
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> None:
     table = markdown(compare(a.checkpoints, sets, describe))
     print(table)
     if a.out is not None:
-        cmd = "python -m estimators.compare " + " ".join(shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
+        cmd = "python -m studies.estimator_compare " + " ".join(shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
         info = machine_info()
         head = [
             "# Estimator checkpoints on named window sets", "",

@@ -1,0 +1,75 @@
+"""When an episode ends: the one fall rule and the state guard, used by every loop that runs the A1 (the
+benchmark, estimator data collection, in-loop studies) through :class:`taslel_bench.sim.episode.Episode`.
+
+Named terms, checked after **every physics step** on the state that step produced:
+
+* ``trunk_height``: the trunk origin below ``FallRule.height_m`` [m] (read from ``qpos``; ``xpos`` still
+  holds the step's starting state after ``mj_step``);
+* ``trunk_tilt``: the angle between trunk z and world z beyond ``FallRule.tilt_deg``;
+* ``body_contact``: the trunk, a hip or a thigh (anything above the knee) touching the terrain at
+  distance <= 0 (MuJoCo's contacts, found for the step's *starting* state: the time is one step earlier).
+
+and after every control tick, ``non_finite_state``: NaN or infinity anywhere in the state, a joint/trunk
+speed beyond ``max_speed``, or MuJoCo resetting the data (its own divergence guard): an error, not a fall.
+The time of a fall is that of the first physics state past a threshold, on the physics-step grid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from taslel_bench.plant.contacts import FootContactReader
+
+TERMS = ("trunk_height", "trunk_tilt", "body_contact")
+
+
+@dataclass(frozen=True)
+class FallRule:
+    """Thresholds of the fall terms (``robot.fall_height_m``, ``robot.fall_tilt_deg``)."""
+
+    height_m: float  # [m] trunk origin below this -> fall
+    tilt_deg: float  # [deg] trunk tilt beyond this -> fall
+    max_speed: float = 200.0  # [rad/s, m/s] ||qvel||_2 beyond this (or non-finite) -> "exploding state" error
+
+
+@dataclass
+class Fall:
+    term: str  # one of TERMS
+    reason: str  # what crossed which threshold, for people
+    t_s: float  # [s] episode time of the first physics state past the threshold
+
+
+class Terminations:
+    """The fall terms and the state guard of one episode (``qpos_adr``: the free joint's qpos address)."""
+
+    def __init__(self, rule: FallRule, qpos_adr: int, contacts: FootContactReader, physics_dt_s: float) -> None:
+        self.rule, self.a, self.contacts, self.dt = rule, qpos_adr, contacts, physics_dt_s
+        self._cos_tilt_min = math.cos(math.radians(rule.tilt_deg))
+        self._vmax_sq = rule.max_speed**2
+
+    def after_step(self, qpos: np.ndarray, data: mujoco.MjData, t_s: float) -> Fall | None:
+        """The first fall term crossed by the state ``qpos`` a physics step produced at episode time ``t_s``."""
+        a = self.a
+        z = qpos[a + 2]
+        cos_tilt = 1.0 - 2.0 * (qpos[a + 4] * qpos[a + 4] + qpos[a + 5] * qpos[a + 5])  # trunk z . world z
+        if z < self.rule.height_m:
+            return Fall("trunk_height", f"trunk height {z:.3f} m < {self.rule.height_m} m", t_s)
+        if cos_tilt < self._cos_tilt_min:
+            tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
+            return Fall("trunk_tilt", f"trunk tilt {tilt:.0f} deg", t_s)
+        if self.contacts.check_non_foot_contact(data):  # contacts of the step's starting state
+            name = self.contacts.non_foot_contact_name
+            return Fall("body_contact", f"{name} (above the knee) touched the terrain", t_s - self.dt)
+        return None
+
+    def state_is_bad(self, qpos: np.ndarray, qvel: np.ndarray) -> bool:
+        """NaN/inf anywhere in the state or a speed beyond the bound (one dot product each)."""
+        return not (float(qvel @ qvel) < self._vmax_sq and math.isfinite(float(qpos @ qpos)))
+
+    def on_grid(self, t_s: float) -> float:
+        """``t_s`` rounded to the physics-step grid [s]."""
+        return round(t_s / self.dt) * self.dt
