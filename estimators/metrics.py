@@ -6,7 +6,8 @@ import itertools
 
 import numpy as np
 
-OVERESTIMATE_MARGIN = 0.05  # [-] an estimate above truth + this margin counts as an over-estimate
+from taslel_bench.interfaces import overestimates
+
 FRICTION_BINS = (0.1, 0.3, 0.5, 0.7, 0.9, 1.2001)  # [-] bin edges for the per-bin MAE
 
 
@@ -22,7 +23,7 @@ def regression_metrics(y: np.ndarray, mu_hat: np.ndarray, sigma: np.ndarray | No
         "rmse": float(np.sqrt((err**2).mean())),
         "r2": float(1.0 - (err**2).sum() / ss_tot) if ss_tot > 0 else float("nan"),
         "bias": float(err.mean()),
-        "overestimate_rate": float((err > OVERESTIMATE_MARGIN).mean()),
+        "overestimate_rate": float(overestimates(mu_hat, y).mean()),
     }
     for lo, hi in itertools.pairwise(FRICTION_BINS):
         sel = (y >= lo) & (y < hi)

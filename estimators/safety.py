@@ -24,9 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from taslel_bench.interfaces import OVERESTIMATE_MARGIN
+from taslel_bench.interfaces import overestimates as is_overestimate
+
 BANDS: tuple[tuple[float, float], ...] = ((0.1, 0.3), (0.3, 0.5), (0.5, 0.8), (0.8, 1.2))  # [-] truth bands
 LOW_MU = 0.5  # [-] the over-estimation target conditions on mu below this
-OVER_MARGIN = 0.05  # [-] mu_hat above mu + this is an over-estimate
+OVER_MARGIN = OVERESTIMATE_MARGIN  # [-] mu_hat above mu + this is an over-estimate (the core's one margin)
 USEFUL_CAP = 0.5  # [-] usefulness: mu_hat >= min(mu, USEFUL_CAP) - USEFUL_SLACK
 USEFUL_SLACK = 0.1  # [-]
 MAE_CAP = 0.6  # [-] capped MAE: estimate and truth capped here
@@ -47,7 +50,8 @@ def band_mask(y: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def overestimates(y: np.ndarray, mu_hat: np.ndarray) -> np.ndarray:
-    return np.asarray(mu_hat, float) > np.asarray(y, float) + OVER_MARGIN
+    """mu_hat > y + OVERESTIMATE_MARGIN per window (the core's one predicate, truth first here)."""
+    return is_overestimate(mu_hat, y)
 
 
 def useful(y: np.ndarray, mu_hat: np.ndarray) -> np.ndarray:

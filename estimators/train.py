@@ -42,6 +42,7 @@ from estimators.models import (
     calibrate_variance,
     parameter_count,
 )
+from taslel_bench.interfaces import overestimates
 
 LOSSES = ("mae+nll", "nll", "mae")
 SCHEDULES = ("plateau", "cosine_time")
@@ -146,7 +147,7 @@ class FrictionTask(L.LightningModule):
             ql = pinball(lower, y, q)
             loss = loss + self.hparams.quantile_weight * ql
             self.log(f"{stage}_pinball", ql, on_epoch=True, on_step=False)
-            self.log(f"{stage}_lower_over", ((lower - y) > 0.05).float().mean(), on_epoch=True, on_step=False)
+            self.log(f"{stage}_lower_over", overestimates(lower, y).float().mean(), on_epoch=True, on_step=False)
         self.log(f"{stage}_loss", loss, prog_bar=stage == "train", on_epoch=True, on_step=False)
         self.log(f"{stage}_mae", mae, prog_bar=True, on_epoch=True, on_step=False)
         return loss

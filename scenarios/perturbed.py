@@ -23,9 +23,9 @@ class PerturbedPlant(FlatGround):
 
     def __init__(self, name: str = "perturbed", friction: float = 1.0, trunk_mass_scale: float = 1.0,
                  trunk_com_shift_m: Sequence[float] = (0.0, 0.0, 0.0),
-                 joint_damping: float | Sequence[float] = 0.0,
-                 joint_frictionloss: float | Sequence[float] = 0.0,
-                 motor_strength_scale: float = 1.0, actuator_delay_steps: int = 0,
+                 joint_damping: float | Sequence[float] = 0.05,
+                 joint_frictionloss: float | Sequence[float] = 0.1,
+                 motor_strength_scale: float = 0.9, actuator_delay_steps: int = 2,
                  armature: float | Sequence[float] = 0.0, payload_mass_kg: float = 0.0,
                  payload_pos_m: Sequence[float] = (0.0, 0.0, 0.0),
                  coefficients: Sequence[float] | None = None) -> None:

@@ -20,7 +20,8 @@ class Pushes(FlatGround):
     impulse of each is force x duration [N·s], applied at the trunk's centre of mass."""
 
     def __init__(self, name: str = "push", friction: float = 1.0,
-                 pushes: Sequence[dict] = ({"t_s": 2.0, "force_n": (0.0, 60.0, 0.0), "duration_s": 0.1},)) -> None:
+                 pushes: Sequence[dict] = ({"t_s": 3.0, "force_n": (0.0, 60.0, 0.0), "duration_s": 0.1},
+                                           {"t_s": 6.0, "force_n": (40.0, 0.0, 0.0), "duration_s": 0.1})) -> None:
         super().__init__(name=name, friction=friction)
         if isinstance(pushes, (str, bytes)) or not isinstance(pushes, Sequence):  # ListConfig is a Sequence
             raise fail("scenario.pushes", pushes, "must be a list of {t_s, force_n: [fx, fy, fz],"

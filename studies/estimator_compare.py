@@ -26,8 +26,8 @@ import torch
 
 from estimators.checkpoint import load_checkpoint
 from estimators.data import load_windows
-from estimators.metrics import OVERESTIMATE_MARGIN
 from studies.estimator_evaluate import markdown_table, predict_all
+from taslel_bench.interfaces import OVERESTIMATE_MARGIN
 from taslel_bench.util.machine import machine_info
 
 LOW_MU, HIGH_MU = 0.4, 0.9  # [-] friction bands for the signed bias columns

@@ -25,6 +25,7 @@ from estimators.data import load_split, load_windows, window_filter_mu
 from estimators.features import with_filter_channels
 from estimators.metrics import regression_metrics
 from estimators.models import VARIANTS, FrictionModel, parameter_count
+from taslel_bench.util import tables
 from taslel_bench.util.machine import machine_info
 
 FIXTURE = CHECKPOINT_DIR / "heldout64.npz"
@@ -259,16 +260,8 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
 
 
 def markdown_table(df: object) -> str:
-    """A pipe table of a DataFrame (floats with 4 decimals) without the optional ``tabulate`` package."""
-    cols = list(df.columns)  # type: ignore[attr-defined]
-
-    def fmt(v: object) -> str:
-        return f"{v:.4f}" if isinstance(v, float) else str(v)
-
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for row in df.itertuples(index=False):  # type: ignore[attr-defined]
-        lines.append("| " + " | ".join(fmt(v) for v in row) + " |")
-    return "\n".join(lines)
+    """A pipe table of a DataFrame, floats with 4 decimals (the core's table writer)."""
+    return tables.markdown_table(df, fmt=lambda v: f"{v:.4f}" if isinstance(v, float) else str(v)).rstrip("\n")
 
 
 def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict[str, dict]) -> list[str]:

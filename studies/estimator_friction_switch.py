@@ -12,18 +12,16 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
-
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from estimators.checkpoint import checkpoint_paths
 from estimators.learned import LearnedEstimator
-from estimators.metrics import OVERESTIMATE_MARGIN
 from estimators.randomisation import EpisodeParams
 from taslel_bench import api
-from taslel_bench.interfaces import GROUND, Plane, Terrain
+from taslel_bench.interfaces import GROUND, OVERESTIMATE_MARGIN, Plane, Terrain
 
 RESULTS_DIR = Path(__file__).resolve().parents[1] / "results" / "estimators"
 

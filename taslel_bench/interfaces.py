@@ -143,6 +143,14 @@ class Scenario(Protocol):
 # [-] largest friction coefficient a config may give (scenario frictions, estimator constants): far above any
 # real foot-ground pair (rubber on concrete ~1), low enough to catch typos like 1e6
 MAX_FRICTION = 5.0
+# [-] an estimate above the true friction by more than this is an over-estimate (the dangerous side: the filter's
+# cone is then wider than the ground's); the one predicate is :func:`overestimates`
+OVERESTIMATE_MARGIN = 0.05
+
+
+def overestimates(mu_hat, mu_true):
+    """mu_hat > mu_true + OVERESTIMATE_MARGIN (numbers or arrays): the estimate is on the dangerous side."""
+    return mu_hat > mu_true + OVERESTIMATE_MARGIN
 
 
 @dataclass
@@ -188,7 +196,7 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "Log", "Plane", "Scenario", "Terrain",
     "TerrainPart",
     # estimator
-    "MAX_FRICTION", "Estimator", "FrictionEstimate", "Proprioception",
+    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "Proprioception", "overestimates",
     # the plant's perturbations
     "ActuatorDelay", "PlantPerturbation",
     # the robot and config values

@@ -9,8 +9,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from scenarios.perturbed import PerturbedPlant
 from taslel_bench.config.settings import model_options
+from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
 from taslel_bench.plant.build import a1_spec, compile_plant
 from taslel_bench.robot import a1
@@ -27,7 +27,7 @@ AGREE = 1e-9  # [kg·m², N·m] the issue's bound; measured ~1e-13
 
 def perturbed_plant(**kw) -> mujoco.MjModel:
     spec = a1_spec()
-    PerturbedPlant(**kw).build(spec, np.random.default_rng(0))
+    PlantPerturbation.checked("scenario", **kw).apply(spec)  # the one implementation of the plant edits
     return compile_plant(spec)
 
 

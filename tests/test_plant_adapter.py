@@ -10,10 +10,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from scenarios.perturbed import PerturbedPlant
 from taslel_bench.config.settings import plant_options
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.adapter import read_record
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import a1_spec, build_plant, compile_plant
@@ -265,7 +265,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
         "payload_pos_m": (0.1, 0.0, 0.0),
     }
     spec = a1_spec()
-    PerturbedPlant(**kw).build(spec, np.random.default_rng(0))
+    PlantPerturbation.checked("scenario", **kw).apply(spec)  # the one implementation of the plant edits
     m = compile_plant(spec)
     nominal = plant_vs_model(m, A1Model(), STAND)
     assert (

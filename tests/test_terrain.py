@@ -87,7 +87,7 @@ def test_the_plant_gets_the_terrains_friction_and_geometry():
 
 def test_capsule_distance_of_a_leg_link_over_the_floor_and_a_log():
     terrain = Terrain((Plane(1.0), Log(x_m=1.0, z_m=0.0, radius_m=0.1)))
-    d, n, _, axis_point = terrain.capsule_distance([0.5, 0.0, 0.3], [0.5, 0.0, 0.1], 0.015)
+    d, _, _, axis_point = terrain.capsule_distance([0.5, 0.0, 0.3], [0.5, 0.0, 0.1], 0.015)
     assert d == pytest.approx(0.1 - 0.015) and np.allclose(axis_point, [0.5, 0.0, 0.1])
     d, _, point, _ = terrain.capsule_distance([1.0, 0.0, 0.3], [1.0, 0.0, 0.15], 0.015)
     assert d == pytest.approx(0.15 - 0.1 - 0.015) and np.allclose(point, [1.0, 0.0, 0.1])

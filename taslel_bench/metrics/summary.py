@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from taslel_bench.interfaces import OVERESTIMATE_MARGIN, overestimates
 from taslel_bench.metrics.clearance import clearance_metrics
 from taslel_bench.metrics.contacts import contact_metrics
 from taslel_bench.metrics.health import HealthLimits, assess
@@ -126,14 +127,14 @@ def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
     out = {
         "estimator_mae": float(np.abs(err).mean()),
         "estimator_bias": float(err.mean()),
-        "estimator_overestimate_rate": float(np.mean(err > 0.05)),
+        "estimator_overestimate_rate": float(np.mean(overestimates(tr.mu_hat[:n], tr.mu_true[:n]))),
     }
     out["estimator_settle_s"] = settle_time(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n])
     out.update(estimator_safety_metrics(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n], tr.mu_hat_ready[:n]))
     return out
 
 
-SETTLE_BAND = 0.05  # [-] |mu_hat - mu| band for the settle time
+SETTLE_BAND = OVERESTIMATE_MARGIN  # [-] |mu_hat - mu| band for the settle time
 
 
 def settle_time(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: float = SETTLE_BAND) -> float:
@@ -154,7 +155,7 @@ CAPPED_MAE_CAP = 0.6  # [-] capped MAE: estimate and truth capped here
 
 def estimator_safety_metrics(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray,
                              ready: np.ndarray) -> dict[str, float]:
-    """One-sided estimator metrics over control ticks (issue 19); over = mu_hat > mu + 0.05.
+    """One-sided estimator metrics over control ticks (issue 19); over = :func:`overestimates`.
 
     * ``estimator_low_overestimate_rate``: over-estimation over the ticks with mu < 0.5 (every tick, the
       startup window and friction drops included; nan without such ticks);
@@ -171,7 +172,7 @@ def estimator_safety_metrics(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndar
     n = len(t)
     if n == 0:
         return {}
-    over = mu_hat > mu_true + SETTLE_BAND
+    over = overestimates(mu_hat, mu_true)
     low = mu_true < LOW_FRICTION
     first_ready = int(np.argmax(ready)) if ready.any() else n
     dt = float(t[1] - t[0]) if n > 1 else 0.0
@@ -201,7 +202,7 @@ def time_to_safe(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: f
     if drops.size == 0:
         return math.nan
     k0 = int(drops[0]) + 1
-    return _time_until_clear(t, k0, mu_hat[k0:] > mu_true[k0:] + band)
+    return _time_until_clear(t, k0, mu_hat[k0:] > mu_true[k0:] + band)  # = overestimates() at the default band
 
 
 def _time_until_clear(t: np.ndarray, k0: int, bad: np.ndarray) -> float:

@@ -19,6 +19,7 @@ import pandas as pd
 
 from taslel_bench.record import run_files
 from taslel_bench.sweep.report import SHGEOM_SHIFT_US, machine_info, shifted_geometric_mean
+from taslel_bench.util.tables import markdown_table
 
 QP_TABLE = "replay_qps.parquet"  # per QP x backend x profile x mode x pass, in a job folder
 JOB_INFO = "replay_job.json"  # the job's backend, settings and machine
@@ -118,11 +119,7 @@ def _pivot(summary: pd.DataFrame, value: str, fmt: str, second: str | None = Non
 
 
 def _md(frame: pd.DataFrame, index: bool = True) -> str:
-    f = frame.reset_index() if index else frame
-    head = "| " + " | ".join(map(str, f.columns)) + " |"
-    sep = "|" + "|".join("---" for _ in f.columns) + "|"
-    body = ["| " + " | ".join(str(v) for v in r) + " |" for r in f.itertuples(index=False)]
-    return "\n".join([head, sep, *body])
+    return markdown_table(frame.reset_index() if index else frame, fmt=str).rstrip("\n")
 
 
 def _figure(frame: pd.DataFrame, out: Path) -> str | None:

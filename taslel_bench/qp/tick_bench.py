@@ -25,6 +25,7 @@ from taslel_bench.api import compose
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.record.trace import TICK_PARTS
 from taslel_bench.sim.build import Built
+from taslel_bench.util.tables import markdown_table
 
 
 def _median_us(fn, n: int = 2000) -> float:
@@ -126,11 +127,10 @@ def main(argv: list[str] | None = None) -> None:
             "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
             "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
             "Other processes on the machine inflate all numbers alike.\n"),
-            "| " + " | ".join(cols) + " |",
-            "|" + "---|" * len(cols),
         ]
-        for label, tick, rtf, status, fell, in_loop, isolated in rows:
-            lines.append(f"| {label} | {tick:.1f} | {rtf:.1f}x | {status} | {fell} | {fmt(in_loop)} | {fmt(isolated)} |")
+        cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", status, fell, fmt(in_loop), fmt(isolated))
+                 for label, tick, rtf, status, fell, in_loop, isolated in rows]
+        lines.append(markdown_table(cells, cols, fmt=str).rstrip("\n"))
         args.out.parent.mkdir(parents=True, exist_ok=True)
         figure = args.out.with_suffix(".png")
         lines += ["", f"![tick parts in the loop]({figure.name})"]

@@ -99,8 +99,8 @@ def channels(barrier_names: Sequence[str] = ()) -> dict[str, dict[str, tuple[dic
     ``<name>_h_e_mps`` per foot (``h_m``: the smallest h over the families)."""
     out = {topic: dict(fields) for topic, fields in CHANNELS.items()}
     for name in barrier_names:
-        out["/barrier"][f"{name}_h_m"] = (_ARR, _legs("{leg}_barrier_%s_h_m" % name))
-        out["/barrier"][f"{name}_h_e_mps"] = (_ARR, _legs("{leg}_barrier_%s_he_mps" % name))
+        out["/barrier"][f"{name}_h_m"] = (_ARR, _legs("{leg}_barrier_" + name + "_h_m"))
+        out["/barrier"][f"{name}_h_e_mps"] = (_ARR, _legs("{leg}_barrier_" + name + "_he_mps"))
     return out
 EVENTS = {"/events": {"t_s": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
           "/summary": {"summary": {"type": "object"}}}  # fmt: skip

@@ -41,10 +41,11 @@ def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Genera
     return build_plant(scenario, plant_options(cfg), int(cfg.seed), rng, Path(mjcf) if mjcf else None)
 
 
-def build_plant(scenario: Scenario, options: PlantOptions = PlantOptions(), seed: int = 0,
+def build_plant(scenario: Scenario, options: PlantOptions | None = None, seed: int = 0,
                 rng: np.random.Generator | None = None, mjcf: Path | None = None) -> mujoco.MjModel:
     """The URDF plant (or the A1 MJCF ``mjcf``) with the scenario's terrain (drawn from its own stream of
     ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's other edits."""
+    options = options if options is not None else PlantOptions()
     spec = mjcf_spec(mjcf, options) if mjcf is not None else a1_spec(options)
     scenario.terrain.build(spec, terrain_rng(seed))
     scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))

@@ -40,6 +40,7 @@ from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
 PROGRESS_EVERY_TICKS = 500
+DEFAULT_FALL_RULE = FallRule(height_m=0.12, tilt_deg=57.0)  # conf/robot/a1.yaml's
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ class EpisodeSettings:
     duration_s: float = 10.0  # [s] walking time after the stand
     physics_dt_s: float = 0.001  # [s]
     control_dt_s: float = 0.001  # [s] an integer multiple of physics_dt_s
-    fall: FallRule = FallRule(height_m=0.12, tilt_deg=57.0)
+    fall: FallRule = DEFAULT_FALL_RULE
     init_joint_noise_rad: float = 0.02  # [rad] std of the initial joint-angle perturbation (seeded)
     init_base_vel_noise_mps: float = 0.05  # [m/s] std of the initial trunk velocity perturbation
     filter_start_s: float = 0.0  # [s] episode time before which u_nom passes unfiltered (paper's figure)

@@ -19,6 +19,7 @@ import numpy as np
 from taslel_bench.record import run_files
 from taslel_bench.sim.build import Built
 from taslel_bench.util.machine import machine_info
+from taslel_bench.util.tables import markdown_table
 
 
 def scan(seeds: range, overrides: list[str], stand: bool = True) -> list[dict[str, object]]:
@@ -62,9 +63,9 @@ def markdown(rows: list[dict[str, object]], command: str, seconds: float) -> str
         ("Each seed is built exactly as its run would be (initial state drawn once from the seed, the lowest "
          "foot sphere placed 0.1 mm into the floor, the friction of every touching foot checked against the "
          "scenario), then its stand is simulated.\n"),
-        "| seeds | started | stood (no fall in the stand) | feet touching at the start: min / median / max |",
-        "|---|---|---|---|",
-        f"| {rows[0]['seed']}..{rows[-1]['seed']} ({len(rows)}) | {len(started)} | {len(stood)} | {spread} |\n",
+        markdown_table([(f"{rows[0]['seed']}..{rows[-1]['seed']} ({len(rows)})", len(started), len(stood), spread)],
+                       ["seeds", "started", "stood (no fall in the stand)",
+                        "feet touching at the start: min / median / max"]),
     ]
     failed = [r for r in rows if not r["started"] or r["stood"] is False]
     if failed:

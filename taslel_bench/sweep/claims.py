@@ -18,6 +18,8 @@ from collections.abc import Callable
 
 import pandas as pd
 
+from taslel_bench.util.tables import markdown_table
+
 PAPER_GRF_MAE_N = {"z": 3.051, "xy": 1.847}  # [N] the paper's GRF prediction error, flat ground, filter on
 Runs = Callable[[str, bool], pd.DataFrame]
 
@@ -63,11 +65,9 @@ def paper_claims(finished: pd.DataFrame) -> str:
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "nominal only", "filter on"])
-    head = "| " + " | ".join(table.columns) + " |\n|" + "---|" * len(table.columns) + "\n"
-    body = "".join("| " + " | ".join(map(str, r)) + " |\n" for r in table.itertuples(index=False))
     return ("## Paper vs this harness\n\n" + note + "Mean (min–max, runs) over finished runs. *Loaded* = every foot with a "
             "plant or filter normal force >= 1 N (the headline); *stance* = the filter's stance set with plant "
-            "load (the paper's selection).\n\n" + head + body + "\n### Claim by claim\n\n"
+            "load (the paper's selection).\n\n" + markdown_table(table, fmt=str) + "\n### Claim by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
 
 

@@ -19,6 +19,7 @@ from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
 from taslel_bench.util.machine import machine_info
+from taslel_bench.util.tables import markdown_table
 
 SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
@@ -305,16 +306,6 @@ def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
     return "logs.png"
 
 
-def _md_table(table: pd.DataFrame) -> str:
-    def fmt(v: object) -> str:
-        if isinstance(v, float):
-            return "—" if not np.isfinite(v) else f"{v:.3g}"
-        return str(v)
-
-    head = "| " + " | ".join(table.columns) + " |\n|" + "---|" * len(table.columns) + "\n"
-    return head + "".join("| " + " | ".join(fmt(v) for v in row) + " |\n" for row in table.itertuples(index=False))
-
-
 HOW_MEASURED = """
 How each column is measured (all plant quantities in MuJoCo, per run over the walking time, then averaged
 over the row's finished runs, `ok` or `degraded`; `fall_rate` counts falls over those runs; `degraded` runs
@@ -381,9 +372,9 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
         f"Packages: {info['packages']}\n",
         "## Safety and physics per group of runs (seeds pooled)\n",
-        _md_table(safety) if len(table) else "_no runs found_\n",
+        markdown_table(safety) if len(table) else "_no runs found_\n",
         "## Cost per group of runs\n" if len(table) else "",
-        _md_table(cost) if len(table) else "",
+        markdown_table(cost) if len(table) else "",
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
         paper_claims(_finished(frame)) if not frame.empty else "",
     ]

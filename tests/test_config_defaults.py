@@ -1,0 +1,81 @@
+"""YAML is the one source of defaults: the settings dataclasses the core builds from the config, and each axis
+class's defaults, agree with the config files (a default written twice that differs is a bug)."""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import fields
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from taslel_bench.config import settings
+from taslel_bench.config.compose import CONF_DIR, compose
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import PDGains
+from taslel_bench.filter.robust import RobustSettings
+from taslel_bench.filter.safety_filter import FilterSettings
+from taslel_bench.metrics.health import HealthLimits
+from taslel_bench.plant.build import PlantOptions
+from taslel_bench.robot.model_options import ModelOptions
+from taslel_bench.sim.episode import EpisodeSettings
+
+
+def _differences(built, default) -> list[str]:
+    return [f"{f.name}: config {getattr(built, f.name)!r}, dataclass {getattr(default, f.name)!r}"
+            for f in fields(default) if getattr(built, f.name) != getattr(default, f.name)]
+
+
+def test_core_settings_defaults_are_the_configs():
+    cfg = compose()
+    controller = settings.build_controller(cfg)
+    pairs = {
+        "filter": (settings.filter_settings(cfg), FilterSettings()),
+        "filter.robust": (settings.robust_settings(cfg.filter.robust), RobustSettings()),
+        "episode": (settings.episode_settings(cfg), EpisodeSettings()),
+        "health": (settings.health_limits(cfg), HealthLimits()),
+        "model": (settings.model_options(cfg), ModelOptions()),
+        "plant": (settings.plant_options(cfg), PlantOptions()),
+        "controller gait": (controller.gait.p, GaitParams()),
+        "controller gains": (controller.gains, PDGains()),
+    }
+    wrong = {name: diff for name, (built, default) in pairs.items() if (diff := _differences(built, default))}
+    assert not wrong
+
+
+def _same(yaml_value, default) -> bool:
+    if isinstance(default, tuple):
+        default = list(default)
+    if isinstance(yaml_value, list) and isinstance(default, list) and len(yaml_value) == len(default):
+        return all(_same(a, b) for a, b in zip(yaml_value, default))
+    if isinstance(yaml_value, dict) and isinstance(default, dict) and yaml_value.keys() == default.keys():
+        return all(_same(yaml_value[k], default[k]) for k in yaml_value)
+    return yaml_value == default
+
+
+def _class_files() -> list[Path]:
+    """The axis config files named like their class's default ``name`` (the others are presets:
+    ``low_friction`` is FlatGround with friction 0.2); they must hold the class's defaults."""
+    out = []
+    for path in sorted(p for group in ("scenario", "estimator", "solver") for p in (CONF_DIR / group).glob("*.yaml")):
+        target = get_class_or_function(OmegaConf.load(path)["_target_"])
+        params = inspect.signature(target).parameters
+        if "name" in params and params["name"].default == path.stem:
+            out.append(path)
+    return out
+
+
+def get_class_or_function(target: str):
+    module, _, name = target.rpartition(".")
+    return getattr(__import__(module, fromlist=[name]), name)
+
+
+@pytest.mark.parametrize("path", _class_files(), ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_an_axis_class_defaults_are_its_config_files(path: Path):
+    node = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    params = inspect.signature(get_class_or_function(node["_target_"])).parameters
+    wrong = [f"{key}: yaml {value!r}, class {params[key].default!r}" for key, value in node.items()
+             if key in params and params[key].default is not inspect.Parameter.empty
+             and not _same(value, params[key].default)]
+    assert not wrong
