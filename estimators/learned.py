@@ -58,8 +58,14 @@ from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_ch
 from estimators.models import VARIANTS, run_stages
 from estimators.safety import BandMargin
 from estimators.simple import SAFE_FLOOR_MU
-from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception
-from taslel_bench.util.fields import ConfigError, integer, number
+from taslel_bench.interfaces import (
+    MAX_FRICTION,
+    ConfigError,
+    FrictionEstimate,
+    Proprioception,
+    integer,
+    number,
+)
 
 MAX_CONSERVATIVE_K = 10.0  # [sigmas] the shipped configs use 0.5-3
 

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
-from taslel_bench.robot import a1
+from taslel_bench.interfaces import a1
 
 VARIANTS = ("mlp", "attention", "linformer")
 TOKENISATIONS = ("joint", "step")

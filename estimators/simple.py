@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception
-from taslel_bench.util.fields import number
+from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception, number
 
 
 class OracleEstimator:

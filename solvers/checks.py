@@ -21,8 +21,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numba import njit
 
-from taslel_bench.interfaces import SOLVED, QPProblem
-from taslel_bench.util.fields import choice, number
+from taslel_bench.interfaces import SOLVED, QPProblem, choice, number
 
 LEVELS = ("kkt", "primal", "none")
 

@@ -25,8 +25,7 @@ from numba import njit
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.settings import check_settings
 from solvers.sparse import PatternCSC
-from taslel_bench.interfaces import QPProblem
-from taslel_bench.util.fields import flag
+from taslel_bench.interfaces import QPProblem, flag
 
 # Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
 # Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):

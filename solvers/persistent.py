@@ -25,8 +25,7 @@ from numba import njit
 from solvers.base import BackendSolution, checked, invalid_data, layout_key, package_version
 from solvers.checks import Tolerances
 from solvers.settings import check_settings
-from taslel_bench.interfaces import QPProblem
-from taslel_bench.util.fields import flag
+from taslel_bench.interfaces import QPProblem, flag
 
 BIG = 1e20  # finite stand-in for an infinite bound, where a solver needs one
 

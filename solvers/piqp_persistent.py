@@ -21,8 +21,7 @@ import numpy as np
 
 from solvers.persistent import NativeResult, PersistentBackend, failure_reason
 from solvers.sparse import PatternCSC
-from taslel_bench.interfaces import QPProblem
-from taslel_bench.util.fields import choice
+from taslel_bench.interfaces import QPProblem, choice
 
 DEFAULT_SETTINGS: dict[str, Any] = {"eps_abs": 1e-9, "eps_rel": 0.0, "verbose": False}
 

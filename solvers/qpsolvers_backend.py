@@ -14,8 +14,7 @@ from solvers.checks import Tolerances
 from solvers.presolve import Reduced, reduce
 from solvers.settings import check_settings
 from solvers.sparse import PatternCache
-from taslel_bench.interfaces import QPProblem
-from taslel_bench.util.fields import choice, fail, flag
+from taslel_bench.interfaces import QPProblem, choice, fail, flag
 
 # Solvers whose qpsolvers interface passes lb/ub to the native solver (others turn them into G rows,
 # infinite ones included): for the rest we pass only the finite bounds, as rows.

@@ -20,8 +20,7 @@ import numpy as np
 
 from solvers.base import BackendSolution
 from solvers.qpsolvers_backend import QpsolversBackend
-from taslel_bench.interfaces import QPBackend, QPProblem
-from taslel_bench.util.fields import number
+from taslel_bench.interfaces import QPBackend, QPProblem, number
 
 TIGHT_CHECK = {"primal": 1e-8, "dual": 1e-8, "gap": 1e-8}
 

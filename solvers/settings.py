@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from taslel_bench.util.fields import fail, integer, is_number, number
+from taslel_bench.interfaces import fail, integer, is_number, number
 
 ITERATION_CAPS = ("max_iter", "iter_limit", "maxiter")
 

@@ -22,9 +22,10 @@ import numpy as np
 
 from solvers.reference import reference_backend
 from taslel_bench.interfaces import ClearanceProfile, QPProblem
-from taslel_bench.record.qpset import active_sets, binding_tags
-from tests.solver_fixture import DEFAULT_PATH, save
+from taslel_bench.record.qpset import active_sets, binding_tags, from_problems
+from taslel_bench.record.qpset import save as save_qpset
 
+DEFAULT_PATH = Path(__file__).resolve().parents[1] / "tests" / "data" / "qps_episode.npz"  # the fixture
 BUMP_M = 0.08  # [m] obstacle peak of the clearance profile
 BUMP = (0.0, 0.0, 16 * BUMP_M, -32 * BUMP_M, 16 * BUMP_M)  # z(s) = 16 h s² (1 - s)²
 
@@ -122,7 +123,7 @@ def main(argv: list[str] | None = None) -> None:
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
     run = {"scenario": f"fixture_bump_mu{args.mu:g}", "source": "studies.record_solver_fixture"}
-    save(args.out, [qps[i] for i in keep], xs[keep], keep, None, meta, run)
+    save_qpset(args.out, from_problems([qps[i] for i in keep], xs[keep], keep, meta, run))
     kept = {f: sum(f in tags[i] for i in keep) for f in ("ecbf", "friction", "torque", "none")}
     print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB): {len(keep)} QPs, binding {kept}; "
           f"episode: {meta['binding_counts']}")  # fmt: skip

@@ -1,29 +1,16 @@
-"""The solver tests' QP fixture: a :mod:`taslel_bench.record.qpset` file (the format lives in the core, which writes
-it during runs with ``record.qps=true``); this module only names the committed fixture and adds helpers.
-
-``save(path, problems, x_ref, ticks, tags, meta)`` keeps the old call signature (``tags`` are recomputed from
-what is active at ``x_ref``, the solution stored as used).
-"""
+"""The solver tests' QP fixture: a :mod:`taslel_bench.record.qpset` file (the format lives in the core, which
+writes it during runs with ``record.qps=true``; ``python -m studies.record_solver_fixture`` made this one); this
+module names the committed fixture and adds helpers."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.record.qpset import QPSet, from_problems
+from taslel_bench.record.qpset import QPSet
 from taslel_bench.record.qpset import load as _load
-from taslel_bench.record.qpset import save as _save
 
-DEFAULT_PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "qps_episode.npz"
-
-
-def save(path: Path, problems: list[QPProblem], x_ref: np.ndarray, ticks: np.ndarray, tags: list[str] | None,
-         meta: dict, run: dict | None = None) -> None:  # fmt: skip
-    """Write in-memory QPs (x_ref = the solution used) as a QP set."""
-    del tags  # derived from the active sets at x_ref on load
-    _save(path, from_problems(problems, x_ref, ticks, meta, run))
+DEFAULT_PATH = Path(__file__).resolve().parent / "data" / "qps_episode.npz"
 
 
 def load(path: Path | str = DEFAULT_PATH) -> QPSet:
@@ -42,4 +29,4 @@ def without_rows(problem: QPProblem, labels_prefix_out: str) -> QPProblem:
     )  # fmt: skip
 
 
-__all__ = ["DEFAULT_PATH", "QPSet", "load", "save", "without_rows"]
+__all__ = ["DEFAULT_PATH", "QPSet", "load", "without_rows"]

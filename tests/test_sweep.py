@@ -16,7 +16,8 @@ from taslel_bench.record.mcap import AFTER_EPISODE, CHANNELS, EVENTS
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
 from taslel_bench.sweep.aggregate import aggregate
-from taslel_bench.sweep.report import shifted_geometric_mean, write_report
+from taslel_bench.sweep.report import write_report
+from taslel_bench.util.stats import shifted_geometric_mean
 from tests.conftest import compose_cfg
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.record import run_files
-from taslel_bench.sweep.report import SHGEOM_SHIFT_US, machine_info, shifted_geometric_mean
+from taslel_bench.util.machine import machine_info
+from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
 
 QP_TABLE = "replay_qps.parquet"  # per QP x backend x profile x mode x pass, in a job folder
@@ -178,7 +179,7 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
     lines = [
         "# QP replay benchmark",
         "",
-        f"Generated {dt.datetime.now().isoformat(timespec='seconds')} by `python -m taslel_bench.replay`.",
+        f"Generated {dt.datetime.now().isoformat(timespec='seconds')} by `python -m taslel_bench.replay`, {m['code']}.",
         f"Test set: `{Path(info.get('testset', '?')).name}`, {info.get('n_qps', '?')} QPs from "
         f"{len(info.get('runs', []))} closed-loop runs; replayed per scenario: "
         + ", ".join(f"{k} {v}" for k, v in scen.items())

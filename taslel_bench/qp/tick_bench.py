@@ -23,8 +23,10 @@ from rich.table import Table
 
 from taslel_bench.api import compose
 from taslel_bench.filter.layout import TickInputs
+from taslel_bench.record.run_files import atomic_write
 from taslel_bench.record.trace import TICK_PARTS
 from taslel_bench.sim.build import Built
+from taslel_bench.util.machine import machine_info
 from taslel_bench.util.tables import markdown_table
 
 
@@ -107,9 +109,6 @@ def main(argv: list[str] | None = None) -> None:
         table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), fmt(in_loop), fmt(isolated))
     Console(width=220).print(table)
     if args.out is not None:
-        from taslel_bench.record.run_files import atomic_write
-        from taslel_bench.sweep.report import machine_info
-
         info = machine_info()
         lines = [
             "# Control-tick cost\n",
@@ -117,7 +116,7 @@ def main(argv: list[str] | None = None) -> None:
             f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n"),
             (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
             f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
-            f"Packages: {info['packages']}\n"),
+            f"Packages: {info['packages']}  \nCode: {info['code']}\n"),
             ("Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
             "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
             "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "

@@ -16,6 +16,7 @@ import pandas as pd
 SUMMARY = "summary.json"
 STEPS = "steps.parquet"
 EVENTS = "events.json"
+OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may hold commas and spaces)
 
 
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:

@@ -24,9 +24,10 @@ from taslel_bench.metrics.summary import summarize
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
+from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
-from taslel_bench.sweep.aggregate import OVERRIDE_SEPARATOR
+from taslel_bench.util.provenance import code_version
 
 
 def file_sha256(path: Path) -> str:
@@ -155,6 +156,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
+        **code_version(),  # git_commit, git_dirty
         **notes,
     }
     summary.update(plant_identity(cfg, built))

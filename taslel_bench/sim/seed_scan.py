@@ -59,7 +59,7 @@ def markdown(rows: list[dict[str, object]], command: str, seconds: float) -> str
     spread = f"{feet.min()} / {np.median(feet)} / {feet.max()}" if feet.size else "—"
     lines = [
         "# Seed scan: does every seed start?\n",
-        f"Generated {when} by `{command}` in {seconds:.0f} s on {machine}.\n",
+        f"Generated {when} by `{command}` ({info['code']}) in {seconds:.0f} s on {machine}.\n",
         ("Each seed is built exactly as its run would be (initial state drawn once from the seed, the lowest "
          "foot sphere placed 0.1 mm into the floor, the friction of every touching foot checked against the "
          "scenario), then its stand is simulated.\n"),

@@ -11,6 +11,7 @@ from typing import Any
 import pandas as pd
 
 from taslel_bench.record import run_files
+from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 
 SUMMARY_TABLE = "summary.parquet"
 AXES = ("scenario", "solver", "estimator", "seed")
@@ -77,7 +78,6 @@ def aggregate(sweep_dir: Path) -> pd.DataFrame:
     return frame
 
 
-OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may hold commas and spaces)
 
 
 def parse_overrides(text: object) -> dict[str, str]:

@@ -19,9 +19,9 @@ from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
 from taslel_bench.util.machine import machine_info
+from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
 
-SHGEOM_SHIFT_US = 10.0  # [µs] shift of the shifted geometric mean of solve times
 GROUP = ["scenario", "solver", "filter_formulation", "filter_contact_velocity_gain", "estimator"]
 OPTIONAL_GROUP = ("filter_formulation", "filter_contact_velocity_gain")  # columns only when the sweep varies them
 
@@ -48,16 +48,6 @@ def solver_label(row: pd.Series | dict, frame: pd.DataFrame) -> str:
     if "filter_formulation" in group_columns(frame) and isinstance(row.get("filter_formulation"), str):
         return f"{solver} ({row['filter_formulation']})"
     return solver
-
-
-def shifted_geometric_mean(values_us: np.ndarray, shift_us: float = SHGEOM_SHIFT_US) -> float:
-    """exp(mean(log(t + shift))) - shift over all solve times [µs]; robust to a few huge outliers and to
-    tiny times, as in qpbenchmark."""
-    v = np.asarray(values_us, float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return float("nan")
-    return float(np.exp(np.mean(np.log(v + shift_us))) - shift_us)
 
 
 FINISHED = ("ok", "degraded")  # runs that simulated to their end or to a fall
@@ -354,6 +344,16 @@ def _run_list(frame: pd.DataFrame, status: str, detail: str, title: str) -> list
     return [f"## {title}\n"] + [f"- `{r.get('run_dir')}`: {r.get(detail)}\n" for _, r in sel.iterrows()]
 
 
+def _run_commits(frame: pd.DataFrame) -> str:
+    """The code versions the runs' summaries name (``git_commit``, ``git_dirty``), with their run counts."""
+    if "git_commit" not in frame.columns or frame.empty:
+        return "an unrecorded code version"
+    dirty = frame["git_dirty"] if "git_dirty" in frame.columns else pd.Series(False, index=frame.index)
+    labels = [f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}" for c, d in zip(frame["git_commit"], dirty)]
+    counts = pd.Series(labels).value_counts()
+    return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
+
+
 def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
@@ -370,7 +370,8 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         "# taslel_bench sweep report\n",
         f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
-        f"Packages: {info['packages']}\n",
+        f"Packages: {info['packages']}  \n",
+        f"Report written by {info['code']}; runs produced by {_run_commits(frame)}\n",
         "## Safety and physics per group of runs (seeds pooled)\n",
         markdown_table(safety) if len(table) else "_no runs found_\n",
         "## Cost per group of runs\n" if len(table) else "",

@@ -1,4 +1,4 @@
-"""The machine and package versions a result was produced on (one place; reports of every package and
+"""The machine, package versions and code version (git commit) a result was produced on (one place; reports of every package and
 axis use it: it is a leaf module with no dependency on the rest of the core)."""
 
 from __future__ import annotations
@@ -7,6 +7,8 @@ import importlib.metadata
 import os
 import platform
 from pathlib import Path
+
+from taslel_bench.util.provenance import describe as describe_code
 
 PACKAGES = ("mujoco", "pin", "numpy", "scipy", "qpsolvers", "osqp", "clarabel", "piqp", "proxsuite", "daqp",
             "quadprog", "hydra-core", "pandas", "torch", "lightning")
@@ -28,6 +30,7 @@ def machine_info() -> dict[str, str]:
         except importlib.metadata.PackageNotFoundError:
             continue
     return {
+        "code": describe_code(),
         "cpu": cpu,
         "cores": str(os.cpu_count()),
         "os": f"{platform.system()} {platform.release()}",
