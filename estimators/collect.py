@@ -43,6 +43,7 @@ from estimators.randomisation import (
     PLANT_FACTORS,
     TRAIN_RANGES,
     EpisodeParams,
+    Ranges,
     draw,
     ranges_dict,
     shifted_ranges,
@@ -178,6 +179,228 @@ def _versions() -> dict[str, str]:
     return out
 
 
+_SPLITS = ("train", "val", "test", "shifted")  # in the order their random streams are spawned
+
+
+def _positive_range(name: str, value: tuple[float, float]) -> tuple[float, float]:
+    """``value`` as a (lo, hi) pair of floats with 0 < lo <= hi; a ValueError naming ``name`` otherwise."""
+    lo, hi = (float(v) for v in value)
+    if not 0.0 < lo <= hi:
+        raise ValueError(f"{name} must be (lo, hi) with 0 < lo <= hi, got {value!r}")
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class _FilterDraws:
+    """How each episode's safety filter is drawn: in the loop with probability ``fraction`` [-]; its
+    friction [-] is the true one times U(``mu_scale``), or U(``mu_range``) independent of the truth when
+    that is given."""
+
+    fraction: float
+    mu_scale: tuple[float, float]
+    mu_range: tuple[float, float] | None
+
+    @classmethod
+    def checked(cls, fraction: float, mu_scale: tuple[float, float],
+                mu_range: tuple[float, float] | None) -> _FilterDraws:
+        """The draws of the ``collect`` arguments, after checking them (ValueError on a bad one)."""
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"filter_fraction must be in [0, 1], got {fraction!r}")
+        scale = _positive_range("filter_mu_scale", mu_scale)
+        rng = None
+        if mu_range is not None:
+            rng = _positive_range("filter_mu_range", mu_range)
+            if scale != (1.0, 1.0):
+                raise ValueError("give filter_mu_scale or filter_mu_range, not both")
+        return cls(fraction, scale, rng)
+
+    def draw(self, ep_seed: int, friction: float) -> tuple[bool, float]:
+        """(filter in the loop, the filter's friction [-]) of the episode ``ep_seed`` whose floor friction is
+        ``friction`` [-], from a stream separate from the plant draws (so the plant draws of a seed are the
+        same for every filter_fraction)."""
+        filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
+        filtered = bool(filt_rng.random() < self.fraction)
+        u = float(filt_rng.random())  # one draw, so the stream is the same for both modes
+        if self.mu_range is None:
+            lo_s, hi_s = self.mu_scale
+            mu_f = friction * (lo_s + (hi_s - lo_s) * u)
+        else:
+            lo_r, hi_r = self.mu_range
+            mu_f = lo_r + (hi_r - lo_r) * u
+        return filtered, float(mu_f)
+
+    def manifest_fields(self) -> dict[str, object]:
+        """The manifest's ``filter_mu_scale`` / ``filter_mu_range`` entries (the one not used is None)."""
+        return {"filter_mu_scale": None if self.mu_range is not None else list(self.mu_scale),
+                "filter_mu_range": None if self.mu_range is None else list(self.mu_range)}
+
+
+def _check_splits(counts: dict[str, int]) -> None:
+    """ValueError if ``counts`` names a split other than train / val / test / shifted."""
+    valid = set(_SPLITS)
+    if bad := set(counts) - valid:
+        raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
+
+
+def _split_ranges(shift_factors: tuple[str, ...], friction_range: tuple[float, float] | None
+                  ) -> tuple[Ranges, Ranges, tuple[float, float] | None]:
+    """(training ranges, shifted ranges, checked friction range or None): the shifted split moves
+    ``shift_factors`` outside the training ranges; a ``friction_range`` (lo, hi) [-] replaces the floor
+    friction range of both."""
+    shifted_r = shifted_ranges(tuple(shift_factors))
+    train_r = TRAIN_RANGES
+    if friction_range is not None:
+        friction_range = _positive_range("friction_range", friction_range)
+        train_r = replace(TRAIN_RANGES, friction=friction_range)
+        shifted_r = replace(shifted_r, friction=friction_range)
+    return train_r, shifted_r, friction_range
+
+
+def _draw_jobs(seed: int, counts: dict[str, int], train_r: Ranges, shifted_r: Ranges, plant_beta: float,
+               filters: _FilterDraws) -> list[tuple[str, EpisodeParams, bool, float]]:
+    """The episodes of every split, in split order: (split, plant draw, filtered, filter mu [-]). Each split
+    and episode has its own spawned seed stream, so a split's draws do not depend on the other counts."""
+    root = np.random.SeedSequence(seed)
+    jobs: list[tuple[str, EpisodeParams, bool, float]] = []  # (split, plant, filtered, filter mu [-])
+    for split_ss, split in zip(root.spawn(len(_SPLITS)), _SPLITS):
+        n = counts.get(split, 0)
+        for ep_ss in split_ss.spawn(n):
+            rng = np.random.default_rng(ep_ss)
+            ep_seed = int(ep_ss.generate_state(1)[0])
+            shifted = split == "shifted"
+            p = draw(rng, shifted_r if shifted else train_r, ep_seed, symmetric_com=not shifted,
+                     plant_beta=1.0 if shifted else plant_beta)
+            filtered, mu_f = filters.draw(ep_seed, p.friction)
+            jobs.append((split, p, filtered, mu_f))
+    return jobs
+
+
+def _run_jobs(jobs: list[tuple[str, EpisodeParams, bool, float]], cfg: EpisodeConfig,
+              workers: int) -> tuple[list[EpisodeResult], float]:
+    """Run every job (in ``workers`` forked processes if > 1), printing the progress about every 5 % of the
+    episodes; returns the results in job order and the wall time [s]."""
+    t0 = time.perf_counter()
+    args = [(p, cfg, f, s) for _, p, f, s in jobs]
+    results: list[EpisodeResult] = []
+    every = max(1, len(args) // 20)
+
+    def progress(r: EpisodeResult) -> None:
+        results.append(r)
+        if len(results) % every == 0 or len(results) == len(args):
+            el = time.perf_counter() - t0
+            print(f"  {len(results)}/{len(args)} episodes, {el:.0f} s, "
+                  f"eta {el / len(results) * (len(args) - len(results)):.0f} s", flush=True)
+
+    if workers <= 1:
+        for a in args:
+            progress(_run(a))
+    else:
+        ctx = mp.get_context("fork")
+        with ctx.Pool(workers) as pool:
+            for r in pool.imap(_run, args, chunksize=2):  # imap keeps the job order
+                progress(r)
+    return results, time.perf_counter() - t0
+
+
+def _cost_by_kind(results: list[EpisodeResult]) -> dict[str, object]:
+    """The manifest's per-kind (nominal / filtered episodes) cost: mean wall time [s] of one episode and
+    env-steps/s of one worker (per-episode wall time summed over workers; None: no episode of that kind)."""
+    filt = [r for r in results if r.filtered]
+    nom = [r for r in results if not r.filtered]
+    return {
+        # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
+        "episode_wall_s_mean": {
+            "nominal": float(np.mean([r.wall_s for r in nom])) if nom else None,
+            "filtered": float(np.mean([r.wall_s for r in filt])) if filt else None,
+        },
+        "env_steps_per_s_per_worker": {
+            "nominal": sum(r.steps for r in nom) / sum(r.wall_s for r in nom) if nom else None,
+            "filtered": sum(r.steps for r in filt) / sum(r.wall_s for r in filt) if filt else None,
+        },
+    }
+
+
+def _build_manifest(seed: int, workers: int, cfg: EpisodeConfig, ranges: tuple[Ranges, Ranges],
+                    shift_factors: tuple[str, ...], results: list[EpisodeResult], wall: float,
+                    filters: _FilterDraws, friction_range: tuple[float, float] | None,
+                    plant_beta: float) -> dict[str, object]:
+    """The manifest of a collection (``ranges``: training and shifted; ``wall`` [s]: its wall time), with an
+    empty ``splits`` entry for :func:`_write_split` to fill."""
+    train_r, shifted_r = ranges
+    total_steps = sum(r.steps for r in results)
+    return {
+        "seed": seed,
+        "workers": workers,
+        "episode_config": asdict(cfg),
+        "window": {"steps": WINDOW_STEPS, "dt_s": WINDOW_DT_S, "features": N_FEATURES,
+                   "layout": "q[12] rad, qdot[12] rad/s, tau_cmd[12] N·m; legs FL,FR,RL,RR x hip,thigh,calf"},
+        "train_ranges": ranges_dict(train_r),
+        "shifted_ranges": ranges_dict(shifted_r),
+        "shift_factors": list(shift_factors),
+        "shifted_note": "com_shift_xy_m is a magnitude range with random sign in the shifted set",
+        "versions": _versions(),
+        "wall_time_s": wall,
+        "env_steps": total_steps,
+        "env_steps_per_s": total_steps / wall,
+        "paper_env_steps_per_s": PAPER_STEPS_PER_S,
+        "filter_fraction": filters.fraction,
+        "filter_overrides": list(cfg.filter_overrides),
+        **filters.manifest_fields(),
+        # None: the training range
+        "friction_range": None if friction_range is None else list(friction_range),
+        "plant_beta": plant_beta,  # plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform)
+        "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
+                       "floor friction x U(filter_mu_scale), or U(filter_mu_range) independent of the true "
+                       "friction; tau features = filtered torque; the filter's mu per episode: filter_mu",
+        **_cost_by_kind(results),
+        "splits": {},
+    }
+
+
+def _write_split(out_dir: Path, split: str, rs: list[EpisodeResult]) -> int:
+    """Write ``<split>.npz`` of the episodes ``rs`` (whole, then renamed into place); returns its window
+    count. Per window: X (n, WINDOW_STEPS, N_FEATURES) float32, y = floor friction [-], episode index,
+    window_filtered; per episode: params (``EpisodeParams.columns()``), fell, filtered, filter_mu [-]."""
+    X = np.concatenate([r.windows for r in rs]).astype(np.float32)
+    y = np.concatenate([np.full(len(r.windows), r.params.friction, np.float32) for r in rs])
+    ep = np.concatenate([np.full(len(r.windows), i, np.int32) for i, r in enumerate(rs)])
+    params = np.array([r.params.as_row() for r in rs], np.float64)
+    tmp = out_dir / f"{split}.tmp.npz"  # written whole, then renamed: never a half-written split
+    np.savez_compressed(
+        tmp, X=X, y=y, episode=ep, params=params,
+        param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
+        filtered=np.array([r.filtered for r in rs]), filter_mu=np.array([r.filter_mu for r in rs]),
+        window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
+    )
+    tmp.replace(out_dir / f"{split}.npz")
+    return len(X)
+
+
+def _split_summary(rs: list[EpisodeResult], n_windows: int) -> dict[str, object]:
+    """The manifest entry of one split: episode / window counts, falls (and their floor friction [-]),
+    physics steps, filtered episodes and the filter's fallback ticks."""
+    fell = [r for r in rs if r.fell]
+    return {
+        "episodes": len(rs),
+        "windows": n_windows,
+        "episodes_fallen": len(fell),
+        "episodes_fallen_without_windows": sum(1 for r in fell if len(r.windows) == 0),
+        "fallen_friction": sorted(round(r.params.friction, 3) for r in fell),
+        "env_steps": sum(r.steps for r in rs),
+        "episodes_filtered": sum(r.filtered for r in rs),
+        "windows_filtered": sum(len(r.windows) for r in rs if r.filtered),
+        "episodes_fallen_filtered": sum(1 for r in fell if r.filtered),
+        "filter_fallback_ticks": sum(r.filter_failures for r in rs),
+    }
+
+
+def _write_manifest(out_dir: Path, manifest: dict[str, object]) -> None:
+    """Write ``manifest.json`` (whole, then renamed into place)."""
+    tmp_man = out_dir / "manifest.json.tmp"
+    tmp_man.write_text(json.dumps(manifest, indent=2))
+    tmp_man.replace(out_dir / "manifest.json")
+
+
 def collect(
     out_dir: Path,
     counts: dict[str, int],
@@ -203,145 +426,26 @@ def collect(
     :func:`estimators.randomisation.shifted_ranges`); ``friction_range`` (lo, hi) [-]: draw the floor friction
     of every split from U(lo, hi) instead of the training range (e.g. low-friction evaluation sets; the same
     random stream, so only the friction values change)."""
-    if not 0.0 <= filter_fraction <= 1.0:
-        raise ValueError(f"filter_fraction must be in [0, 1], got {filter_fraction!r}")
-    lo_s, hi_s = (float(v) for v in filter_mu_scale)
-    if not 0.0 < lo_s <= hi_s:
-        raise ValueError(f"filter_mu_scale must be (lo, hi) with 0 < lo <= hi, got {filter_mu_scale!r}")
-    if filter_mu_range is not None:
-        lo_r, hi_r = (float(v) for v in filter_mu_range)
-        if not 0.0 < lo_r <= hi_r:
-            raise ValueError(f"filter_mu_range must be (lo, hi) with 0 < lo <= hi, got {filter_mu_range!r}")
-        if (lo_s, hi_s) != (1.0, 1.0):
-            raise ValueError("give filter_mu_scale or filter_mu_range, not both")
-    valid = {"train", "val", "test", "shifted"}
-    if bad := set(counts) - valid:
-        raise ValueError(f"unknown split(s) {sorted(bad)}; valid splits: {sorted(valid)}")
-    shifted_r = shifted_ranges(tuple(shift_factors))
-    train_r = TRAIN_RANGES
-    if friction_range is not None:
-        lo_f, hi_f = (float(v) for v in friction_range)
-        if not 0.0 < lo_f <= hi_f:
-            raise ValueError(f"friction_range must be (lo, hi) with 0 < lo <= hi, got {friction_range!r}")
-        train_r = replace(TRAIN_RANGES, friction=(lo_f, hi_f))
-        shifted_r = replace(shifted_r, friction=(lo_f, hi_f))
+    filters = _FilterDraws.checked(filter_fraction, filter_mu_scale, filter_mu_range)
+    _check_splits(counts)
+    train_r, shifted_r, friction_range = _split_ranges(shift_factors, friction_range)
     out_dir.mkdir(parents=True, exist_ok=True)
-    root = np.random.SeedSequence(seed)
-    jobs: list[tuple[str, EpisodeParams, bool, float]] = []  # (split, plant, filtered, filter mu [-])
-    for split_ss, split in zip(root.spawn(len(valid)), ("train", "val", "test", "shifted")):
-        n = counts.get(split, 0)
-        for ep_ss in split_ss.spawn(n):
-            rng = np.random.default_rng(ep_ss)
-            ep_seed = int(ep_ss.generate_state(1)[0])
-            shifted = split == "shifted"
-            p = draw(rng, shifted_r if shifted else train_r, ep_seed, symmetric_com=not shifted,
-                     plant_beta=1.0 if shifted else plant_beta)
-            # separate stream: the plant draws of a seed are the same for every filter_fraction
-            filt_rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xF117]))
-            filtered = bool(filt_rng.random() < filter_fraction)
-            u = float(filt_rng.random())  # one draw, so the stream is the same for both modes
-            if filter_mu_range is None:
-                mu_f = p.friction * (lo_s + (hi_s - lo_s) * u)
-            else:
-                mu_f = lo_r + (hi_r - lo_r) * u
-            jobs.append((split, p, filtered, float(mu_f)))
-
-    t0 = time.perf_counter()
-    args = [(p, cfg, f, s) for _, p, f, s in jobs]
-    results: list[EpisodeResult] = []
-    every = max(1, len(args) // 20)
-
-    def progress(r: EpisodeResult) -> None:
-        results.append(r)
-        if len(results) % every == 0 or len(results) == len(args):
-            el = time.perf_counter() - t0
-            print(f"  {len(results)}/{len(args)} episodes, {el:.0f} s, "
-                  f"eta {el / len(results) * (len(args) - len(results)):.0f} s", flush=True)
-
-    if workers <= 1:
-        for a in args:
-            progress(_run(a))
-    else:
-        ctx = mp.get_context("fork")
-        with ctx.Pool(workers) as pool:
-            for r in pool.imap(_run, args, chunksize=2):  # imap keeps the job order
-                progress(r)
-    wall = time.perf_counter() - t0
-    total_steps = sum(r.steps for r in results)
-    filt = [r for r in results if r.filtered]
-    nom = [r for r in results if not r.filtered]
-
-    manifest: dict[str, object] = {
-        "seed": seed,
-        "workers": workers,
-        "episode_config": asdict(cfg),
-        "window": {"steps": WINDOW_STEPS, "dt_s": WINDOW_DT_S, "features": N_FEATURES,
-                   "layout": "q[12] rad, qdot[12] rad/s, tau_cmd[12] N·m; legs FL,FR,RL,RR x hip,thigh,calf"},
-        "train_ranges": ranges_dict(train_r),
-        "shifted_ranges": ranges_dict(shifted_r),
-        "shift_factors": list(shift_factors),
-        "shifted_note": "com_shift_xy_m is a magnitude range with random sign in the shifted set",
-        "versions": _versions(),
-        "wall_time_s": wall,
-        "env_steps": total_steps,
-        "env_steps_per_s": total_steps / wall,
-        "paper_env_steps_per_s": PAPER_STEPS_PER_S,
-        "filter_fraction": filter_fraction,
-        "filter_overrides": list(cfg.filter_overrides),
-        "filter_mu_scale": None if filter_mu_range is not None else [lo_s, hi_s],
-        "filter_mu_range": None if filter_mu_range is None else [lo_r, hi_r],
-        "friction_range": None if friction_range is None else [lo_f, hi_f],  # None: the training range
-        "plant_beta": plant_beta,  # plant factors ~ lo + (hi - lo) Beta(a, a) in train/val/test (1 = uniform)
-        "filter_note": "filtered episodes: ID-CBF-QP safety filter in the loop (taslel_bench.api), mu = true "
-                       "floor friction x U(filter_mu_scale), or U(filter_mu_range) independent of the true "
-                       "friction; tau features = filtered torque; the filter's mu per episode: filter_mu",
-        # per-episode wall time summed over workers (CPU-side cost of one episode of each kind)
-        "episode_wall_s_mean": {
-            "nominal": float(np.mean([r.wall_s for r in nom])) if nom else None,
-            "filtered": float(np.mean([r.wall_s for r in filt])) if filt else None,
-        },
-        "env_steps_per_s_per_worker": {
-            "nominal": sum(r.steps for r in nom) / sum(r.wall_s for r in nom) if nom else None,
-            "filtered": sum(r.steps for r in filt) / sum(r.wall_s for r in filt) if filt else None,
-        },
-        "splits": {},
-    }
-    for split in ("train", "val", "test", "shifted"):
+    jobs = _draw_jobs(seed, counts, train_r, shifted_r, plant_beta, filters)
+    results, wall = _run_jobs(jobs, cfg, workers)
+    manifest = _build_manifest(seed, workers, cfg, (train_r, shifted_r), shift_factors, results, wall,
+                               filters, friction_range, plant_beta)
+    for split in _SPLITS:
         rs = [r for (s, _, _, _), r in zip(jobs, results) if s == split]
         if not rs:
             continue
-        X = np.concatenate([r.windows for r in rs]).astype(np.float32)
-        y = np.concatenate([np.full(len(r.windows), r.params.friction, np.float32) for r in rs])
-        ep = np.concatenate([np.full(len(r.windows), i, np.int32) for i, r in enumerate(rs)])
-        params = np.array([r.params.as_row() for r in rs], np.float64)
-        tmp = out_dir / f"{split}.tmp.npz"  # written whole, then renamed: never a half-written split
-        np.savez_compressed(
-            tmp, X=X, y=y, episode=ep, params=params,
-            param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
-            filtered=np.array([r.filtered for r in rs]), filter_mu=np.array([r.filter_mu for r in rs]),
-            window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
-        )
-        tmp.replace(out_dir / f"{split}.npz")
-        fell = [r for r in rs if r.fell]
-        manifest["splits"][split] = {  # type: ignore[index]
-            "episodes": len(rs),
-            "windows": len(X),
-            "episodes_fallen": len(fell),
-            "episodes_fallen_without_windows": sum(1 for r in fell if len(r.windows) == 0),
-            "fallen_friction": sorted(round(r.params.friction, 3) for r in fell),
-            "env_steps": sum(r.steps for r in rs),
-            "episodes_filtered": sum(r.filtered for r in rs),
-            "windows_filtered": sum(len(r.windows) for r in rs if r.filtered),
-            "episodes_fallen_filtered": sum(1 for r in fell if r.filtered),
-            "filter_fallback_ticks": sum(r.filter_failures for r in rs),
-        }
-    tmp_man = out_dir / "manifest.json.tmp"
-    tmp_man.write_text(json.dumps(manifest, indent=2))
-    tmp_man.replace(out_dir / "manifest.json")
+        n_windows = _write_split(out_dir, split, rs)
+        manifest["splits"][split] = _split_summary(rs, n_windows)  # type: ignore[index]
+    _write_manifest(out_dir, manifest)
     return manifest
 
 
-def main(argv: list[str] | None = None) -> None:
+def _parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m estimators.collect``."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("/work/data/estimators"), help="output folder")
     ap.add_argument("--train", type=int, default=700, help="training episodes")
@@ -368,17 +472,13 @@ def main(argv: list[str] | None = None) -> None:
                     help="floor friction ~ U(LO, HI) in every split instead of the training range (evaluation sets)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
-    a = ap.parse_args(argv)
-    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
-    counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
-    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
-                  filter_mu_scale=tuple(a.filter_mu_scale),
-                  filter_mu_range=None if a.filter_mu_range is None else tuple(a.filter_mu_range),
-                  plant_beta=a.plant_beta,
-                  shift_factors=tuple(a.shift_factors),
-                  friction_range=None if a.friction_range is None else tuple(a.friction_range))
+    return ap
+
+
+def _print_summary(man: dict[str, object], out: Path, workers: int) -> None:
+    """Print the throughput (env-steps/s, against the paper's), the per-kind cost and the split counts."""
     rate = man["env_steps_per_s"]
-    print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {a.workers} workers")
+    print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {workers} workers")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "
           f"{rate / PAPER_STEPS_PER_S:.2f}x")
     per = man["env_steps_per_s_per_worker"]  # type: ignore[index]
@@ -390,7 +490,20 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  {split:8s} {info['episodes']:5d} episodes ({info['episodes_filtered']} filtered) "
               f"{info['windows']:7d} windows fallen {info['episodes_fallen']} "
               f"(filtered {info['episodes_fallen_filtered']}), filter fallback ticks {info['filter_fallback_ticks']}")
-    print(f"wrote {a.out}/{{train,val,test,shifted}}.npz and manifest.json")
+    print(f"wrote {out}/{{train,val,test,shifted}}.npz and manifest.json")
+
+
+def main(argv: list[str] | None = None) -> None:
+    a = _parser().parse_args(argv)
+    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
+    counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
+    man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
+                  filter_mu_scale=tuple(a.filter_mu_scale),
+                  filter_mu_range=None if a.filter_mu_range is None else tuple(a.filter_mu_range),
+                  plant_beta=a.plant_beta,
+                  shift_factors=tuple(a.shift_factors),
+                  friction_range=None if a.friction_range is None else tuple(a.friction_range))
+    _print_summary(man, a.out, a.workers)
 
 
 if __name__ == "__main__":

@@ -150,6 +150,26 @@ class LearnedEstimator:
         "k": ..., "delta": ..., "confirm": ..., "lookback": ...}`` (:class:`DropDetector`; None: none); ``inference``:
         ``"inline"``, ``"staged"`` or ``"thread"``; ``apply_delay_s`` [s]: with ``"staged"`` / ``"thread"``, the
         latency after which a sample's result is applied."""
+        prior_mu, conservative_k, mu_min = self._checked_settings(
+            variant, prior_mu, conservative_k, mu_min, bound, hold_min_samples, inference, apply_delay_s)
+        if threads is not None:
+            torch.set_num_threads(integer("estimator.threads", threads, 1))
+        self.model, self.meta = self._load_model(variant, checkpoint, bound)
+        self.bound = bound
+        self.name = Path(checkpoint).stem if checkpoint is not None else variant
+        self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
+        self.band_margin = BandMargin(**{k: tuple(v) for k, v in dict(band_margin).items()}) if band_margin else None
+        self.detector = DropDetector(**dict(drop_detector)) if drop_detector else None
+        self.inference, self.apply_delay_s = inference, float(apply_delay_s)
+        self._init_buffers(int(hold_min_samples))
+        self.reset()
+
+    @staticmethod
+    def _checked_settings(variant: str, prior_mu: float, conservative_k: float, mu_min: float, bound: str,
+                          hold_min_samples: int, inference: str,
+                          apply_delay_s: float) -> tuple[float, float, float]:
+        """Check the constructor's settings (ValueError / ConfigError naming the bad one); returns the checked
+        ``(prior_mu [-], conservative_k [sigmas], mu_min [-])``."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; valid choices: {', '.join(VARIANTS)}")
         prior_mu = number("estimator.prior_mu", prior_mu, 0.0, MAX_FRICTION, lo_open=True)
@@ -163,31 +183,34 @@ class LearnedEstimator:
             raise ValueError(f"unknown inference {inference!r}; valid choices: {', '.join(INFERENCE_MODES)}")
         if not (0.0 <= apply_delay_s < WINDOW_DT_S):
             raise ValueError(f"apply_delay_s must be in [0, {WINDOW_DT_S}) s, got {apply_delay_s!r}")
-        if threads is not None:
-            torch.set_num_threads(integer("estimator.threads", threads, 1))
+        return prior_mu, conservative_k, mu_min
+
+    @staticmethod
+    def _load_model(variant: str, checkpoint: str | Path | None, bound: str) -> tuple[Any, dict[str, Any]]:
+        """(model, metadata) of ``checkpoint`` (the shipped ``variant`` if None); ConfigError if it cannot be
+        read, ValueError if it holds another variant or lacks the lower-quantile head ``bound="quantile"``
+        needs."""
         try:
-            self.model, self.meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
+            model, meta = load_checkpoint(checkpoint if checkpoint is not None else variant)
         except (CheckpointError, FileNotFoundError) as exc:  # the message names the file
             raise ConfigError(f"estimator.checkpoint={checkpoint!r} (variant {variant!r}): {exc}") from exc
-        if self.meta["model"]["variant"] != variant:
+        if meta["model"]["variant"] != variant:
             raise ValueError(
-                f"checkpoint {checkpoint!r} holds a {self.meta['model']['variant']!r} model, not {variant!r}"
+                f"checkpoint {checkpoint!r} holds a {meta['model']['variant']!r} model, not {variant!r}"
             )
-        if bound == "quantile" and not float(self.meta["model"].get("lower_quantile", 0.0)) > 0:
+        if bound == "quantile" and not float(meta["model"].get("lower_quantile", 0.0)) > 0:
             raise ValueError(f"bound='quantile' needs a checkpoint with a lower-quantile head ({checkpoint or variant})")
-        self.bound = bound
-        self.name = Path(checkpoint).stem if checkpoint is not None else variant
-        self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
-        self.band_margin = BandMargin(**{k: tuple(v) for k, v in dict(band_margin).items()}) if band_margin else None
-        self.detector = DropDetector(**dict(drop_detector)) if drop_detector else None
-        self.inference, self.apply_delay_s = inference, float(apply_delay_s)
-        self._hold = np.full(int(hold_min_samples), np.inf)  # ring of the last bounds [-]
+        return model, meta
+
+    def _init_buffers(self, hold_min_samples: int) -> None:
+        """The hold ring of the last ``hold_min_samples`` bounds [-], the sample window (WINDOW_STEPS x the
+        model's raw features), and the (lazily started) worker thread with its lock."""
+        self._hold = np.full(hold_min_samples, np.inf)  # ring of the last bounds [-]
         self.filter_mu_input = self.model.cfg.filter_mu_input
         n_raw = self.model.cfg.n_raw  # 36, or 38 with the filter features
         self._buf = np.zeros((WINDOW_STEPS, n_raw), np.float32)
         self._pool: ThreadPoolExecutor | None = None
         self._lock = threading.Lock()  # one model call at a time (torch modules are not re-entrant)
-        self.reset()
 
     # ------------------------------------------------------------------------------------------ state
     def reset(self) -> None:

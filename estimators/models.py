@@ -12,7 +12,7 @@ Tokenisation for the transformers (paper, "Network Architecture", ViT-like):
   learned temporal embedding (T, d) plus a learned spatial (joint) embedding (12, d);
 * ``"step"``: one token per time step (T = 40 tokens of 36 features) with a learned temporal embedding.
 Pooling is the mean over tokens or a learned CLS token. Options tried in the round-3 design study and
-kept (not used by the shipped checkpoints, ``results/estimators/design.md``): ``window_norm`` (per-window
+kept (not used by the shipped checkpoints, ``studies/notes/estimators/design.md``): ``window_norm`` (per-window
 torque scale removed, :func:`window_features`) and ``kinematic_features`` (:func:`foot_kinematics`).
 With ``filter_mu_input`` the raw windows carry 2 more features per step after the 36 (filter in the loop
 0 / 1, the friction it assumed [-]; :func:`estimators.features.filter_channels`), step tokens and the mlp only. Linformer projects keys and values along the

@@ -148,15 +148,24 @@ def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np
 BOUND_SELECTION: dict[str, str] = {}  # how the deployed bound was chosen (filled by evaluate, for the report)
 
 
-def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path, latency_runs: int,
-             bound_set: Path | None = None) -> list[dict[str, object]]:
-    """Evaluate each variant; returns one row per (variant, split, estimate). ``bound_set``: a collected
-    ``.npz`` (e.g. a shifted *validation* set, never a test split) on which the candidate bounds must
-    over-estimate <= 5 % (default: the validation split); the validation MAE ranks them."""
-    torch.set_num_threads(1)
-    if not FIXTURE.is_file():
-        make_fixture(data_dir)
-    # windows with the filter features; predict_all slices them for models that do not read them
+_Windows = tuple[np.ndarray, np.ndarray]  # (windows X (N, 40, 38), true friction y (N,) [-])
+_BoundSpec = tuple[str, float]  # (base: "mean" or "lower" quantile, k [sigmas]) of max(0.05, base - k sigma)
+_Splits = dict[str, tuple[np.ndarray, ...]]  # split name -> (X, y, episode) of its windows
+_Flags = dict[str, np.ndarray | None]  # split name -> per-window "filter in the loop" flags (None: no record)
+
+
+def _bound(spec: _BoundSpec, mean: np.ndarray, sigma: np.ndarray, lower: np.ndarray | None) -> np.ndarray:
+    """The bound max(0.05, base - k sigma) [-] of ``spec`` = (base, k) from the model outputs [-]."""
+    b = mean if spec[0] == "mean" else lower
+    return np.maximum(b - spec[1] * sigma, 0.05)  # type: ignore[operator]
+
+
+def _load_evaluation_sets(data_dir: Path,
+                          bound_set: Path | None) -> tuple[_Splits, _Flags, _Windows, _Windows]:
+    """(test / shifted splits (X, y, episode), their per-window filter flags, the validation windows, the
+    bound-selection windows: ``bound_set`` or the validation split); records the selection rule in
+    :data:`BOUND_SELECTION`. Windows carry the filter features; predict_all slices them for models that do
+    not read them."""
     splits = {s: load_split(data_dir, s, filter_mu=True) for s in ("test", "shifted")}
     flags = {s: window_filtered(data_dir, s) for s in splits}
     splits_val = load_split(data_dir, "val", filter_mu=True)[:2]
@@ -166,96 +175,181 @@ def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path
     else:
         sel_set = splits_val
         BOUND_SELECTION.update(set="the validation split", rule="over-estimation <= 5 %, lowest validation MAE")
+    return splits, flags, splits_val, sel_set
+
+
+def _constant_rows(data_dir: Path, splits: _Splits) -> list[dict[str, object]]:
+    """The baseline rows: every split's metrics of the constant predictor (the training mean friction [-])."""
     y_train_mean = float(load_split(data_dir, "train")[1].mean())
     rows: list[dict[str, object]] = []
     for split, (_, y, _) in splits.items():
         base = regression_metrics(y, np.full_like(y, y_train_mean))
         rows.append({"variant": "constant(train mean)", "split": split, "estimate": "mean", **base})
+    return rows
+
+
+def _candidate_bounds(model: FrictionModel, sel_set: _Windows, q: float,
+                      recorded: dict[str, object]) -> dict[str, _BoundSpec]:
+    """The candidate deployed bounds, by label: the smallest k of :data:`K_SWEEP` giving <= 5 %
+    over-estimation on the selection set, for the mean and (models with a lower-quantile head, ``q`` > 0)
+    the lower quantile, which is also a candidate with k = 0; records both k in ``recorded``."""
+    k_val = select_k(model, *sel_set)
+    k_val_q = select_k(model, *sel_set, base="lower")
+    recorded["k_val_over_5pct"] = k_val
+    recorded["k_val_over_5pct_quantile"] = k_val_q
+    cand_spec: dict[str, _BoundSpec] = {} if k_val is None else {f"gaussian k={k_val:g}": ("mean", k_val)}
+    if q > 0:
+        cand_spec["quantile k=0"] = ("lower", 0.0)
+        if k_val_q:  # the lower quantile alone over-estimates > 5 % of validation windows
+            cand_spec[f"quantile k={k_val_q:g}"] = ("lower", k_val_q)
+    return cand_spec
+
+
+def _choose_bound(model: FrictionModel, cand_spec: dict[str, _BoundSpec], splits_val: _Windows,
+                  sel_set: _Windows, recorded: dict[str, object]) -> str | None:
+    """The label of the candidate with the lowest validation MAE among those over-estimating <= 5 % on the
+    selection set (None: none does); records every candidate's validation metrics in ``recorded``."""
+    mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
+    mean_sel, sigma_sel, lower_sel = (
+        (mean_val, sigma_val, lower_val) if sel_set is splits_val else predict_all(model, sel_set[0]))
+    val_bounds: dict[str, dict[str, float]] = {}
+    recorded["val_bounds"] = val_bounds
+    recorded["bound_selection"] = dict(BOUND_SELECTION)
+    for label, spec in cand_spec.items():
+        mv = regression_metrics(splits_val[1], _bound(spec, mean_val, sigma_val, lower_val))
+        ms = regression_metrics(sel_set[1], _bound(spec, mean_sel, sigma_sel, lower_sel))
+        val_bounds[label] = {"mae": mv["mae"], "overestimate_rate": mv["overestimate_rate"],
+                             "selection_set_overestimate_rate": ms["overestimate_rate"]}
+    ok = {lb: v for lb, v in val_bounds.items() if v["selection_set_overestimate_rate"] <= 0.05}
+    choice = min(ok, key=lambda lb: ok[lb]["mae"]) if ok else None
+    recorded["val_bound_choice"] = choice
+    return choice
+
+
+def _estimates(mean: np.ndarray, sigma: np.ndarray, lower: np.ndarray | None, ks: list[float], q: float,
+               choice: str | None, cand_spec: dict[str, _BoundSpec]) -> list[tuple[str, np.ndarray]]:
+    """The estimates [-] evaluated on one split, by label: the raw mean, max(0.05, mean - k sigma) for each
+    k of ``ks``, the lower quantile (if the model has one) and the chosen bound (if any)."""
+    ests = [("mean", mean)] + [(f"mean-{k:g}sigma", np.maximum(mean - k * sigma, 0.05)) for k in ks]
+    if lower is not None:
+        ests.append((f"lower(q={q:g})", np.maximum(lower, 0.05)))
+    if choice is not None:
+        ests.append((f"chosen({choice})", _bound(cand_spec[choice], mean, sigma, lower)))
+    return ests
+
+
+def _subset_rows(row: dict[str, object], split: str, y: np.ndarray, sigma: np.ndarray, wf: np.ndarray | None,
+                 ests: list[tuple[str, np.ndarray]], recorded: dict[str, object]) -> list[dict[str, object]]:
+    """Rows of the raw mean, lower quantile and chosen bound on the nominal-controller and the
+    filter-in-the-loop windows of ``split`` (flags ``wf``; no rows unless it has both kinds), also recorded
+    in ``recorded``; ``row``: the variant's common cells."""
+    rows: list[dict[str, object]] = []
+    if wf is None or not 0 < wf.sum() < len(wf):  # nominal-controller vs filter-in-the-loop windows
+        return rows
+    for sub, sel in (("nominal", ~wf), ("filtered", wf)):
+        for label, est in ests:
+            if label != "mean" and not label.startswith(("lower", "chosen")):
+                continue
+            m = regression_metrics(y[sel], est[sel], sigma[sel])
+            rows.append({"variant": row["variant"], "split": f"{split}[{sub}]", "estimate": label,
+                         "params": row["params"], "latency_ms": row["latency_ms"], **m})
+            recorded[f"{split}[{sub}]/{label}"] = {key: m[key] for key in
+                                                   ("mae", "bias", "overestimate_rate")}
+    return rows
+
+
+def _estimate_rows(row: dict[str, object], split: str, y: np.ndarray, sigma: np.ndarray,
+                   ests: list[tuple[str, np.ndarray]],
+                   recorded: dict[str, object]) -> list[dict[str, object]]:
+    """One row per estimate on all windows of ``split`` (truth ``y``, predicted ``sigma`` [-]), also recorded
+    in ``recorded``; ``row``: the variant's common cells (variant, params, latency_ms)."""
+    rows: list[dict[str, object]] = []
+    for label, est in ests:
+        m = regression_metrics(y, est, sigma)
+        rows.append({"variant": row["variant"], "split": split, "estimate": label, "params": row["params"],
+                     "latency_ms": row["latency_ms"], **m})
+        recorded[f"{split}/{label}"] = {key: m[key] for key in
+                                        ("mae", "rmse", "r2", "bias", "overestimate_rate",
+                                         "within_1sigma", "within_2sigma")}
+    return rows
+
+
+def _record_metrics(model: FrictionModel, meta: dict, recorded: dict[str, object], lat: float, n_params: int,
+                    json_path: Path) -> float:
+    """Write the metrics (``recorded``, latency ``lat`` [s], parameters, fixture MAEs) into the checkpoint's
+    JSON ``json_path``; returns the fixture MAE [-] of the raw mean."""
+    fx = fixture_mae(model)
+    meta["metrics"] = {**recorded, "latency_ms_batch1_1thread": lat * 1e3, "parameters": n_params,
+                       "fixture": FIXTURE.name, "fixture_mae": fx,
+                       "fixture_mae_filtered": fixture_mae(model, "filtered"),
+                       "fixture_mae_nominal": fixture_mae(model, "nominal")}
+    json_path.write_text(json.dumps(meta, indent=2))
+    return fx
+
+
+def _record_k_sweep(variant: str, panels: dict[str, tuple[np.ndarray, ...]]) -> None:
+    """Append to :data:`K_ROWS` the MAE, bias and over-estimation rate of max(0.05, mean - k sigma) for every
+    k of :data:`K_SWEEP` on every split."""
+    for split, (y, mean, sigma) in panels.items():
+        for k in K_SWEEP:
+            m = regression_metrics(y, np.maximum(mean - k * sigma, 0.05))
+            K_ROWS.append({"variant": variant, "split": split, "k": k, "mae": m["mae"],
+                           "bias": m["bias"], "overestimate_rate": m["overestimate_rate"]})
+
+
+def _evaluate_variant(name: str, splits: _Splits, flags: _Flags, splits_val: _Windows, sel_set: _Windows,
+                      ks: list[float], out_dir: Path, latency_runs: int) -> list[dict[str, object]]:
+    """Evaluate one checkpoint (shipped name or path): choose its bound on validation data, measure every
+    estimate on every split, record the metrics in its JSON, draw its regression figure; returns its rows."""
+    model, meta = load_checkpoint(name)
+    variant = checkpoint_paths(name)[0].stem
+    JSON_PATHS[variant] = checkpoint_paths(name)[1]
+    lat = latency_s(model, latency_runs)
+    n_params = parameter_count(model)
+    row = {"variant": variant, "params": n_params, "latency_ms": lat * 1e3}  # the cells common to its rows
+    panels = {}
+    recorded: dict[str, object] = {}
+    q = float(meta["model"].get("lower_quantile", 0.0))
+    # bound choice on validation data only: the candidates' (base, k) = the smallest k giving <= 5 %
+    # over-estimation on the selection set (the validation split, or bound_set); the lowest validation
+    # MAE among the candidates that hold <= 5 % there
+    cand_spec = _candidate_bounds(model, sel_set, q, recorded)
+    choice = _choose_bound(model, cand_spec, splits_val, sel_set, recorded)
+    print(f"{variant}: validation bounds {recorded['val_bounds']} -> {choice}")
+    k_val, k_val_q = recorded["k_val_over_5pct"], recorded["k_val_over_5pct_quantile"]
+    print(f"{variant}: smallest k with validation over-estimation <= 5 %: mean {k_val}, "
+          f"lower quantile {k_val_q}")
+    rows: list[dict[str, object]] = []
+    for split, (X, y, _) in splits.items():
+        mean, sigma, lower = predict_all(model, X)
+        panels[split] = (y, mean, sigma)
+        ests = _estimates(mean, sigma, lower, ks, q, choice, cand_spec)
+        rows += _estimate_rows(row, split, y, sigma, ests, recorded)
+        rows += _subset_rows(row, split, y, sigma, flags.get(split), ests, recorded)
+    fx = _record_metrics(model, meta, recorded, lat, n_params, checkpoint_paths(name)[1])
+    scatter_png(out_dir / f"regression_{variant}.png", variant, panels, ks[0])
+    _record_k_sweep(variant, panels)
+    print(f"{variant}: test MAE {recorded['test/mean']['mae']:.4f}  shifted MAE "
+          f"{recorded['shifted/mean']['mae']:.4f}  latency {lat * 1e3:.2f} ms  fixture MAE {fx:.4f}")
+    return rows
+
+
+def evaluate(data_dir: Path, variants: list[str], ks: list[float], out_dir: Path, latency_runs: int,
+             bound_set: Path | None = None) -> list[dict[str, object]]:
+    """Evaluate each variant; returns one row per (variant, split, estimate). ``bound_set``: a collected
+    ``.npz`` (e.g. a shifted *validation* set, never a test split) on which the candidate bounds must
+    over-estimate <= 5 % (default: the validation split); the validation MAE ranks them."""
+    torch.set_num_threads(1)
+    if not FIXTURE.is_file():
+        make_fixture(data_dir)
+    splits, flags, splits_val, sel_set = _load_evaluation_sets(data_dir, bound_set)
+    rows = _constant_rows(data_dir, splits)
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in variants:
         if not checkpoint_paths(name)[0].is_file():
             print(f"skip {name}: no checkpoint")
             continue
-        model, meta = load_checkpoint(name)
-        variant = checkpoint_paths(name)[0].stem
-        JSON_PATHS[variant] = checkpoint_paths(name)[1]
-        lat = latency_s(model, latency_runs)
-        n_params = parameter_count(model)
-        panels = {}
-        recorded: dict[str, object] = {}
-        q = float(meta["model"].get("lower_quantile", 0.0))
-        # bound choice on validation data only: the candidates' (base, k) = the smallest k giving <= 5 %
-        # over-estimation on the selection set (the validation split, or bound_set); the lowest validation
-        # MAE among the candidates that hold <= 5 % there
-        k_val = select_k(model, *sel_set)
-        k_val_q = select_k(model, *sel_set, base="lower")
-        recorded["k_val_over_5pct"] = k_val
-        recorded["k_val_over_5pct_quantile"] = k_val_q
-        cand_spec: dict[str, tuple[str, float]] = {} if k_val is None else {f"gaussian k={k_val:g}": ("mean", k_val)}
-        if q > 0:
-            cand_spec["quantile k=0"] = ("lower", 0.0)
-            if k_val_q:  # the lower quantile alone over-estimates > 5 % of validation windows
-                cand_spec[f"quantile k={k_val_q:g}"] = ("lower", k_val_q)
-
-        def bound(spec: tuple[str, float], mean: np.ndarray, sigma: np.ndarray, lower: np.ndarray | None) -> np.ndarray:
-            b = mean if spec[0] == "mean" else lower
-            return np.maximum(b - spec[1] * sigma, 0.05)  # type: ignore[operator]
-
-        mean_val, sigma_val, lower_val = predict_all(model, splits_val[0])
-        mean_sel, sigma_sel, lower_sel = (
-            (mean_val, sigma_val, lower_val) if sel_set is splits_val else predict_all(model, sel_set[0]))
-        recorded["val_bounds"] = {}
-        recorded["bound_selection"] = dict(BOUND_SELECTION)
-        for label, spec in cand_spec.items():
-            mv = regression_metrics(splits_val[1], bound(spec, mean_val, sigma_val, lower_val))
-            ms = regression_metrics(sel_set[1], bound(spec, mean_sel, sigma_sel, lower_sel))
-            recorded["val_bounds"][label] = {"mae": mv["mae"], "overestimate_rate": mv["overestimate_rate"],
-                                             "selection_set_overestimate_rate": ms["overestimate_rate"]}
-        ok = {lb: v for lb, v in recorded["val_bounds"].items() if v["selection_set_overestimate_rate"] <= 0.05}
-        choice = min(ok, key=lambda lb: ok[lb]["mae"]) if ok else None
-        recorded["val_bound_choice"] = choice
-        print(f"{variant}: validation bounds {recorded['val_bounds']} -> {choice}")
-        print(f"{variant}: smallest k with validation over-estimation <= 5 %: mean {k_val}, lower quantile {k_val_q}")
-        for split, (X, y, _) in splits.items():
-            mean, sigma, lower = predict_all(model, X)
-            panels[split] = (y, mean, sigma)
-            ests = [("mean", mean)] + [(f"mean-{k:g}sigma", np.maximum(mean - k * sigma, 0.05)) for k in ks]
-            if lower is not None:
-                ests.append((f"lower(q={q:g})", np.maximum(lower, 0.05)))
-            if choice is not None:
-                ests.append((f"chosen({choice})", bound(cand_spec[choice], mean, sigma, lower)))
-            for label, est in ests:
-                m = regression_metrics(y, est, sigma)
-                rows.append({"variant": variant, "split": split, "estimate": label, "params": n_params,
-                             "latency_ms": lat * 1e3, **m})
-                recorded[f"{split}/{label}"] = {key: m[key] for key in
-                                                ("mae", "rmse", "r2", "bias", "overestimate_rate",
-                                                 "within_1sigma", "within_2sigma")}
-            wf = flags.get(split)
-            if wf is not None and 0 < wf.sum() < len(wf):  # nominal-controller vs filter-in-the-loop windows
-                for sub, sel in (("nominal", ~wf), ("filtered", wf)):
-                    for label, est in ests:
-                        if label != "mean" and not label.startswith(("lower", "chosen")):
-                            continue
-                        m = regression_metrics(y[sel], est[sel], sigma[sel])
-                        rows.append({"variant": variant, "split": f"{split}[{sub}]", "estimate": label,
-                                     "params": n_params, "latency_ms": lat * 1e3, **m})
-                        recorded[f"{split}[{sub}]/{label}"] = {key: m[key] for key in
-                                                               ("mae", "bias", "overestimate_rate")}
-        fx = fixture_mae(model)
-        meta["metrics"] = {**recorded, "latency_ms_batch1_1thread": lat * 1e3, "parameters": n_params,
-                           "fixture": FIXTURE.name, "fixture_mae": fx,
-                           "fixture_mae_filtered": fixture_mae(model, "filtered"),
-                           "fixture_mae_nominal": fixture_mae(model, "nominal")}
-        checkpoint_paths(name)[1].write_text(json.dumps(meta, indent=2))
-        scatter_png(out_dir / f"regression_{variant}.png", variant, panels, ks[0])
-        for split, (y, mean, sigma) in panels.items():
-            for k in K_SWEEP:
-                m = regression_metrics(y, np.maximum(mean - k * sigma, 0.05))
-                K_ROWS.append({"variant": variant, "split": split, "k": k, "mae": m["mae"],
-                               "bias": m["bias"], "overestimate_rate": m["overestimate_rate"]})
-        print(f"{variant}: test MAE {recorded['test/mean']['mae']:.4f}  shifted MAE "
-              f"{recorded['shifted/mean']['mae']:.4f}  latency {lat * 1e3:.2f} ms  fixture MAE {fx:.4f}")
+        rows += _evaluate_variant(name, splits, flags, splits_val, sel_set, ks, out_dir, latency_runs)
     return rows
 
 
@@ -341,13 +435,10 @@ def _source_text(src: dict[str, object]) -> str:
             f"{filt}, {float(src['env_steps_per_s']):,.0f} env-steps/s)")  # type: ignore[arg-type]
 
 
-def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, ks: list[float]) -> None:
-    import pandas as pd
-
-    df = pd.DataFrame(rows)
-    df.to_csv(out_dir / "metrics.csv", index=False)
-    manifest = json.loads((data_dir / "manifest.json").read_text())
-    names = [n for n in dict.fromkeys(df.variant) if not n.startswith("constant")]
+def _training_records(names: list[str]) -> dict[str, dict]:
+    """Per variant: the training record of its checkpoint's JSON, with the validation-chosen k
+    (``k_val``) and whether the model reads the filter's mu (``filter_mu_input``); variants without a JSON
+    are left out."""
     train_rec = {}
     for v in names:
         js = JSON_PATHS.get(v, checkpoint_paths(v)[1])
@@ -356,10 +447,21 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
             train_rec[v] = {**full.get("training", {}),
                             "k_val": full.get("metrics", {}).get("k_val_over_5pct"),
                             "filter_mu_input": bool(full.get("model", {}).get("filter_mu_input", False))}
-    base = df[df.variant.str.startswith("constant")].set_index("split")["mae"]
+    return train_rec
+
+
+def _metrics_table(df: object) -> object:
+    """The columns of the metrics DataFrame shown in the report's "All metrics" table (per-bin MAE last)."""
     cols = ["variant", "split", "estimate", "mae", "rmse", "r2", "bias", "overestimate_rate",
             "within_1sigma", "within_2sigma"] + [c for c in df.columns if c.startswith("mae_bin")]
-    table = df[[c for c in cols if c in df]].copy()
+    return df[[c for c in cols if c in df]].copy()  # type: ignore[index]
+
+
+def _k_tradeoff_table(out_dir: Path) -> str:
+    """Write ``k_tradeoff.csv`` from :data:`K_ROWS` and return its pivot (MAE and over-estimation rate per
+    variant, k [sigmas] and split) as a markdown table."""
+    import pandas as pd
+
     kdf = pd.DataFrame(K_ROWS)
     if len(kdf):
         kdf.to_csv(out_dir / "k_tradeoff.csv", index=False)
@@ -368,11 +470,38 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         k_table = markdown_table(piv.reset_index())
     else:
         k_table = "(no variants evaluated)"
-    lines = [
-        "# Terrain estimators: friction from proprioception",
-        "",
-        "Generated by `python -m studies.estimator_evaluate`; every number is measured on this machine.",
-        "",
+    return k_table
+
+
+def _splits_line(manifest: dict) -> str:
+    """The report's line on the collection's splits: episodes, windows, falls (and filtered episodes)."""
+    return "- Splits by episode: " + ", ".join(
+        f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell"
+        + (f"; {i['episodes_filtered']} episodes with the safety filter in the loop"
+           if "episodes_filtered" in i else "")
+        + ")"
+        for s, i in manifest["splits"].items()) + "."
+
+
+def _filter_lines(manifest: dict) -> list[str]:
+    """The report's line on the safety filter in the collection loop (none if no episode had it)."""
+    if not manifest.get("filter_fraction"):
+        return []
+    return [(f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
+             f"(ID-CBF-QP through `taslel_bench.api`, the filter's mu = true floor friction x "
+             f"U({manifest.get('filter_mu_scale', [1, 1])[0]:g}, "
+             f"{manifest.get('filter_mu_scale', [1, 1])[1]:g}) per episode, "
+             "features hold the filtered torque); "
+             "per worker: nominal episodes "
+             f"{manifest['env_steps_per_s_per_worker']['nominal'] or 0:,.0f} env-steps/s, "
+             f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
+             "`test[nominal]` / `test[filtered]` split the test windows by how they were collected.")]
+
+
+def _data_section(manifest: dict, base: object) -> list[str]:
+    """The report's "Data" section: collection throughput (env-steps/s), splits, filter, training sources,
+    plant ranges and the constant predictor's MAE [-] (``base``: per split)."""
+    return [
         "## Data",
         "",
         (f"- Collection (`python -m estimators.collect`): {manifest['env_steps']:,} env steps in "
@@ -380,19 +509,8 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         f"**{manifest['env_steps_per_s']:,.0f} env-steps/s** (paper: 100,000 steps/s, Isaac Gym, 4096 A1s, "
         f"RTX 3080) — one env step = one 1 ms MuJoCo step plus the Python nominal controller (and, in "
         "filtered episodes, the ID-CBF-QP safety filter)."),
-        "- Splits by episode: " + ", ".join(
-            f"{s} {i['episodes']} episodes / {i['windows']} windows ({i['episodes_fallen']} fell"
-            + (f"; {i['episodes_filtered']} episodes with the safety filter in the loop" if "episodes_filtered" in i else "")
-            + ")"
-            for s, i in manifest["splits"].items()) + ".",
-        *([(f"- Safety filter in the loop for a fraction {manifest['filter_fraction']} of the episodes "
-           f"(ID-CBF-QP through `taslel_bench.api`, the filter's mu = true floor friction x "
-           f"U({manifest.get('filter_mu_scale', [1, 1])[0]:g}, {manifest.get('filter_mu_scale', [1, 1])[1]:g}) per episode, "
-           "features hold the filtered torque); "
-           f"per worker: nominal episodes {manifest['env_steps_per_s_per_worker']['nominal'] or 0:,.0f} env-steps/s, "
-           f"filtered {manifest['env_steps_per_s_per_worker']['filtered'] or 0:,.0f} env-steps/s. Rows "
-           "`test[nominal]` / `test[filtered]` split the test windows by how they were collected.")]
-          if manifest.get("filter_fraction") else []),
+        _splits_line(manifest),
+        *_filter_lines(manifest),
         *([ "- Training split = " + " + ".join(_source_text(src) for src in manifest["sources"])
             + "; val / test / shifted: the first collection, uniform draws."] if "sources" in manifest else []),
         f"- Training ranges: `{json.dumps(manifest['train_ranges'])}`",
@@ -401,6 +519,13 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         (f"- Constant predictor (training mean) MAE: test {base.get('test', float('nan')):.3f}, "
         f"shifted {base.get('shifted', float('nan')):.3f}."),
         "",
+    ]
+
+
+def _summary_section(df: object, names: list[str], ks: list[float], train_rec: dict[str, dict]) -> list[str]:
+    """The report's "Summary" section: how the bound was chosen, the summary table and the models that read
+    the filter's mu."""
+    return [
         "## Summary",
         "",
         (f"Bound chosen on validation data: {BOUND_SELECTION.get('rule', '')}, on {BOUND_SELECTION.get('set', '')} "
@@ -421,6 +546,12 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "filter mu): " + (", ".join(f"`{v}`" for v in names if train_rec.get(v, {}).get("filter_mu_input")) or "none")
         + "; the others read q, qdot, tau only.",
         "",
+    ]
+
+
+def _subset_and_tradeoff_sections(df: object, names: list[str], k_table: str) -> list[str]:
+    """The report's nominal-vs-filtered windows section and the conservative-bound trade-off section."""
+    return [
         "## Nominal-controller vs filter-in-the-loop windows",
         "",
         ("The same metrics on the windows of episodes collected under the nominal controller only and of "
@@ -437,6 +568,12 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "",
         k_table,
         "",
+    ]
+
+
+def _appendix_sections(table: object, train_rec: dict[str, dict], names: list[str]) -> list[str]:
+    """The report's closing sections: all metrics, training records, machine and the figure list."""
+    return [
         "## All metrics",
         "",
         markdown_table(table),
@@ -457,6 +594,31 @@ def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, k
         "```",
         "",
         "Figures: " + ", ".join(f"`regression_{v}.png`" for v in names) + ".",
+    ]
+
+
+def write_report(rows: list[dict[str, object]], out_dir: Path, data_dir: Path, ks: list[float]) -> None:
+    """Write ``metrics.csv`` (one row per variant, split and estimate), ``k_tradeoff.csv`` and ``report.md``
+    into ``out_dir``; the data section reads ``data_dir/manifest.json``."""
+    import pandas as pd
+
+    df = pd.DataFrame(rows)
+    df.to_csv(out_dir / "metrics.csv", index=False)
+    manifest = json.loads((data_dir / "manifest.json").read_text())
+    names = [n for n in dict.fromkeys(df.variant) if not n.startswith("constant")]
+    train_rec = _training_records(names)
+    base = df[df.variant.str.startswith("constant")].set_index("split")["mae"]
+    table = _metrics_table(df)
+    k_table = _k_tradeoff_table(out_dir)
+    lines = [
+        "# Terrain estimators: friction from proprioception",
+        "",
+        "Generated by `python -m studies.estimator_evaluate`; every number is measured on this machine.",
+        "",
+        *_data_section(manifest, base),
+        *_summary_section(df, names, ks, train_rec),
+        *_subset_and_tradeoff_sections(df, names, k_table),
+        *_appendix_sections(table, train_rec, names),
     ]
     (out_dir / "report.md").write_text("\n".join(lines) + "\n")
 

@@ -146,39 +146,14 @@ def adapt(
     """Rename the file's joints, actuators, foot geoms and trunk to the core's names, make the 12 actuators
     torque motors, find the floor. Returns (the floor geom or None, record). Raises :class:`ConfigError`
     (prefixed ``where``) naming *joints*, *actuators*, *feet*, *trunk* or *floor* for each thing missing."""
-    problems: list[str] = []
     joints = {j.name: j for j in spec.joints if j.name}
     geoms = {g.name: g for g in spec.geoms if g.name}
     bodies = {b.name: b for b in spec.bodies if b.name}
-
     file_joint = {core: names.file_name("joints", core) for core in a1.JOINT_NAMES}
-    missing = [
-        f"{core} (as {f!r})" if f != core else core for core, f in file_joint.items() if f not in joints
-    ]
-    if missing:
-        problems.append(
-            f"joints: no joint {', '.join(missing)} (robot.plant_names.joints); "
-            f"joints in the file: {_available(joints)}"
-        )
     feet = {core: names.file_name("feet", core) for core in a1.FOOT_FRAMES}
-    bad_feet = [
-        f"{core} (as {f!r})" if f != core else core
-        for core, f in feet.items()
-        if f not in geoms or geoms[f].type != mujoco.mjtGeom.mjGEOM_SPHERE
-    ]
-    if bad_feet:
-        problems.append(
-            f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
-            f"sphere geoms in the file: "
-            f"{_available(n for n, g in geoms.items() if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)}"
-        )
     trunk = names.trunk or a1.TRUNK_BODY
-    if trunk not in bodies:
-        problems.append(
-            f"trunk: no body {trunk!r} (robot.plant_names.trunk); bodies in the file: {_available(bodies)}"
-        )
-    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
-        problems.append("trunk: no free joint (the floating base)")
+    problems = _joint_problems(file_joint, joints) + _foot_problems(feet, geoms)
+    problems += _trunk_problems(spec, trunk, bodies)
     chosen, act_problems = _find_actuators(spec, names, file_joint)
     problems += act_problems
     floor, floor_problem = _find_floor(spec, names)
@@ -189,33 +164,106 @@ def adapt(
 
     # torque motors first (it deletes the other actuators on the leg joints), then the core's names
     record: dict[str, object] = _torque_motors(spec, chosen, torque_limit_nm)
-    renamed: dict[str, object] = {}
-    for kind, objtype, table, wanted in (
-        ("joints", mujoco.mjtObj.mjOBJ_JOINT, joints, file_joint),
-        ("feet", mujoco.mjtObj.mjOBJ_GEOM, geoms, feet),
-        ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {a1.TRUNK_BODY: trunk}),
+    renamed = _rename_to_core(
+        spec,
+        [
+            ("joints", mujoco.mjtObj.mjOBJ_JOINT, joints, file_joint),
+            ("feet", mujoco.mjtObj.mjOBJ_GEOM, geoms, feet),
+            ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {a1.TRUNK_BODY: trunk}),
+            _actuator_renames(chosen),
+        ],
+    )
+    for core, act in chosen.items():  # unnamed actuators (nothing can refer to them) get the joint's name
+        act.name = act.name or core
+    old_floor = _name_floor(spec, floor)
+    if old_floor is not None:
+        renamed["floor"] = old_floor
+    if renamed:
+        record["renamed"] = renamed
+    return floor, record
+
+
+def _as_core(core: str, file_name: str) -> str:
+    """``core``, followed by ``(as 'file name')`` when the file names it differently."""
+    return f"{core} (as {file_name!r})" if file_name != core else core
+
+
+def _joint_problems(file_joint: dict[str, str], joints: dict[str, mujoco.MjsJoint]) -> list[str]:
+    """The *joints* problem (as a list of at most one) when a core joint's file name is not in the file."""
+    missing = [_as_core(core, f) for core, f in file_joint.items() if f not in joints]
+    if not missing:
+        return []
+    return [
         (
-            "actuators",
-            mujoco.mjtObj.mjOBJ_ACTUATOR,
-            {a.name: a for a in chosen.values() if a.name},
-            {core: a.name for core, a in chosen.items() if a.name},
-        ),
-    ):
+            f"joints: no joint {', '.join(missing)} (robot.plant_names.joints); "
+            f"joints in the file: {_available(joints)}"
+        )
+    ]
+
+
+def _foot_problems(feet: dict[str, str], geoms: dict[str, mujoco.MjsGeom]) -> list[str]:
+    """The *feet* problem (as a list of at most one) when a core foot's file name is not a sphere geom."""
+    sphere = mujoco.mjtGeom.mjGEOM_SPHERE
+    bad_feet = [_as_core(core, f) for core, f in feet.items() if f not in geoms or geoms[f].type != sphere]
+    if not bad_feet:
+        return []
+    return [
+        (
+            f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
+            f"sphere geoms in the file: "
+            f"{_available(n for n, g in geoms.items() if g.type == sphere)}"
+        )
+    ]
+
+
+def _trunk_problems(spec: mujoco.MjSpec, trunk: str, bodies: dict[str, mujoco.MjsBody]) -> list[str]:
+    """The *trunk* problems: no body named ``trunk`` in the file, no free joint (floating base)."""
+    problems = []
+    if trunk not in bodies:
+        problems.append(
+            f"trunk: no body {trunk!r} (robot.plant_names.trunk); bodies in the file: {_available(bodies)}"
+        )
+    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints):
+        problems.append("trunk: no free joint (the floating base)")
+    return problems
+
+
+def _actuator_renames(chosen: dict[str, mujoco.MjsActuator]) -> tuple[str, mujoco.mjtObj, dict, dict]:
+    """The renaming of the named chosen actuators, as an entry of :func:`_rename_to_core`'s list."""
+    return (
+        "actuators",
+        mujoco.mjtObj.mjOBJ_ACTUATOR,
+        {a.name: a for a in chosen.values() if a.name},
+        {core: a.name for core, a in chosen.items() if a.name},
+    )
+
+
+def _rename_to_core(
+    spec: mujoco.MjSpec, renames: list[tuple[str, mujoco.mjtObj, dict[str, object], dict[str, str]]]
+) -> dict[str, object]:
+    """For each (kind, object type, {file name: element}, {core name: file name}): rename the elements whose
+    file name differs to their core name (and every reference to them). Returns the record's ``renamed``
+    part, {kind: {core name: file name}} for the kinds with a renamed element."""
+    renamed: dict[str, object] = {}
+    for kind, objtype, table, wanted in renames:
         to_core = {f: core for core, f in wanted.items() if f != core}
         if to_core:
             _rename(spec, objtype, {f: table[f] for f in to_core}, to_core)
             renamed[kind] = {core: f for f, core in to_core.items()}
-    for core, act in chosen.items():  # unnamed actuators (nothing can refer to them) get the joint's name
-        act.name = act.name or core
-    if floor is not None and floor.name != FLOOR:
-        renamed["floor"] = floor.name or "(unnamed plane)"
-        if floor.name:
-            _rename(spec, mujoco.mjtObj.mjOBJ_GEOM, {floor.name: floor}, {floor.name: FLOOR})
-        else:
-            floor.name = FLOOR
-    if renamed:
-        record["renamed"] = renamed
-    return floor, record
+    return renamed
+
+
+def _name_floor(spec: mujoco.MjSpec, floor: mujoco.MjsGeom | None) -> str | None:
+    """Name the file's floor geom :data:`FLOOR` (with every reference to it). Returns its old name for the
+    record (``(unnamed plane)`` if it had none), None when there is no floor or it already has the name."""
+    if floor is None or floor.name == FLOOR:
+        return None
+    old = floor.name or "(unnamed plane)"
+    if floor.name:
+        _rename(spec, mujoco.mjtObj.mjOBJ_GEOM, {floor.name: floor}, {floor.name: FLOOR})
+    else:
+        floor.name = FLOOR
+    return old
 
 
 def _find_actuators(
@@ -224,50 +272,90 @@ def _find_actuators(
     """The actuator of each core joint (by name with ``names.actuators``, else the one driving the joint)."""
     by_name = {a.name: a for a in spec.actuators if a.name}
     joint_names = {j.name for j in spec.joints}
-    driving: dict[str, list] = {}
-    for a in spec.actuators:
-        if a.trntype in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT):
-            driving.setdefault(a.target, []).append(a)
-    chosen, missing, ambiguous, wrong = {}, [], [], []
+    driving = _actuators_by_joint(spec)
+    chosen: dict[str, mujoco.MjsActuator] = {}
+    unfit: dict[str, list[str]] = {"missing": [], "ambiguous": [], "wrong": []}
     for core, fj in file_joint.items():
         if names.actuators is not None:
-            fa = names.file_name("actuators", core)
-            if fa not in by_name:
-                missing.append(f"{core} (as {fa!r})")
-                continue
-            act = by_name[fa]
-            if (
-                act.trntype not in (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT)
-                or act.target != fj
-            ):
-                wrong.append(f"{fa!r} drives {act.target!r}, not joint {fj!r}")
-                continue
+            act, kind, problem = _named_actuator(names, core, fj, by_name)
         elif fj not in joint_names:
             continue  # reported under joints
         else:
-            acts = driving.get(fj, [])
-            if len(acts) != 1:
-                (missing if not acts else ambiguous).append(
-                    f"{core}"
-                    + (f" (joint {fj!r})" if fj != core else "")
-                    + (f": {', '.join(repr(a.name) for a in acts)}" if acts else "")
-                )
-                continue
-            act = acts[0]
-        chosen[core] = act
+            act, kind, problem = _driving_actuator(core, fj, driving.get(fj, []))
+        if act is None:
+            unfit[kind].append(problem)
+        else:
+            chosen[core] = act
+    problems = _actuator_match_problems(unfit, by_name) + _actuator_type_problems(chosen)
+    return chosen, problems
+
+
+_JOINT_TRANSMISSIONS = (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT)
+
+
+def _actuators_by_joint(spec: mujoco.MjSpec) -> dict[str, list[mujoco.MjsActuator]]:
+    """{joint name: the actuators with a joint transmission driving it}, in file order."""
+    driving: dict[str, list] = {}
+    for a in spec.actuators:
+        if a.trntype in _JOINT_TRANSMISSIONS:
+            driving.setdefault(a.target, []).append(a)
+    return driving
+
+
+def _named_actuator(
+    names: PlantNames, core: str, fj: str, by_name: dict[str, mujoco.MjsActuator]
+) -> tuple[mujoco.MjsActuator | None, str, str]:
+    """The actuator ``names.actuators`` names for core joint ``core`` (file joint ``fj``): (actuator, "", "")
+    or (None, "missing" / "wrong", what is wrong) when there is none or it does not drive that joint."""
+    fa = names.file_name("actuators", core)
+    if fa not in by_name:
+        return None, "missing", f"{core} (as {fa!r})"
+    act = by_name[fa]
+    if act.trntype not in _JOINT_TRANSMISSIONS or act.target != fj:
+        return None, "wrong", f"{fa!r} drives {act.target!r}, not joint {fj!r}"
+    return act, "", ""
+
+
+def _driving_actuator(
+    core: str, fj: str, acts: list[mujoco.MjsActuator]
+) -> tuple[mujoco.MjsActuator | None, str, str]:
+    """The one actuator ``acts`` driving core joint ``core`` (file joint ``fj``): (actuator, "", ""), or
+    (None, "missing" / "ambiguous", the joint and the actuators found) when there is none or several."""
+    if len(acts) == 1:
+        return acts[0], "", ""
+    problem = (
+        f"{core}"
+        + (f" (joint {fj!r})" if fj != core else "")
+        + (f": {', '.join(repr(a.name) for a in acts)}" if acts else "")
+    )
+    return None, ("missing" if not acts else "ambiguous"), problem
+
+
+def _actuator_match_problems(
+    unfit: dict[str, list[str]], by_name: dict[str, mujoco.MjsActuator]
+) -> list[str]:
+    """The *actuators* problems of the joints without an actuator (``unfit["missing"]``), with several
+    (``"ambiguous"``) or with a named actuator driving something else (``"wrong"``)."""
     problems = []
-    if missing:
+    if unfit["missing"]:
         problems.append(
-            f"actuators: none for {', '.join(missing)} (robot.plant_names.actuators); "
+            f"actuators: none for {', '.join(unfit['missing'])} (robot.plant_names.actuators); "
             f"actuators in the file: {_available(by_name)}"
         )
-    if ambiguous:
+    if unfit["ambiguous"]:
         problems.append(
-            f"actuators: several drive {'; '.join(ambiguous)}: name the one to command in "
+            f"actuators: several drive {'; '.join(unfit['ambiguous'])}: name the one to command in "
             f"robot.plant_names.actuators"
         )
-    if wrong:
-        problems.append(f"actuators: {'; '.join(wrong)}")
+    if unfit["wrong"]:
+        problems.append(f"actuators: {'; '.join(unfit['wrong'])}")
+    return problems
+
+
+def _actuator_type_problems(chosen: dict[str, mujoco.MjsActuator]) -> list[str]:
+    """The *actuators* problems of the chosen actuators that are neither a torque motor nor a servo (no
+    activation dynamics, fixed gain, no or affine bias), which :func:`_torque_motors` cannot convert."""
+    problems = []
     for core, act in chosen.items():
         if (
             act.dyntype != mujoco.mjtDyn.mjDYN_NONE
@@ -279,7 +367,7 @@ def _find_actuators(
                 f"servo (dyntype {act.dyntype.name}, gaintype {act.gaintype.name}, "
                 f"biastype {act.biastype.name})"
             )
-    return chosen, problems
+    return problems
 
 
 def _torque_motors(

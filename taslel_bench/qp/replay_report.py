@@ -13,6 +13,7 @@ import argparse
 import datetime as dt
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -21,6 +22,9 @@ from taslel_bench.record import run_files
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
+
+if TYPE_CHECKING:
+    from pandas.api.typing import DataFrameGroupBy
 
 QP_TABLE = "replay_qps.parquet"  # per QP x backend x profile x mode x pass, in a job folder
 JOB_INFO = "replay_job.json"  # the job's backend, settings and machine
@@ -48,54 +52,110 @@ def _spread(per_pass: pd.Series, fmt: str = "{:.0f}") -> str:
 
 def summarize(frame: pd.DataFrame, deadlines_hz: tuple[float, ...] = (1000.0, 500.0)) -> pd.DataFrame:
     """One row per backend x profile x mode (unavailable ones included with their reason)."""
-    rows = []
-    for key, g in frame.groupby(KEYS, sort=False):
-        row = dict(zip(KEYS, key))
-        row["backend"] = g["backend"].iloc[0] if "backend" in g else ""
-        if (g["qp"] < 0).all():
-            row["status"] = str(g["status"].iloc[0])
-            rows.append(row)
-            continue
-        row["status"] = "ran"
-        first = g[g["repeat"] == 0]
-        per_pass = g.groupby("repeat")
-        outcome = g.pivot_table(index="qp", columns="repeat", values=["success", "correct"], aggfunc="first")
-        row["passes"] = int(g["repeat"].nunique())
-        row["passes_agree"] = bool(all((outcome[c].nunique(axis=1) == 1).all() for c in ("success", "correct")))
-        row["n"] = len(first)
-        row["success_pct"] = 100.0 * first["success"].mean()
-        row["correct_pct"] = 100.0 * first["correct"].mean()
-        row["wrong_but_solved"] = int((first["success"] & ~first["correct"]).sum())
-        row["max_du_nm"] = float(first.loc[first["success"], "du_nm"].max()) if first["success"].any() else np.nan
-        for q, name in ((50, "median"), (99, "p99"), (100, "max")):
-            s = per_pass["solve_s"].apply(lambda v, q=q: np.percentile(v, q) * US)
-            row[f"solve_{name}_us"] = float(np.median(s))
-            row[f"solve_{name}_us_min"], row[f"solve_{name}_us_max"] = float(s.min()), float(s.max())
-        sg = per_pass["solve_s"].apply(lambda v: shifted_geometric_mean(v.to_numpy() * US))
-        row["shgeom_us"], row["shgeom_us_min"], row["shgeom_us_max"] = float(np.median(sg)), sg.min(), sg.max()
-        # per-QP minimum over passes: filters out OS preemption on this shared machine (a stall rarely hits
-        # the same QP in every pass); compare with the raw per-pass numbers to see the noise
-        best = g.groupby("qp")[["solve_s", "build_s"]].min()
-        row["solve_p99_us_minpass"] = float(np.percentile(best["solve_s"], 99) * US) if row["passes"] > 1 else np.nan
-        for hz in deadlines_hz:
-            period = 1.0 / hz
-            row[f"miss_{hz:g}hz_minpass_pct"] = 100.0 * float(np.mean(best["build_s"] + best["solve_s"] > period))
-            miss = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["solve_s"] > p))
-            miss_py = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["call_s"] > p))
-            row[f"miss_{hz:g}hz_pct"] = float(np.median(miss))
-            row[f"miss_{hz:g}hz_pct_spread"] = _spread(miss, "{:.2f}")
-            row[f"miss_{hz:g}hz_python_pct"] = float(np.median(miss_py))
-        med = per_pass[["build_s", "solve_s", "overhead_s", "call_s", "check_s"]].median().median() * US
-        row["build_us"], row["native_us"], row["backend_overhead_us"] = med["build_s"], med["solve_s"], med["overhead_s"]
-        disp = per_pass.apply(lambda d: np.median(d["call_s"] - d["solve_s"] - d["overhead_s"].fillna(0.0)) * US)
-        row["dispatch_us"], row["call_us"], row["check_us"] = float(np.median(disp)), med["call_s"], med["check_s"]
-        row["iterations_median"] = float(first["iterations"].median())
-        for k in ("solve_median_us", "solve_p99_us", "solve_max_us", "shgeom_us"):
-            row[k + "_spread"] = _spread(pd.Series([row[k + "_min"], row[k], row[k + "_max"]])
-                                         if row["passes"] > 1 else pd.Series([row[k]]))  # fmt: skip
-        row["settings"] = g["settings"].iloc[0] if "settings" in g else ""
-        rows.append(row)
-    out = pd.DataFrame(rows)
+    rows = [_summarize_group(key, g, deadlines_hz) for key, g in frame.groupby(KEYS, sort=False)]
+    return _add_shgeom_rel(pd.DataFrame(rows))
+
+
+def _summarize_group(key: tuple, g: pd.DataFrame, deadlines_hz: tuple[float, ...]) -> dict:
+    """The summary row of one backend x profile x mode: its status (the reason when it did not run), else
+    outcome, solve times [µs], deadline misses [%] at each rate [Hz] and the per-QP cost breakdown [µs]."""
+    row = dict(zip(KEYS, key))
+    row["backend"] = g["backend"].iloc[0] if "backend" in g else ""
+    if (g["qp"] < 0).all():
+        row["status"] = str(g["status"].iloc[0])
+        return row
+    row["status"] = "ran"
+    first = g[g["repeat"] == 0]
+    per_pass = g.groupby("repeat")
+    row.update(_outcome_columns(g, first))
+    row.update(_solve_time_columns(per_pass))
+    row.update(_deadline_columns(g, per_pass, row["passes"], deadlines_hz))
+    row.update(_cost_columns(per_pass))
+    row["iterations_median"] = float(first["iterations"].median())
+    row.update(_spread_columns(row))
+    row["settings"] = g["settings"].iloc[0] if "settings" in g else ""
+    return row
+
+
+def _outcome_columns(g: pd.DataFrame, first: pd.DataFrame) -> dict:
+    """Passes, whether every pass gives the same success / correctness per QP, and the first pass's
+    success / correctness rates [%], solved-but-wrong count and largest |du| of the solved QPs [N·m]."""
+    outcome = g.pivot_table(index="qp", columns="repeat", values=["success", "correct"], aggfunc="first")
+    solved = first["success"]
+    return {
+        "passes": int(g["repeat"].nunique()),
+        "passes_agree": bool(all((outcome[c].nunique(axis=1) == 1).all() for c in ("success", "correct"))),
+        "n": len(first),
+        "success_pct": 100.0 * solved.mean(),
+        "correct_pct": 100.0 * first["correct"].mean(),
+        "wrong_but_solved": int((solved & ~first["correct"]).sum()),
+        "max_du_nm": float(first.loc[solved, "du_nm"].max()) if solved.any() else np.nan,
+    }
+
+
+def _solve_time_columns(per_pass: DataFrameGroupBy) -> dict:
+    """Native solve time [µs]: median / p99 / max and shifted geometric mean of each pass, as the median
+    over passes with the min and max over passes (``*_min``, ``*_max``)."""
+    cols: dict[str, float] = {}
+    for q, name in ((50, "median"), (99, "p99"), (100, "max")):
+        s = per_pass["solve_s"].apply(lambda v, q=q: np.percentile(v, q) * US)
+        cols[f"solve_{name}_us"] = float(np.median(s))
+        cols[f"solve_{name}_us_min"], cols[f"solve_{name}_us_max"] = float(s.min()), float(s.max())
+    sg = per_pass["solve_s"].apply(lambda v: shifted_geometric_mean(v.to_numpy() * US))
+    cols["shgeom_us"], cols["shgeom_us_min"], cols["shgeom_us_max"] = float(np.median(sg)), sg.min(), sg.max()
+    return cols
+
+
+def _deadline_columns(
+    g: pd.DataFrame, per_pass: DataFrameGroupBy, passes: int, deadlines_hz: tuple[float, ...]
+) -> dict:
+    """p99 solve time [µs] of each QP's fastest pass, and per rate [Hz] the deadline-miss rate [%] (build +
+    native solve > one period): with each QP's fastest pass, median over passes (and its spread), and with
+    the Python call instead of the native solve."""
+    # per-QP minimum over passes: filters out OS preemption on this shared machine (a stall rarely hits
+    # the same QP in every pass); compare with the raw per-pass numbers to see the noise
+    best = g.groupby("qp")[["solve_s", "build_s"]].min()
+    cols: dict[str, object] = {
+        "solve_p99_us_minpass": float(np.percentile(best["solve_s"], 99) * US) if passes > 1 else np.nan
+    }
+    for hz in deadlines_hz:
+        period = 1.0 / hz
+        best_miss = best["build_s"] + best["solve_s"] > period
+        cols[f"miss_{hz:g}hz_minpass_pct"] = 100.0 * float(np.mean(best_miss))
+        miss = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["solve_s"] > p))
+        miss_py = per_pass.apply(lambda d, p=period: 100.0 * np.mean(d["build_s"] + d["call_s"] > p))
+        cols[f"miss_{hz:g}hz_pct"] = float(np.median(miss))
+        cols[f"miss_{hz:g}hz_pct_spread"] = _spread(miss, "{:.2f}")
+        cols[f"miss_{hz:g}hz_python_pct"] = float(np.median(miss_py))
+    return cols
+
+
+def _cost_columns(per_pass: DataFrameGroupBy) -> dict:
+    """Median per QP [µs] (median over QPs, then over passes) of the recorded QP build, the native solve,
+    the backend's overhead, the rest of the Python call (dispatch), the whole call and the replay's check."""
+    med = per_pass[["build_s", "solve_s", "overhead_s", "call_s", "check_s"]].median().median() * US
+    disp = per_pass.apply(lambda d: np.median(d["call_s"] - d["solve_s"] - d["overhead_s"].fillna(0.0)) * US)
+    return {
+        "build_us": med["build_s"],
+        "native_us": med["solve_s"],
+        "backend_overhead_us": med["overhead_s"],
+        "dispatch_us": float(np.median(disp)),
+        "call_us": med["call_s"],
+        "check_us": med["check_s"],
+    }
+
+
+def _spread_columns(row: dict) -> dict:
+    """Solve-time cells as text [µs]: median over passes (min-max), or the one pass's value."""
+    cols = {}
+    for k in ("solve_median_us", "solve_p99_us", "solve_max_us", "shgeom_us"):
+        cols[k + "_spread"] = _spread(pd.Series([row[k + "_min"], row[k], row[k + "_max"]])
+                                      if row["passes"] > 1 else pd.Series([row[k]]))  # fmt: skip
+    return cols
+
+
+def _add_shgeom_rel(out: pd.DataFrame) -> pd.DataFrame:
+    """Add ``shgeom_rel``: the shifted geometric mean relative to the best of its profile (when any ran)."""
     if "shgeom_us" in out:
         best = out.groupby("profile")["shgeom_us"].transform("min")
         out["shgeom_rel"] = (out["shgeom_us"] + SHGEOM_SHIFT_US) / (best + SHGEOM_SHIFT_US)
@@ -162,24 +222,51 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
     out = Path(out or folder)
     out.mkdir(parents=True, exist_ok=True)
     frame, infos = load_tables(Path(folder))
-    hz = tuple(float(h) for h in (infos[0]["config"].get("deadlines_hz", (1000, 500)) if infos else (1000, 500)))
-    summary = summarize(frame, hz)
+    summary = summarize(frame, _deadlines_hz(infos))
     run_files.atomic_write(out / "results.csv", lambda p: summary.to_csv(p, index=False))
-    ran = summary[summary["status"] == "ran"]
-    overhead = ran[[*KEYS, "backend", "build_us", "native_us", "backend_overhead_us", "dispatch_us", "call_us",
-                    "check_us"]].copy()  # fmt: skip
-    overhead["in_loop_us"] = overhead["build_us"] + overhead["call_us"]
-    overhead["native_share_pct"] = 100.0 * overhead["native_us"] / overhead["in_loop_us"]
+    overhead = _overhead_table(summary)
     run_files.atomic_write(out / "overhead.csv", lambda p: overhead.round(2).to_csv(p, index=False))
     fig = _figure(frame, out)
     info = infos[0] if infos else {}
+    lines = _intro_lines(frame, info, machine_info())
+    lines += _rate_lines(summary)
+    lines += _profile_lines(summary)
+    lines += _overhead_lines(overhead)
+    lines += _not_run_lines(summary)
+    if fig:
+        lines += ["## Solve-time distributions", "", f"![solve times]({fig})", ""]
+    lines += _settings_lines(summary)
+    path = out / "report.md"
+    run_files.atomic_write(path, lambda p: p.write_text("\n".join(lines) + "\n"))
+    return path
+
+
+def _deadlines_hz(infos: list[dict]) -> tuple[float, ...]:
+    """The deadline rates [Hz] of the first job's config (default 1000 and 500 Hz)."""
+    rates = infos[0]["config"].get("deadlines_hz", (1000, 500)) if infos else (1000, 500)
+    return tuple(float(h) for h in rates)
+
+
+def _overhead_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """The cost breakdown of the backends that ran [µs per QP], with the closed loop's share (``in_loop_us``
+    = build + call) and the native solve's share of it [%]."""
+    ran = summary[summary["status"] == "ran"]
+    costs = ["build_us", "native_us", "backend_overhead_us", "dispatch_us", "call_us", "check_us"]
+    overhead = ran[[*KEYS, "backend", *costs]].copy()
+    overhead["in_loop_us"] = overhead["build_us"] + overhead["call_us"]
+    overhead["native_share_pct"] = 100.0 * overhead["native_us"] / overhead["in_loop_us"]
+    return overhead
+
+
+def _intro_lines(frame: pd.DataFrame, info: dict, m: dict) -> list[str]:
+    """Title, provenance (time, code, test set, tolerances, passes), machine ``m``, modes and profiles."""
     cfg = info.get("config", {})
-    m = machine_info()
     scen = frame[frame["qp"] >= 0].drop_duplicates("qp")["scenario"].value_counts().to_dict()
-    lines = [
+    return [
         "# QP replay benchmark",
         "",
-        f"Generated {dt.datetime.now().isoformat(timespec='seconds')} by `python -m taslel_bench.replay`, {m['code']}.",
+        (f"Generated {dt.datetime.now().isoformat(timespec='seconds')} by `python -m taslel_bench.replay`, "
+         f"{m['code']}."),
         f"Test set: `{Path(info.get('testset', '?')).name}`, {info.get('n_qps', '?')} QPs from "
         f"{len(info.get('runs', []))} closed-loop runs; replayed per scenario: "
         + ", ".join(f"{k} {v}" for k, v in scen.items())
@@ -191,12 +278,20 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         "(shared with other jobs: absolute times are noisy, compare within a table)."),
         f"Versions: {m['packages']}.",
         "",
-        ("Modes: **cold** = reset before every QP (no guess, set up from scratch); **warm** = previous tick's "
-        "answer as initial guess (qpsolvers `initvals`); **persistent** = native solver set up once per layout, "
-        "values updated in place and warm started. Profiles: **default** = the solver's own settings and no "
-        "answer check inside the backend (success = the solver says solved); **high_accuracy** = "
-        "`conf/solver/*.yaml` as a closed-loop sweep uses them (tuned tolerances, backend answer check on)."),
+        ("Modes: **cold** = reset before every QP (no guess, set up from scratch); **warm** = previous "
+         "tick's answer as initial guess (qpsolvers `initvals`); **persistent** = native solver set up once "
+         "per layout, values updated in place and warm started. Profiles: **default** = the solver's own "
+         "settings and no answer check inside the backend (success = the solver says solved); "
+         "**high_accuracy** = `conf/solver/*.yaml` as a closed-loop sweep uses them (tuned tolerances, "
+         "backend answer check on)."),
         "",
+    ]  # fmt: skip
+
+
+def _rate_lines(summary: pd.DataFrame) -> list[str]:
+    """The solver x (profile / mode) tables: success and correctness rates [%], relative shifted geometric
+    mean of the solve time, deadline-miss rates [%] at 1 kHz and 500 Hz."""
+    return [
         "## Success rate [%] (backend status `solved`)",
         "",
         _md(_pivot(summary, "success_pct", "{:.2f}")),
@@ -205,14 +300,15 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         "",
         _md(_pivot(summary, "correct_pct", "{:.2f}")),
         "",
-        f"## Shifted geometric mean of solve time, relative to the best of its profile (shift {SHGEOM_SHIFT_US:g} µs)",
+        (f"## Shifted geometric mean of solve time, relative to the best of its profile "
+         f"(shift {SHGEOM_SHIFT_US:g} µs)"),
         "",
         _md(_pivot(summary, "shgeom_rel", "{:.1f}")),
         "",
         "## Deadline-miss rate [%] at 1 kHz (recorded build time + native solve time > 1 ms)",
         "",
-        ("Cells: median over passes / with each QP's fastest pass (the second filters out stalls of this shared "
-         "2-core machine: the slow solves have the same iteration counts as the typical ones)."),
+        ("Cells: median over passes / with each QP's fastest pass (the second filters out stalls of this "
+         "shared 2-core machine: the slow solves have the same iteration counts as the typical ones)."),
         "",
         _md(_pivot(summary, "miss_1000hz_pct", "{:.2f}", "miss_1000hz_minpass_pct")),
         "",
@@ -221,47 +317,70 @@ def write_report(folder: Path, out: Path | None = None) -> Path:
         _md(_pivot(summary, "miss_500hz_pct", "{:.2f}", "miss_500hz_minpass_pct")),
         "",
     ]  # fmt: skip
+
+
+def _profile_lines(summary: pd.DataFrame) -> list[str]:
+    """One section per settings profile: the table of the backends that ran with it."""
+    lines: list[str] = []
     for prof in dict.fromkeys(summary["profile"]):
         s = summary[(summary["profile"] == prof) & (summary["status"] == "ran")]
-        t = pd.DataFrame({
-            "solver": s["solver"], "mode": s["mode"], "success %": s["success_pct"].round(2),
-            "correct %": s["correct_pct"].round(2), "solved but wrong": s["wrong_but_solved"].astype(int),
-            "max abs du [N·m]": s["max_du_nm"].map(lambda v: f"{v:.1e}"),
-            "median [µs]": s["solve_median_us_spread"], "p99 [µs]": s["solve_p99_us_spread"],
-            "max [µs]": s["solve_max_us_spread"],
-            "p99 fastest pass [µs]": s["solve_p99_us_minpass"].round(0), "shgeom [µs]": s["shgeom_us_spread"],
-            "shgeom rel": s["shgeom_rel"].round(1), "miss 1 kHz %": s["miss_1000hz_pct_spread"],
-            "miss 500 Hz %": s["miss_500hz_pct_spread"], "miss 1 kHz % (Python call)": s["miss_1000hz_python_pct"].round(2),
-            "passes agree": s["passes_agree"],
-        })  # fmt: skip
-        lines += [f"## Settings profile `{prof}`", "", _md(t, index=False), ""]
-    oh = overhead[overhead["profile"] == "high_accuracy"] if (overhead["profile"] == "high_accuracy").any() else overhead
+        lines += [f"## Settings profile `{prof}`", "", _md(_profile_table(s), index=False), ""]
+    return lines
+
+
+def _profile_table(s: pd.DataFrame) -> pd.DataFrame:
+    """The displayed columns of summary rows ``s``: rates [%], largest |du| [N·m], solve times [µs] as
+    median (min-max) over passes, relative shifted geometric mean, deadline misses [%], pass agreement."""
+    return pd.DataFrame({
+        "solver": s["solver"], "mode": s["mode"], "success %": s["success_pct"].round(2),
+        "correct %": s["correct_pct"].round(2), "solved but wrong": s["wrong_but_solved"].astype(int),
+        "max abs du [N·m]": s["max_du_nm"].map(lambda v: f"{v:.1e}"),
+        "median [µs]": s["solve_median_us_spread"], "p99 [µs]": s["solve_p99_us_spread"],
+        "max [µs]": s["solve_max_us_spread"],
+        "p99 fastest pass [µs]": s["solve_p99_us_minpass"].round(0), "shgeom [µs]": s["shgeom_us_spread"],
+        "shgeom rel": s["shgeom_rel"].round(1), "miss 1 kHz %": s["miss_1000hz_pct_spread"],
+        "miss 500 Hz %": s["miss_500hz_pct_spread"],
+        "miss 1 kHz % (Python call)": s["miss_1000hz_python_pct"].round(2),
+        "passes agree": s["passes_agree"],
+    })  # fmt: skip
+
+
+def _overhead_lines(overhead: pd.DataFrame) -> list[str]:
+    """The harness-overhead section: the cost breakdown [µs per QP] of profile high_accuracy (of every
+    profile when high_accuracy did not run), rounded to 0.1 µs."""
+    has_ha = (overhead["profile"] == "high_accuracy").any()
+    oh = overhead[overhead["profile"] == "high_accuracy"] if has_ha else overhead
     oh = oh.drop(columns=["profile"]).round(1)
-    lines += [
+    return [
         "## Harness overhead vs native solve (median per QP [µs], profile high_accuracy)",
         "",
-        ("`build` = the filter writing the QP, measured in the recorded runs; `native` = the timed solver call "
-        "(`solve_time_s`: for qpsolvers backends it includes qpsolvers' own packing and the solver setup; for "
-        "persistent ones the in-place update + solve); `backend overhead` = conversions + the backend's answer "
-        "check (`overhead_s`); `dispatch` = the rest of the Python `solve()` call; `in loop` = build + call, "
-        "what the Python closed loop pays; `check` = the replay's own correctness check (not in the loop). "
-        "A C++ deployment would pay roughly build (~C++ speed) + native."),
+        ("`build` = the filter writing the QP, measured in the recorded runs; `native` = the timed solver "
+         "call (`solve_time_s`: for qpsolvers backends it includes qpsolvers' own packing and the solver "
+         "setup; for persistent ones the in-place update + solve); `backend overhead` = conversions + the "
+         "backend's answer check (`overhead_s`); `dispatch` = the rest of the Python `solve()` call; "
+         "`in loop` = build + call, what the Python closed loop pays; `check` = the replay's own correctness "
+         "check (not in the loop). A C++ deployment would pay roughly build (~C++ speed) + native."),
         "",
         _md(oh, index=False),
         "",
-    ]
+    ]  # fmt: skip
+
+
+def _not_run_lines(summary: pd.DataFrame) -> list[str]:
+    """The "Not run" section (backend / profile / mode: reason), empty when everything ran."""
     unavailable = summary[summary["status"] != "ran"]
-    if not unavailable.empty:
-        lines += ["## Not run", ""] + [f"- {r.solver} / {r.profile} / {r.mode}: {r.status}"
-                                       for r in unavailable.itertuples()] + [""]  # fmt: skip
-    if fig:
-        lines += ["## Solve-time distributions", "", f"![solve times]({fig})", ""]
-    lines += ["## Settings in force", ""]
+    if unavailable.empty:
+        return []
+    return ["## Not run", ""] + [f"- {r.solver} / {r.profile} / {r.mode}: {r.status}"
+                                 for r in unavailable.itertuples()] + [""]  # fmt: skip
+
+
+def _settings_lines(summary: pd.DataFrame) -> list[str]:
+    """The "Settings in force" section: the settings of each backend / profile / mode that ran."""
+    lines = ["## Settings in force", ""]
     for r in summary[summary["status"] == "ran"].drop_duplicates(["solver", "profile", "mode"]).itertuples():
         lines.append(f"- {r.solver} / {r.profile} / {r.mode}: `{r.settings}`")
-    path = out / "report.md"
-    run_files.atomic_write(path, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return path
+    return lines
 
 
 OUTCOME = ["success_pct", "correct_pct", "wrong_but_solved"]

@@ -69,7 +69,33 @@ def part_costs(built: Built) -> dict[str, float]:
     return costs
 
 
+_COLUMNS = ("loop", "tick µs (median)", "real-time factor", "status", "fell", "in the loop µs (median)",
+           "isolated µs (median)")  # fmt: skip
+_NOTES = (
+    "Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
+    "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
+    "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "
+    "fall checks). In the loop = median of each part of the tick timed inside the episode "
+    "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
+    "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
+    "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
+    "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+    "Other processes on the machine inflate all numbers alike.\n"
+)
+
+
 def main(argv: list[str] | None = None) -> None:
+    """Run each loop, print the table and, with ``--out``, write it as markdown with a figure."""
+    args = _parse_args(argv)
+    load_before = os.getloadavg()[0]
+    rows = [_run_loop(label, extra, args) for label, extra in _loop_configs(args.solvers, args.formulations)]
+    _print_table(rows, args)
+    if args.out is not None:
+        _write_markdown(rows, args, load_before)
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line: episode duration [s], solvers, formulations, scenario, markdown output file."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=5.0, help="walking time per episode [s]")
     ap.add_argument("--solvers", default="daqp,osqp_persistent,osqp", help="comma-separated solver options")
@@ -77,65 +103,74 @@ def main(argv: list[str] | None = None) -> None:
                     help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
-    args = ap.parse_args(argv)
-    rows = []
-    load_before = os.getloadavg()[0]
-    configs = [("nominal only", ["filter.enabled=false"])] + [
+    return ap.parse_args(argv)
+
+
+def _loop_configs(solvers: str, formulations: str) -> list[tuple[str, list[str]]]:
+    """(label, config overrides) of each loop: the nominal-only loop, then the filter with each solver
+    (comma-separated ``solvers``) in each formulation (comma-separated ``formulations``)."""
+    return [("nominal only", ["filter.enabled=false"])] + [
         (f"filter ({form}) + {s}", [f"solver={s}", f"filter.formulation={form}"])
-        for s in args.solvers.split(",") if s
-        for form in args.formulations.split(",") if form
+        for s in solvers.split(",") if s
+        for form in formulations.split(",") if form
     ]
-    for label, extra in configs:
-        cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
-        built = Built(cfg)
-        res = built.episode.run()
-        tr, n = res.trace, res.trace.n
-        rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
-        in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
-        if built.filter is None:
-            del in_loop["model"], in_loop["filter"]
-        rows.append((label, float(np.median(tr.tick_us[:n])), rtf, res.status, res.fell, in_loop, part_costs(built)))
 
-    def fmt(parts: dict[str, float]) -> str:
-        return ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
 
-    cols = ("loop", "tick µs (median)", "real-time factor", "status", "fell", "in the loop µs (median)",
-            "isolated µs (median)")  # fmt: skip
+def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
+    """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
+    factor, status, fell, {part: median µs in the loop}, {part: median µs in isolation})."""
+    cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
+    built = Built(cfg)
+    res = built.episode.run()
+    tr, n = res.trace, res.trace.n
+    rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
+    in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
+    if built.filter is None:
+        del in_loop["model"], in_loop["filter"]
+    return label, float(np.median(tr.tick_us[:n])), rtf, res.status, res.fell, in_loop, part_costs(built)
+
+
+def _fmt_parts(parts: dict[str, float]) -> str:
+    """{part: µs} as ``part 12.3, ...``."""
+    return ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
+
+
+def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
+    """The rows as a rich table on the console."""
     table = Table(title=f"tick cost, {args.scenario}, {args.duration} s walk, 1 kHz control "
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
-    for col in cols:
+    for col in _COLUMNS:
         table.add_column(col)
     for label, tick, rtf, status, fell, in_loop, isolated in rows:
-        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), fmt(in_loop), fmt(isolated))
+        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), _fmt_parts(in_loop),
+                      _fmt_parts(isolated))  # fmt: skip
     Console(width=220).print(table)
-    if args.out is not None:
-        info = machine_info()
-        lines = [
-            "# Control-tick cost\n",
-            (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
-            f"{args.formulations} --scenario {args.scenario}` · {datetime.now().isoformat(timespec='seconds')}\n"),
-            (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
-            f"load average during the run (1 min): {load_before:.1f} at start, {os.getloadavg()[0]:.1f} at end  \n"
-            f"Packages: {info['packages']}  \nCode: {info['code']}\n"),
-            ("Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
-            "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
-            "simulated time / wall time of the whole episode loop (also counts the per-tick trace copy and the "
-            "fall checks). In the loop = median of each part of the tick timed inside the episode "
-            "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
-            "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
-            "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
-            "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
-            "Other processes on the machine inflate all numbers alike.\n"),
-        ]
-        cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", status, fell, fmt(in_loop), fmt(isolated))
-                 for label, tick, rtf, status, fell, in_loop, isolated in rows]
-        lines.append(markdown_table(cells, cols, fmt=str).rstrip("\n"))
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        figure = args.out.with_suffix(".png")
-        lines += ["", f"![tick parts in the loop]({figure.name})"]
-        atomic_write(figure, lambda p: _plot_parts(rows, args.scenario, p))
-        atomic_write(args.out, lambda p: p.write_text("\n".join(lines) + "\n"))
-        print(f"wrote {args.out}, {figure}")
+
+
+def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float) -> None:
+    """Write the rows as markdown to ``args.out`` (with the command, machine, 1-min load average at the
+    start ``load_before`` and now, and what the columns mean) and the figure next to it (``.png``)."""
+    info = machine_info()
+    stamp = datetime.now().isoformat(timespec="seconds")
+    load_after = os.getloadavg()[0]
+    lines = [
+        "# Control-tick cost\n",
+        (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
+         f"{args.formulations} --scenario {args.scenario}` · {stamp}\n"),
+        (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
+         f"load average during the run (1 min): {load_before:.1f} at start, {load_after:.1f} at end  \n"
+         f"Packages: {info['packages']}  \nCode: {info['code']}\n"),
+        _NOTES,
+    ]
+    cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", status, fell, _fmt_parts(in_loop), _fmt_parts(isolated))
+             for label, tick, rtf, status, fell, in_loop, isolated in rows]  # fmt: skip
+    lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    figure = args.out.with_suffix(".png")
+    lines += ["", f"![tick parts in the loop]({figure.name})"]
+    atomic_write(figure, lambda p: _plot_parts(rows, args.scenario, p))
+    atomic_write(args.out, lambda p: p.write_text("\n".join(lines) + "\n"))
+    print(f"wrote {args.out}, {figure}")
 
 
 def _plot_parts(rows: list, scenario: str, path: Path) -> None:
@@ -164,6 +199,7 @@ def _plot_parts(rows: list, scenario: str, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=120)
     plt.close(fig)
+
 
 if __name__ == "__main__":
     main()

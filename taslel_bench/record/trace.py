@@ -232,6 +232,14 @@ class EpisodeTrace:
         else:
             d = self.derive(k0, k1)
         cols: dict[str, np.ndarray] = {"t_s": self.t_s[t]}
+        self._state_columns(cols, d, t)
+        self._leg_columns(cols, d, t)
+        self._model_columns(cols, k0, k1)
+        self._loop_columns(cols, d, t)
+        return pd.DataFrame(cols)
+
+    def _state_columns(self, cols: dict, d: dict, t: slice) -> None:
+        """Trunk pose and velocity (world / trunk axes), joints, commands, gait phase."""
         _put(cols, "base_{}_w_m", "xyz", d["base_pos_w"])
         _put(cols, "base_quat_{}", "wxyz", d["base_quat_wxyz"])
         _put(cols, "base_v{}_w_mps", "xyz", d["base_linvel_w"])
@@ -244,7 +252,11 @@ class EpisodeTrace:
             cols[f"u_nom_{short}_nm"] = self.u_nom[t, j]
             cols[f"u_{short}_nm"] = self.u[t, j]
         cols["gait_phase"] = self.gait_phase[t]
+
+    def _leg_columns(self, cols: dict, d: dict, t: slice) -> None:
+        """Per leg: schedule, plant contact, foot, forces (plant and filter), barrier values, clearance."""
         slip = np.hypot(d["slip_w"][..., 0], d["slip_w"][..., 1])
+        h_min = self.barrier_h_min(t)
         for i, leg in enumerate(a1.LEGS):
             cols[f"{leg}_stance"] = self.in_stance[t, i]
             cols[f"{leg}_contact"] = d["in_contact"][:, i]
@@ -253,7 +265,7 @@ class EpisodeTrace:
             cols[f"{leg}_contact_point_speed_mps"] = slip[:, i]
             _put(cols, leg + "_grf_plant_{}_w_n", "xyz", d["grf_plant_w"][:, i])
             _put(cols, leg + "_grf_filter_{}_w_n", "xyz", self.grf_filter_w[t, i])
-            cols[f"{leg}_barrier_h_m"] = self.barrier_h_min(t)[:, i]
+            cols[f"{leg}_barrier_h_m"] = h_min[:, i]
             cols[f"{leg}_clearance_m"] = d["clearance_m"][:, i]
             cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
@@ -261,6 +273,10 @@ class EpisodeTrace:
             for name, log in self.barriers.items():
                 cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
                 cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
+
+    def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
+        """The controller model's residuals and barrier conditions (nan until computed after the episode)."""
+        t = slice(k0, k1)
         residual = _rows(self.model_residual, k0, k1, a1.NV)
         cols["residual_trunk_force_n"] = np.linalg.norm(residual[:, :3], axis=1)
         cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
@@ -272,20 +288,16 @@ class EpisodeTrace:
             cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
             cols[f"{leg}_barrier_psi_planned_mps2"] = psi_planned[:, i]
             cols[f"{leg}_barrier_psi_realized_mps2"] = psi_real[:, i]
+
+    def _loop_columns(self, cols: dict, d: dict, t: slice) -> None:
+        """Leg-link contacts, the QP's status and timings, the friction estimate, the tick's cost."""
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
         cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
-        cols["qp_status"] = self.qp_status[t]
-        cols["qp_fallback"] = self.qp_fallback[t]
-        cols["qp_build_us"] = self.qp_build_us[t]
-        cols["qp_solve_us"] = self.qp_solve_us[t]
-        cols["qp_iterations"] = self.qp_iterations[t]
-        cols["mu_hat"] = self.mu_hat[t]
-        cols["mu_true"] = self.mu_true[t]
-        cols["mu_hat_ready"] = self.mu_hat_ready[t]
-        cols["tick_us"] = self.tick_us[t]
+        for name in ("qp_status", "qp_fallback", "qp_build_us", "qp_solve_us", "qp_iterations", "mu_hat", "mu_true",
+                     "mu_hat_ready", "tick_us"):
+            cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
-        return pd.DataFrame(cols)
 
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:

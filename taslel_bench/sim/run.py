@@ -138,16 +138,26 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     res: EpisodeResult = built.episode.run(progress=show)
     if show is not None:
         print(file=sys.stderr)
-    dt = 1.0 / float(cfg.control_rate_hz)
-    summary: dict[str, object] = {
+    summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
+    summary.update(_episode_summary(cfg, built, res))
+    events = _events(cfg, res, out_dir)
+    _write_results(out_dir, res, summary, events, sink, qp_recorder)
+    return summary
+
+
+def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overrides: list[str] | None,
+                  config_hash: str) -> dict[str, object]:
+    """What was run: the axes, the filter's settings, rates, seed, overrides, the config and code versions,
+    the plant and the controller's model."""
+    filt = built.filter
+    out: dict[str, object] = {
         "scenario": choices.get("scenario", built.scenario.name),
         "solver": choices.get("solver", "") if built.backend is not None else "none",
         "estimator": choices.get("estimator", getattr(built.estimator, "name", "")),
-        "filter_enabled": built.filter is not None,
-        "filter_formulation": built.filter.settings.formulation if built.filter is not None else "none",
-        "filter_contact_velocity_gain": (  # [1/s] k_v of the stance-contact rows (nan: filter off)
-            float(built.filter.settings.contact_velocity_gain) if built.filter is not None else math.nan
-        ),
+        "filter_enabled": filt is not None,
+        "filter_formulation": filt.settings.formulation if filt is not None else "none",
+        # [1/s] k_v of the stance-contact rows (nan: filter off)
+        "filter_contact_velocity_gain": float(filt.settings.contact_velocity_gain) if filt is not None else math.nan,
         "seed": int(cfg.seed),
         "duration_s": float(cfg.duration),
         "control_rate_hz": float(cfg.control_rate_hz),
@@ -157,19 +167,31 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
         **code_version(),  # git_commit, git_dirty
-        **notes,
     }
-    summary.update(plant_identity(cfg, built))
-    summary.update(plant_vs_model(built.mj_model, built.episode.model,
-                                  built.controller.stand_configuration()))
+    out.update(plant_identity(cfg, built))
+    out.update(plant_vs_model(built.mj_model, built.episode.model, built.controller.stand_configuration()))
+    return out
+
+
+def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[str, object]:
+    """The episode's metrics (:func:`taslel_bench.metrics.summary.summarize`), the estimator's own
+    diagnostics (optional ``diagnostics()``) and the backend's settings."""
+    dt = 1.0 / float(cfg.control_rate_hz)
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
-    summary.update(summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg)))
-    summary["recording_s"] = float(res.extras.get("recording_s", 0.0))
-    diagnostics = getattr(built.estimator, "diagnostics", None)  # optional: counters of the estimator's own
+    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg))
+    out["recording_s"] = float(res.extras.get("recording_s", 0.0))
+    diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
-        summary.update({f"estimator_{k}": v for k, v in diagnostics().items()})
+        out.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.backend is not None:
-        summary["solver_settings"] = str(built.backend.describe())
+        out["solver_settings"] = str(built.backend.describe())
+    return out
+
+
+def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
+    """QP failures, residual alarms, the fall and the error of the run (with simulated times); an error's
+    traceback goes to ``traceback.txt``."""
+    dt = 1.0 / float(cfg.control_rate_hz)
     events = list(res.trace.events)
     k0 = min(round(float(cfg.controller.stand_duration) / dt), res.trace.n)
     events += alarm_events(res.trace, k0, health_limits(cfg))
@@ -179,7 +201,14 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
         if "traceback" in res.extras:
             run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
-    steps = res.trace.to_frame(dt)
+    return events
+
+
+def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict],
+                   sink: _GuardedSink | None, qp_recorder) -> None:
+    """episode.mcap (finished), qps.npz, steps.parquet, events.json and, last (it marks the run complete),
+    summary.json; a recording failure is noted in the summary, never loses the run."""
+    steps = res.trace.to_frame()
     if sink is not None:
         _close_mcap(sink, res, events, summary, steps)
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.record.qpset)
@@ -190,8 +219,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
     run_files.write_parquet(out_dir / run_files.STEPS, steps)
     run_files.write_json(out_dir / run_files.EVENTS, events)
-    run_files.write_json(out_dir / run_files.SUMMARY, summary)  # written last: marks the run complete
-    return summary
+    run_files.write_json(out_dir / run_files.SUMMARY, summary)
 
 
 def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
