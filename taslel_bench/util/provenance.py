@@ -1,5 +1,6 @@
 """Which code produced a result: the git commit of the project's checkout and whether its tracked files had
-uncommitted changes (every run summary, sweep report and results README records it)."""
+uncommitted changes (every run summary, sweep report and results README records it). Changes under
+``results/`` (reports being regenerated) do not count: they are outputs, not code."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ def code_version() -> dict[str, object]:
     commit = _git("rev-parse", "HEAD")
     if not commit:
         return {"git_commit": "unknown", "git_dirty": None}
-    status = _git("status", "--porcelain", "--untracked-files=no")
+    status = _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)results")
     return {"git_commit": commit, "git_dirty": bool(status) if status is not None else None}
 
 
