@@ -227,10 +227,14 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
     simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
     if not cfg.record.mcap:
         return None
-    from taslel_bench.record.mcap import McapStream
+    from taslel_bench.record import mcap
 
     names = [b.name for b in built.filter.barriers] if built.filter is not None else []
-    sink = _GuardedSink(McapStream(out_dir, names))
+    metadata = {"config": {"config.yaml": OmegaConf.to_yaml(cfg, resolve=True)}, "versions": mcap.versions()}
+    every = mcap.stride(cfg.control_rate_hz, cfg.record.mcap_rate_hz)  # record.mcap_rate_hz (null: every tick)
+    stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),
+                             metadata=metadata)
+    sink = _GuardedSink(stream)
     built.episode.chunk_sink = sink
     built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
     return sink
