@@ -50,7 +50,7 @@ CHANNELS: dict[str, Spec] = {
         "angvel_b_radps": _axes("base_w{ax}_b_radps"),
     },
     "/joint_state": {"position_rad": {j: f"q_{j}_rad" for j in JOINTS},
-                     "velocity_radps": {j: f"qd_{j}_radps" for j in JOINTS}},  # fmt: skip
+                     "velocity_radps": {j: f"qd_{j}_radps" for j in JOINTS}},
     "/torques": {"u_nom_nm": {j: f"u_nom_{j}_nm" for j in JOINTS}, "u_nm": {j: f"u_{j}_nm" for j in JOINTS}},
     "/contact_force": _per_leg({
         "filter_w_n": _axes_per_leg("{leg}_grf_filter_{ax}_w_n"),
@@ -59,16 +59,16 @@ CHANNELS: dict[str, Spec] = {
         "contact": "{leg}_contact",
         "mu_foot": "{leg}_mu_foot",
         "contact_point_speed_mps": "{leg}_contact_point_speed_mps",
-    }),  # fmt: skip
+    }),
     "/qp": {"status": "qp_status", "fallback": "qp_fallback", "solve_us": "qp_solve_us", "build_us": "qp_build_us",
-            "iterations": "qp_iterations"},  # fmt: skip
+            "iterations": "qp_iterations"},
     "/tick": {"tick_us": "tick_us", **{f"{p}_us": f"tick_{p}_us" for p in TICK_PARTS}},
     "/barrier": _per_leg({  # + <name>_h_m, <name>_h_e_mps of every barrier family (channels())
         "h_m": "{leg}_barrier_h_m",
         "clearance_m": "{leg}_clearance_m",
         "obstacle_clearance_m": "{leg}_obstacle_clearance_m",
         "obstacle_contact": "{leg}_obstacle_contact",
-    }),  # fmt: skip
+    }),
     "/friction": {"mu_hat": "mu_hat", "mu_true": "mu_true", "mu_hat_ready": "mu_hat_ready"},
 }
 # computed after the episode (taslel_bench.metrics.residuals): written for every recorded tick at close
@@ -79,7 +79,7 @@ AFTER_EPISODE: dict[str, Spec] = {
         "joint_max_nm": "residual_joint_nm_max",
         **_per_leg({"foot_acc_error_mps2": "{leg}_foot_acc_error_mps2",
                     "barrier_psi_planned_mps2": "{leg}_barrier_psi_planned_mps2",
-                    "barrier_psi_realized_mps2": "{leg}_barrier_psi_realized_mps2"}),  # fmt: skip
+                    "barrier_psi_realized_mps2": "{leg}_barrier_psi_realized_mps2"}),
     },
 }
 
@@ -117,7 +117,7 @@ def _column_values(frame: pd.DataFrame, column: str) -> list:
     """A column as JSON-ready Python values (NaN -> None)."""
     a = frame[column].to_numpy()
     if a.dtype.kind == "f" and np.isnan(a).any():
-        return [None if v != v else v for v in a.tolist()]
+        return [None if np.isnan(v) else v for v in a.tolist()]
     return a.tolist()
 
 

@@ -141,7 +141,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
     summary.update(_episode_summary(cfg, built, res))
     events = _events(cfg, res, out_dir)
-    _write_results(out_dir, res, summary, events, sink, qp_recorder)
+    video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
+    _write_results(out_dir, res, summary, events, sink, qp_recorder, video)
     return summary
 
 
@@ -205,9 +206,9 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
 
 
 def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict],
-                   sink: _GuardedSink | None, qp_recorder) -> None:
-    """episode.mcap (finished), qps.npz, steps.parquet, events.json and, last (it marks the run complete),
-    summary.json; a recording failure is noted in the summary, never loses the run."""
+                   sink: _GuardedSink | None, qp_recorder, video=None) -> None:
+    """episode.mcap (finished), qps.npz, steps.parquet, events.json, video.mp4 and, last (it marks the run
+    complete), summary.json; a recording failure is noted in the summary, never loses the run."""
     steps = res.trace.to_frame()
     if sink is not None:
         _close_mcap(sink, res, events, summary, steps)
@@ -219,7 +220,18 @@ def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: lis
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
     run_files.write_parquet(out_dir / run_files.STEPS, steps)
     run_files.write_json(out_dir / run_files.EVENTS, events)
+    if video is not None:
+        video(summary)
     run_files.write_json(out_dir / run_files.SUMMARY, summary)
+
+
+def _video(cfg: DictConfig, built: Built, out_dir: Path):
+    """record.video: a callable rendering video.mp4 from the run folder (taslel_bench.record.video), or None."""
+    if not cfg.record.get("video", False):
+        return None
+    from taslel_bench.record.video import render_at_end_of_run
+
+    return lambda summary: render_at_end_of_run(out_dir, built.mj_model, summary, cfg.record)
 
 
 def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
