@@ -165,7 +165,7 @@ def verdict_text(summary: dict) -> str:
     fell = summary.get("fell")
     trips = summary.get("trips")
     parts = ([f"fell ({summary.get('fall_reason')})"] if fell else []) + ([f"{int(trips)} trips"] if trips else [])
-    return "verdict: n/a (no 'safe' key)" + (f"; {', '.join(parts)}" if parts else "")
+    return "verdict: n/a" + (f"; {', '.join(parts)}" if parts else "")
 
 
 def _qpos_addresses(model) -> np.ndarray:
@@ -185,11 +185,21 @@ def _overlay(image: np.ndarray, lines: list[tuple[str, tuple[int, int, int]]]) -
     draw = ImageDraw.Draw(img)
     line_h = max(11, img.height // 24)
     font = ImageFont.load_default(size=line_h - 2)
+    lines = [(_fit(draw, text, font, img.width - 10), colour) for text, colour in lines]
     width = max((draw.textlength(text, font=font) for text, _ in lines), default=0)
     draw.rectangle([0, 0, int(width) + 10, line_h * len(lines) + 6], fill=(0, 0, 0))
     for i, (text, colour) in enumerate(lines):
         draw.text((5, 3 + i * line_h), text, fill=colour, font=font)
     return np.asarray(img)
+
+
+def _fit(draw, text: str, font, width_px: int) -> str:
+    """``text`` cut (with an ellipsis) to fit ``width_px``."""
+    if draw.textlength(text, font=font) <= width_px:
+        return text
+    while text and draw.textlength(text + "...", font=font) > width_px:
+        text = text[:-1]
+    return text + "..."
 
 
 # ------------------------------------------------------------------------------------------- run folders

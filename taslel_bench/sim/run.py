@@ -59,12 +59,23 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
+SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
+
+
+def run_config_yaml(cfg: DictConfig) -> str:
+    """The run's resolved config as written to its config.yaml (without :data:`SWEEP_LEVEL_KEYS`)."""
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    for key in SWEEP_LEVEL_KEYS:
+        plain.pop(key, None)
+    return OmegaConf.to_yaml(OmegaConf.create(plain))
+
+
 def config_sha256(cfg: DictConfig) -> str:
     """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
     only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
     ``model.urdf``)."""
     plain = OmegaConf.to_container(cfg, resolve=True)
-    for key in ("progress", "force"):
+    for key in ("progress", "force", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
     for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
@@ -131,7 +142,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         return skipped
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
-    run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
+    run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
@@ -242,7 +253,7 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
     from taslel_bench.record import mcap
 
     names = [b.name for b in built.filter.barriers] if built.filter is not None else []
-    metadata = {"config": {"config.yaml": OmegaConf.to_yaml(cfg, resolve=True)}, "versions": mcap.versions()}
+    metadata = {"config": {"config.yaml": run_config_yaml(cfg)}, "versions": mcap.versions()}
     every = mcap.stride(cfg.control_rate_hz, cfg.record.mcap_rate_hz)  # record.mcap_rate_hz (null: every tick)
     stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),
                              metadata=metadata)
