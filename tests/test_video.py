@@ -86,3 +86,28 @@ def test_verdict_text_reads_the_safety_keys_when_present():
     assert verdict_text({"safe": True}) == "verdict: safe"
     assert verdict_text({"safe": False, "unsafe_reasons": "fell"}) == "verdict: UNSAFE fell"
     assert verdict_text({"fell": True, "fall_reason": "trunk_height", "trips": 2}).endswith("fell (trunk_height), 2 trips")
+
+
+def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(tmp_path):
+    """The report's stills (sweep/stills.py): a fall row gets a PNG strip of 5 frames and an event clip
+    (no video.mp4 in the run); the first trip is the first walking tick of a swing foot on an obstacle."""
+    from PIL import Image
+
+    from taslel_bench.sweep.stills import STILL_SIZE, STRIP_OFFSETS_S, first_trip_s, still_strips
+
+    run_dir = tmp_path / "sweep" / "r0"
+    run(compose_cfg(SHORT), run_dir)
+    row = pd.Series({"run_dir": "r0", "status": "ok", "fell": True, "time_to_fall_s": 0.6, "fall_reason": "test"})
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    lines = still_strips(tmp_path / "sweep", pd.DataFrame([row]))
+    assert len(lines) == 2 and "fall at 0.600 s (test)" in lines[1] and "no still" not in lines[1]
+    png = tmp_path / "sweep" / "stills" / "r0.png"
+    assert Image.open(png).size == (STILL_SIZE[0] * len(STRIP_OFFSETS_S), STILL_SIZE[1])
+    clip = tmp_path / "sweep" / "stills" / "r0.mp4"
+    assert "(stills/r0.mp4)" in lines[1] and imageio_ffmpeg.count_frames_and_secs(str(clip))[0] == EXPECTED_FRAMES  # 0 .. 0.7 s (the run ends)
+    steps = pd.read_parquet(run_dir / "steps.parquet")
+    assert first_trip_s(run_dir) is None  # flat floor: nothing to trip on
+    steps.loc[600, "FL_obstacle_contact"], steps.loc[600, "FL_stance"] = True, False
+    steps.loc[100, "nonfoot_obstacle_contact"] = True  # during the stand: not a trip
+    steps.to_parquet(run_dir / "steps.parquet")
+    assert first_trip_s(run_dir) == pytest.approx(steps["t_s"][600])
