@@ -64,7 +64,7 @@ def test_a_barrier_family_is_one_class_and_one_config_entry(tmp_path):
             for name, s in (("toy", steps), ("plain", plain_steps))}
     assert apex["plain"] > 0.05 and apex["toy"] < 0.045  # the trot lifts the feet ~6 cm without it
     fields = next(msg for topic, _, msg in read_messages(tmp_path / "toy" / "episode.mcap") if topic == "/barrier")
-    assert "ceiling_h_m" in fields and "ceiling_h_e_mps" in fields
+    assert all("ceiling_h_m" in fields[leg] and "ceiling_h_e_mps" in fields[leg] for leg in a1.LEGS)
     assert math.isfinite(summary["barrier_negative_rate"])  # the metrics judged the toy family
 
 

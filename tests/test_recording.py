@@ -85,8 +85,8 @@ def test_streamed_mcap_is_readable_before_it_is_finished(tmp_path):
     partial.write_bytes(partial.read_bytes()[: (sizes[2] + sizes[3]) // 2])  # killed while writing chunk 4
     counts = Counter(topic for topic, _, _ in read_messages(partial))
     assert counts["/base_state"] == 1500  # the three complete chunks
-    times = [t for topic, t, _ in read_messages(partial) if topic == "/base_state"]
-    assert times == sorted(times) and times[-1] == round(1.499 * 1e9)
+    times = [t - stream.start_ns for topic, t, _ in read_messages(partial) if topic == "/base_state"]
+    assert times == sorted(times) and times[-1] == round(1.499 * 1e9)  # log time = wall-clock start + simulated time
 
 
 @pytest.mark.slow
@@ -98,14 +98,15 @@ def test_killed_run_leaves_a_partial_mcap_that_a_rerun_puts_aside(tmp_path):
     partial = run_dir / PARTIAL_NAME
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # wait for two streamed seconds of simulated time
-        if partial.is_file() and sum(t == "/tick" for t, _, _ in read_messages(partial)) >= 2000:
+        if partial.is_file() and sum(t == "/tick" for t, _, _ in read_messages(partial)) >= 200:  # 100 Hz
             break
         time.sleep(0.5)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (run_dir / "summary.json").exists()
-    ticks = sum(topic == "/tick" for topic, _, _ in read_messages(partial))
-    assert ticks >= 2000 and ticks % 1000 == 0  # whole seconds, as flushed
+    counts = Counter(topic for topic, _, _ in read_messages(partial))
+    assert counts["/tick"] >= 200 and counts["/tick"] % 100 == 0  # whole seconds at record.mcap_rate_hz=100
+    assert counts["/tf"] == counts["/tick"] and counts["/scene/robot"] == counts["/tick"] // 100  # the 3D channels too
     summary = run(compose_cfg(["duration=0.2", "progress=false", "filter.enabled=false"]), run_dir)
     assert summary["superseded"].endswith("_killed")
     assert (run_dir / summary["superseded"] / PARTIAL_NAME).is_file()

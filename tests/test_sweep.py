@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -12,7 +11,8 @@ import pandas as pd
 import pytest
 from mcap.reader import make_reader
 
-from taslel_bench.record.mcap import AFTER_EPISODE, CHANNELS, EVENTS
+from taslel_bench.record.mcap import EVENTS, PROTOBUF_CHANNELS, read_messages
+from taslel_bench.record.signals import AFTER_EPISODE, CHANNELS
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
 from taslel_bench.sweep.aggregate import aggregate
@@ -25,19 +25,21 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def mcap_counts(path: Path) -> dict[str, int]:
     counts: dict[str, int] = {}
-    with open(path, "rb") as f:
-        for _, channel, message in make_reader(f).iter_messages():
-            json.loads(message.data)
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    with open(path, "rb") as f:  # the mcap reader (indexed, summary section) agrees with the streamed read
+        indexed = [channel.topic for _, channel, _ in make_reader(f).iter_messages()]
+    for topic, _, message in read_messages(path):  # JSON and protobuf channels decoded
+        assert isinstance(message, dict)
+        counts[topic] = counts.get(topic, 0) + 1
+    assert sorted(indexed) == sorted(t for t, n in counts.items() for _ in range(n))
     return counts
 
 
 def test_mcap_reads_back_with_every_channel(tmp_path):
     run(compose_cfg(["duration=0.3", "progress=false", "scenario=obstacle"]), tmp_path, {"solver": "daqp"})
     counts = mcap_counts(tmp_path / "episode.mcap")
-    assert set(counts) == set(CHANNELS) | set(AFTER_EPISODE) | set(EVENTS)
+    assert set(counts) == set(CHANNELS) | set(AFTER_EPISODE) | set(EVENTS) | set(PROTOBUF_CHANNELS)
     assert all(n > 0 for n in counts.values())
-    assert counts["/torques"] == 800  # one per control tick (0.5 s stand + 0.3 s)
+    assert counts["/torques"] == counts["/tf"] == 80  # every 10th control tick (record.mcap_rate_hz=100) of 0.8 s
 
 
 def test_run_that_raises_leaves_readable_mcap_and_error_summary(tmp_path, monkeypatch):
@@ -58,7 +60,7 @@ def test_run_that_raises_leaves_readable_mcap_and_error_summary(tmp_path, monkey
     assert summary["status"] == "error" and "mid-episode fault" in summary["message"]
     assert (tmp_path / "traceback.txt").is_file()
     counts = mcap_counts(tmp_path / "episode.mcap")
-    assert counts["/events"] >= 2 and counts["/base_state"] > 300
+    assert counts["/events"] >= 2 and counts["/base_state"] > 30  # 100 Hz up to the fault at t > 0.4 s
 
 
 def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):

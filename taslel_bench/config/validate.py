@@ -137,10 +137,21 @@ def _top_level(cfg: DictConfig) -> int:
         raise fail(
             "control_rate_hz", control, f"must divide physics_rate_hz={physics} (valid: {_divisors(physics)})"
         )
-    for key in ("force", "progress", "record.mcap", "record.qps"):
+    for key in ("force", "progress", "record.mcap", "record.qps", "record.video"):
         flag(key, _get(cfg, key, False))
     integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
+    if _get(cfg, "record.mcap_rate_hz", None) is not None:
+        number("record.mcap_rate_hz", _get(cfg, "record.mcap_rate_hz"), 0.0, control, lo_open=True, unit="Hz",
+               why="at most control_rate_hz; null: every tick")
+    _video(cfg)
     return control
+
+
+def _video(cfg: DictConfig) -> None:
+    """``record.video_*``: frame rate and size of the rendered video."""
+    integer("record.video_fps", _get(cfg, "record.video_fps", 30), 1, 240, unit="frames/s")
+    for key in ("record.video_width", "record.video_height"):
+        integer(key, _get(cfg, key, 480), 16, 4096, unit="px")
 
 
 def _controller(cfg: DictConfig, control_rate_hz: int) -> float:

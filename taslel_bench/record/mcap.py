@@ -1,183 +1,189 @@
-"""``episode.mcap``: the episode's trace as JSON-schema channels (opens in Foxglove; reads back with the
-``mcap`` reader). Log time = simulated time [ns].
+"""``episode.mcap``: the episode for Foxglove (reads back with the ``mcap`` reader, :func:`read_messages`).
 
-Written *while* the episode runs: :class:`McapStream` is the episode's chunk sink; every chunk of ticks
-(:attr:`taslel_bench.sim.episode.Episode.chunk_ticks`, 1 s of simulated time by default) becomes messages of the
-same columns as ``steps.parquet`` and is flushed to ``episode.partial.mcap`` as one MCAP chunk. A killed run
-leaves that partial file, readable up to its last chunk (:func:`read_messages`); :meth:`McapStream.close`
-adds the channels computed after the episode (``/residual``: the controller model's residuals), the events
-and the summary, writes the MCAP summary section and renames the file ``episode.mcap``.
+Channels (every ``record.mcap_rate_hz``-th of a second, i.e. every :attr:`McapStream.every`-th control tick):
+
+* the robot in the 3D panel, protobuf well-known schemas of ``foxglove-sdk``
+  (:mod:`taslel_bench.record.scene`): ``/tf`` (``foxglove.FrameTransforms``: world -> trunk -> links),
+  ``/scene/robot`` and ``/scene/terrain`` (``foxglove.SceneUpdate``: collision geometry and terrain, repeated
+  once per streamed chunk so a seek or a partial file shows them), ``/scene/contact`` (force arrows of the
+  plant and of the filter per foot, the swing feet's barrier state);
+* the signals, JSON with named fields (:mod:`taslel_bench.record.signals`): ``/base_state``,
+  ``/joint_state``, ``/torques``, ``/contact_force``, ``/qp``, ``/tick``, ``/barrier``, ``/friction``, and at
+  close ``/residual`` (computed after the episode);
+* ``/events`` (JSON) and ``/log`` (``foxglove.Log``): QP failures, falls, errors, the end; ``/summary``.
+
+Log time = the run's wall-clock start [ns since the Unix epoch] + simulated time; publish time = simulated
+time [ns] (and ``t_s`` in every JSON message, ``t_s`` in every scene entity's metadata). MCAP metadata
+records: ``run`` (start time, rates, frames), ``config`` (the resolved config.yaml), ``versions``
+(packages, git commit) and, at close, ``summary``.
+
+Written *while* the episode runs: :class:`McapStream` is the episode's chunk sink; every chunk of ticks (1 s
+of simulated time) is flushed to ``episode.partial.mcap`` as one zstd-compressed MCAP chunk. A killed run
+leaves that partial file, readable up to its last chunk; :meth:`McapStream.close` adds the channels
+computed after the episode, the events, the summary and the MCAP summary section and renames the file.
 """
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
+import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from foxglove import messages as fm
 from mcap.exceptions import McapError
-from mcap.records import Channel, Message
+from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
+from taslel_bench.record import scene, signals
+from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import a1
+from taslel_bench.util.provenance import code_version
 
 FINAL_NAME = "episode.mcap"
 PARTIAL_NAME = "episode.partial.mcap"
-
-_NUM = {"type": "number"}
-_ARR = {"type": "array", "items": {"type": ["number", "null"]}}
-_BOOLS = {"type": "array", "items": {"type": "boolean"}}
-_NAMES = {"type": "array", "items": {"type": "string"}}
-_SHORT = [j.removesuffix("_joint") for j in a1.JOINT_NAMES]
-_LEGS = list(a1.LEGS)
-
-
-def _legs(pattern: str, axes: str = "") -> list[str]:
-    """steps.parquet column names of a per-leg quantity, legs in LEGS order (then axes)."""
-    return [pattern.format(leg=leg, ax=ax) for leg in _LEGS for ax in (axes or [""])]
-
-
-# topic -> {field: (JSON schema, steps.parquet columns)}; fields with columns=None are constant
-CHANNELS: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
-    "/base_state": {
-        "position_w_m": (_ARR, ["base_x_w_m", "base_y_w_m", "base_z_w_m"]),
-        "quat_wxyz": (_ARR, ["base_quat_w", "base_quat_x", "base_quat_y", "base_quat_z"]),
-        "rpy_rad": (_ARR, ["base_roll_rad", "base_pitch_rad", "base_yaw_rad"]),
-        "linvel_w_mps": (_ARR, ["base_vx_w_mps", "base_vy_w_mps", "base_vz_w_mps"]),
-        "angvel_b_radps": (_ARR, ["base_wx_b_radps", "base_wy_b_radps", "base_wz_b_radps"]),
-    },
-    "/joint_state": {
-        "name": (_NAMES, None),
-        "position_rad": (_ARR, [f"q_{j}_rad" for j in _SHORT]),
-        "velocity_radps": (_ARR, [f"qd_{j}_radps" for j in _SHORT]),
-    },
-    "/torques": {"u_nom_nm": (_ARR, [f"u_nom_{j}_nm" for j in _SHORT]), "u_nm": (_ARR, [f"u_{j}_nm" for j in _SHORT])},
-    "/contact_force": {
-        "foot": (_NAMES, None),
-        "filter_w_n": (_ARR, _legs("{leg}_grf_filter_{ax}_w_n", "xyz")),
-        "plant_w_n": (_ARR, _legs("{leg}_grf_plant_{ax}_w_n", "xyz")),
-        "stance": (_BOOLS, _legs("{leg}_stance")),
-        "contact": (_BOOLS, _legs("{leg}_contact")),
-        "mu_foot": (_ARR, _legs("{leg}_mu_foot")),
-        "contact_point_speed_mps": (_ARR, _legs("{leg}_contact_point_speed_mps")),
-    },
-    "/qp": {"status": (_NUM, ["qp_status"]), "fallback": ({"type": "boolean"}, ["qp_fallback"]),
-            "solve_us": (_NUM, ["qp_solve_us"]), "build_us": (_NUM, ["qp_build_us"]),
-            "iterations": (_NUM, ["qp_iterations"])},
-    "/tick": {"tick_us": (_NUM, ["tick_us"]), **{f"{p}_us": (_NUM, [f"tick_{p}_us"]) for p in TICK_PARTS}},
-    "/barrier": {  # + {name}_h_m, {name}_h_e_mps of every barrier family (barrier_channel)
-        "foot": (_NAMES, None),
-        "h_m": (_ARR, _legs("{leg}_barrier_h_m")),
-        "clearance_m": (_ARR, _legs("{leg}_clearance_m")),
-        "obstacle_clearance_m": (_ARR, _legs("{leg}_obstacle_clearance_m")),
-        "obstacle_contact": (_BOOLS, _legs("{leg}_obstacle_contact")),
-    },
-    "/friction": {"mu_hat": (_NUM, ["mu_hat"]), "mu_true": (_NUM, ["mu_true"])},
-}
-# computed after the episode (taslel_bench.metrics.residuals): written for every tick when the file is closed
-AFTER_EPISODE: dict[str, dict[str, tuple[dict, list[str] | None]]] = {
-    "/residual": {
-        "foot": (_NAMES, None),
-        "trunk_force_n": (_NUM, ["residual_trunk_force_n"]),
-        "trunk_torque_nm": (_NUM, ["residual_trunk_torque_nm"]),
-        "joint_max_nm": (_NUM, ["residual_joint_nm_max"]),
-        "foot_acc_error_mps2": (_ARR, _legs("{leg}_foot_acc_error_mps2")),
-        "barrier_psi_planned_mps2": (_ARR, _legs("{leg}_barrier_psi_planned_mps2")),
-        "barrier_psi_realized_mps2": (_ARR, _legs("{leg}_barrier_psi_realized_mps2")),
-    },
-}
-CONSTANTS = {"name": _SHORT, "foot": _LEGS}
-
-
-def channels(barrier_names: Sequence[str] = ()) -> dict[str, dict[str, tuple[dict, list[str] | None]]]:
-    """:data:`CHANNELS` with the ``/barrier`` channel's fields of each barrier family: ``<name>_h_m`` and
-    ``<name>_h_e_mps`` per foot (``h_m``: the smallest h over the families)."""
-    out = {topic: dict(fields) for topic, fields in CHANNELS.items()}
-    for name in barrier_names:
-        out["/barrier"][f"{name}_h_m"] = (_ARR, _legs("{leg}_barrier_" + name + "_h_m"))
-        out["/barrier"][f"{name}_h_e_mps"] = (_ARR, _legs("{leg}_barrier_" + name + "_he_mps"))
-    return out
-EVENTS = {"/events": {"t_s": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
+PROTOBUF_CHANNELS = {"/tf": fm.FrameTransforms, "/scene/robot": fm.SceneUpdate, "/scene/terrain": fm.SceneUpdate,
+                     "/scene/contact": fm.SceneUpdate, "/log": fm.Log}  # fmt: skip
+EVENTS = {"/events": {"t_s": {"type": "number"}, "kind": {"type": "string"}, "message": {"type": "string"}},
           "/summary": {"summary": {"type": "object"}}}  # fmt: skip
+VERSION_PACKAGES = ("mujoco", "pin", "numpy", "qpsolvers", "daqp", "osqp", "hydra-core", "foxglove-sdk", "mcap")
+_LOG_LEVEL = {"qp_failure": fm.LogLevel.Warning, "residual_alarm": fm.LogLevel.Warning, "fall": fm.LogLevel.Error,
+              "error": fm.LogLevel.Error, "end": fm.LogLevel.Info}  # fmt: skip
 
 
-def _schema(title: str, props: dict[str, dict]) -> bytes:
-    return json.dumps({"title": title, "type": "object", "properties": props}).encode()
+class Plant3D:
+    """What the 3D channels need of a run: the plant model (bodies, collision geoms) and the terrain."""
 
-
-def _values(frame: pd.DataFrame, cols: list[str]) -> list:
-    """Per row, the columns' values as JSON-ready Python (NaN -> null; one column -> a scalar)."""
-    a = frame[cols].to_numpy()
-    if a.dtype.kind == "f" and np.isnan(a).any():
-        a = np.where(np.isnan(a), None, a.astype(object))
-    rows = a.tolist()
-    return [r[0] for r in rows] if len(cols) == 1 else rows
+    def __init__(self, mj_model, terrain) -> None:
+        self.model, self.terrain = mj_model, terrain
+        self.tree = scene.BodyTree(mj_model)
 
 
 class McapStream:
     """The episode's chunk sink: ``stream(trace, k0, k1)`` writes ticks k0..k1 as one flushed MCAP chunk to
-    ``<run>/episode.partial.mcap``; :meth:`close` finishes the file and renames it ``episode.mcap``."""
+    ``<run>/episode.partial.mcap``; :meth:`close` finishes the file and renames it ``episode.mcap``.
 
-    def __init__(self, run_dir: Path, barrier_names: Sequence[str] = ()) -> None:
-        self.partial = Path(run_dir) / PARTIAL_NAME
-        self.final = Path(run_dir) / FINAL_NAME
+    ``every``: write every ``every``-th control tick (1: all); ``plant``: the 3D channels (None: signals
+    only); ``metadata``: MCAP metadata records written first (name -> {key: text}); ``start_ns``: wall-clock
+    time [ns] of simulated time 0 (default: now)."""
+
+    def __init__(self, run_dir: Path, barrier_names: Sequence[str] = (), *, every: int = 1,
+                 plant: Plant3D | None = None, metadata: dict[str, dict[str, str]] | None = None,
+                 start_ns: int | None = None) -> None:  # fmt: skip
+        self.partial, self.final = Path(run_dir) / PARTIAL_NAME, Path(run_dir) / FINAL_NAME
+        self.every, self.plant = max(1, int(every)), plant
+        self.start_ns = time.time_ns() if start_ns is None else int(start_ns)
+        self.barrier_names = list(barrier_names)
         self._file = open(self.partial, "wb")  # noqa: SIM115 - kept open for the episode, closed in close()
         self._writer = Writer(self._file)
         self._writer.start(profile="", library="taslel_bench")
         self._channels: dict[str, int] = {}
-        self.channels = channels(barrier_names)
-        for topic, fields in {**self.channels, **AFTER_EPISODE}.items():
-            self._register(topic, {name: schema for name, (schema, _) in fields.items()})
+        self.channels = signals.channels(barrier_names)
+        for topic, spec in {**self.channels, **signals.AFTER_EPISODE}.items():
+            self._register_json(topic, signals.json_schema(topic, spec))
         for topic, props in EVENTS.items():
-            self._register(topic, props)
+            self._register_json(topic, {"title": topic, "type": "object", "properties": props})
+        for topic, cls in PROTOBUF_CHANNELS.items():
+            if plant is not None or topic == "/log":
+                self._register_protobuf(topic, cls)
+        for name, record in {"run": self._run_record(), **(metadata or {})}.items():
+            self._writer.add_metadata(name, {k: str(v) for k, v in record.items()})
         self.ticks_written = 0
 
-    def _register(self, topic: str, props: dict[str, dict]) -> None:
-        sid = self._writer.register_schema(name=topic.strip("/"), encoding="jsonschema", data=_schema(topic, props))
+    def _run_record(self) -> dict[str, str]:
+        return {"start_unix_ns": str(self.start_ns), "log_time": "start_unix_ns + simulated time [ns]",
+                "publish_time": "simulated time [ns]", "record_every_ticks": str(self.every),
+                "fixed_frame": scene.WORLD_FRAME, "follow_frame": a1.TRUNK_BODY,
+                "force_arrow_m_per_n": str(scene.FORCE_SCALE_M_PER_N)}  # fmt: skip
+
+    def _register_json(self, topic: str, schema: dict) -> None:
+        sid = self._writer.register_schema(name=topic.strip("/"), encoding="jsonschema", data=json.dumps(schema).encode())
         self._channels[topic] = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
 
-    def _put(self, topic: str, t_s: float, msg: dict) -> None:
-        ns = round(t_s * 1e9)
-        self._writer.add_message(self._channels[topic], log_time=ns, publish_time=ns, data=json.dumps(msg).encode())
+    def _register_protobuf(self, topic: str, cls) -> None:
+        schema = cls.get_schema()
+        sid = self._writer.register_schema(name=schema.name, encoding="protobuf", data=bytes(schema.data))
+        self._channels[topic] = self._writer.register_channel(topic=topic, message_encoding="protobuf", schema_id=sid)
+
+    def _put(self, topic: str, t_s: float, data: bytes) -> None:
+        sim_ns = round(t_s * 1e9)
+        self._writer.add_message(self._channels[topic], log_time=self.start_ns + sim_ns, publish_time=sim_ns, data=data)
+
+    def _put_json(self, topic: str, t_s: float, msg: dict) -> None:
+        self._put(topic, t_s, json.dumps(msg).encode())
+
+    def log_ns(self, t_s: float) -> int:
+        return self.start_ns + round(t_s * 1e9)
+
+    def recorded(self, k0: int, k1: int) -> np.ndarray:
+        """The ticks of ``k0:k1`` that are written (every ``every``-th tick of the episode)."""
+        first = -(-k0 // self.every) * self.every
+        return np.arange(first, k1, self.every)
 
     def __call__(self, trace: EpisodeTrace, k0: int, k1: int) -> None:
-        """Write ticks ``k0:k1`` (the rows steps.parquet will hold) and flush them to disk."""
+        """Write the recorded ticks of ``k0:k1`` (the rows steps.parquet will hold) and flush them to disk."""
         if k1 <= k0:
             return
-        self._write(trace.frame(k0, k1), self.channels)
+        ticks = self.recorded(k0, k1)
+        if len(ticks):
+            frame = trace.frame(k0, k1).iloc[ticks - k0].reset_index(drop=True)
+            if self.plant is not None:
+                self._write_3d(trace.qpos_mj[ticks], frame)
+            self._write_signals(frame, self.channels)
+        self._writer.flush()
         self.ticks_written = k1
 
-    def _write(self, frame: pd.DataFrame, channels: dict) -> None:
+    def _write_signals(self, frame: pd.DataFrame, channels: dict) -> None:
         times = frame["t_s"].tolist()
-        for topic, fields in channels.items():
-            columns = {name: (_values(frame, cols) if cols is not None else None) for name, (_, cols) in fields.items()}
-            for i, t in enumerate(times):
-                msg = {name: (vals[i] if vals is not None else CONSTANTS[name]) for name, vals in columns.items()}
-                self._put(topic, t, msg)
-        self._writer.flush()
+        for topic, spec in channels.items():
+            for t, msg in zip(times, signals.messages(frame, spec)):
+                self._put_json(topic, t, msg)
+
+    def _write_3d(self, qpos_rows: np.ndarray, frame: pd.DataFrame) -> None:
+        """/scene/robot and /scene/terrain once (the chunk's first tick), /tf and /scene/contact per tick."""
+        p, times = self.plant, frame["t_s"].to_numpy()
+        t0 = float(times[0])
+        self._put("/scene/robot", t0, scene.robot_scene(p.model, p.tree, self.log_ns(t0)).encode())
+        self._put("/scene/terrain", t0, scene.terrain_scene(p.terrain, p.model, self.log_ns(t0)).encode())
+        pos, quat = p.tree.relative_poses(qpos_rows)
+        feet = _leg_array(frame, "{leg}_foot_{ax}_w_m")
+        plant_f, filter_f = _leg_array(frame, "{leg}_grf_plant_{ax}_w_n"), _leg_array(frame, "{leg}_grf_filter_{ax}_w_n")
+        h = {name: frame[[f"{leg}_barrier_{name}_h_m" for leg in a1.LEGS]].to_numpy() for name in self.barrier_names}
+        for i, t in enumerate(times):
+            ns = self.log_ns(float(t))
+            self._put("/tf", float(t), scene.body_transforms(p.tree, ns, pos[i], quat[i]).encode())
+            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()})
+            self._put("/scene/contact", float(t), update.encode())
 
     def close(self, trace: EpisodeTrace, events: list[dict], summary: dict, steps: pd.DataFrame | None = None) -> Path:
         """Write the ticks not streamed yet, the channels computed after the episode (from ``steps``, the
-        whole episode's frame, when the caller has it), the events and the summary; finish; rename to
-        episode.mcap."""
+        whole episode's frame, when the caller has it), the events, the summary (a channel and a metadata
+        record); finish; rename to episode.mcap."""
         self(trace, self.ticks_written, trace.n)
         if trace.n:
-            self._write(steps if steps is not None else trace.frame(0, trace.n), AFTER_EPISODE)
+            frame = steps if steps is not None else trace.frame(0, trace.n)
+            self._write_signals(frame.iloc[self.recorded(0, trace.n)].reset_index(drop=True), signals.AFTER_EPISODE)
         t_end = float(trace.t_s[trace.n - 1]) if trace.n else 0.0
         for e in [*events, {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}]:
-            t = float(e.get("t_s") if e.get("t_s") is not None else t_end)
-            self._put("/events", t, {"t_s": t, "kind": str(e["kind"]), "message": str(e["message"])})
+            self._write_event(float(e.get("t_s") if e.get("t_s") is not None else t_end), str(e["kind"]), str(e["message"]))
         safe = {k: (v if not (isinstance(v, float) and not np.isfinite(v)) else None) for k, v in summary.items()}
-        self._put("/summary", t_end, {"summary": safe})
+        self._put_json("/summary", t_end, {"summary": safe})
+        self._writer.add_metadata("summary", {k: json.dumps(v) if not isinstance(v, str) else v for k, v in safe.items()})
         self._writer.finish()
         self._file.close()
         os.replace(self.partial, self.final)
         return self.final
+
+    def _write_event(self, t: float, kind: str, message: str) -> None:
+        self._put_json("/events", t, {"t_s": t, "kind": kind, "message": message})
+        log = fm.Log(timestamp=scene.timestamp(self.log_ns(t)), level=_LOG_LEVEL.get(kind, fm.LogLevel.Info),
+                     message=f"t={t:.3f} s {kind}: {message}", name="taslel_bench", file="", line=0)  # fmt: skip
+        self._put("/log", t, log.encode())
 
     def abandon(self) -> None:
         """Close the file without finishing it (the partial file stays, readable up to its last chunk)."""
@@ -185,16 +191,80 @@ class McapStream:
             self._file.close()
 
 
-def read_messages(path: Path) -> Iterator[tuple[str, int, dict]]:
-    """(topic, log time [ns], decoded JSON) of every message of a finished or partial MCAP file; a partial
-    file (a killed run) is read record by record up to its last complete chunk."""
-    channels: dict[int, str] = {}
+def _leg_array(frame: pd.DataFrame, pattern: str) -> np.ndarray:
+    """(n, 4, 3) of the columns ``pattern`` per leg and axis (legs in LEGS order, world axes)."""
+    cols = [pattern.format(leg=leg, ax=ax) for leg in a1.LEGS for ax in "xyz"]
+    return frame[cols].to_numpy(float).reshape(len(frame), a1.N_LEGS, 3)
+
+
+def stride(control_rate_hz: float, mcap_rate_hz: float | None) -> int:
+    """Control ticks per MCAP sample for ``record.mcap_rate_hz`` (None: every tick)."""
+    if mcap_rate_hz is None:
+        return 1
+    return max(1, round(float(control_rate_hz) / float(mcap_rate_hz)))
+
+
+def versions() -> dict[str, str]:
+    """The package versions and the code version of the run (the ``versions`` metadata record)."""
+    out = {}
+    for pkg in VERSION_PACKAGES:
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    return {**out, **{k: str(v) for k, v in code_version().items()}}
+
+
+# ------------------------------------------------------------------------------------------------ reading
+def _protobuf_decoder(schema: Schema):
+    """bytes -> dict for a protobuf schema (the FileDescriptorSet the file carries; google.protobuf only)."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, json_format, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    pending = list(descriptor_pb2.FileDescriptorSet.FromString(schema.data).file)
+    while pending:  # add each file after its dependencies
+        added = [f for f in pending if all(_has_file(pool, dep) for dep in f.dependency)]
+        if not added:
+            raise McapError(f"schema {schema.name}: unresolved protobuf dependencies")
+        for f in added:
+            pool.Add(f)
+            pending.remove(f)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+    return lambda data: json_format.MessageToDict(cls.FromString(data), preserving_proto_field_name=True)
+
+
+def _has_file(pool, name: str) -> bool:
+    try:
+        pool.FindFileByName(name)
+    except KeyError:
+        return False
+    return True
+
+
+def read_messages(path: Path, with_publish_time: bool = False) -> Iterator[tuple]:
+    """(topic, log time [ns], decoded message) of every message of a finished or partial MCAP file (JSON
+    and protobuf channels, both as dicts; with ``with_publish_time`` a 4th item, the publish time = the
+    simulated time [ns]); a partial file (a killed run) is read up to its last complete chunk."""
+    topics: dict[int, str] = {}
+    decoders: dict[int, object] = {}
+    schemas: dict[int, Schema] = {}
+    by_schema: dict[int, object] = {}  # protobuf decoders, built once per schema
     with open(path, "rb") as f:
         try:
             for record in StreamReader(f).records:  # chunks are expanded into their records
-                if isinstance(record, Channel):
-                    channels[record.id] = record.topic
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                    if record.message_encoding != "protobuf":
+                        decoders[record.id] = json.loads
+                        continue
+                    if record.schema_id not in by_schema:
+                        by_schema[record.schema_id] = _protobuf_decoder(schemas[record.schema_id])
+                    decoders[record.id] = by_schema[record.schema_id]
                 elif isinstance(record, Message):
-                    yield channels[record.channel_id], record.log_time, json.loads(record.data)
+                    msg = decoders[record.channel_id](record.data)
+                    head = (topics[record.channel_id], record.log_time, msg)
+                    yield (*head, record.publish_time) if with_publish_time else head
         except (McapError, EOFError, ValueError):
             return  # a partial file ends inside its last record

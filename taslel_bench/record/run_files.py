@@ -66,7 +66,8 @@ def completed_summary(run_dir: Path) -> dict | None:
 
 
 SUPERSEDED = "superseded"
-RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt", "qps.npz")
+RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt", "qps.npz",
+                "video.mp4")
 
 
 def supersede(run_dir: Path, tag: str) -> Path | None:

@@ -59,12 +59,23 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
+SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
+
+
+def run_config_yaml(cfg: DictConfig) -> str:
+    """The run's resolved config as written to its config.yaml (without :data:`SWEEP_LEVEL_KEYS`)."""
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    for key in SWEEP_LEVEL_KEYS:
+        plain.pop(key, None)
+    return OmegaConf.to_yaml(OmegaConf.create(plain))
+
+
 def config_sha256(cfg: DictConfig) -> str:
     """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
     only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
     ``model.urdf``)."""
     plain = OmegaConf.to_container(cfg, resolve=True)
-    for key in ("progress", "force"):
+    for key in ("progress", "force", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
     for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
@@ -131,7 +142,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         return skipped
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
-    run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(OmegaConf.to_yaml(cfg, resolve=True)))
+    run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
@@ -141,7 +152,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
     summary.update(_episode_summary(cfg, built, res))
     events = _events(cfg, res, out_dir)
-    _write_results(out_dir, res, summary, events, sink, qp_recorder)
+    video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
+    _write_results(out_dir, res, summary, events, sink, qp_recorder, video)
     return summary
 
 
@@ -205,9 +217,9 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
 
 
 def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict],
-                   sink: _GuardedSink | None, qp_recorder) -> None:
-    """episode.mcap (finished), qps.npz, steps.parquet, events.json and, last (it marks the run complete),
-    summary.json; a recording failure is noted in the summary, never loses the run."""
+                   sink: _GuardedSink | None, qp_recorder, video=None) -> None:
+    """episode.mcap (finished), qps.npz, steps.parquet, events.json, video.mp4 and, last (it marks the run
+    complete), summary.json; a recording failure is noted in the summary, never loses the run."""
     steps = res.trace.to_frame()
     if sink is not None:
         _close_mcap(sink, res, events, summary, steps)
@@ -219,7 +231,18 @@ def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: lis
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
     run_files.write_parquet(out_dir / run_files.STEPS, steps)
     run_files.write_json(out_dir / run_files.EVENTS, events)
+    if video is not None:
+        video(summary)
     run_files.write_json(out_dir / run_files.SUMMARY, summary)
+
+
+def _video(cfg: DictConfig, built: Built, out_dir: Path):
+    """record.video: a callable rendering video.mp4 from the run folder (taslel_bench.record.video), or None."""
+    if not cfg.record.get("video", False):
+        return None
+    from taslel_bench.record.video import render_at_end_of_run
+
+    return lambda summary: render_at_end_of_run(out_dir, built.mj_model, summary, cfg.record)
 
 
 def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
@@ -227,10 +250,14 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
     simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
     if not cfg.record.mcap:
         return None
-    from taslel_bench.record.mcap import McapStream
+    from taslel_bench.record import mcap
 
     names = [b.name for b in built.filter.barriers] if built.filter is not None else []
-    sink = _GuardedSink(McapStream(out_dir, names))
+    metadata = {"config": {"config.yaml": run_config_yaml(cfg)}, "versions": mcap.versions()}
+    every = mcap.stride(cfg.control_rate_hz, cfg.record.mcap_rate_hz)  # record.mcap_rate_hz (null: every tick)
+    stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),
+                             metadata=metadata)
+    sink = _GuardedSink(stream)
     built.episode.chunk_sink = sink
     built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
     return sink

@@ -18,6 +18,7 @@ import pandas as pd
 from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
+from taslel_bench.sweep.stills import still_strips
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
@@ -381,6 +382,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
     lines += _run_list(frame, "error", "message", "Runs that ended in an error")
+    lines += still_strips(sweep_dir, frame)  # falls and trips seen (taslel_bench.sweep.stills)
     if figures:
         lines.append("## Figures\n")
         lines += [f"![{f}]({f})\n" for f in figures]

@@ -1,0 +1,12 @@
+"""``python -m taslel_bench.render <run folder> [--out video.mp4] [--fps 30] [--width 480] [--height 360]``:
+render a run's MP4 from its steps.parquet (:mod:`taslel_bench.record.video`). Headless: ``MUJOCO_GL=egl``
+(the default here) or ``MUJOCO_GL=osmesa``."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported: it reads the variable then
+
+from taslel_bench.record.video_cli import main
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""The sweep report's still strips: for every finished run that fell or tripped, the second before the event
+as a row of frames (PNG) rendered from the run's steps.parquet (:mod:`taslel_bench.record.video`), linked to
+the run's ``video.mp4`` or, when the run has none (``record.video=false``), to a clip of the event
+rendered beside the strip (from 2 s before to 0.5 s after it).
+
+The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the first trip: the first
+walking tick on which a swing foot (outside the filter's stance set) or a lower leg touches a physical
+obstacle (MuJoCo contacts; the onsets ``trips`` counts, :mod:`taslel_bench.metrics.clearance`).
+Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``).
+"""
+
+from __future__ import annotations
+
+import re
+import traceback
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from omegaconf import OmegaConf
+
+from taslel_bench.record import run_files
+from taslel_bench.robot import a1
+
+STILLS_DIR = "stills"
+STRIP_OFFSETS_S = (-1.0, -0.75, -0.5, -0.25, 0.0)  # [s] frame times relative to the event
+STILL_SIZE = (256, 192)  # [px] width, height of one frame
+CLIP_WINDOW_S = (-2.0, 0.5)  # [s] the event clip, relative to the event
+FPS = 30.0
+
+
+def event_of_run(run_dir: Path, row: pd.Series) -> tuple[str, float] | None:
+    """("fall", t) or ("trip", t) [s of simulated time] of a run, or None (no fall, no trip)."""
+    if bool(row.get("fell")) and np.isfinite(float(row.get("time_to_fall_s", np.nan))):
+        return "fall", float(row["time_to_fall_s"])
+    trips = row.get("trips")
+    if trips is None or not np.isfinite(float(trips)) or float(trips) <= 0:
+        return None
+    t = first_trip_s(run_dir)
+    return ("trip", t) if t is not None else None
+
+
+def first_trip_s(run_dir: Path) -> float | None:
+    """Simulated time [s] of the first walking tick with a swing foot or a lower leg on an obstacle."""
+    cfg = OmegaConf.load(Path(run_dir) / "config.yaml")
+    legs = [*(f"{leg}_obstacle_contact" for leg in a1.LEGS), *(f"{leg}_stance" for leg in a1.LEGS)]
+    steps = pd.read_parquet(Path(run_dir) / run_files.STEPS, columns=["t_s", "nonfoot_obstacle_contact", *legs])
+    touch = steps["nonfoot_obstacle_contact"].to_numpy(bool).copy()
+    for leg in a1.LEGS:
+        touch |= steps[f"{leg}_obstacle_contact"].to_numpy(bool) & ~steps[f"{leg}_stance"].to_numpy(bool)
+    touch &= steps["t_s"].to_numpy() >= float(cfg.controller.stand_duration)
+    hits = np.flatnonzero(touch)
+    return float(steps["t_s"].iloc[hits[0]]) if hits.size else None
+
+
+def _name(run_dir: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", run_dir).strip("_") or "run"
+
+
+def still_strip(run_dir: Path, t_event_s: float, out: Path) -> Path:
+    """The frames at :data:`STRIP_OFFSETS_S` around ``t_event_s``, side by side, as a PNG at ``out``."""
+    from PIL import Image
+
+    from taslel_bench.record.video import RunFrames, plant_of_run, run_record
+
+    steps, summary, events = run_record(run_dir)
+    frames = RunFrames(plant_of_run(run_dir), steps, *STILL_SIZE, summary, events)
+    try:
+        images = []
+        for offset in STRIP_OFFSETS_S:
+            row = int(np.clip(np.rint((t_event_s + offset - frames.t_s[0]) / frames.dt_s) - 1, 0, len(frames.t_s) - 1))
+            images.append(frames.frame(row))
+    finally:
+        frames.renderer.close()
+    strip = np.concatenate(images, axis=1)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    run_files.atomic_write(out, lambda p: Image.fromarray(strip).save(p, format="PNG"))
+    return out
+
+
+def _video_link(sweep_dir: Path, run_dir: str, t_event_s: float, name: str) -> str:
+    """The run's video.mp4 (relative to the sweep folder), else a clip of the event rendered now."""
+    from taslel_bench.record.video import VIDEO_NAME, render_video
+
+    if (sweep_dir / run_dir / VIDEO_NAME).is_file():
+        return f"{run_dir}/{VIDEO_NAME}"
+    clip = Path(STILLS_DIR) / f"{name}.mp4"
+    t0, t1 = t_event_s + CLIP_WINDOW_S[0], t_event_s + CLIP_WINDOW_S[1]
+    render_video(sweep_dir / run_dir, sweep_dir / clip, fps=FPS, width=STILL_SIZE[0] * 2, height=STILL_SIZE[1] * 2,
+                 t0_s=max(0.0, t0), t1_s=t1)  # fmt: skip
+    return str(clip)
+
+
+def still_strips(sweep_dir: Path, frame: pd.DataFrame) -> list[str]:
+    """Report lines: per finished run that fell or tripped, its still strip linked to its video."""
+    if frame.empty or "run_dir" not in frame or "status" not in frame:
+        return []
+    lines: list[str] = []
+    for _, row in frame[frame["status"].isin(("ok", "degraded"))].iterrows():
+        run_dir = str(row["run_dir"])
+        try:
+            event = event_of_run(sweep_dir / run_dir, row)
+            if event is None:
+                continue
+            kind, t = event
+            name = _name(run_dir)
+            png = still_strip(sweep_dir / run_dir, t, sweep_dir / STILLS_DIR / f"{name}.png")
+            link = _video_link(sweep_dir, run_dir, t, name)
+            reason = f" ({row.get('fall_reason')})" if kind == "fall" else ""
+            lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
+                         f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link})\n\n"
+                         f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
+        except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+            lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
+    if not lines:
+        return []
+    head = ("## The second before each fall or trip\n\nRendered from each run's steps.parquet (MuJoCo's offscreen "
+            "renderer; blue arrows: MuJoCo contact forces); a still links to the run's video.\n")  # fmt: skip
+    return [head, *lines]
