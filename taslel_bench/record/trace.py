@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT
 from taslel_bench.robot import a1
 from taslel_bench.terrain.terrain import Terrain
 
@@ -82,6 +83,19 @@ class EpisodeTrace:
         self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
         self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
+        # every foot-terrain contact in MuJoCo's contact frame (taslel_bench.plant.contact_frames), per tick,
+        # leg and slot (K slots, zero / False unused): f_n [N], |f_t| [N], the contact's mu [-], the normal out
+        # of the terrain (world axes), the contact point's tangential speed [m/s], touching (distance <= 0),
+        # on an obstacle geom; per leg: a non-foot link of the leg touching an obstacle
+        k = MAX_CONTACTS_PER_FOOT
+        self.contact_fn_n = np.zeros((c, nl, k))
+        self.contact_ft_n = np.zeros((c, nl, k))
+        self.contact_mu = np.zeros((c, nl, k))
+        self.contact_normal_w = np.zeros((c, nl, k, 3))
+        self.contact_slip_mps = np.zeros((c, nl, k))
+        self.contact_touching = np.zeros((c, nl, k), bool)
+        self.contact_on_obstacle = np.zeros((c, nl, k), bool)
+        self.leg_link_obstacle_contact = np.zeros((c, nl), bool)
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
@@ -151,6 +165,22 @@ class EpisodeTrace:
         self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
+
+    def record_contact_frames(self, k: int, frames) -> None:
+        """Copy tick ``k``'s contact-frame rows from a :class:`taslel_bench.plant.contact_frames.ContactFrameReader`
+        that read the tick's last physics step."""
+        self.contact_fn_n[k] = frames.normal_force_n
+        self.contact_ft_n[k] = frames.tangential_force_n
+        self.contact_mu[k] = frames.mu
+        self.contact_normal_w[k] = frames.normal_w
+        self.contact_slip_mps[k] = frames.slip_mps
+        self.contact_touching[k] = frames.touching
+        self.contact_on_obstacle[k] = frames.on_obstacle
+        self.leg_link_obstacle_contact[k] = frames.leg_link_obstacle
+
+    def main_contact(self, ticks: slice = slice(None)) -> np.ndarray:
+        """(n, 4) index of each foot's contact slot with the largest normal force."""
+        return np.argmax(self.contact_fn_n[ticks], axis=2)
 
     def bind(self, br: StateBridge, contacts, profile, terrain: Terrain | None = None) -> None:
         """What deriving the named quantities needs: the state bridge (index maps), the episode's
@@ -270,9 +300,23 @@ class EpisodeTrace:
             cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
+            self._contact_frame_columns(cols, t, i, leg)
             for name, log in self.barriers.items():
                 cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
                 cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
+
+    def _contact_frame_columns(self, cols: dict, t: slice, i: int, leg: str) -> None:
+        """Leg ``i``'s contacts in MuJoCo's contact frame: the summed normal force, and the tangential force,
+        friction, normal and contact-point slip of its contact with the largest normal force."""
+        fn = self.contact_fn_n[t, i]
+        main = np.argmax(fn, axis=1)[:, None]
+        cols[f"{leg}_contact_frame_fn_n"] = fn.sum(axis=1)
+        cols[f"{leg}_contact_frame_ft_n"] = np.take_along_axis(self.contact_ft_n[t, i], main, 1)[:, 0]
+        cols[f"{leg}_contact_frame_mu"] = np.take_along_axis(self.contact_mu[t, i], main, 1)[:, 0]
+        normal = np.take_along_axis(self.contact_normal_w[t, i], main[..., None], 1)[:, 0]
+        _put(cols, leg + "_contact_frame_normal_{}_w", "xyz", normal)
+        cols[f"{leg}_contact_frame_slip_mps"] = np.take_along_axis(self.contact_slip_mps[t, i], main, 1)[:, 0]
+        cols[f"{leg}_leg_link_obstacle_contact"] = self.leg_link_obstacle_contact[t, i]
 
     def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
         """The controller model's residuals and barrier conditions (nan until computed after the episode)."""

@@ -31,6 +31,7 @@ from taslel_bench.interfaces import Estimator, FrictionEstimate, Proprioception,
 from taslel_bench.metrics import residuals
 from taslel_bench.metrics.residuals import ResidualSetup
 from taslel_bench.plant.bridge import StateBridge
+from taslel_bench.plant.contact_frames import ContactFrameReader
 from taslel_bench.plant.contacts import FootContactReader
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import EpisodeTrace
@@ -86,6 +87,7 @@ class Episode:
         self.rng = rng
         self.stance_from_contact = stance_from_contact
         self.contacts = FootContactReader(mj_model)
+        self.contact_frames = ContactFrameReader(mj_model)  # every foot contact in its own frame (metrics)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
@@ -207,6 +209,10 @@ class Episode:
         trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
         trace.record(k, t, d.qpos, d.qvel, d.sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                      tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
+        frames0 = time.perf_counter()
+        self.contact_frames.read(d)  # the contacts of the tick's last physics step, in their own frames
+        trace.record_contact_frames(k, self.contact_frames)
+        self._recording_s += time.perf_counter() - frames0  # metrics recording: not in wall_time_s
         trace.mu_hat_ready[k] = est.ready
         return self._ended(t, fall, unstable, res)
 

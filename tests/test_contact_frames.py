@@ -1,0 +1,74 @@
+"""Contact-frame readings checked against independent computations: the foot contact sensors' world-axes
+force projected on the reader's normal, and the point Jacobian ``mj_jac`` at the contact position times
+``qvel`` for the contact point's velocity."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from taslel_bench.plant.contact_frames import ContactFrameReader
+from taslel_bench.robot import a1
+from taslel_bench.sim.build import Built
+from tests.conftest import compose_cfg
+
+
+@pytest.fixture(scope="module")
+def logs_run():
+    """The nominal trot into the logs for 2.5 s (it reaches the first log at x = 0.6 m), trace kept."""
+    cfg = compose_cfg(["scenario=logs", "filter.enabled=false", "duration=2.5", "progress=false",
+                       "record.mcap=false", "seed=0"])
+    built = Built(cfg)
+    res = built.episode.run()
+    return built, res.trace
+
+
+def test_contact_frame_force_agrees_with_the_foot_sensor(logs_run):
+    """One contact per foot: f_n = f_sensor . n and |f_t| = |f_sensor - (f_sensor . n) n|, on the floor and on
+    the logs (where the normal is not world z)."""
+    _, tr = logs_run
+    single = (tr.contact_fn_n[: tr.n] > 0).sum(axis=2) == 1
+    main = tr.main_contact(slice(0, tr.n))
+    f = tr.grf_plant_w[: tr.n]  # [N] on the foot, world axes (foot sensor)
+    n = np.take_along_axis(tr.contact_normal_w[: tr.n], main[..., None, None], 2)[:, :, 0]
+    fn = np.take_along_axis(tr.contact_fn_n[: tr.n], main[..., None], 2)[..., 0]
+    ft = np.take_along_axis(tr.contact_ft_n[: tr.n], main[..., None], 2)[..., 0]
+    f_n = np.einsum("nlj,nlj->nl", f, n)
+    f_t = np.linalg.norm(f - f_n[..., None] * n, axis=2)
+    assert single.sum() > 1000
+    np.testing.assert_allclose(fn[single], f_n[single], atol=1e-6)
+    np.testing.assert_allclose(ft[single], f_t[single], atol=1e-6)
+    on_log = single & (n[..., 2] < 0.99) & (fn > 1.0)
+    assert on_log.sum() > 5  # loaded contacts with a normal that is not world z were judged
+
+
+def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
+    """A state with feet on the floor: the reader's tangential speed equals |(I - n n') J_p(contact.pos) qvel|
+    from mj_jac on the foot's body, independent of mj_objectVelocity."""
+    built = Built(compose_cfg(["scenario=logs", "progress=false", "record.mcap=false"]))
+    m, d = built.mj_model, mujoco.MjData(built.mj_model)
+    d.qpos[:] = built.episode.initial_qpos
+    d.qpos[built.episode.bridge.free_qadr + 2] -= 0.008  # [m] the feet into the floor
+    rng = np.random.default_rng(3)
+    d.qvel[:] = rng.normal(0.0, 0.3, m.nv)
+    mujoco.mj_forward(m, d)
+    reader = ContactFrameReader(m)
+    reader.read(d)
+    jacp = np.zeros((3, m.nv))
+    checked = 0
+    feet = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f): i for i, f in enumerate(a1.FOOT_FRAMES)}
+    for i in range(d.ncon):
+        c = d.contact[i]
+        foot = next((g for g in (c.geom1, c.geom2) if g in feet), None)
+        if foot is None:
+            continue
+        mujoco.mj_jac(m, d, jacp, None, c.pos, m.geom_bodyid[foot])
+        v = jacp @ d.qvel
+        n = c.frame[:3]
+        expected = np.linalg.norm(v - (v @ n) * n)
+        leg = feet[foot]
+        assert reader.slip_mps[leg, 0] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        assert abs(reader.normal_w[leg, 0, 2]) == pytest.approx(1.0)  # floor
+        checked += 1
+    assert checked >= 3
