@@ -23,21 +23,44 @@ from tests.conftest import NeverSolves, compose_cfg
 N = 10  # synthetic ticks, all walking (k0 = 0), dt = 1 ms
 
 
-def synthetic_trace(filter_on: bool = True) -> EpisodeTrace:
+def set_contact(tr: EpisodeTrace, ticks, foot: int, fn: float, ft: float = 0.0, mu: float = 1.0,
+                normal=(0.0, 0.0, 1.0), slip: float = 0.0, obstacle: bool = False, slot: int = 0) -> None:
+    """One contact of ``foot`` on ``ticks`` in its contact frame (what plant.contact_frames records)."""
+    tr.contact_fn_n[ticks, foot, slot] = fn
+    tr.contact_ft_n[ticks, foot, slot] = ft
+    tr.contact_mu[ticks, foot, slot] = mu
+    tr.contact_normal_w[ticks, foot, slot] = np.asarray(normal, float) / np.linalg.norm(normal)
+    tr.contact_slip_mps[ticks, foot, slot] = slip
+    tr.contact_touching[ticks, foot, slot] = fn > 0.0 or obstacle
+    tr.contact_on_obstacle[ticks, foot, slot] = obstacle
+
+
+def clear_contact(tr: EpisodeTrace, ticks, foot: int) -> None:
+    for a in (tr.contact_fn_n, tr.contact_ft_n, tr.contact_mu, tr.contact_slip_mps):
+        a[ticks, foot] = 0.0
+    tr.contact_normal_w[ticks, foot] = 0.0
+    tr.contact_touching[ticks, foot] = False
+    tr.contact_on_obstacle[ticks, foot] = False
+
+
+def synthetic_trace(filter_on: bool = True, n: int = N) -> EpisodeTrace:
     """Four feet in the filter's stance set on flat ground (mu 1), each carrying 50 N, predicted exactly."""
-    tr = EpisodeTrace(N, filter_on=filter_on, barrier_names=["clearance"] if filter_on else [])
-    tr.n = N
+    tr = EpisodeTrace(n, filter_on=filter_on, barrier_names=["clearance"] if filter_on else [])
+    tr.n = n
     tr.in_stance[:] = True
-    tr.in_contact = np.ones((N, 4), bool)
-    tr.grf_plant_w = np.zeros((N, 4, 3))
+    tr.in_contact = np.ones((n, 4), bool)
+    tr.grf_plant_w = np.zeros((n, 4, 3))
     tr.grf_plant_w[..., 2] = 50.0
+    for foot in range(4):
+        set_contact(tr, slice(None), foot, 50.0)
     tr.grf_filter_w[:] = tr.grf_plant_w if filter_on else np.nan
-    tr.mu_foot = np.ones((N, 4))
-    tr.slip_w = np.zeros((N, 4, 2))
-    tr.clearance_m = np.full((N, 4), np.nan)
-    tr.obstacle_clearance_m = np.full((N, 4), np.nan)
-    tr.obstacle_contact = np.zeros((N, 4), bool)
-    tr.qp_status[:N] = 0 if filter_on else -1
+    tr.mu_foot = np.ones((n, 4))
+    tr.slip_w = np.zeros((n, 4, 2))
+    tr.foot_pos_w = np.zeros((n, 4, 3))
+    tr.clearance_m = np.full((n, 4), np.nan)
+    tr.obstacle_clearance_m = np.full((n, 4), np.nan)
+    tr.obstacle_contact = np.zeros((n, 4), bool)
+    tr.qp_status[:n] = 0 if filter_on else -1
     return tr
 
 
@@ -47,7 +70,7 @@ def test_early_touchdown_counts_in_the_headline_not_in_the_stance_set():
     tr.in_stance[5:, 2] = False
     tr.grf_plant_w[5:, 2] = (20.0, 0.0, 120.0)
     tr.grf_filter_w[5:, 2] = 0.0
-    tr.slip_w[5:, 2] = (1.0, 0.0)  # sliding at 1 m/s
+    set_contact(tr, slice(5, None), 2, 120.0, ft=20.0, slip=1.0)  # sliding at 1 m/s
     m = contact_metrics(tr, 0, 1e-3, 0.2)
     assert m["grf_mae_z_n_stance"] == 0.0 and m["slip_mps_mean_stance"] == 0.0  # the old definition
     assert m["contacts_loaded_outside_stance"] == 5
@@ -60,7 +83,9 @@ def test_each_foot_is_judged_against_the_friction_under_it():
     tr = synthetic_trace()
     tr.grf_plant_w[:, :, 0] = 10.0  # |f_t| / f_n = 0.2 on every foot
     tr.grf_filter_w[:] = tr.grf_plant_w
-    tr.mu_foot[:, :2] = 0.2  # front feet on a mu = 0.2 patch: at the cone edge; rear feet on mu = 1
+    for foot in range(4):  # front feet on a mu = 0.2 patch: at the cone edge; rear feet on mu = 1
+        set_contact(tr, slice(None), foot, 50.0, ft=10.0, mu=0.2 if foot < 2 else 1.0)
+    tr.mu_foot[:, :2] = 0.2
     m = contact_metrics(tr, 0, 1e-3, 0.2)
     assert m["friction_cone_edge_rate"] == pytest.approx(0.5)
     # the filter planned the same force: inside the true cone of the rear feet, on the edge of the front
@@ -76,33 +101,35 @@ def test_touchdown_window_takes_the_first_ticks_of_each_contact():
     np.testing.assert_array_equal(got, [0, 0, 0, 1, 1, 0, 0, 0, 0, 1, 1, 0])  # tick 0 is no touchdown
 
 
-def test_virtual_clearance_leaves_loaded_swing_ticks_out_and_reports_depths():
+def test_virtual_clearance_counts_every_swing_tick_and_reports_loaded_ones_beside():
     tr = synthetic_trace()
     tr.in_stance[:, 0] = False  # foot 0 swings the whole time
+    tr.swing_phase[:, 0] = np.linspace(0.05, 0.95, N)
     tr.clearance_m[:, 0] = [0.01, 0.0, -0.002, -0.004, -0.01, 0.02, 0.02, 0.02, -0.03, -0.03]
-    tr.in_contact[:, 0] = False
-    tr.grf_plant_w[:, 0] = 0.0
-    tr.in_contact[8:, 0] = True  # an early touchdown: loaded, below the profile
-    tr.grf_plant_w[8:, 0, 2] = 40.0
+    clear_contact(tr, slice(None), 0)
+    set_contact(tr, slice(8, None), 0, 40.0)  # an early touchdown: loaded, below the profile
     m = clearance_metrics(tr, 0)
-    assert m["clearance_violation_rate"] == pytest.approx(3 / 8)  # -0.002, -0.004, -0.01 of 8 unloaded
-    assert m["clearance_min_m"] == -0.01
-    assert m["clearance_violation_depth_max_m"] == pytest.approx(0.01)
-    assert m["clearance_violation_depth_p50_m"] == pytest.approx(0.004)
-    assert m["clearance_violation_rate_loaded"] == 1.0 and m["clearance_loaded_swing_rate"] == pytest.approx(0.2)
+    assert m["clearance_violation_rate"] == pytest.approx(5 / 10)  # the headline: every swing tick
+    assert m["clearance_min_m"] == -0.03 and m["clearance_violation_depth_max_m"] == pytest.approx(0.03)
+    assert m["clearance_violation_depth_p50_m"] == pytest.approx(0.01)
+    assert m["clearance_violation_rate_unloaded"] == pytest.approx(3 / 8)
+    assert m["clearance_violation_rate_early_touchdown"] == 1.0 and math.isnan(m["clearance_violation_rate_lift_off_lag"])
+    assert m["clearance_loaded_swing_rate"] == pytest.approx(0.2)
 
 
-def test_trips_are_contact_onsets_in_swing_and_lower_leg_contacts():
-    tr = synthetic_trace()
+def test_trips_are_new_obstacle_contacts_in_swing_and_leg_link_contacts():
+    tr = synthetic_trace(n=40)
     tr.obstacle_clearance_m[:] = 0.05
     tr.in_stance[:, 1] = False
-    tr.obstacle_contact[[2, 3, 6], 1] = True  # two touches of foot 1 in swing
-    tr.obstacle_contact[:, 3] = True  # foot 3 stands on a log: not a trip
-    tr.obstacle_clearance_m[[2, 3, 6], 1] = -0.001
-    tr.nonfoot_obstacle_contact[[4, 5]] = True  # one shin knock
+    clear_contact(tr, slice(None), 1)
+    set_contact(tr, [2, 3], 1, 5.0, obstacle=True)  # foot 1 hits a log in swing ...
+    set_contact(tr, [30], 1, 5.0, obstacle=True)  # ... and again later: two trips
+    set_contact(tr, slice(None), 3, 50.0, obstacle=True)  # foot 3 stands on a log: not a trip
+    tr.obstacle_clearance_m[[2, 3, 30], 1] = -0.001
+    tr.leg_link_obstacle_contact[[4, 5], 0] = True  # one knock of leg 0's calf
     m = clearance_metrics(tr, 0)
     assert (m["foot_trips"], m["shin_trips"], m["trips"]) == (2, 1, 3)
-    assert m["obstacle_touch_swing_rate"] == pytest.approx(3 / N)
+    assert m["obstacle_touch_swing_rate"] == pytest.approx(3 / 40)
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 
 

@@ -27,6 +27,7 @@ from typing import Any
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
+from taslel_bench.config.safety import safety_limits
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
 from taslel_bench.interfaces import MAX_FRICTION
@@ -118,6 +119,7 @@ def _validate(cfg: DictConfig) -> None:
     _filter(cfg, control_rate_hz)
     _robot(cfg, stand_height_m)
     _model(cfg)
+    safety_limits(cfg)  # the verdict's limits (taslel_bench/config/safety.py)
     for group in AXES:
         if not isinstance(_get(cfg, group), DictConfig) or "_target_" not in cfg[group]:
             raise fail(group, _get(cfg, group), "has no _target_ to build it from")

@@ -1,16 +1,22 @@
-"""Contact metrics counted by physics: every loaded foot contact, the friction under each foot, sliding.
+"""Contact metrics counted by physics, in each contact's own frame (MuJoCo's contact normal and friction).
 
-Selections over (tick, foot) pairs of the walking ticks (the stand is reported separately, ``_stand``):
+Every contact of a foot sphere with any terrain geom (floor, log, step; :mod:`taslel_bench.plant.contact_frames`)
+is judged in its frame: normal force f_n [N], tangential force |f_t| [N], that contact's mu, and the tangential
+speed of the contact point relative to the terrain [m/s]. Selections over the walking ticks (the stand is
+reported separately, ``_stand``):
 
-* **plant-loaded**: MuJoCo's contact force on the foot has a normal (world z) component >= 1 N;
-* **filter-loaded**: the filter's lambda for the foot has a normal component >= 1 N;
-* **loaded** (the headline): plant-loaded or filter-loaded. This includes early touchdowns in the
-  scheduled swing (rear feet land at swing phase ~0.82-0.96 carrying 50-170 N), lift-off lag, and feet the
-  filter loads while the plant foot is in the air;
-* **stance** (``_stance`` suffix, the definition used before): the filter's stance set and plant-loaded.
+* **loaded contact**: f_n >= 1 N (a foot pressing on a log's flank is loaded, whatever its vertical force);
+  a **plant-loaded foot** has at least one;
+* **filter-loaded foot**: the filter's lambda has a component >= 1 N along the terrain normal under the foot;
+* **loaded foot** (the GRF headline): plant-loaded or filter-loaded (early touchdowns in the scheduled swing,
+  lift-off lag, and feet the filter loads while the plant foot is in the air);
+* **stance** (``_stance`` suffix, the paper's selection): the filter's stance set; for the cone and slip metrics
+  its plant-loaded contacts, for the GRF error every stance foot (one in the air has f = 0).
 
-The contact normal is world z: every terrain surface a foot stands on in the scenarios is horizontal (a foot
-against a log's side is a trip, counted by :mod:`taslel_bench.metrics.clearance`).
+Cone edge: |f_t| >= 0.98 mu f_n with the contact's own mu (sliding or about to). Slip rates are per loaded
+contact; the sliding distance integrates, per plant-loaded foot, the slip of its most loaded contact. The
+filter's planned lambda is judged against the true cone about the terrain normal under the foot (mu = the
+terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mod:`taslel_bench.metrics.windows`).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ import math
 
 import numpy as np
 
+from taslel_bench.metrics.windows import window_ticks, worst_window_rate
 from taslel_bench.record.trace import EpisodeTrace
 
 MIN_NORMAL_FORCE_N = 1.0  # [N] a contact carries load from this normal force on
@@ -49,52 +56,96 @@ def touchdown_window(loaded: np.ndarray, n_ticks: int) -> np.ndarray:
     return out
 
 
+def terrain_normals(tr: EpisodeTrace, ticks: slice, sel: np.ndarray) -> np.ndarray:
+    """(n, 4, 3) unit terrain normal (world axes) under each foot-sphere centre where ``sel`` (n, 4) holds,
+    world z elsewhere and without a terrain (answers cached per millimetre of (x, y))."""
+    xy = tr.foot_pos_w[ticks, :, :2]
+    out = np.zeros((*xy.shape[:2], 3))
+    out[..., 2] = 1.0
+    terrain = tr.terrain()
+    if terrain is None or not sel.any():
+        return out
+    cache: dict[tuple[int, int], np.ndarray] = {}
+    for k, i in zip(*np.nonzero(sel)):
+        key = (round(xy[k, i, 0] * 1000), round(xy[k, i, 1] * 1000))
+        if key not in cache:
+            cache[key] = np.asarray(terrain.normal_at(key[0] / 1000, key[1] / 1000), float)
+        out[k, i] = cache[key]
+    return out
+
+
 def contact_metrics(tr: EpisodeTrace, k0: int, dt: float, stance_duration_s: float) -> dict[str, float]:
     """All contact metrics of the walking ticks ``k0:n`` (see the module doc), plus the stand's ``_stand``
     GRF error and slip. ``dt`` [s] control period; ``stance_duration_s`` [s] scheduled stance length."""
     n = tr.n
     out = _contact_set(tr, slice(k0, n), dt, stance_duration_s, suffix="")
     stand = _contact_set(tr, slice(0, k0), dt, stance_duration_s, suffix="_stand")
-    out.update({k: v for k, v in stand.items() if k.startswith(("grf_mae", "slip_mps_mean", "contacts_loaded"))})
+    out.update({k: v for k, v in stand.items() if k.startswith(("grf_mae", "slip_mps_mean", "contacts_loaded"))
+                and "worst_window" not in k})
     return out
 
 
 def _contact_set(tr: EpisodeTrace, ticks: slice, dt: float, stance_s: float, suffix: str) -> dict[str, float]:
-    f = tr.grf_plant_w[ticks]  # [N] (n, 4, 3) on each foot, world axes
-    lam = tr.grf_filter_w[ticks]  # [N] filter's prediction (nan: filter off or QP failed)
-    mu = tr.mu_foot[ticks]  # [-] true friction under each foot
-    plant_loaded = tr.in_contact[ticks] & (f[..., 2] >= MIN_NORMAL_FORCE_N)
+    fn, ft = tr.contact_fn_n[ticks], tr.contact_ft_n[ticks]  # [N] (n, 4, K) in each contact's frame
+    mu_c, slip = tr.contact_mu[ticks], tr.contact_slip_mps[ticks]  # [-], [m/s]
+    loaded_c = fn >= MIN_NORMAL_FORCE_N  # (n, 4, K) loaded contacts
+    plant_loaded = loaded_c.any(axis=2)  # (n, 4) feet
+    in_stance = tr.in_stance[ticks]
+    stance_c = loaded_c & in_stance[..., None]
+    edge = loaded_c & (ft >= CONE_EDGE_FRACTION * mu_c * fn)
+    main = np.argmax(fn, axis=2)[..., None]
+    slip_main = np.take_along_axis(slip, main, 2)[..., 0]  # [m/s] of each foot's most loaded contact
+    lam = tr.grf_filter_w[ticks]  # [N] filter's prediction, world axes (nan: filter off or QP failed)
     lam_ok = np.all(np.isfinite(lam), axis=2)
-    filter_loaded = lam_ok & (np.nan_to_num(lam[..., 2]) >= MIN_NORMAL_FORCE_N)
+    filter_loaded = np.zeros_like(plant_loaded)
+    normals = None
+    if tr.filter_on:
+        normals = terrain_normals(tr, ticks, lam_ok & (np.nan_to_num(lam[..., 2]) > 0.0))
+        filter_loaded = lam_ok & (np.einsum("nlj,nlj->nl", np.nan_to_num(lam), normals) >= MIN_NORMAL_FORCE_N)
     loaded = plant_loaded | filter_loaded
-    stance = tr.in_stance[ticks] & plant_loaded
-    ft = np.hypot(f[..., 0], f[..., 1])
-    slip = np.hypot(tr.slip_w[ticks, :, 0], tr.slip_w[ticks, :, 1])  # [m/s] contact-point speed
     out: dict[str, float] = {
         f"contacts_loaded{suffix}": int(loaded.sum()),
-        f"contacts_loaded_outside_stance{suffix}": int((loaded & ~tr.in_stance[ticks]).sum()),
+        f"contacts_loaded_outside_stance{suffix}": int((loaded & ~in_stance).sum()),
+        f"contacts_loaded_flank{suffix}": int((loaded_c & (tr.contact_normal_w[ticks][..., 2] < FLANK_COS)).sum()),
     }
-    for name, sel in (("", plant_loaded), ("_stance", stance)):
+    for name, sel, feet in (("", loaded_c, plant_loaded), ("_stance", stance_c, plant_loaded & in_stance)):
         key = name + suffix
-        ratio = ft[sel] / f[..., 2][sel]
-        out[f"friction_cone_edge_rate{key}"] = _mean(ratio >= CONE_EDGE_FRACTION * mu[sel])
+        ratio = ft[sel] / fn[sel]
+        out[f"friction_cone_edge_rate{key}"] = _mean(edge[sel])
         out[f"friction_ratio_p95{key}"] = _pct(ratio, 95)  # capped at mu by the plant's cone: not a violation
         out[f"slip_mps_mean{key}"] = _mean(slip[sel])
         out[f"slip_mps_p95{key}"] = _pct(slip[sel], 95)
-        out[f"sliding_distance_m{key}"] = float(slip[sel].sum() * dt)
+        out[f"sliding_distance_m{key}"] = float(slip_main[feet].sum() * dt)
+    out[f"friction_cone_edge_rate_worst_window{suffix}"] = worst_window_rate(edge, loaded_c, window_ticks(dt))
     touchdown = touchdown_window(plant_loaded, max(1, round(TOUCHDOWN_FRACTION * stance_s / dt)))
-    out[f"touchdown_slip_mps_mean{suffix}"] = _mean(slip[touchdown])
+    out[f"touchdown_slip_mps_mean{suffix}"] = _mean(slip_main[touchdown])
     if tr.filter_on:
-        # GRF prediction error: |lambda - f| where either side carries load (lambda = 0 for a foot the filter
-        # treats as swing; ticks whose QP failed have no lambda and are left out, counted in qp_failed)
-        err = np.abs(np.where(lam_ok[..., None], lam, np.nan) - f)
-        for name, sel in (("", loaded & lam_ok), ("_stance", stance & lam_ok)):
-            out[f"grf_mae_z_n{name}{suffix}"] = _mean(err[..., 2][sel])
-            out[f"grf_mae_xy_n{name}{suffix}"] = _mean(err[..., :2][sel])
-        # the filter's planned tangential demand against the TRUE cone under the foot: beyond it, the plant
-        # had to refuse the force the filter planned with (over-estimated mu, or a wrong contact model)
-        lam_t = np.hypot(lam[..., 0], lam[..., 1])[filter_loaded]
-        lam_n = lam[..., 2][filter_loaded]
-        # (the square pyramid's corners lie exactly on the cone: |lambda_t| = mu lambda_n up to rounding)
-        out[f"filter_demand_beyond_cone_rate{suffix}"] = _mean(lam_t > mu[filter_loaded] * lam_n * (1 + CONE_RTOL))
+        out.update(_filter_forces(tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix))
+    return out
+
+
+FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank
+
+
+def _filter_forces(tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,
+                   loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
+                   suffix: str) -> dict[str, float]:
+    """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
+    filter's planned force against the true cone about the terrain normal under the foot."""
+    out: dict[str, float] = {}
+    f = tr.grf_plant_w[ticks]  # [N] net force on each foot (foot sensor), world axes
+    # lambda = 0 for a foot the filter treats as swing; ticks whose QP failed have no lambda (qp_failed)
+    err = np.where(lam_ok[..., None], lam, np.nan) - f
+    for name, sel in (("", loaded & lam_ok), ("_stance", in_stance & lam_ok)):
+        out[f"grf_mae_z_n{name}{suffix}"] = _mean(np.abs(err[..., 2][sel]))
+        out[f"grf_mae_xy_n{name}{suffix}"] = _mean(np.hypot(err[..., 0], err[..., 1])[sel])
+    # beyond the TRUE cone: the plant had to refuse the force the filter planned (over-estimated mu, or a
+    # wrong contact model); the square pyramid's corners lie on the cone up to rounding (CONE_RTOL)
+    lam0 = np.nan_to_num(lam)
+    lam_n = np.einsum("nlj,nlj->nl", lam0, normals)
+    lam_t = np.linalg.norm(lam0 - lam_n[..., None] * normals, axis=2)
+    beyond = filter_loaded & (lam_t > tr.mu_foot[ticks] * lam_n * (1 + CONE_RTOL))
+    out[f"filter_demand_beyond_cone_rate{suffix}"] = _mean(beyond[filter_loaded])
+    out[f"filter_demand_beyond_cone_rate_worst_window{suffix}"] = worst_window_rate(beyond, filter_loaded,
+                                                                                    window_ticks(dt))
     return out

@@ -17,7 +17,7 @@ class HealthLimits:
     qp_failed_rate_max: float = 0.05  # [-] share of filtered ticks whose QP failed (fallback torque applied)
     barrier_negative_rate_max: float = 0.05  # [-] share of swing ticks with the filter's h < 0 while solved
     barrier_psi_realized_negative_rate_max: float = 0.05  # [-] swing ticks whose realised ECBF condition < 0
-    demand_beyond_cone_rate_max: float = 0.01  # [-] filter-loaded feet planned beyond the true cone
+    demand_beyond_cone_rate_max: float = 0.01  # [-] filter-loaded feet planned beyond the true cone, worst 0.5 s
     residual_alarm_rate_max: float = 0.05  # [-] walking ticks with a model residual beyond the bounds below
     residual_trunk_force_n_max: float = 5.0  # [N] per-tick bound on |trunk-force residual|
     residual_joint_nm_max: float = 2.0  # [N·m] per-tick bound on the largest joint residual
@@ -30,8 +30,9 @@ CHECKS = {
                               "filter's own barrier h < 0 on swing ticks while the QP reported solved"),
     "barrier_psi_realized_negative_rate": ("barrier_psi_realized_negative_rate_max",
                                            "the barrier evolved worse than the filter planned"),
-    "filter_demand_beyond_cone_rate": ("demand_beyond_cone_rate_max",
-                                       "filter planned contact forces outside the true friction cone"),
+    "filter_demand_beyond_cone_rate_worst_window": ("demand_beyond_cone_rate_max",
+                                                    "filter planned contact forces outside the true friction "
+                                                    "cone (worst 0.5 s window)"),
     "residual_alarm_rate": ("residual_alarm_rate_max",
                             "the controller's model disagrees with what the plant did"),
 }

@@ -14,6 +14,7 @@ from taslel_bench.metrics.clearance import clearance_metrics
 from taslel_bench.metrics.contacts import contact_metrics
 from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.metrics.residuals import residual_metrics
+from taslel_bench.metrics.verdict import SafetyLimits, judge
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import TICK_PARTS
 
@@ -27,12 +28,13 @@ def _median(x: np.ndarray) -> float:
 
 
 DEFAULT_LIMITS = HealthLimits()
+DEFAULT_SAFETY = SafetyLimits()
 
 
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
-              limits: HealthLimits = DEFAULT_LIMITS) -> dict[str, object]:  # fmt: skip
+              limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY) -> dict[str, object]:  # fmt: skip
     """The run's summary. ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip window);
-    ``limits``: when the run is ``degraded`` instead of ``ok``."""
+    ``limits``: when the run is ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``."""
     tr, n = res.trace, res.trace.n
     out: dict[str, object] = {
         "status": res.status,
@@ -53,15 +55,16 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
         out[f"tick_{part}_us_median"] = _median(tr.tick_parts_us[:n, j])
     k0 = min(round(stand_duration_s / control_dt_s), n)  # first walking tick
     out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
-    out.update(filter_metrics(res))
+    out.update(filter_metrics(res, k0))
     out.update(contact_metrics(tr, k0, control_dt_s, stance_duration_s))
-    out.update(clearance_metrics(tr, k0))
+    out.update(clearance_metrics(tr, k0, control_dt_s))
     out.update(residual_metrics(tr, k0, limits))
     out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
     if "residuals_error" in res.extras:
         out["residuals_error"] = str(res.extras["residuals_error"])
     out.update(estimator_metrics(res))
     out["status"], out["degraded_reasons"] = assess(out, limits)
+    out["safe"], out["unsafe_reasons"] = judge(out, safety)
     return out
 
 
@@ -84,16 +87,16 @@ def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[st
     }
 
 
-def filter_metrics(res: EpisodeResult) -> dict[str, float]:
-    """Intervention = mean over ticks of ||u - u_nom||_2 [N·m], beside its reference magnitude
-    ``u_nom_nm_mean`` = mean ||u_nom||_2 (what the nominal controller asks for); QP timings from the
-    backend's own timer (solve) and the filter's (build)."""
+def filter_metrics(res: EpisodeResult, k0: int = 0) -> dict[str, float]:
+    """Intervention = mean over the walking ticks ``k0:n`` of ||u - u_nom||_2 [N·m], beside its reference
+    magnitude ``u_nom_nm_mean`` = mean ||u_nom||_2 over the same ticks (what the nominal controller asks for);
+    QP counts and timings from the backend's own timer (solve) and the filter's (build), every filtered tick."""
     tr, n = res.trace, res.trace.n
-    du = np.linalg.norm(tr.u[:n] - tr.u_nom[:n], axis=1)
-    u_nom = np.linalg.norm(tr.u_nom[:n], axis=1)
+    du = np.linalg.norm(tr.u[k0:n] - tr.u_nom[k0:n], axis=1)
+    u_nom = np.linalg.norm(tr.u_nom[k0:n], axis=1)
     out: dict[str, float] = {
-        "intervention_nm_mean": float(du.mean()) if n else math.nan,
-        "u_nom_nm_mean": float(u_nom.mean()) if n else math.nan,
+        "intervention_nm_mean": float(du.mean()) if du.size else math.nan,
+        "u_nom_nm_mean": float(u_nom.mean()) if du.size else math.nan,
     }
     if not tr.filter_on:
         out.update(qp_solves=0, qp_failed_rate=math.nan)
@@ -110,7 +113,7 @@ def filter_metrics(res: EpisodeResult) -> dict[str, float]:
         qp_solve_us_p99=_pct(solve, 99),
         qp_solve_us_max=float(solve.max()) if solve.size else math.nan,
         qp_build_us_median=_median(build[np.isfinite(build)]),
-        intervention_nm_max=float(du.max()) if n else math.nan,
+        intervention_nm_max=float(du.max()) if du.size else math.nan,
     )
     it = tr.qp_iterations[:n]
     if np.any(it >= 0):

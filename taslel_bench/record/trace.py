@@ -195,6 +195,10 @@ class EpisodeTrace:
             raise RuntimeError("EpisodeTrace.bind() must be called first")
         return self._context[1]
 
+    def terrain(self) -> Terrain | None:
+        """The terrain :meth:`bind` was given (None: unbound or no terrain)."""
+        return self._context[3] if self._context is not None else None
+
     def derive(self, k0: int, k1: int) -> dict[str, np.ndarray]:
         """The named plant quantities of ticks ``k0:k1`` from their raw rows (vectorised; the same
         definitions for a chunk written during the episode as for the whole episode after it)."""

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits
 from taslel_bench.config.validate import (
     validate,
@@ -190,7 +191,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     diagnostics (optional ``diagnostics()``) and the backend's settings."""
     dt = 1.0 / float(cfg.control_rate_hz)
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
-    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg))
+    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg))
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))
     diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
