@@ -16,7 +16,9 @@ from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import PDGains
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FilterSettings
+from taslel_bench.config.safety import safety_limits
 from taslel_bench.metrics.health import HealthLimits
+from taslel_bench.metrics.verdict import SafetyLimits
 from taslel_bench.plant.build import PlantOptions
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.episode import EpisodeSettings
@@ -35,6 +37,7 @@ def test_core_settings_defaults_are_the_configs():
         "filter.robust": (settings.robust_settings(cfg.filter.robust), RobustSettings()),
         "episode": (settings.episode_settings(cfg), EpisodeSettings()),
         "health": (settings.health_limits(cfg), HealthLimits()),
+        "safety": (safety_limits(cfg), SafetyLimits()),
         "model": (settings.model_options(cfg), ModelOptions()),
         "plant": (settings.plant_options(cfg), PlantOptions()),
         "controller gait": (controller.gait.p, GaitParams()),

@@ -122,7 +122,7 @@ def test_multirun_with_a_failing_job_records_it_and_finishes_the_others(tmp_path
 
 def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
     """A sweep over filter.contact_velocity_gain: the gain becomes a float column and a row key of the
-    report (also for a crashed job, read from its overrides), and the paper table keeps k_v = 0 rows."""
+    report (also for a crashed job, read from its overrides), and the paper table has one section per gain."""
     for gain in (0.0, 50.0):
         run(compose_cfg(["duration=0.3", "progress=false", f"filter.contact_velocity_gain={gain}"]),
             tmp_path / f"gain={gain}", {"scenario": "flat", "solver": "daqp", "estimator": "oracle"})
@@ -135,7 +135,10 @@ def test_swept_contact_gain_is_a_report_column_and_a_typed_crash_row(tmp_path):
     report = write_report(tmp_path, frame).read_text()
     assert "| scenario | solver | filter_contact_velocity_gain | estimator |" in report
     assert "| flat | daqp | 50 | oracle | 1 | 0 |" in report
-    assert "`filter.contact_velocity_gain=0` (the paper's contact constraint) only" in report
+    # the paper table is split by the gain (never pooled), one section per value
+    assert "Filter-on runs split by `filter_contact_velocity_gain`" in report
+    assert "### Filter setting `filter_contact_velocity_gain=0.0`" in report
+    assert "### Filter setting `filter_contact_velocity_gain=50.0`" in report
 
 
 def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_path, monkeypatch):

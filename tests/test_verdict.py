@@ -137,3 +137,43 @@ def test_a_bad_safety_limit_is_refused_before_simulation(override, field):
     with pytest.raises(ConfigError) as err:
         validate(compose_cfg([override]))
     assert field in str(err.value)
+
+
+def _fake_runs() -> "pd.DataFrame":
+    """Finished obstacle runs: nominal ones (unsafe: clearance) and filter-on ones with the ECBF on (safe) or
+    off (unsafe), as a sweep over filter.ecbf.enabled=true,false leaves them."""
+    import pandas as pd
+
+    rows = []
+    for seed in range(2):
+        rows.append(dict(scenario="obstacle", filter_enabled=False, seed=seed, status="ok", fell=False,
+                         clearance_violation_rate=0.8, safe=False, unsafe_reasons="clearance: x=0.8 > 0.05 (...)",
+                         **{"filter.ecbf.enabled": ""}))
+        for ecbf, rate in (("true", 0.001), ("false", 0.7)):
+            rows.append(dict(scenario="obstacle", filter_enabled=True, seed=seed, status="ok", fell=False,
+                             clearance_violation_rate=rate, safe=rate < 0.05,
+                             unsafe_reasons="" if rate < 0.05 else "clearance: x=0.7 > 0.05 (...)",
+                             **{"filter.ecbf.enabled": ecbf}))
+    return pd.DataFrame(rows)
+
+
+def test_claims_are_split_by_every_filter_override_and_state_the_verdicts():
+    from taslel_bench.sweep.claims import paper_claims
+
+    text = paper_claims(_fake_runs())
+    assert "Filter-on runs split by `filter.ecbf.enabled`" in text
+    on, off = text.split("### Filter setting `filter.ecbf.enabled=false`")[1], text
+    assert "### Filter setting `filter.ecbf.enabled=true`" in off
+    assert "Violation rate 0.8 -> 0.7 of swing ticks" in on  # the ECBF-off runs alone, not pooled
+    assert "Violation rate 0.8 -> 0.001 of swing ticks" in text
+    assert "obstacle 2/2 (clearance 2) nominal vs 0/2 filtered" in text
+    assert "obstacle 2/2 (clearance 2) nominal vs 2/2 (clearance 2) filtered" in text
+
+
+def test_the_verdict_table_counts_unsafe_runs_and_reasons_per_group():
+    from taslel_bench.sweep.verdict_table import verdict_table
+
+    table = verdict_table(_fake_runs(), ["scenario", "filter_enabled", "filter.ecbf.enabled"])
+    got = {(r["filter_enabled"], r["filter.ecbf.enabled"]): (r["unsafe"], r["clearance"], r["fell"])
+           for _, r in table.iterrows()}
+    assert got == {(False, ""): ("2/2", 2, 0), (True, "false"): ("2/2", 2, 0), (True, "true"): ("0/2", 0, 0)}

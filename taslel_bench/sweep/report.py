@@ -19,6 +19,7 @@ from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
 from taslel_bench.sweep.stills import still_strips
+from taslel_bench.sweep.verdict_table import verdict_section
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
@@ -91,6 +92,7 @@ SAFETY_COLUMNS = {
     "grf_mae_z_n_stance": "grf_mae_z_n_stance",
     "grf_mae_xy_n": "grf_mae_xy_n",
     "cone_edge_rate": "friction_cone_edge_rate",
+    "cone_edge_rate_worst_0.5s": "friction_cone_edge_rate_worst_window",
     "demand_beyond_cone_rate": "filter_demand_beyond_cone_rate",
     "slip_mps_mean": "slip_mps_mean",
     "sliding_distance_m": "sliding_distance_m",
@@ -98,6 +100,7 @@ SAFETY_COLUMNS = {
     "clearance_violation_rate": "clearance_violation_rate",
     "clearance_depth_p95_m": "clearance_violation_depth_p95_m",
     "trips": "trips",
+    "stance_strikes": "stance_flank_strikes",
     "barrier_negative_rate": "barrier_negative_rate",
     "residual_joint_nm": "residual_joint_nm_rms",
     "residual_trunk_force_n": "residual_trunk_force_n_rms",
@@ -302,21 +305,28 @@ How each column is measured (all plant quantities in MuJoCo, per run over the wa
 over the row's finished runs, `ok` or `degraded`; `fall_rate` counts falls over those runs; `degraded` runs
 crossed a health limit and are listed below):
 - `speed_mps`: world-x displacement of the trunk from the start of walking / walking time.
-- `intervention_nm`: mean over ticks of ||u - u_nom||₂; `u_nom_nm`: mean ||u_nom||₂, its reference size.
-- *Loaded* contacts: every (tick, foot) with a MuJoCo normal force >= 1 N or a filter lambda_z >= 1 N (early
-  touchdowns in the scheduled swing and lift-off lag included); `_stance`: the filter's stance set with
-  plant load (the definition used before, and the paper's selection).
-- `grf_mae_*`: |filter lambda - MuJoCo contact force| (world axes) over loaded contacts (lambda = 0 where the
-  filter treats the foot as swing).
-- `cone_edge_rate`: share of plant-loaded contacts with |f_t| >= 0.98 mu f_n, mu = the friction under that
-  foot: sliding or about to. `demand_beyond_cone_rate`: share of filter-loaded contacts whose planned
-  |lambda_t| exceeds mu lambda_z with the true mu under the foot (what the plant had to refuse).
-- `slip_mps_mean`: mean horizontal speed of the contact point over plant-loaded contacts;
-  `sliding_distance_m`: its integral over time, summed over the feet; `touchdown_slip_mps`: the mean over
-  the first 10 % of the stance duration after each touchdown.
-- `clearance_violation_rate`: unloaded swing ticks with the foot-sphere bottom more than 1 mm below the
-  virtual profile z(s); `clearance_depth_p95_m`: 95th percentile of how far below.
-- `trips`: onsets of a swing foot or a lower leg touching a physical obstacle (MuJoCo contacts, distance <= 0).
+- `intervention_nm`: mean over walking ticks of ||u - u_nom||₂; `u_nom_nm`: mean ||u_nom||₂, its reference size.
+- Contacts are judged in MuJoCo's own contact frame (its normal and friction), every contact of a foot with
+  any terrain geom: a *loaded contact* has a normal force f_n >= 1 N (a foot on a log's flank included).
+  *Loaded* feet (GRF headline): a loaded plant contact or a filter lambda >= 1 N along the terrain normal
+  (early touchdowns and lift-off lag included); `_stance`: the filter's stance set (the paper's selection).
+- `grf_mae_*`: |filter lambda - MuJoCo contact force| (world axes) over loaded feet (lambda = 0 where the
+  filter treats the foot as swing): `z` the vertical error, `xy` the magnitude of the lateral error vector.
+- `cone_edge_rate`: share of loaded contacts with |f_t| >= 0.98 mu f_n in the contact frame, mu = that
+  contact's friction: sliding or about to; `_worst_0.5s`: the same over the worst 0.5 s window.
+  `demand_beyond_cone_rate`: share of filter-loaded feet whose planned lambda leaves the true cone about
+  the terrain normal under the foot (what the plant had to refuse).
+- `slip_mps_mean`: mean tangential speed of the contact point (relative to the terrain, normal component
+  removed) over loaded contacts; `sliding_distance_m`: its integral over time for each foot's most loaded
+  contact, summed over the feet; `touchdown_slip_mps`: the mean over the first 10 % of the stance duration
+  after each touchdown.
+- `clearance_violation_rate`: every swing tick (loaded ones included: lift-off lag, early touchdown) with
+  the foot-sphere bottom more than 1 mm below the virtual profile z(s); `clearance_depth_p95_m`: 95th
+  percentile of how far below.
+- `trips`: new contacts (after >= 10 ms without one) of a swing foot with an obstacle, plus new contacts of
+  a leg link (calf, thigh, hip) with one (MuJoCo contacts, distance <= 0); a contact continuing from stance
+  through lift-off is not a trip. `stance_strikes`: new foot contacts in stance whose normal is more than
+  45 deg from vertical (a log's flank).
 - `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
 - `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
   |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows
@@ -373,6 +383,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
         f"Packages: {info['packages']}  \n",
         f"Report written by {info['code']}; runs produced by {_run_commits(frame)}\n",
+        verdict_section(frame, group_columns(frame)) if not frame.empty else "",
         "## Safety and physics per group of runs (seeds pooled)\n",
         markdown_table(safety) if len(table) else "_no runs found_\n",
         "## Cost per group of runs\n" if len(table) else "",
