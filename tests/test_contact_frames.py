@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from taslel_bench.plant.contact_frames import ContactFrameReader
+from taslel_bench.plant.contact_frames import ContactFrameReader, ContactLog
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
 from tests.conftest import compose_cfg
@@ -53,8 +53,9 @@ def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
     rng = np.random.default_rng(3)
     d.qvel[:] = rng.normal(0.0, 0.3, m.nv)
     mujoco.mj_forward(m, d)
-    reader = ContactFrameReader(m)
-    reader.read(d)
+    reader, log = ContactFrameReader(m), ContactLog(1)
+    reader.record(d, log, 0)
+    frames = reader.frames(log, 0, 1)
     jacp = np.zeros((3, m.nv))
     checked = 0
     feet = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f): i for i, f in enumerate(a1.FOOT_FRAMES)}
@@ -68,7 +69,8 @@ def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
         n = c.frame[:3]
         expected = np.linalg.norm(v - (v @ n) * n)
         leg = feet[foot]
-        assert reader.slip_mps[leg, 0] == pytest.approx(expected, rel=1e-9, abs=1e-12)
-        assert abs(reader.normal_w[leg, 0, 2]) == pytest.approx(1.0)  # floor
+        assert frames["contact_slip_mps"][0, leg, 0] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        assert frames["contact_normal_w"][0, leg, 0, 2] == pytest.approx(1.0)  # floor, out of it
+        assert frames["contact_fn_n"][0, leg, 0] > 0.0
         checked += 1
     assert checked >= 3

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class SafetyLimits:
     trips_max: int = 0  # [-] trips per run (a swing foot's or a leg link's new contact with an obstacle)
-    cone_edge_rate_worst_window_max: float = 0.10  # [-] loaded contacts at the cone edge, worst 0.5 s window
-    clearance_violation_rate_worst_window_max: float = 0.05  # [-] swing ticks > 1 mm below z(s), worst window
+    cone_edge_rate_worst_window_max: float = 0.25  # [-] loaded contacts at the cone edge, worst 0.5 s window
+    clearance_violation_rate_worst_window_max: float = 0.10  # [-] swing ticks > 1 mm below z(s), worst window
     clearance_violation_depth_max_m: float = 0.01  # [m] deepest swing-foot violation of the profile z(s)
     demand_beyond_cone_rate_worst_window_max: float = 0.01  # [-] filter-loaded feet planned beyond the true cone
 

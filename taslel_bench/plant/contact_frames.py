@@ -1,14 +1,20 @@
 """Every contact of a foot with the terrain, in MuJoCo's own contact frame.
 
-:class:`ContactFrameReader` walks ``data.contact`` after a physics step and keeps, for each foot, up to
-:data:`MAX_CONTACTS_PER_FOOT` contacts of the foot sphere with any non-robot geom (floor, logs, steps,
-heightfields): the force MuJoCo applied in that contact's frame (``mj_contactForce``: normal first, then the
-two tangential components) [N], the contact's tangential friction coefficient ``friction[0]`` [-], the unit
-normal pointing out of the terrain into the foot (world axes), and the tangential speed [m/s] of the foot's
-material point at the contact position relative to the terrain's (the bodies' ``cvel``, as
-``mj_objectVelocity`` reads it, moved to ``contact.pos``; the normal component removed) — the slip at the contact, not at the sphere's
-lowest point. It also flags, per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle
-geom at distance <= 0 (a leg-link trip).
+In the control loop :meth:`ContactFrameReader.record` copies the raw contact rows of the tick's last physics
+step into a :class:`ContactLog` (the contact list's geoms, normals, positions, friction, distances, the
+contact-frame forces, and the velocities of the foot bodies); after the episode :meth:`ContactFrameReader.frames`
+turns them into per-foot quantities for every contact of a foot sphere with any non-robot geom (floor, logs,
+steps, heightfields), vectorised over ticks:
+
+* the force MuJoCo applied in that contact's frame (what ``mj_contactForce`` returns: normal first, then the
+  two tangential components) [N]: f_n and |f_t|;
+* the contact's tangential friction coefficient ``friction[0]`` [-];
+* the unit normal pointing out of the terrain into the foot (world axes; frame row 0 points from geom1 to
+  geom2);
+* the tangential speed [m/s] of the foot's material point at the contact position (the body's ``cvel`` moved
+  to ``contact.pos``, as ``mj_objectVelocity`` reads it; the normal component removed) — the slip at the
+  contact, not at the sphere's lowest point. Terrain geoms are static (world or mocap bodies: no velocity);
+* per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0.
 
 After ``mj_step`` the contact list, the constraint forces and the body velocities are those of the step's
 *starting* state, the same instant the foot sensors (:mod:`taslel_bench.plant.contacts`) report.
@@ -23,120 +29,124 @@ from taslel_bench.plant.contacts import foot_geom_ids, obstacle_geom_mask
 from taslel_bench.robot import a1
 
 MAX_CONTACTS_PER_FOOT = 3  # a sphere meets a plane and a log's flank at once at most twice in practice
+MAX_CONTACTS_LOGGED = 24  # contacts kept per tick (the robot on flat ground has 2-4; overflow is counted)
+
+
+class ContactLog:
+    """Raw contact rows per tick (``capacity`` ticks, up to :data:`MAX_CONTACTS_LOGGED` contacts each)."""
+
+    def __init__(self, capacity: int) -> None:
+        c, m = capacity, MAX_CONTACTS_LOGGED
+        self.count = np.zeros(c, np.int32)  # ncon of the tick (may exceed m)
+        self.geom = np.full((c, m, 2), -1, np.int32)
+        self.normal = np.zeros((c, m, 3))  # frame row 0, from geom1 to geom2
+        self.pos = np.zeros((c, m, 3))  # [m] contact position, world
+        self.friction = np.zeros((c, m))  # [-] tangential coefficient
+        self.dist = np.zeros((c, m))  # [m] negative: penetration
+        self.force = np.zeros((c, m, 3))  # [N] in the contact frame (normal, tangent1, tangent2)
+        self.foot_cvel = np.zeros((c, a1.N_LEGS, 6))  # (omega, v at the root's subtree com) of each foot's body
+        self.root_com = np.zeros((c, 3))  # [m] subtree centre of mass of the robot's root body
 
 
 class ContactFrameReader:
-    """Per-foot contact-frame quantities of the last step (arrays (4, K), K = MAX_CONTACTS_PER_FOOT, zero /
-    False in unused slots; ``count`` (4,) the number of foot-terrain contacts, possibly more than K, in which
-    case the K with the largest normal force are kept):
-
-    ``normal_force_n`` f_n [N] >= 0; ``tangential_force_n`` |f_t| [N]; ``mu`` tangential friction [-];
-    ``normal_w`` (4, K, 3) unit normal out of the terrain, world axes; ``slip_mps`` tangential speed of the
-    contact point relative to the terrain [m/s]; ``on_obstacle`` the terrain geom is an obstacle and the
-    contact is touching (distance <= 0); ``touching`` the contact's distance is <= 0 (not only inside a
-    margin); ``leg_link_obstacle`` (4,) a non-foot link of the leg touches an
-    obstacle (distance <= 0)."""
+    """Records raw contact rows in the loop (:meth:`record`) and derives the per-foot contact-frame arrays
+    (:meth:`frames`)."""
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model
         feet = foot_geom_ids(model)
-        root = model.body_rootid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)]
-        self._is_robot = model.body_rootid[model.geom_bodyid] == root
-        self._foot_leg = np.full(model.ngeom, -1)
+        trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        self._root = int(model.body_rootid[trunk])
+        self._is_robot = model.body_rootid[model.geom_bodyid] == self._root
+        self._foot_leg = np.full(model.ngeom + 1, -1)  # index -1 (an unused row) maps to -1 too
         self._foot_leg[feet] = np.arange(a1.N_LEGS)
-        self._link_leg = np.full(model.ngeom, -1)  # leg of every other robot geom below the trunk
+        self._link_leg = np.full(model.ngeom + 1, -1)  # leg of every other robot geom below the trunk
         for g in range(model.ngeom):
             name = model.body(model.geom_bodyid[g]).name
             for i, leg in enumerate(a1.LEGS):
                 if self._is_robot[g] and self._foot_leg[g] < 0 and name.startswith(f"{leg}_"):
                     self._link_leg[g] = i
-        self._is_obstacle = obstacle_geom_mask(model)
-        k = MAX_CONTACTS_PER_FOOT
-        self.normal_force_n = np.zeros((a1.N_LEGS, k))
-        self.tangential_force_n = np.zeros((a1.N_LEGS, k))
-        self.mu = np.zeros((a1.N_LEGS, k))
-        self.normal_w = np.zeros((a1.N_LEGS, k, 3))
-        self.slip_mps = np.zeros((a1.N_LEGS, k))
-        self.on_obstacle = np.zeros((a1.N_LEGS, k), bool)
-        self.touching = np.zeros((a1.N_LEGS, k), bool)
-        self.count = np.zeros(a1.N_LEGS, np.int32)
-        self.leg_link_obstacle = np.zeros(a1.N_LEGS, bool)
-        self._force = np.zeros(6)
+        self._is_robot = np.append(self._is_robot, True)
+        self._is_obstacle = np.append(obstacle_geom_mask(model), False)
+        self._foot_bodies = model.geom_bodyid[feet]
         self._elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+        self._force6 = np.zeros(6)
 
-    def _clear(self) -> None:
-        for a in (self.normal_force_n, self.tangential_force_n, self.mu, self.normal_w, self.slip_mps):
-            a.fill(0.0)
-        self.on_obstacle.fill(False)
-        self.touching.fill(False)
-        self.count.fill(0)
-        self.leg_link_obstacle.fill(False)
-
-    def read(self, data: mujoco.MjData) -> None:
-        """Fill the arrays from ``data`` (after ``mj_step`` or ``mj_forward``); vectorised over contacts."""
-        self._clear()
-        if data.ncon == 0:
+    # ---------------------------------------------------------------------------------------- in the loop
+    def record(self, data: mujoco.MjData, log: ContactLog, k: int) -> None:
+        """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``."""
+        n = data.ncon
+        log.count[k] = n
+        log.foot_cvel[k] = data.cvel[self._foot_bodies]
+        log.root_com[k] = data.subtree_com[self._root]
+        if n == 0:
             return
+        m = min(n, MAX_CONTACTS_LOGGED)
         con = data.contact
-        geom = con.geom
+        log.geom[k, :m] = con.geom[:m]
+        log.geom[k, m:] = -1
+        log.normal[k, :m] = con.frame[:m, :3]
+        log.pos[k, :m] = con.pos[:m]
+        log.friction[k, :m] = con.friction[:m, 0]
+        log.dist[k, :m] = con.dist[:m]
+        adr, dim = con.efc_address[:m], con.dim[:m]
+        if self._elliptic and adr.min() >= 0 and dim.min() == 3 and dim.max() == 3:
+            log.force[k, :m] = data.efc_force[adr[:, None] + np.arange(3)]  # = mj_contactForce (elliptic)
+        else:
+            for i in range(m):
+                mujoco.mj_contactForce(self.model, data, i, self._force6)
+                log.force[k, i] = self._force6[:3]
+
+    # -------------------------------------------------------------------------------------- after the loop
+    def frames(self, log: ContactLog, k0: int, k1: int) -> dict[str, np.ndarray]:
+        """Per-foot arrays of ticks ``k0:k1`` (shape (n, 4, K), K = MAX_CONTACTS_PER_FOOT, zero / False in
+        unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept):
+        ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
+        (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;
+        ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4)."""
+        t = slice(k0, k1)
+        n, kk = k1 - k0, MAX_CONTACTS_PER_FOOT
+        geom = log.geom[t]
         robot = self._is_robot[geom]
-        terrain_pair = robot[:, 0] != robot[:, 1]
-        foot_leg = self._foot_leg[geom]
-        self._leg_links(geom, terrain_pair & (con.dist <= 0.0))
-        idx = np.flatnonzero(terrain_pair & ((foot_leg[:, 0] >= 0) | (foot_leg[:, 1] >= 0)))
-        if idx.size == 0:
-            return
-        pair = geom[idx]
-        foot_is_geom2 = foot_leg[idx, 1] >= 0
-        foot = np.where(foot_is_geom2, pair[:, 1], pair[:, 0])
-        ground = np.where(foot_is_geom2, pair[:, 0], pair[:, 1])
-        force = self._forces_in_contact_frame(data, con, idx)  # [N] (k, 3) normal, tangent1, tangent2
-        n = con.frame[idx, :3] * np.where(foot_is_geom2, 1.0, -1.0)[:, None]  # out of the terrain, into the foot
-        p = con.pos[idx]
-        v = self._point_velocity(data, foot, p) - self._point_velocity(data, ground, p)  # [m/s] foot - terrain
-        v_t = v - np.sum(v * n, axis=1)[:, None] * n
-        legs = self._foot_leg[foot]
-        order = np.lexsort((-force[:, 0], legs))  # by leg, then the largest normal force first
-        legs_sorted = legs[order]
-        slot = np.arange(order.size) - np.searchsorted(legs_sorted, legs_sorted, side="left")
-        keep = slot < MAX_CONTACTS_PER_FOOT
-        j, leg, slot = order[keep], legs_sorted[keep], slot[keep]
-        np.add.at(self.count, legs, 1)
-        dist = con.dist[idx]
-        self.normal_force_n[leg, slot] = force[j, 0]
-        self.tangential_force_n[leg, slot] = np.hypot(force[j, 1], force[j, 2])
-        self.mu[leg, slot] = con.friction[idx[j], 0]
-        self.normal_w[leg, slot] = n[j]
-        self.slip_mps[leg, slot] = np.linalg.norm(v_t[j], axis=1)
-        self.touching[leg, slot] = dist[j] <= 0.0
-        self.on_obstacle[leg, slot] = self._is_obstacle[ground[j]] & (dist[j] <= 0.0)
-
-    def _leg_links(self, geom: np.ndarray, touching: np.ndarray) -> None:
-        """``leg_link_obstacle`` from the touching robot-terrain contacts ``geom`` (ncon, 2)."""
-        link_leg = self._link_leg[geom]
+        used = geom[..., 0] >= 0
+        terrain_pair = used & (robot[..., 0] != robot[..., 1])
+        touching = log.dist[t] <= 0.0
+        out = {"leg_link_obstacle_contact": np.zeros((n, a1.N_LEGS), bool)}
+        link = self._link_leg[geom]
         for side in (0, 1):
-            hit = touching & (link_leg[:, side] >= 0) & self._is_obstacle[geom[:, 1 - side]]
-            self.leg_link_obstacle[link_leg[hit, side]] = True
-
-    def _forces_in_contact_frame(self, data: mujoco.MjData, con, idx: np.ndarray) -> np.ndarray:
-        """(k, 3) [N] force of contacts ``idx`` in their frames: with the elliptic cone and condim 3 the
-        constraint forces themselves (what ``mj_contactForce`` returns), otherwise ``mj_contactForce``."""
-        adr, dim = con.efc_address[idx], con.dim[idx]
-        if self._elliptic and np.all(dim == 3) and np.all(adr >= 0):
-            return data.efc_force[adr[:, None] + np.arange(3)]
-        out = np.zeros((idx.size, 3))
-        for r, i in enumerate(idx):
-            mujoco.mj_contactForce(self.model, data, int(i), self._force)
-            out[r] = self._force[:3]
+            hit = terrain_pair & touching & (link[..., side] >= 0) & self._is_obstacle[geom[..., 1 - side]]
+            tick, j = np.nonzero(hit)
+            out["leg_link_obstacle_contact"][tick, link[tick, j, side]] = True
+        foot_leg = self._foot_leg[geom]
+        tick, j = np.nonzero(terrain_pair & ((foot_leg[..., 0] >= 0) | (foot_leg[..., 1] >= 0)))
+        foot_is_geom2 = foot_leg[tick, j, 1] >= 0
+        leg = np.where(foot_is_geom2, foot_leg[tick, j, 1], foot_leg[tick, j, 0])
+        ground = np.where(foot_is_geom2, geom[tick, j, 0], geom[tick, j, 1])
+        force = log.force[t][tick, j]
+        normal = log.normal[t][tick, j] * np.where(foot_is_geom2, 1.0, -1.0)[:, None]
+        # [m/s] the foot's material point at the contact: v + omega x (p - c), c the root's subtree com
+        cvel = log.foot_cvel[t][tick, leg]
+        r = log.pos[t][tick, j] - log.root_com[t][tick]
+        v = cvel[:, 3:] + np.cross(cvel[:, :3], r)
+        v_t = v - np.sum(v * normal, axis=1)[:, None] * normal
+        order = np.lexsort((-force[:, 0], leg, tick))  # per (tick, leg), the largest normal force first
+        key = tick[order] * a1.N_LEGS + leg[order]
+        slot = np.arange(order.size) - np.searchsorted(key, key, side="left")
+        keep = slot < kk
+        o, s = order[keep], slot[keep]
+        ti, li = tick[o], leg[o]
+        arrays = {"contact_fn_n": np.zeros((n, a1.N_LEGS, kk)), "contact_ft_n": np.zeros((n, a1.N_LEGS, kk)),
+                  "contact_mu": np.zeros((n, a1.N_LEGS, kk)), "contact_slip_mps": np.zeros((n, a1.N_LEGS, kk)),
+                  "contact_normal_w": np.zeros((n, a1.N_LEGS, kk, 3)),
+                  "contact_touching": np.zeros((n, a1.N_LEGS, kk), bool),
+                  "contact_on_obstacle": np.zeros((n, a1.N_LEGS, kk), bool)}
+        arrays["contact_fn_n"][ti, li, s] = force[o, 0]
+        arrays["contact_ft_n"][ti, li, s] = np.hypot(force[o, 1], force[o, 2])
+        arrays["contact_mu"][ti, li, s] = log.friction[t][tick[o], j[o]]
+        arrays["contact_normal_w"][ti, li, s] = normal[o]
+        arrays["contact_slip_mps"][ti, li, s] = np.linalg.norm(v_t[o], axis=1)
+        touch = touching[tick[o], j[o]]
+        arrays["contact_touching"][ti, li, s] = touch
+        arrays["contact_on_obstacle"][ti, li, s] = touch & self._is_obstacle[ground[o]]
+        out.update(arrays)
         return out
-
-    def _point_velocity(self, data: mujoco.MjData, geoms: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """(k, 3) [m/s] world-axes velocity of the material point at ``p`` (k, 3) [m] of each geom's body:
-        ``cvel`` holds (omega, v) at the subtree centre of mass of the body's root (as mj_objectVelocity
-        reads it), so v_p = v + omega x (p - c)."""
-        body = self.model.geom_bodyid[geoms]
-        cvel = data.cvel[body]
-        r = p - data.subtree_com[self.model.body_rootid[body]]
-        w, v = cvel[:, :3], cvel[:, 3:]
-        return v + np.stack([w[:, 1] * r[:, 2] - w[:, 2] * r[:, 1], w[:, 2] * r[:, 0] - w[:, 0] * r[:, 2],
-                             w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]], axis=1)

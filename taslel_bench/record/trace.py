@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT
+from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT, ContactLog
 from taslel_bench.robot import a1
 from taslel_bench.terrain.terrain import Terrain
 
@@ -83,10 +83,12 @@ class EpisodeTrace:
         self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
         self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
-        # every foot-terrain contact in MuJoCo's contact frame (taslel_bench.plant.contact_frames), per tick,
-        # leg and slot (K slots, zero / False unused): f_n [N], |f_t| [N], the contact's mu [-], the normal out
-        # of the terrain (world axes), the contact point's tangential speed [m/s], touching (distance <= 0),
-        # on an obstacle geom; per leg: a non-foot link of the leg touching an obstacle
+        self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
+        # derived from contact_log by finalize() (taslel_bench.plant.contact_frames; zero until then): every
+        # foot-terrain contact in MuJoCo's contact frame, per tick, leg and slot (K slots, zero / False unused):
+        # f_n [N], |f_t| [N], the contact's mu [-], the normal out of the terrain (world axes), the contact
+        # point's tangential speed [m/s], touching (distance <= 0), on an obstacle geom; per leg: a non-foot
+        # link of the leg touching an obstacle
         k = MAX_CONTACTS_PER_FOOT
         self.contact_fn_n = np.zeros((c, nl, k))
         self.contact_ft_n = np.zeros((c, nl, k))
@@ -104,7 +106,7 @@ class EpisodeTrace:
         # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
         self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
-        self._context: tuple | None = None  # (bridge, contact reader, profile, terrain): see bind()
+        self._context: tuple | None = None  # (bridge, contact reader, profile, terrain, frames): see bind()
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
         self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
         self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
@@ -166,28 +168,18 @@ class EpisodeTrace:
         self.shin_floor_contact[k] = shin_floor_contact
         self.n = k + 1
 
-    def record_contact_frames(self, k: int, frames) -> None:
-        """Copy tick ``k``'s contact-frame rows from a :class:`taslel_bench.plant.contact_frames.ContactFrameReader`
-        that read the tick's last physics step."""
-        self.contact_fn_n[k] = frames.normal_force_n
-        self.contact_ft_n[k] = frames.tangential_force_n
-        self.contact_mu[k] = frames.mu
-        self.contact_normal_w[k] = frames.normal_w
-        self.contact_slip_mps[k] = frames.slip_mps
-        self.contact_touching[k] = frames.touching
-        self.contact_on_obstacle[k] = frames.on_obstacle
-        self.leg_link_obstacle_contact[k] = frames.leg_link_obstacle
-
     def main_contact(self, ticks: slice = slice(None)) -> np.ndarray:
         """(n, 4) index of each foot's contact slot with the largest normal force."""
         return np.argmax(self.contact_fn_n[ticks], axis=2)
 
-    def bind(self, br: StateBridge, contacts, profile, terrain: Terrain | None = None) -> None:
+    def bind(self, br: StateBridge, contacts, profile, terrain: Terrain | None = None, frames=None) -> None:
         """What deriving the named quantities needs: the state bridge (index maps), the episode's
         :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout), the scenario's clearance
         profile or None (then ``clearance_m`` is all nan) and the terrain (friction under each foot,
-        obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles)."""
-        self._context = (br, contacts, profile, terrain)
+        obstacles; None: the trunk's friction ``mu_true`` for every foot, no obstacles) and the
+        :class:`taslel_bench.plant.contact_frames.ContactFrameReader` that filled ``contact_log`` (None: the
+        contact-frame arrays stay as they are)."""
+        self._context = (br, contacts, profile, terrain, frames)
 
     def contact_reader(self):
         """The episode's :class:`taslel_bench.plant.contacts.FootContactReader` (sensor layout of ``sensordata_mj``)."""
@@ -204,7 +196,7 @@ class EpisodeTrace:
         definitions for a chunk written during the episode as for the whole episode after it)."""
         if self._context is None:
             raise RuntimeError("EpisodeTrace.bind() must be called before deriving quantities")
-        br, contacts, profile, terrain = self._context
+        br, contacts, profile, terrain, frames = self._context
         a, dv, ticks = br.free_qadr, br.free_dadr, slice(k0, k1)
         qpos, qvel = self.qpos_mj[ticks], self.qvel_mj[ticks]
         plant_side = contacts.from_sensor_log(self.sensordata_mj[ticks])
@@ -231,6 +223,8 @@ class EpisodeTrace:
             z_obstacle = profile.evaluate(self.swing_phase[ticks][swing])[0]
             clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
         out["clearance_m"] = clearance
+        if frames is not None:
+            out.update(frames.frames(self.contact_log, k0, k1))
         return out
 
     def finalize(self) -> None:
@@ -304,23 +298,23 @@ class EpisodeTrace:
             cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
-            self._contact_frame_columns(cols, t, i, leg)
+            self._contact_frame_columns(cols, d, t, i, leg)
             for name, log in self.barriers.items():
                 cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
                 cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
 
-    def _contact_frame_columns(self, cols: dict, t: slice, i: int, leg: str) -> None:
+    def _contact_frame_columns(self, cols: dict, d: dict, t: slice, i: int, leg: str) -> None:
         """Leg ``i``'s contacts in MuJoCo's contact frame: the summed normal force, and the tangential force,
-        friction, normal and contact-point slip of its contact with the largest normal force."""
-        fn = self.contact_fn_n[t, i]
-        main = np.argmax(fn, axis=1)[:, None]
-        cols[f"{leg}_contact_frame_fn_n"] = fn.sum(axis=1)
-        cols[f"{leg}_contact_frame_ft_n"] = np.take_along_axis(self.contact_ft_n[t, i], main, 1)[:, 0]
-        cols[f"{leg}_contact_frame_mu"] = np.take_along_axis(self.contact_mu[t, i], main, 1)[:, 0]
-        normal = np.take_along_axis(self.contact_normal_w[t, i], main[..., None], 1)[:, 0]
-        _put(cols, leg + "_contact_frame_normal_{}_w", "xyz", normal)
-        cols[f"{leg}_contact_frame_slip_mps"] = np.take_along_axis(self.contact_slip_mps[t, i], main, 1)[:, 0]
-        cols[f"{leg}_leg_link_obstacle_contact"] = self.leg_link_obstacle_contact[t, i]
+        friction, normal and contact-point slip of its most loaded contact (slot 0: sorted by normal force)."""
+        def get(name: str) -> np.ndarray:
+            return d[name][:, i] if name in d else getattr(self, name)[t, i]
+
+        cols[f"{leg}_contact_frame_fn_n"] = get("contact_fn_n").sum(axis=1)
+        cols[f"{leg}_contact_frame_ft_n"] = get("contact_ft_n")[:, 0]
+        cols[f"{leg}_contact_frame_mu"] = get("contact_mu")[:, 0]
+        _put(cols, leg + "_contact_frame_normal_{}_w", "xyz", get("contact_normal_w")[:, 0])
+        cols[f"{leg}_contact_frame_slip_mps"] = get("contact_slip_mps")[:, 0]
+        cols[f"{leg}_leg_link_obstacle_contact"] = get("leg_link_obstacle_contact")
 
     def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
         """The controller model's residuals and barrier conditions (nan until computed after the episode)."""

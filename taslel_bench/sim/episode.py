@@ -179,7 +179,7 @@ class Episode:
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
-        trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain)
+        trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain, self.contact_frames)
         self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
         self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
@@ -210,9 +210,8 @@ class Episode:
         trace.record(k, t, d.qpos, d.qvel, d.sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                      tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         frames0 = time.perf_counter()
-        self.contact_frames.read(d)  # the contacts of the tick's last physics step, in their own frames
-        trace.record_contact_frames(k, self.contact_frames)
-        self._recording_s += time.perf_counter() - frames0  # metrics recording: not in wall_time_s
+        self.contact_frames.record(d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
+        self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
         trace.mu_hat_ready[k] = est.ready
         return self._ended(t, fall, unstable, res)
 
