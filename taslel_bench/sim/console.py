@@ -8,7 +8,8 @@ from rich.console import Console
 from rich.table import Table
 
 KEY_METRICS = (
-    "status", "degraded_reasons", "fell", "time_to_fall_s", "fall_reason", "distance_m", "mean_speed_mps",
+    "status", "degraded_reasons", "safe", "unsafe_reasons", "fell", "time_to_fall_s", "fall_reason", "distance_m",
+    "mean_speed_mps",
     "real_time_factor", "tick_us_median", "intervention_nm_mean", "u_nom_nm_mean", "qp_failed_rate",
     "qp_solve_us_median", "qp_solve_us_p99", "grf_mae_z_n", "grf_mae_z_n_stance", "friction_cone_edge_rate",
     "filter_demand_beyond_cone_rate", "slip_mps_mean", "sliding_distance_m", "clearance_violation_rate",

@@ -181,7 +181,7 @@ def _friction(runs: Runs, rows: list, sentences: list) -> None:
     sentences.append(
         f"**Friction constraint** (paper: the filter eliminates sliding on mu = 0.2): {verdict}. Loaded contacts "
         f"at the cone edge {edge_off:.3g} -> {edge_on:.3g}, total sliding distance {dist_off:.3g} -> {dist_on:.3g} m "
-        f"per run (nominal -> filter).")
+        f"per run (nominal -> filter); unsafe runs (verdict) {_unsafe(off)} nominal vs {_unsafe(on)} filtered.")
 
 
 def _clearance(runs: Runs, rows: list, sentences: list) -> None:
@@ -212,7 +212,8 @@ def _clearance(runs: Runs, rows: list, sentences: list) -> None:
         f"**ECBF ground clearance, virtual profile** (paper: the swing foot is kept above z(phi)): {verdict}. "
         f"Violation rate {r_off:.3g} -> {r_on:.3g} of swing ticks (loaded ones included), p95 depth "
         f"{_mean(on, 'clearance_violation_depth_p95_m') * 1000:.3g} mm with the ECBF. The profile is virtual: "
-        "no geometry in the plant, so a violation here costs nothing physically (see the logs).")
+        f"no geometry in the plant, so a violation here costs nothing physically (see the logs). Unsafe runs "
+        f"(verdict) {_unsafe(off)} nominal vs {_unsafe(on)} filtered.")
 
 
 def _logs(runs: Runs, rows: list, sentences: list) -> None:
