@@ -12,11 +12,11 @@ from omegaconf import OmegaConf
 
 from taslel_bench.config import settings
 from taslel_bench.config.compose import CONF_DIR, compose
+from taslel_bench.config.safety import safety_limits
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import PDGains
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FilterSettings
-from taslel_bench.config.safety import safety_limits
 from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.metrics.verdict import SafetyLimits
 from taslel_bench.plant.build import PlantOptions

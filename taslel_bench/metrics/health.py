@@ -31,8 +31,7 @@ CHECKS = {
     "barrier_psi_realized_negative_rate": ("barrier_psi_realized_negative_rate_max",
                                            "the barrier evolved worse than the filter planned"),
     "filter_demand_beyond_cone_rate_worst_window": ("demand_beyond_cone_rate_max",
-                                                    "filter planned contact forces outside the true friction "
-                                                    "cone (worst 0.5 s window)"),
+                                                    "filter planned forces outside the true cone (worst 0.5 s)"),
     "residual_alarm_rate": ("residual_alarm_rate_max",
                             "the controller's model disagrees with what the plant did"),
 }
