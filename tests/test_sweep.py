@@ -76,6 +76,9 @@ def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
     assert pd.read_parquet(tmp_path / "summary.parquet").shape[0] == 3
     report = write_report(tmp_path, frame).read_text()
     assert "| flat | daqp | oracle | 2 | 0 | 0 | 0/2 |" in report  # runs, errors, degraded, falls
+    # the first table: unsafe runs per group and why (the crashed job is not judged)
+    assert report.index("## Unsafe runs per group (the verdict)") < report.index("## Safety and physics per group")
+    assert "| flat | daqp | oracle | 2 | 0/2 | 2 | 0 | 0 | 0 |" in report  # runs, unsafe, status_ok, not_judged, fell, tripped
     assert "left no summary.json" in report
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
 
