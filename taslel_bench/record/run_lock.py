@@ -13,6 +13,7 @@ import json
 import os
 import socket
 from pathlib import Path
+from typing import Self
 
 LOCK_NAME = "run.lock"
 
@@ -58,9 +59,9 @@ class RunLock:
         self.stale_taken_over: str | None = None
         self._held = False
 
-    def acquire(self) -> "RunLock":
+    def acquire(self) -> Self:
         me = {"pid": os.getpid(), "host": socket.gethostname(),
-              "started": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}  # fmt: skip
+              "started": dt.datetime.now(dt.UTC).isoformat(timespec="seconds")}  # fmt: skip
         for _ in range(3):
             try:
                 fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
@@ -90,7 +91,7 @@ class RunLock:
             if holder is not None and holder.get("pid") == os.getpid():
                 self.path.unlink(missing_ok=True)
 
-    def __enter__(self) -> "RunLock":
+    def __enter__(self) -> Self:
         return self.acquire()
 
     def __exit__(self, *exc: object) -> None:

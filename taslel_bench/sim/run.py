@@ -18,17 +18,15 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.settings import health_limits
-from taslel_bench.config.validate import (
-    validate,
-)
+from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.residuals import alarm_events
 from taslel_bench.metrics.summary import summarize
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
-from taslel_bench.robot import a1
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
+from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
 from taslel_bench.util.provenance import code_version
@@ -85,7 +83,7 @@ def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
     for the plant (``robot.plant_mjcf`` with its includes and assets, or the URDF), the controller model's
     URDF, ``input_files`` (the estimator's checkpoints) and the code version."""
     plain = OmegaConf.to_container(cfg, resolve=True)
-    for key in ("progress", "force", *SWEEP_LEVEL_KEYS):
+    for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
     mjcf = cfg.robot.get("plant_mjcf")
@@ -227,6 +225,7 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
         "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
+        "memory_estimate_gb": memory_estimate_gb(cfg),  # [GB] checked against max_memory_gb before the run
         **code_version(),  # git_commit, git_dirty
     }
     out.update(plant_identity(cfg, built))

@@ -91,7 +91,7 @@ def _yaml_mapping(path: Path) -> dict:
 
     data = yaml.safe_load(path.read_text())
     if not isinstance(data, dict):
-        raise ValueError(f"holds a {type(data).__name__}, not a YAML mapping")
+        raise TypeError(f"holds a {type(data).__name__}, not a YAML mapping")
     return data
 
 
