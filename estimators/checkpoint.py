@@ -72,11 +72,24 @@ def load_checkpoint(name_or_path: str | Path) -> tuple[FrictionModel | EnsembleM
     except Exception as exc:  # torch raises RuntimeError, OSError, UnpicklingError ... on a damaged file
         raise CheckpointError(f"checkpoint weights {pt} cannot be read (truncated or not a torch state "
                               f"dict?): {type(exc).__name__}: {exc}") from exc
+    check_finite_weights(pt, state)
     try:
         return _build(meta, state)
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # RuntimeError: state dict mismatch
         raise CheckpointError(f"checkpoint {pt} with metadata {js} cannot be loaded into a model: "
                               f"{type(exc).__name__}: {exc}") from exc
+
+
+def check_finite_weights(pt: Path, state: object) -> None:
+    """Refuse weights holding NaN or infinity (a diverged training run): such a model answers NaN, which the
+    estimator would floor to ``mu_min`` without a word."""
+    if not isinstance(state, dict):
+        raise CheckpointError(f"checkpoint weights {pt} hold a {type(state).__name__}, not a state dict of tensors")
+    for key, value in state.items():
+        if isinstance(value, torch.Tensor) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            bad = int((~torch.isfinite(value)).sum())
+            raise CheckpointError(f"checkpoint weights {pt}: tensor {key!r} holds {bad} non-finite value(s) "
+                                  f"(NaN or infinity) of {value.numel()}; retrain or use another checkpoint")
 
 
 def _build(meta: dict, state: dict) -> tuple[FrictionModel | EnsembleModel, dict[str, object]]:

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from estimators.checkpoint import CheckpointError, load_checkpoint
+from estimators.checkpoint import CheckpointError, checkpoint_paths, load_checkpoint
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, filter_channels, sample_vector
 from estimators.models import VARIANTS, run_stages
 from estimators.safety import BandMargin
@@ -96,9 +96,11 @@ class DropDetector:
             raise ValueError(f"drop_detector.lookback must be an integer >= 1, got {lookback!r}")
         self.k, self.delta, self.confirm, self.lookback = float(k), float(delta), int(confirm), int(lookback)
         self.model = None
+        self.files: tuple[Path, ...] = ()
         if checkpoint is None:
             return
         self.model, self.meta = load_checkpoint(checkpoint)
+        self.files = checkpoint_paths(checkpoint)
         self.steps = int(self.model.cfg.window_steps)
         if not 1 <= self.steps < WINDOW_STEPS:
             raise ValueError(f"drop_detector checkpoint {checkpoint!r} has a {self.steps}-sample window; it must be "
@@ -155,6 +157,7 @@ class LearnedEstimator:
         if threads is not None:
             torch.set_num_threads(integer("estimator.threads", threads, 1))
         self.model, self.meta = self._load_model(variant, checkpoint, bound)
+        self._files = checkpoint_paths(checkpoint if checkpoint is not None else variant)
         self.bound = bound
         self.name = Path(checkpoint).stem if checkpoint is not None else variant
         self.prior_mu, self.k, self.mu_min = float(prior_mu), float(conservative_k), float(mu_min)
@@ -371,6 +374,11 @@ class LearnedEstimator:
                 self._hold[:] = np.inf
                 return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)
+
+    def input_files(self) -> list[Path]:
+        """The checkpoint files this estimator loaded (model and drop detector: weights and metadata), part of
+        the run's identity."""
+        return [*self._files, *(self.detector.files if self.detector is not None else ())]
 
     def diagnostics(self) -> dict[str, float]:
         """Counters of this episode: drops detected, samples, and with ``inference="thread"`` the deadline

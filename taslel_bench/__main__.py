@@ -2,10 +2,15 @@
 
 Each run writes its folder (summary.json, steps.parquet, events.json, episode.mcap); at the end of a
 multirun the :class:`taslel_bench.sweep.aggregate.SweepCallback` aggregates the sweep folder and writes the report.
+
+Exit codes (README, "Exit codes"): 0 every run ``ok`` (and the sweep's table and report written); 1 a run
+``error`` or ``degraded``, a failed report, a full disk; 2 bad input (a value refused before anything
+ran, a job list that maps two jobs to one run folder).
 """
 
 from __future__ import annotations
 
+import errno
 import sys
 from pathlib import Path
 
@@ -17,7 +22,19 @@ from omegaconf import DictConfig
 from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.run import record_job_error
+from taslel_bench.sweep import callback as sweep_callback
 from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides
+from taslel_bench.util.fields import ConfigError
+
+EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+_single_run_exit = [EXIT_OK]
+
+
+def _one_line(exc: BaseException) -> str:
+    """The error in one line; a full disk says so."""
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return f"disk full: {exc.strerror} writing {exc.filename or '(a run file)'}"
+    return f"{type(exc).__name__}: {exc}"
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
@@ -27,15 +44,32 @@ def main(cfg: DictConfig) -> dict:
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if "/" not in k and not k.startswith("hydra")}
+    multirun = hc.mode == RunMode.MULTIRUN
     try:
         summary = run(cfg, out_dir, choices, list(hc.overrides.task))
     except Exception as exc:
-        if hc.mode != RunMode.MULTIRUN:
-            raise  # a single run: the error (e.g. a bad value, naming the field) is the output
+        if not multirun:
+            if isinstance(exc, ConfigError):  # the refusal (naming the field, the value, what is valid) is the output
+                print(f"error: ConfigError: {exc}", file=sys.stderr)
+                _single_run_exit[0] = EXIT_BAD_INPUT
+                return {"status": "error", "message": str(exc)}
+            if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+                print(f"error: {_one_line(exc)}", file=sys.stderr)
+                _single_run_exit[0] = EXIT_RUNS_FAILED
+                return {"status": "error", "message": _one_line(exc)}
+            raise
         # in a sweep one bad job must not stop the others: leave an error summary the report lists
-        summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
+        try:
+            summary = record_job_error(out_dir, choices, cfg, exc, list(hc.overrides.task))
+        except OSError as write_exc:  # e.g. the disk is full: the launcher keeps the row for the table
+            summary = {"status": "error", "message": f"{_one_line(exc)}; its error summary could not be written "
+                                                     f"({_one_line(write_exc)})"}
+            print(f"{out_dir}: {summary['message']}", file=sys.stderr)
+            return summary
+    if not multirun:
+        _single_run_exit[0] = EXIT_OK if summary.get("status") == "ok" else EXIT_RUNS_FAILED
     print_summary(summary, out_dir)
-    if hc.mode == RunMode.MULTIRUN:
+    if multirun:
         from taslel_bench.sweep.aggregate import run_folders
 
         sweep_dir = Path(hc.sweep.dir)
@@ -52,3 +86,6 @@ if __name__ == "__main__":
     except LauncherNotInstalled as exc:
         sys.exit(f"error: {exc}")
     main()
+    # a sweep's code is set by its callback (table and report written, every run ok?)
+    code = sweep_callback.exit_code() if sweep_callback.sweep_ended() else _single_run_exit[0]
+    sys.exit(code)

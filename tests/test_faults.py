@@ -33,6 +33,10 @@ FAULTS = [
     # top level and record.*
     (["seed=${oops}"], "seed", "${oops}"),
     (["duration=1e9"], "duration", "1000000000.0"),
+    (["duration=3600"], "duration", "3600"),
+    (["filter.start_time=3600", "duration=0.5"], "filter.start_time", "3600"),
+    (["record.qps=true", "filter.enabled=false"], "record.qps", "True"),
+    (["max_memory_gb=0"], "max_memory_gb", "0"),
     (["physics_rate_hz=50", "control_rate_hz=50"], "physics_rate_hz", "50"),
     (["record.qps_every=0"], "record.qps_every", "0"),
     (["progress=maybe"], "progress", "'maybe'"),

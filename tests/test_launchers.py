@@ -33,7 +33,7 @@ def test_launcher_options_are_the_documented_three():
 @pytest.mark.parametrize(
     ("name", "target_class", "key", "value"),
     [
-        ("local", "JoblibLauncher", "n_jobs", -1),  # -1: every core of the machine, not a fixed count
+        ("local", "RobustJoblibLauncher", "n_jobs", -1),  # -1: every core of the machine, not a fixed count
         ("ray", "RayLauncher", "address", "local"),  # a new local Ray instance, whatever runs on the node
         ("slurm", "SlurmLauncher", "timeout_min", 30),
     ],

@@ -62,6 +62,11 @@ MAX_IMPRATIO = 100.0  # [-]
 MAX_SOLREF_TIMECONST_S = 1.0  # [s]
 MAX_SOLREF_DAMPRATIO = 10.0  # [-]
 MAX_FOOT_MARGIN_M = 0.05  # [m]
+# peak resident memory of one run [GB] = base + per tick x control ticks (stand + walk): the trace is held in
+# memory until the end. Fitted to runs of 10 / 60 / 300 s at 1 kHz, record.mcap on (peak 0.41 / 0.65 /
+# 1.60 GB; studies/notes/reliability.md)
+MEMORY_BASE_GB = 0.40
+MEMORY_PER_TICK_GB = 4.0e-6
 
 
 def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
@@ -117,6 +122,8 @@ def _validate(cfg: DictConfig) -> None:
     control_rate_hz = _top_level(cfg)
     stand_height_m = _controller(cfg, control_rate_hz)
     _filter(cfg, control_rate_hz)
+    _meaningful(cfg)
+    _memory(cfg, control_rate_hz)
     _robot(cfg, stand_height_m)
     _model(cfg)
     safety_limits(cfg)  # the verdict's limits (taslel_bench/config/safety.py)
@@ -147,6 +154,41 @@ def _top_level(cfg: DictConfig) -> int:
                why="at most control_rate_hz; null: every tick")
     _video(cfg)
     return control
+
+
+def memory_estimate_gb(cfg: DictConfig) -> float:
+    """[GB] the peak resident memory a run of ``cfg`` is expected to need (see :data:`MEMORY_PER_TICK_GB`)."""
+    ticks = (float(cfg.controller.stand_duration) + float(cfg.duration)) * float(cfg.control_rate_hz)
+    return MEMORY_BASE_GB + MEMORY_PER_TICK_GB * ticks
+
+
+def _memory(cfg: DictConfig, control_rate_hz: int) -> None:
+    """Refuse a run that would need more memory than ``max_memory_gb`` (before it runs for hours and is
+    killed by the OOM killer at the end)."""
+    limit = number("max_memory_gb", _get(cfg, "max_memory_gb", 8.0), 0.0, 1e4, lo_open=True, unit="GB")
+    need = memory_estimate_gb(cfg)
+    if need > limit:
+        longest = (limit - MEMORY_BASE_GB) / (MEMORY_PER_TICK_GB * control_rate_hz) - float(cfg.controller.stand_duration)
+        raise fail("duration", _get(cfg, "duration"),
+                   f"this run needs ~{need:.1f} GB by estimate ({MEMORY_PER_TICK_GB * 1e6:.0f} kB per control tick at "
+                   f"control_rate_hz={control_rate_hz}: the trace is held in memory until the end), more than "
+                   f"max_memory_gb={limit:g}; the longest run within it is ~{max(longest, 0):.0f} s (shorten the run, "
+                   f"lower control_rate_hz, or raise max_memory_gb if the machine has the memory)")
+
+
+def _meaningful(cfg: DictConfig) -> None:
+    """Combinations whose result would not mean what it says: a filter that never runs in the episode,
+    recording QPs of a filter that is off, an MCAP rate on a run without MCAP."""
+    walk_end_s = float(_get(cfg, "controller.stand_duration", 0.0)) + float(_get(cfg, "duration"))
+    filter_on = bool(_get(cfg, "filter.enabled"))
+    start = float(_get(cfg, "filter.start_time", 0.0))
+    if filter_on and start >= walk_end_s:
+        raise fail("filter.start_time", _get(cfg, "filter.start_time"),
+                   f"the filter would never run: the episode ends at {walk_end_s:g} s (controller.stand_duration + "
+                   f"duration); the run would report filter_enabled with no filtered tick. Use a start before "
+                   f"{walk_end_s:g} s, or filter.enabled=false")
+    if bool(_get(cfg, "record.qps", False)) and not filter_on:
+        raise fail("record.qps", True, "there is no QP to record with filter.enabled=false (set one of them)")
 
 
 def _video(cfg: DictConfig) -> None:
@@ -398,4 +440,4 @@ def _divisors(n: int) -> str:
 # ------------------------------------------------------------------------------------------ the axes
 
 
-__all__ = ["ConfigError", "check_finite", "validate"]
+__all__ = ["ConfigError", "check_finite", "memory_estimate_gb", "validate"]

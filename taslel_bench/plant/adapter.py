@@ -152,7 +152,8 @@ def adapt(
     file_joint = {core: names.file_name("joints", core) for core in a1.JOINT_NAMES}
     feet = {core: names.file_name("feet", core) for core in a1.FOOT_FRAMES}
     trunk = names.trunk or a1.TRUNK_BODY
-    problems = _joint_problems(file_joint, joints) + _foot_problems(feet, geoms)
+    unnamed = [g for g in spec.geoms if not g.name and g.type == mujoco.mjtGeom.mjGEOM_SPHERE]
+    problems = _joint_problems(file_joint, joints) + _foot_problems(feet, geoms, unnamed)
     problems += _trunk_problems(spec, trunk, bodies)
     chosen, act_problems = _find_actuators(spec, names, file_joint)
     problems += act_problems
@@ -201,19 +202,22 @@ def _joint_problems(file_joint: dict[str, str], joints: dict[str, mujoco.MjsJoin
     ]
 
 
-def _foot_problems(feet: dict[str, str], geoms: dict[str, mujoco.MjsGeom]) -> list[str]:
-    """The *feet* problem (as a list of at most one) when a core foot's file name is not a sphere geom."""
+def _foot_problems(feet: dict[str, str], geoms: dict[str, mujoco.MjsGeom],
+                   unnamed: list[mujoco.MjsGeom] = ()) -> list[str]:  # fmt: skip
+    """The *feet* problem (as a list of at most one) when a core foot's file name is not a sphere geom; with
+    a hint naming the bodies of unnamed sphere geoms (Menagerie-style files leave the feet unnamed)."""
     sphere = mujoco.mjtGeom.mjGEOM_SPHERE
     bad_feet = [_as_core(core, f) for core, f in feet.items() if f not in geoms or geoms[f].type != sphere]
     if not bad_feet:
         return []
-    return [
-        (
-            f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
-            f"sphere geoms in the file: "
-            f"{_available(n for n, g in geoms.items() if g.type == sphere)}"
-        )
-    ]
+    problem = (f"feet: no sphere geom {', '.join(bad_feet)} (robot.plant_names.feet); "
+               f"sphere geoms in the file: {_available(n for n, g in geoms.items() if g.type == sphere)}")
+    if unnamed:
+        bodies = sorted({g.parent.name or "(unnamed body)" for g in unnamed})
+        problem += (f"; the file has {len(unnamed)} unnamed sphere geom(s) (in bodies {', '.join(bodies[:8])}): "
+                    f"name these {len(feet)} spheres {', '.join(feet.values())} in the file (name=\"...\" on each "
+                    f"foot's <geom>), or name them as you like and map them with robot.plant_names.feet")
+    return [problem]
 
 
 def _trunk_problems(spec: mujoco.MjSpec, trunk: str, bodies: dict[str, mujoco.MjsBody]) -> list[str]:

@@ -18,6 +18,7 @@ from pathlib import Path
 import mujoco
 
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, store_record
+from taslel_bench.plant.mjcf_files import mjcf_files
 from taslel_bench.robot import a1
 from taslel_bench.terrain.geoms import TERRAIN_PRIORITY, add_terrain_geom
 from taslel_bench.util.fields import ConfigError
@@ -174,9 +175,16 @@ def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) ->
                           f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
 
 
-def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:
-    """Compile with a clear error if the spec lost what the harness relies on."""
-    model = spec.compile()
+def compile_plant(spec: mujoco.MjSpec, source: Path | None = None) -> mujoco.MjModel:
+    """Compile with a clear error if the spec lost what the harness relies on. ``source``: the
+    ``robot.plant_mjcf`` file the spec came from; MuJoCo's compile errors (a mass below mjMINVAL, a mesh
+    file it cannot open) become a :class:`ConfigError` naming the field, the file and any missing file."""
+    try:
+        model = spec.compile()
+    except ValueError as exc:
+        if source is None:
+            raise
+        raise ConfigError(compile_error_message(Path(source), exc)) from exc
     missing = [
         n for n in a1.JOINT_NAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) < 0
     ]
@@ -186,6 +194,20 @@ def compile_plant(spec: mujoco.MjSpec) -> mujoco.MjModel:
     if missing:
         raise ValueError(f"plant model is missing {', '.join(missing)}")
     return model
+
+
+def compile_error_message(source: Path, exc: BaseException) -> str:
+    """``robot.plant_mjcf=<path>: MuJoCo cannot compile the plant: <its message>`` with the files the MJCF
+    names that do not exist (resolved as MuJoCo resolves them: includes, meshdir/texturedir/assetdir)."""
+    reason = " ".join(str(exc).split())
+    message = f"robot.plant_mjcf={str(source)!r}: MuJoCo cannot compile the plant: {reason}"
+    missing = [str(p) for p in mjcf_files(source) if not p.is_file()]
+    if missing:
+        message += f"; files it names that do not exist: {', '.join(missing[:8])}" + (" ..." if len(missing) > 8 else "")
+    if "mjMINVAL" in reason:
+        message += ("; every moving body needs mass and inertia: give it an <inertial> or geoms with density "
+                    "(compiler inertiafromgeom)")
+    return message
 
 
 def build_plant(options: PlantOptions = PlantOptions()) -> mujoco.MjModel:

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,16 +39,44 @@ def main(argv: list[str] | None = None) -> None:
     mg.add_argument("--reference", action="store_true",
                     help="store the tight reference (conf/solver/reference.yaml) of every QP in the set")
     args = ap.parse_args(argv)
-    if args.cmd == "info":
-        print(describe(qpset.load(args.path)))
-        return
+    try:
+        if args.cmd == "info":
+            print(describe(qpset.load(args.path)))
+            return
+        _merge(args)
+    except qpset.QPSetError as exc:  # one line naming the file, before any work on the other files
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def check_output(out: Path) -> None:
+    """Refuse an output path that cannot be written (before merging): its folder must exist and be
+    writable, and it must not be a folder."""
+    folder = out.parent if str(out.parent) else Path(".")
+    if out.is_dir():
+        raise qpset.QPSetError(f"--out {out}: is a folder; give the path of the .npz file to write")
+    if not folder.is_dir():
+        raise qpset.QPSetError(f"--out {out}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise qpset.QPSetError(f"--out {out}: folder {folder} is not writable")
+
+
+def _merge(args: argparse.Namespace) -> None:
+    check_output(args.out)
+    for p in args.paths:
+        if not p.exists():
+            raise qpset.QPSetError(f"{p}: no such file or folder")
     files = qpset.find_sets(args.paths)
     if not files:
-        raise SystemExit(f"no {qpset.FILENAME} under {', '.join(map(str, args.paths))} (run with record.qps=true)")
-    qs = qpset.merge((qpset.load(f) for f in files), {"merged_from": [str(f) for f in files]})
+        raise qpset.QPSetError(f"no {qpset.FILENAME} under {', '.join(map(str, args.paths))} (run with record.qps=true)")
+    sets = [qpset.load(f) for f in files]  # every file checked before any work
+    qs = qpset.merge(sets, {"merged_from": [str(f) for f in files]})
     if args.reference:
         reference_solutions(qs)
-    qpset.save(args.out, qs)
+    try:
+        qpset.save(args.out, qs)
+    except OSError as exc:  # e.g. a full disk: name the output, not the temporary file
+        raise qpset.QPSetError(f"--out {args.out}: could not be written ({exc.strerror or exc})") from None
     print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.1f} MB)\n{describe(qs)}")
 
 

@@ -265,11 +265,41 @@ def profiles_from(cfg: DictConfig) -> dict[str, dict]:
     return {p: dict(all_over.get(p) or {}) for p in cfg.profiles}
 
 
+class ReplayInputError(ValueError):
+    """A replay setting or test set that cannot work (the message names the field or the file)."""
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """Refuse bad replay settings before any QP is solved: ``repeats`` >= 1, ``max_qps`` >= 0, known
+    ``modes`` and ``profiles``, positive tolerances."""
+    def integer(key: str, lo: int) -> None:
+        v = cfg.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+            raise ReplayInputError(f"{key}={v!r}: must be an integer >= {lo}")
+
+    integer("repeats", 1)
+    integer("max_qps", 0)
+    modes = list(cfg.get("modes") or [])
+    bad = [m for m in modes if m not in MODES]
+    if not modes or bad:
+        raise ReplayInputError(f"modes={modes}: valid modes: {', '.join(MODES)} (unknown: {', '.join(map(str, bad))})")
+    known = set(cfg.get("profile_overrides") or {})
+    profiles = list(cfg.get("profiles") or [])
+    bad = [p for p in profiles if p not in known]
+    if not profiles or bad:
+        raise ReplayInputError(f"profiles={profiles}: valid profiles (profile_overrides): {', '.join(sorted(known))}")
+    for key, v in (cfg.get("tolerances") or {}).items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise ReplayInputError(f"tolerances.{key}={v!r}: must be a positive number")
+
+
 def run_job(cfg: DictConfig, out_dir: Path, solver: str | None = None) -> pd.DataFrame:
     """One replay job (one conf/solver name, or every one when ``solver`` is None): writes
-    ``replay_qps.parquet`` into ``out_dir``."""
-    out_dir.mkdir(parents=True, exist_ok=True)
+    ``replay_qps.parquet`` into ``out_dir``. Settings and the test set are checked first
+    (:class:`ReplayInputError`, :class:`taslel_bench.record.qpset.QPSetError`)."""
+    check_settings(cfg)
     qs = qpset.load(cfg.testset)
+    out_dir.mkdir(parents=True, exist_ok=True)
     names = base_names() if solver is None else [solver]
     tol = Tolerances(**OmegaConf.to_container(cfg.tolerances, resolve=True))
     print(f"replay {cfg.testset}: {len(qs)} QPs, {len(qs.runs)} runs; {', '.join(names)}", file=sys.stderr)
@@ -305,7 +335,11 @@ def _hydra_main(cfg: DictConfig) -> None:
 
     hc = HydraConfig.get()
     job_dir = Path(hc.runtime.output_dir)
-    run_job(cfg, job_dir, hc.runtime.choices.get("solver"))  # the solver group option (None: all)
+    try:
+        run_job(cfg, job_dir, hc.runtime.choices.get("solver"))  # the solver group option (None: all)
+    except (ReplayInputError, qpset.QPSetError) as exc:  # one line, before any QP is solved
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     if str(hc.mode) != "RunMode.MULTIRUN":
         out = Path(cfg.out) if cfg.get("out") else job_dir
         print(f"replay report: {write_report(job_dir, out)}")

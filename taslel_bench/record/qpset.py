@@ -318,11 +318,30 @@ def save(path: Path | str, qs: QPSet) -> None:
     atomic_write(Path(path), write)
 
 
+class QPSetError(ValueError):
+    """A file that is not a readable QP test set (the message names it and says why)."""
+
+
 def load(path: Path | str) -> QPSet:
-    """Read a set written by :func:`save`."""
+    """Read a set written by :func:`save`; :class:`QPSetError` naming the file if it is not one (missing,
+    not a zip/npz, truncated, an array missing, pickled data)."""
+    path = Path(path)
+    if not path.is_file():
+        raise QPSetError(f"{path}: no such file (a {FILENAME} of a run with record.qps=true, or a merged set)")
+    try:
+        return _load(path)
+    except QPSetError:
+        raise
+    except KeyError as exc:
+        raise QPSetError(f"{path}: not a complete {FORMAT} file: array {exc} is missing") from None
+    except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, OSError, "contains pickled data" ...
+        raise QPSetError(f"{path}: not a readable {FORMAT} file ({type(exc).__name__}: {exc})") from None
+
+
+def _load(path: Path) -> QPSet:
     with np.load(path, allow_pickle=False) as d:
         if "format" not in d or str(d["format"]) not in READS:
-            raise ValueError(f"{path}: not a {FORMAT} file")
+            raise QPSetError(f"{path}: not a {FORMAT} file (no 'format' entry of a known version)")
         groups = []
         for gi in range(int(d["n_groups"])):
             pre = f"g{gi}__"

@@ -53,27 +53,71 @@ def write_parquet(path: Path, frame: pd.DataFrame) -> None:
     atomic_write(path, lambda tmp: frame.to_parquet(tmp, index=False))
 
 
-def completed_summary(run_dir: Path) -> dict | None:
-    """The summary of a finished run in ``run_dir`` (status ok, degraded or error, all files present),
-    else None."""
-    p = run_dir / SUMMARY
-    if not p.is_file() or not (run_dir / STEPS).is_file():
-        return None
+def read_summary(run_dir: Path) -> dict | None:
+    """``run_dir/summary.json`` as a dict, None if absent, unreadable, truncated or not a JSON object."""
+    p = Path(run_dir) / SUMMARY
     try:
-        return json.loads(p.read_text())
-    except json.JSONDecodeError:
+        data = json.loads(p.read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
         return None
+    return data if isinstance(data, dict) else None
+
+
+def completed_summary(run_dir: Path) -> dict | None:
+    """The summary of a finished run in ``run_dir`` whose result files are all there as written (see
+    :func:`folder_state`), else None."""
+    summary, problem = folder_state(run_dir)
+    return summary if summary is not None and not problem else None
 
 
 SUPERSEDED = "superseded"
 RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt", "qps.npz",
                 "video.mp4")
+MANIFEST_KEY = "result_files"  # in summary.json: {file name: size [bytes]} of the files the run wrote
+
+
+def present_results(run_dir: Path) -> list[str]:
+    """Names of the result files in ``run_dir``."""
+    return [name for name in RESULT_FILES if (Path(run_dir) / name).exists()]
+
+
+def manifest(run_dir: Path) -> dict[str, int]:
+    """``{name: size [bytes]}`` of the result files now in ``run_dir`` (summary.json itself excluded): written
+    into the summary, so a later reader can tell a complete set from a damaged one."""
+    return {name: (Path(run_dir) / name).stat().st_size for name in present_results(run_dir) if name != SUMMARY}
+
+
+def folder_state(run_dir: Path) -> tuple[dict | None, str]:
+    """(readable summary or None, what is wrong with the folder's result files: "" when they are a complete
+    set as written, "empty" when there are none). The set must match the summary's manifest: every listed
+    file present with its size, no other result file (e.g. an old traceback.txt); a summary without a
+    manifest (older runs) needs steps.parquet."""
+    run_dir = Path(run_dir)
+    present = present_results(run_dir)
+    if not present:
+        return None, "empty"
+    summary = read_summary(run_dir)
+    if SUMMARY not in present:
+        return None, "no-summary"  # killed before the end (or the summary was deleted)
+    if summary is None:
+        return None, "summary-unreadable"
+    listed = summary.get(MANIFEST_KEY)
+    if not isinstance(listed, dict):
+        return summary, "" if STEPS in present else f"missing-{STEPS}"
+    for name, size in listed.items():
+        path = run_dir / name
+        if not path.is_file():
+            return summary, f"missing-{name}"
+        if path.stat().st_size != size:
+            return summary, f"size-{name}"
+    extra = [name for name in present if name != SUMMARY and name not in listed]
+    return summary, f"extra-{extra[0]}" if extra else ""
 
 
 def supersede(run_dir: Path, tag: str) -> Path | None:
     """Move the result files of ``run_dir`` into ``run_dir/superseded/<time>_<tag>/`` (never overwrite a
     result: a rerun into the folder first puts the old one aside). Returns that folder, None if empty."""
-    present = [run_dir / name for name in RESULT_FILES if (run_dir / name).exists()]
+    present = [run_dir / name for name in present_results(run_dir)]
     if not present:
         return None
     dest = run_dir / SUPERSEDED / f"{dt.datetime.now().strftime('%Y%m%d-%H%M%S-%f')}_{tag}"

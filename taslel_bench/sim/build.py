@@ -49,7 +49,7 @@ def build_plant(scenario: Scenario, options: PlantOptions | None = None, seed: i
     spec = mjcf_spec(mjcf, options) if mjcf is not None else a1_spec(options)
     scenario.terrain.build(spec, terrain_rng(seed))
     scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))
-    return compile_plant(spec)
+    return compile_plant(spec, mjcf)
 
 
 def terrain_rng(seed: int) -> np.random.Generator:

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import hashlib
 import math
+import resource
 import sys
 import traceback
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -17,17 +19,17 @@ from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits
-from taslel_bench.config.validate import (
-    validate,
-)
+from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.residuals import alarm_events
 from taslel_bench.metrics.summary import summarize
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
+from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
 from taslel_bench.util.provenance import code_version
 
 
@@ -48,6 +50,11 @@ def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
         "model_source": str(model_src),
         "model_sha256": file_sha256(model_src),
     }
+
+
+def peak_memory_gb() -> float:
+    """[GB] peak resident memory of this process so far (Linux ru_maxrss is in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
 def _progress_printer(duration: float, enabled: bool):
@@ -71,44 +78,76 @@ def run_config_yaml(cfg: DictConfig) -> str:
     return OmegaConf.to_yaml(OmegaConf.create(plain))
 
 
-def config_sha256(cfg: DictConfig) -> str:
-    """Hash of everything that decides a run's results: the resolved config (``progress`` and ``force``
-    only change what is printed) and the content of the files it names (``robot.plant_mjcf``,
-    ``model.urdf``)."""
+def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
+    """Hash of everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved
+    config (``progress`` and ``force`` only change what is printed), the content of every file MuJoCo reads
+    for the plant (``robot.plant_mjcf`` with its includes and assets, or the URDF), the controller model's
+    URDF, ``input_files`` (the estimator's checkpoints) and the code version."""
     plain = OmegaConf.to_container(cfg, resolve=True)
-    for key in ("progress", "force", *SWEEP_LEVEL_KEYS):
+    for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
-    for source in (cfg.robot.get("plant_mjcf"), cfg.get("model", {}).get("urdf")):
-        if source and Path(source).is_file():
-            h.update(Path(source).read_bytes())
+    mjcf = cfg.robot.get("plant_mjcf")
+    hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [a1.a1_urdf_path()])
+    hash_files(h, [Path(cfg.get("model", {}).get("urdf") or a1.a1_urdf_path())])
+    hash_files(h, sorted(Path(p).resolve() for p in input_files))
+    h.update(code_identity().encode())
     return h.hexdigest()
+
+
+def estimator_files(built: Built) -> list[Path]:
+    """The files the run's estimator loaded (its optional ``input_files()``: checkpoints), [] if none."""
+    files = getattr(built.estimator, "input_files", None)
+    return [Path(p) for p in files()] if callable(files) else []
+
+
+SUPERSEDE_WHY = {
+    "no-summary": "a run that did not finish (no summary.json)",
+    "summary-unreadable": "summary.json unreadable (truncated or not JSON)",
+    "forced": "force=true",
+}
+
+
+def _supersede_tag(problem: str, same: bool, previous: dict | None, out_dir: Path) -> tuple[str, str]:
+    """(folder tag, reason in words) for putting the folder's result files aside before a rerun."""
+    from taslel_bench.record.mcap import PARTIAL_NAME
+
+    if problem == "no-summary" and (out_dir / PARTIAL_NAME).exists():
+        return "killed", "a killed run (partial episode.mcap, no summary.json)"
+    if problem:
+        kind, _, name = problem.partition("-")
+        why = {"missing": f"{name} of the result is missing", "size": f"{name} differs from the size the run "
+               f"wrote (truncated or replaced)", "extra": f"{name} is not part of the result"}.get(kind)  # fmt: skip
+        return f"incomplete-{problem}", why or SUPERSEDE_WHY[problem]
+    if same:
+        return "forced", SUPERSEDE_WHY["forced"]
+    sha = str(previous.get("config_sha256", "unknown")) if previous else "unknown"
+    return f"config-{sha[:8]}", f"a run of another config or inputs (config_sha256 {sha[:12]})"
 
 
 def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[dict | None, dict[str, object]]:
     """(summary of a complete run to skip, or None; notes for the new run's summary). A complete run of the
-    same config is skipped unless ``force``; any other result in the folder (a complete run of another
-    config, a forced rerun, a killed run's partial MCAP) is moved to ``superseded/`` first, never
-    overwritten; files of interrupted writes are removed and named."""
-    from taslel_bench.record.mcap import PARTIAL_NAME
-
-    previous = run_files.completed_summary(out_dir)
+    same identity is skipped unless ``force``; any other set of result files in the folder (a complete run
+    of another config, a forced rerun, a killed run, a truncated summary, a missing steps.parquet, a stray
+    traceback.txt) is moved to ``superseded/`` first, never overwritten, and the notes say what was moved
+    and why; files of interrupted writes are removed and named."""
+    previous, problem = run_files.folder_state(out_dir)
     same = previous is not None and previous.get("config_sha256") == config_hash
-    if same and not cfg.get("force", False):
+    if not problem and same and not cfg.get("force", False):
         return {**previous, "skipped": True}, {}
     notes: dict[str, object] = {}
     stale = run_files.remove_stale(out_dir)
     if stale:
         notes["stale_files_removed"] = ",".join(stale)
-    if previous is not None or (out_dir / PARTIAL_NAME).exists():
-        if previous is None:
-            tag = "killed"
-        else:
-            tag = "forced" if same else f"config-{str(previous.get('config_sha256', 'unknown'))[:8]}"
-        moved = run_files.supersede(out_dir, tag)
-        if moved is not None:
-            notes["superseded"] = str(moved.relative_to(out_dir))
-            print(f"{out_dir}: held a {tag} run; moved to {moved}", file=sys.stderr)
+    if problem == "empty":
+        return None, notes
+    tag, why = _supersede_tag(problem, same, previous, out_dir)
+    moved = run_files.supersede(out_dir, tag)
+    if moved is not None:
+        notes["superseded"] = str(moved.relative_to(out_dir))
+        notes["superseded_files"] = ",".join(sorted(p.name for p in moved.iterdir()))
+        notes["superseded_why"] = why
+        print(f"{out_dir}: held {why}; moved {notes['superseded_files']} to {moved}", file=sys.stderr)
     return None, notes
 
 
@@ -136,13 +175,21 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
     validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
+    built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated or written
+    config_hash = config_sha256(cfg, estimator_files(built))
     out_dir.mkdir(parents=True, exist_ok=True)
-    config_hash = config_sha256(cfg)
-    skipped, notes = prepare_folder(cfg, out_dir, config_hash)
-    if skipped is not None:
-        return skipped
-    built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
-    choices = dict(choices or {})
+    with RunLock(out_dir) as lock:  # one writer per run folder (RunFolderLocked if another one is alive)
+        skipped, notes = prepare_folder(cfg, out_dir, config_hash)
+        if skipped is not None:
+            return skipped
+        if lock.stale_taken_over:
+            notes["stale_lock_taken_over"] = lock.stale_taken_over
+        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes)
+
+
+def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, str], overrides: list[str] | None,
+              config_hash: str, notes: dict[str, object]) -> dict[str, object]:
+    """The episode and its files, in a folder prepared (and locked) by :func:`run`."""
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
@@ -179,6 +226,7 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
         "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
+        "memory_estimate_gb": memory_estimate_gb(cfg),  # [GB] checked against max_memory_gb before the run
         **code_version(),  # git_commit, git_dirty
     }
     out.update(plant_identity(cfg, built))
@@ -234,6 +282,8 @@ def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: lis
     run_files.write_json(out_dir / run_files.EVENTS, events)
     if video is not None:
         video(summary)
+    summary["memory_peak_gb"] = peak_memory_gb()
+    summary[run_files.MANIFEST_KEY] = run_files.manifest(out_dir)  # the complete set, checked by a rerun
     run_files.write_json(out_dir / run_files.SUMMARY, summary)
 
 
@@ -293,11 +343,9 @@ def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
 
 def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException,
                      overrides: list[str] | None = None) -> dict:  # fmt: skip
-    """Summary of a job that raised before or outside the episode (status "error", traceback saved)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    run_files.supersede(out_dir, "before-error")  # a result already in the folder is put aside, not overwritten
-    tb = traceback.format_exc()
-    run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
+    """Summary of a job that raised before or outside the episode (status "error", traceback saved). A
+    folder another live process writes (:class:`RunFolderLocked`) is left alone: the summary is returned,
+    not written."""
     summary = {
         "scenario": choices.get("scenario", ""),
         "solver": choices.get("solver", ""),
@@ -308,8 +356,29 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
         "fell": False,
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
     }
-    run_files.write_json(out_dir / run_files.SUMMARY, summary)
+    if not isinstance(exc, RunFolderLocked):
+        write_error_folder(out_dir, summary, traceback.format_exc())
     return summary
+
+
+def write_error_folder(out_dir: Path, summary: dict, tb: str) -> None:
+    """Write an error ``summary`` (and ``traceback.txt``) into ``out_dir`` under its lock, a result already
+    there put aside first; a folder locked by a live writer is not touched."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = RunLock(out_dir).acquire()
+    except RunFolderLocked:
+        return
+    try:
+        moved = run_files.supersede(out_dir, "before-error")  # a result in the folder is put aside, not overwritten
+        if moved is not None:
+            summary["superseded"] = str(moved.relative_to(out_dir))
+        run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
+        summary[run_files.MANIFEST_KEY] = run_files.manifest(out_dir)
+        run_files.write_json(out_dir / run_files.SUMMARY, summary)
+    finally:
+        lock.release()
 
 
 def _seed_or_minus_one(cfg: DictConfig) -> int:
@@ -321,4 +390,4 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
-__all__ = ["record_job_error", "run"]
+__all__ = ["record_job_error", "run", "write_error_folder"]

@@ -4,7 +4,6 @@ gets no job results: it reads the sweep folder) and usable on any folder of runs
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -33,8 +32,12 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
     """A job folder without a summary: it crashed before finishing; say so, with what is known."""
     row: dict[str, Any] = {"status": "error", "message": "job left no summary.json (crashed or killed)"}
     overrides = run_dir / ".hydra" / "overrides.yaml"
-    if overrides.is_file():
-        items = [line.strip().lstrip("- ").strip() for line in overrides.read_text().splitlines()]
+    try:
+        text = overrides.read_text() if overrides.is_file() else ""
+    except (OSError, UnicodeDecodeError):
+        text = ""
+    if text:
+        items = [line.strip().lstrip("- ").strip() for line in text.splitlines()]
         items = [item for item in items if "=" in item]
         row["overrides"] = OVERRIDE_SEPARATOR.join(sorted(items))
         for item in items:
@@ -43,8 +46,11 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
             if key in AXES or key in OVERRIDE_COLUMNS.values():
                 row[key] = _typed(key, value)
     tb = run_dir / "traceback.txt"
-    if tb.is_file():
-        row["message"] = tb.read_text().strip().splitlines()[-1]
+    try:
+        if tb.is_file() and tb.read_text().strip():
+            row["message"] = tb.read_text().strip().splitlines()[-1]
+    except (OSError, UnicodeDecodeError):
+        pass
     return row
 
 
@@ -58,26 +64,97 @@ def _typed(column: str, value: str) -> Any:
         return value
 
 
-def aggregate(sweep_dir: Path) -> pd.DataFrame:
-    """Write ``summary.parquet`` in ``sweep_dir`` (atomically) and return it."""
-    sweep_dir = Path(sweep_dir)
-    rows = []
-    for run_dir in run_folders(sweep_dir):
-        summary_path = run_dir / run_files.SUMMARY
+def _unreadable(run_dir: Path, summary: dict) -> str:
+    """What makes a finished run's files unusable ("" if nothing): a result set that does not match its
+    manifest (a file missing, truncated or extra), a steps.parquet whose footer cannot be read, a config.yaml
+    that is not YAML. The message names the file."""
+    import pyarrow.parquet as pq
+
+    _, problem = run_files.folder_state(run_dir)
+    if problem:
+        kind, _, name = problem.partition("-")
+        what = {"missing": "is missing", "size": "does not have the size the run wrote (truncated or replaced)",
+                "extra": "is not part of the run's result"}.get(kind, problem)  # fmt: skip
+        return f"{run_dir / name}: {what}"
+    steps, config = run_dir / run_files.STEPS, run_dir / "config.yaml"
+    for path, read in ((steps, lambda p: pq.ParquetFile(p).metadata), (config, _yaml_mapping)):
         try:
-            row = json.loads(summary_path.read_text()) if summary_path.is_file() else _row_for_unfinished(run_dir)
-        except json.JSONDecodeError as exc:
-            row = {"status": "error", "message": f"unreadable summary.json: {exc}"}
+            if path.is_file():
+                read(path)
+        except Exception as exc:  # noqa: BLE001 - ArrowInvalid, yaml errors, OSError: the row names the file
+            return f"{path}: unreadable ({type(exc).__name__}: {(str(exc).splitlines() or [''])[0]})"
+    return ""
+
+
+def _yaml_mapping(path: Path) -> dict:
+    import yaml
+
+    data = yaml.safe_load(path.read_text())
+    if not isinstance(data, dict):
+        raise TypeError(f"holds a {type(data).__name__}, not a YAML mapping")
+    return data
+
+
+def _row(run_dir: Path, known: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The table row of one run folder; an unreadable summary or result file makes an error row naming it;
+    ``known``: rows the launcher kept for jobs that could not write their folder."""
+    summary_path = run_dir / run_files.SUMMARY
+    if not summary_path.is_file():
+        row = dict(known.get(str(run_dir.absolute()), {})) or _row_for_unfinished(run_dir)
+        row.setdefault("status", "error")
+        return row
+    row = run_files.read_summary(run_dir)
+    if row is None:
+        fallback = _row_for_unfinished(run_dir)
+        fallback["message"] = f"{summary_path}: unreadable (truncated or not a JSON object)"
+        return fallback
+    if row.get("status") in ("ok", "degraded") and (problem := _unreadable(run_dir, row)):
+        row = {**row, "status_reported": row.get("status"), "status": "error", "message": problem}
+    return row
+
+
+def collect(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None) -> pd.DataFrame:
+    """One row per run folder under ``sweep_dir`` (plus the ``known`` rows of jobs whose folder holds none),
+    failed and unreadable runs included; never raises on one bad run."""
+    sweep_dir = Path(sweep_dir)
+    known = dict(known or {})
+    rows = []
+    folders = run_folders(sweep_dir)
+    for run_dir in folders:
+        row = _row(run_dir, known)
         row.pop("skipped", None)
         row["run_dir"] = str(run_dir.relative_to(sweep_dir))
         rows.append(row)
+    seen = {str(d.absolute()) for d in folders}
+    for folder, row in known.items():  # a job that could not even create its folder
+        if folder not in seen:
+            rel = Path(folder).relative_to(sweep_dir.absolute()) if Path(folder).is_relative_to(sweep_dir.absolute()) \
+                else Path(folder)
+            rows.append({**row, "run_dir": str(rel)})
     frame = expand_overrides(pd.DataFrame(rows))
     if not frame.empty:
         frame = frame.sort_values([c for c in (*AXES, "run_dir") if c in frame.columns]).reset_index(drop=True)
-    run_files.write_parquet(sweep_dir / SUMMARY_TABLE, frame)
     return frame
 
 
+def aggregate(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None,
+              frame: pd.DataFrame | None = None) -> pd.DataFrame:  # fmt: skip
+    """Write ``summary.parquet`` in ``sweep_dir`` (atomically; ``frame``, else :func:`collect`) and return it."""
+    sweep_dir = Path(sweep_dir)
+    frame = collect(sweep_dir, known) if frame is None else frame
+    run_files.write_parquet(sweep_dir / SUMMARY_TABLE, _parquet_safe(frame))
+    return frame
+
+
+def _parquet_safe(frame: pd.DataFrame) -> pd.DataFrame:
+    """Columns of mixed Python types (a corrupt summary's odd values) as text, so the table can be written."""
+    out = frame.copy()
+    for col in out.columns:
+        if out[col].dtype == object:
+            kinds = {type(v) for v in out[col] if v is not None and not (isinstance(v, float) and pd.isna(v))}
+            if len(kinds) > 1 or (kinds and not kinds <= {str, bool, int, float}):
+                out[col] = [None if v is None else str(v) for v in out[col]]
+    return out
 
 
 def parse_overrides(text: object) -> dict[str, str]:

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import errno
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from taslel_bench.record import run_files
-from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, override_keys, run_folders
+from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.verdict_table import verdict_section
@@ -68,15 +70,26 @@ def _mean(frame: pd.DataFrame, col: str) -> float:
     return float(frame[col].astype(float).mean()) if col in frame and frame[col].notna().any() else float("nan")
 
 
+def read_steps(path: Path, columns: list[str] | None = None) -> pd.DataFrame | None:
+    """A run's steps.parquet (``columns`` of it), None when it is absent or unreadable (truncated, another
+    file): the report of a sweep never fails on one bad run; its row says so (:func:`sweep.aggregate.collect`)."""
+    if not path.is_file():
+        return None
+    try:
+        return pd.read_parquet(path, columns=columns)
+    except Exception:  # noqa: BLE001 - ArrowInvalid, OSError, a missing column
+        return None
+
+
 def solve_times(sweep_dir: Path, frame: pd.DataFrame) -> dict[str, np.ndarray]:
     """Per solver: every tick's solve time [µs] from the runs' steps.parquet."""
     out: dict[str, list[np.ndarray]] = {}
     for _, row in frame.iterrows():
         if row.get("solver") in (None, "none") or not isinstance(row.get("run_dir"), str):
             continue
-        steps = sweep_dir / row["run_dir"] / run_files.STEPS
-        if steps.is_file():
-            t = pd.read_parquet(steps, columns=["qp_solve_us"])["qp_solve_us"].to_numpy()
+        steps = read_steps(sweep_dir / row["run_dir"] / run_files.STEPS, ["qp_solve_us"])
+        if steps is not None:
+            t = steps["qp_solve_us"].to_numpy()
             out.setdefault(solver_label(row, frame), []).append(t[np.isfinite(t)])
     return {k: np.concatenate(v) for k, v in out.items() if v}
 
@@ -196,8 +209,7 @@ def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series
 def _steps(sweep_dir: Path, row: pd.Series | None) -> pd.DataFrame | None:
     if row is None:
         return None
-    path = sweep_dir / str(row["run_dir"]) / run_files.STEPS
-    return pd.read_parquet(path) if path.is_file() else None
+    return read_steps(sweep_dir / str(row["run_dir"]) / run_files.STEPS)
 
 
 def _episode_figures(sweep_dir: Path, frame: pd.DataFrame, plt) -> list[str]:
@@ -260,7 +272,10 @@ def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
-    return instantiate(OmegaConf.load(path).scenario).terrain.logs()
+    try:
+        return instantiate(OmegaConf.load(path).scenario).terrain.logs()
+    except Exception:  # noqa: BLE001 - a corrupt config.yaml: the figure is drawn without the logs
+        return ()
 
 
 def _logs_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> str | None:
@@ -365,6 +380,14 @@ def _run_commits(frame: pd.DataFrame) -> str:
     return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
 
 
+def _guarded(make, what: str) -> tuple[list, str]:
+    """(``make()``, "") or ([], a note naming the error): one bad run's files cost a figure, not the report."""
+    try:
+        return make(), ""
+    except Exception as exc:  # noqa: BLE001
+        return [], f"{what} skipped: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
+
+
 def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
@@ -372,7 +395,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     table = summary_table(sweep_dir, frame) if not frame.empty else pd.DataFrame()
     run_files.atomic_write(sweep_dir / "table.csv", lambda p: table.to_csv(p, index=False))
     run_files.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
-    figures = _figures(sweep_dir, frame, table) if not frame.empty else []
+    figures, skipped = _guarded(lambda: _figures(sweep_dir, frame, table) if not frame.empty else [], "figures")
     info = machine_info()
     keys = [c for c in group_columns(frame) if c in table]
     safety = table[[*keys, *COUNT_COLUMNS, *SAFETY_COLUMNS]] if len(table) else table
@@ -393,7 +416,9 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
     lines += _run_list(frame, "error", "message", "Runs that ended in an error")
-    lines += still_strips(sweep_dir, frame)  # falls and trips seen (taslel_bench.sweep.stills)
+    strips, strips_skipped = _guarded(lambda: still_strips(sweep_dir, frame), "still strips")
+    lines += strips  # falls and trips seen (taslel_bench.sweep.stills)
+    lines += [f"_{note}_\n" for note in (skipped, strips_skipped) if note]
     if figures:
         lines.append("## Figures\n")
         lines += [f"![{f}]({f})\n" for f in figures]
@@ -403,16 +428,30 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Exit 0: table and report written, every run ok; 1: a run error or degraded, or the table or report
+    could not be written (one line); 2: not a sweep folder."""
     ap = argparse.ArgumentParser(description="Aggregate a sweep folder and write its report.")
     ap.add_argument("sweep_dir", type=Path)
     args = ap.parse_args(argv)
     if not args.sweep_dir.is_dir():
-        raise SystemExit(f"not a folder: {args.sweep_dir}")
+        print(f"error: not a folder: {args.sweep_dir}", file=sys.stderr)
+        raise SystemExit(2)
     if not run_folders(args.sweep_dir):
-        raise SystemExit(f"no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
-                         ".hydra/ (a sweep folder, outputs/sweeps/<time>/)")
-    frame = aggregate(args.sweep_dir)
-    print(write_report(args.sweep_dir, frame))
+        print(f"error: no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
+              ".hydra/ (a sweep folder, outputs/sweeps/<time>/)", file=sys.stderr)
+        raise SystemExit(2)
+    frame = collect(args.sweep_dir)
+    try:
+        aggregate(args.sweep_dir, frame=frame)
+        print(write_report(args.sweep_dir, frame))
+    except OSError as exc:
+        what = "disk full" if exc.errno == errno.ENOSPC else type(exc).__name__
+        print(f"error: {what}: could not write the table or report in {args.sweep_dir}: {exc}", file=sys.stderr)
+        raise SystemExit(1) from None
+    failed = frame[frame["status"] != "ok"] if "status" in frame else frame
+    for _, row in failed.iterrows():
+        print(f"  {row.get('status')}: {row.get('run_dir')}: {row.get('message') or row.get('degraded_reasons')}")
+    raise SystemExit(1 if len(failed) else 0)
 
 
 if __name__ == "__main__":

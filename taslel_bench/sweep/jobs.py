@@ -1,0 +1,112 @@
+"""What the sweep's launchers share (``hydra_plugins/taslel_bench_launchers/``): the check that every job
+has its own run folder, and the sweep's record of jobs that ended without writing their folder (a dead
+worker, a full disk, a folder that cannot be written), read by the callback so the table still has a row
+for each.
+
+A launcher returns a completed :class:`hydra.core.utils.JobReturn` for every job, whatever happened to it:
+Hydra's sweeper re-raises the exception of a failed one and the sweep would end without its table.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from hydra.core.utils import JobReturn, JobStatus, filter_overrides
+from hydra.types import HydraContext
+from omegaconf import DictConfig
+
+from taslel_bench.record.run_files import OVERRIDE_SEPARATOR, read_summary
+
+EXIT_BAD_INPUT = 2
+
+# run folder (absolute, as text) -> the row of a job that could not leave a readable summary.json
+JOB_OUTCOMES: dict[str, dict[str, Any]] = {}
+
+
+class SweepRefused(SystemExit):
+    """The job list cannot run as given (exit code 2, one line on stderr, nothing run)."""
+
+
+def job_folders(config: DictConfig, job_overrides: Sequence[Sequence[str]],
+                hydra_context: HydraContext) -> list[Path]:  # fmt: skip
+    """The run folder of each job (``hydra.sweep.dir/hydra.sweep.subdir`` of its composed config)."""
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import OmegaConf
+
+    folders = []
+    before = HydraConfig.instance().cfg
+    for overrides in job_overrides:
+        job_cfg = hydra_context.config_loader.load_sweep_config(config, list(overrides))
+        HydraConfig.instance().set_config(job_cfg)  # ${hydra:...} in the folder pattern
+        sweep_dir = str(OmegaConf.select(job_cfg, "hydra.sweep.dir"))
+        subdir = str(OmegaConf.select(job_cfg, "hydra.sweep.subdir"))
+        folders.append(Path(sweep_dir, subdir).absolute())
+    if before is not None:
+        HydraConfig.instance().set_config(before)
+    return folders
+
+
+def check_one_folder_per_job(config: DictConfig, job_overrides: Sequence[Sequence[str]],
+                             hydra_context: HydraContext, first_idx: int = 0) -> list[Path]:  # fmt: skip
+    """The jobs' run folders; :class:`SweepRefused` (exit 2) naming both jobs' overrides when two jobs would
+    write one folder (e.g. ``seed=0,0``, or ``record.mcap=true,false``: ``record.*`` keys are not part of the
+    folder name), before any job runs."""
+    folders = job_folders(config, job_overrides, hydra_context)
+    seen: dict[Path, int] = {}
+    for i, folder in enumerate(folders):
+        if folder in seen:
+            j = seen[folder]
+            a, b = (" ".join(filter_overrides(job_overrides[k])) or "(no overrides)" for k in (j, i))
+            message = (f"error: jobs #{first_idx + j} ({a}) and #{first_idx + i} ({b}) would write the same run "
+                       f"folder {folder}: two writers in one folder corrupt each other's results. Sweep a value "
+                       f"only once, or make the differing key part of the folder name (it is in "
+                       f"hydra.job.config.override_dirname.exclude_keys), or run them into separate sweeps")
+            print(message, file=sys.stderr)
+            raise SweepRefused(EXIT_BAD_INPUT)
+        seen[folder] = i
+    return folders
+
+
+def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "") -> JobReturn:
+    """A completed JobReturn holding an error summary for a job that could not run or finish; the error is
+    written into its folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
+    from taslel_bench.sim.run import write_error_folder
+
+    summary: dict[str, Any] = {"status": "error", "message": message, "fell": False, "seed": -1,
+                               "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}  # fmt: skip
+    for item in overrides:
+        key, _, value = item.partition("=")
+        if key in ("scenario", "solver", "estimator"):
+            summary[key] = value
+        elif key == "seed" and value.isdigit():
+            summary["seed"] = int(value)
+    try:
+        write_error_folder(folder, dict(summary), tb or message)
+    except OSError as exc:  # a full disk, a read-only folder: the row lives on in the sweep's table
+        summary["message"] = f"{message}; its error summary could not be written either ({exc})"
+    JOB_OUTCOMES[str(folder)] = summary
+    ret = JobReturn(overrides=list(overrides), working_dir=str(folder), task_name="taslel_bench")
+    ret.status = JobStatus.COMPLETED
+    ret.return_value = summary
+    return ret
+
+
+def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
+    """``ret`` if the job completed (its summary kept in :data:`JOB_OUTCOMES` if the folder holds none, e.g.
+    the disk was full); else an :func:`error_return` naming what it raised."""
+    if isinstance(ret, JobReturn) and ret.status == JobStatus.COMPLETED:
+        value = ret._return_value
+        if isinstance(value, dict) and "status" in value and read_summary(folder) is None:
+            JOB_OUTCOMES[str(folder)] = {**value, "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}
+        return ret
+    exc = ret._return_value if isinstance(ret, JobReturn) else ret
+    tb = "".join(traceback.format_exception(exc)) if isinstance(exc, BaseException) else ""
+    return error_return(overrides, folder, f"{type(exc).__name__}: {exc}", tb)
+
+
+__all__ = ["EXIT_BAD_INPUT", "JOB_OUTCOMES", "SweepRefused", "check_one_folder_per_job", "error_return",
+           "job_folders", "settle"]
