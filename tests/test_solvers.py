@@ -15,19 +15,20 @@ import pytest
 from solvers import make_backend
 from solvers.checks import residuals
 from solvers.persistent import NativeResult
+from solvers.registry import PERSISTENT as PERSISTENT_NAMES
 from solvers.registry import available_backends
 from tests.solver_fixture import DEFAULT_PATH, load, without_rows
 
 # Max |u - u_ref| [N·m] accepted per backend: ~10-30x what was measured on this fixture with the settings of
-# conf/solver/*.yaml (measured: quadprog/daqp ~1e-13, daqp_persistent 1e-10, proxqp 2e-8, proxqp_persistent
-# 1e-7, piqp(_persistent) 2e-7, osqp 5e-7, osqp_persistent 3e-6, clarabel 4e-6). Target for all: 1e-3.
+# conf/solver/*.yaml and solvers/qpsolvers_settings.py (measured: quadprog/daqp ~1e-13, daqp 1e-10, proxqp 1e-7
+# (per call 2e-8), piqp 2e-7, osqp 3e-6 (per call 5e-7), clarabel 7e-6 (per call 7e-6)). Target for all: 1e-3.
 U_TOL = {
-    "quadprog": 1e-9, "daqp": 1e-9, "reference": 1e-9, "daqp_persistent": 1e-8,
-    "proxqp": 1e-6, "proxqp_persistent": 1e-5, "piqp": 1e-5, "piqp_persistent": 1e-5,
-    "osqp": 1e-4, "osqp_persistent": 1e-4, "clarabel": 1e-4,
+    "quadprog": 1e-9, "qpsolvers:quadprog": 1e-9, "qpsolvers:daqp": 1e-9, "reference": 1e-9, "daqp": 1e-8,
+    "qpsolvers:proxqp": 1e-6, "proxqp": 1e-5, "qpsolvers:piqp": 1e-5, "piqp": 1e-5,
+    "qpsolvers:osqp": 1e-4, "osqp": 1e-4, "qpsolvers:clarabel": 1e-4, "clarabel": 1e-4,
 }  # fmt: skip
 DEFAULT_U_TOL = 1e-3
-PERSISTENT = [n for n in available_backends() if n.endswith("_persistent")]
+PERSISTENT = [n for n in available_backends() if n in PERSISTENT_NAMES]
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +90,7 @@ def test_describe_states_settings(name):
 def test_unknown_name_lists_available():
     with pytest.raises(ValueError) as err:
         make_backend("gurobi_but_misspelt")
-    for name in ("osqp", "daqp_persistent", "reference"):
+    for name in ("osqp", "qpsolvers:osqp", "daqp", "reference"):
         assert name in str(err.value)
 
 
@@ -132,7 +133,7 @@ def test_primal_perturbation_is_caught(qps, monkeypatch):
         return sol
 
     monkeypatch.setattr(qpsolvers, "solve_problem", perturbed)
-    sol = make_backend("daqp").solve(qps.problems[0])
+    sol = make_backend("qpsolvers:daqp").solve(qps.problems[0])
     assert not sol.ok and sol.status.startswith("inaccurate: primal")
 
 
@@ -206,7 +207,7 @@ def test_warm_and_cold_give_the_same_u(name, qps):
 
 def test_persistent_backend_copies_its_data(qps):
     """The filter overwrites its problem in place: a backend must not keep references to it."""
-    backend = make_backend("osqp_persistent")
+    backend = make_backend("osqp")
     p = qps.problems[0].copy()
     first = backend.solve(p)
     p.q[:] = 0.0  # overwrite in place, then solve the original values again via a fresh copy

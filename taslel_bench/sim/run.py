@@ -142,6 +142,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         return skipped
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated
     choices = dict(choices or {})
+    if choices.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
+        choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
