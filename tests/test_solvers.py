@@ -237,3 +237,84 @@ def test_compiled_residuals_equal_an_independent_numpy_computation():
         assert residuals(p, x).primal == pytest.approx(want[0], rel=1e-12, abs=1e-12)
     x[0] = np.nan
     assert math.isnan(residuals(p, x).primal) and math.isnan(residuals(p, x, y, z, z_box).dual)
+
+
+# ------------------------------------------------------------------------------- names and routes
+
+
+def test_solver_names_mean_the_persistent_deployment_and_the_per_call_route_is_explicit():
+    """solver=<name> is set up once and updated (setups stay at 1 over same-layout QPs); qpsolvers:<name>
+    (solver=qpsolvers solver.name=<name>) sets up on every call; the old names refuse, naming the new one."""
+    for name in PERSISTENT_NAMES:
+        backend = make_backend(name)
+        assert backend.describe()["kind"] == "persistent" and backend.name == name
+        per_call = make_backend(f"qpsolvers:{name}")
+        assert per_call.describe()["kind"] == "qpsolvers" and per_call.name == f"qpsolvers:{name}"
+    for old in ("osqp_persistent", "daqp_persistent", "piqp_persistent", "proxqp_persistent"):
+        with pytest.raises(ValueError, match=f"renamed: solver={old.removesuffix('_persistent')} "):
+            make_backend(old)
+
+
+def test_persistent_clarabel_updates_its_data_instead_of_setting_up(qps):
+    backend = make_backend("clarabel")
+    same_layout = [p for p in qps.problems[:30] if p.G.shape == qps.problems[0].G.shape]
+    for p in same_layout:
+        assert backend.solve(p).ok
+    assert backend.setups < len(same_layout) // 2  # set up per stance pattern, not per QP
+    assert backend.settings["presolve_enable"] is False  # what Clarabel's data updates need
+
+
+# --------------------------------------------------------------------------------- reference check
+
+
+class ShiftedU:
+    """The exact answer with u moved by ``du`` and status "solved": right-looking, wrong."""
+
+    name = "shifted"
+
+    def __init__(self, du: float) -> None:
+        self.inner, self.du = make_backend("daqp"), du
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def describe(self) -> dict:
+        return {"name": self.name}
+
+    def solve(self, problem):
+        sol = self.inner.solve(problem)
+        sol.x = sol.x.copy()
+        sol.x[problem.layout["u"]] += self.du
+        return sol
+
+
+def test_reference_check_counts_solved_but_wrong_answers(qps):
+    from taslel_bench.qp.reference_check import ReferenceCheck, reference_metrics
+
+    for du, wrong in ((0.0, 0.0), (2e-3, 1.0), (5e-4, 0.0)):
+        check, backend = ReferenceCheck(make_backend("reference"), every=3, tol_nm=1e-3), ShiftedU(du)
+        err = np.array([check.on_tick(k, p, backend.solve(p)) for k, p in enumerate(qps.problems)])
+        assert np.isfinite(err).sum() == math.ceil(len(qps.problems) / 3)  # every 3rd tick
+        solve_us = np.r_[np.full(len(err) - 2, 10.0), 1500.0, 2500.0]  # two solves over 1 ms
+        m = reference_metrics(check, err, solve_us, control_dt_s=0.002)
+        assert m["qp_wrong_rate"] == wrong
+        assert m["u_error_nm_max"] == pytest.approx(du, abs=1e-9)
+        assert m["qp_reference_checks"] == math.ceil(len(qps.problems) / 3) and m["qp_reference_failed"] == 0
+        assert m["qp_solve_over_1ms_rate"] == pytest.approx(2 / len(err))
+        assert m["qp_deadline_miss_rate"] == pytest.approx(1 / len(err))  # 2 ms period: only the 2.5 ms one
+
+
+def test_a_run_checks_its_answers_off_the_clock(tmp_path):
+    from taslel_bench import api
+    from taslel_bench.sim.run import run
+
+    cfg = api.compose(["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp",
+                       "record.reference_every=7"])  # fmt: skip
+    s = run(cfg, tmp_path, {"scenario": "flat", "solver": "osqp"})
+    ticks = round((0.5 + 0.2) * 1000)
+    assert s["qp_reference_checks"] == math.ceil(ticks / 7) and s["qp_wrong_rate"] == 0.0
+    assert 0.0 <= s["u_error_nm_max"] <= 1e-4 and s["reference_s"] > 0.0
+    import pandas as pd
+
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    assert np.isfinite(steps["qp_u_error_nm"]).sum() == s["qp_reference_checks"]

@@ -91,6 +91,9 @@ class Episode:
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
+        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck):
+        # on_tick(k, backend problem, solution) -> |u - u_ref| after the tick, off the clock (extras["reference_s"])
+        self.reference_check = None
         # --- streaming hook (record.mcap): chunk_sink(trace, k0, k1) after every chunk_ticks ticks, outside
         # the ticks' timers (its time is reported as recording_s, not in wall_time_s)
         self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
@@ -161,9 +164,10 @@ class Episode:
         except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
             res.status, res.message = "error", f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
-        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s
+        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s
         res.n_ticks = trace.n
         res.extras["recording_s"] = self._recording_s
+        res.extras["reference_s"] = self._reference_s
         if self.s.analyse:
             trace.finalize()
             self._residuals(trace, res)
@@ -184,6 +188,9 @@ class Episode:
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._t0_plant = self.d.time
         self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
+        self._reference_s = 0.0  # [s] spent in the reference check, outside the ticks' timers
+        if self.reference_check is not None:
+            self.reference_check.reset()
         res.extras["warmup_s"] = self._warm_up()
         return trace, res
 
@@ -208,6 +215,10 @@ class Episode:
         trace.record(k, t, d.qpos, d.qvel, d.sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                      tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         trace.mu_hat_ready[k] = est.ready
+        if self.reference_check is not None and fres is not None:
+            ref0 = time.perf_counter()
+            trace.qp_u_error_nm[k] = self.reference_check.on_tick(k, self.filter.backend_problem, fres.solve)
+            self._reference_s += time.perf_counter() - ref0
         return self._ended(t, fall, unstable, res)
 
     def _filter(self, k: int, t: float, u_nom: np.ndarray, gs, in_stance: np.ndarray, est: FrictionEstimate,
