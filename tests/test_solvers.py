@@ -318,3 +318,69 @@ def test_a_run_checks_its_answers_off_the_clock(tmp_path):
 
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     assert np.isfinite(steps["qp_u_error_nm"]).sum() == s["qp_reference_checks"]
+
+
+# ---------------------------------------------------------------------------------- solver verdict
+
+
+def _fake_sweep(root: Path) -> "pd.DataFrame":
+    """Three backends x 2 seeds on one world, 1 kHz: 'slow_ok' (solves 200-400 µs, right), 'fast_wrong'
+    (10 µs, u off by 2e-3 N·m on some checks), 'late' (right, 1 % of solves over 1 ms)."""
+    import pandas as pd
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for solver, base, wrong_every, late in (("slow_ok", 300.0, 0, 0.0), ("fast_wrong", 10.0, 50, 0.0),
+                                            ("late", 50.0, 0, 0.01)):  # fmt: skip
+        for seed in (0, 1):
+            n = 1000
+            solve = base * (1 + 0.3 * rng.random(n))
+            solve[rng.random(n) < late] = 1500.0
+            err = np.full(n, np.nan)
+            err[::10] = 1e-7
+            if wrong_every:
+                err[::wrong_every] = 2e-3
+            run_dir = f"solver={solver},seed={seed}"
+            (root / run_dir).mkdir(parents=True)
+            pd.DataFrame({"qp_solve_us": solve, "qp_iterations": np.full(n, 3, np.int32), "qp_u_error_nm": err,
+                          "qp_status": np.zeros(n, np.int8), "fell": False}).to_parquet(root / run_dir / "steps.parquet")
+            rows.append({"scenario": "flat", "solver": solver, "seed": seed, "status": "ok", "run_dir": run_dir,
+                         "control_rate_hz": 1000.0, "qp_reference_tol_nm": 1e-3, "real_time_factor": 5.0,
+                         "fell": False, "filter_enabled": True,
+                         "solver_settings": str({"kind": "persistent", "settings": {"eps_abs": 1e-6}})})
+    return pd.DataFrame(rows)
+
+
+def test_solver_verdict_ships_the_fastest_backend_with_no_wrong_answer_and_no_miss(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from taslel_bench.sweep.solver_verdict import solve_time_figure, solver_verdict
+
+    frame = _fake_sweep(tmp_path)
+    text, rows = solver_verdict(tmp_path, frame, ["scenario", "solver"])
+    r = rows.set_index("backend")
+    assert r.loc["fast_wrong", "wrong_rate"] == pytest.approx(20 / 100)  # every 5th of the checks
+    assert r.loc["slow_ok", "wrong_rate"] == 0.0
+    assert r.loc["fast_wrong", "u_err_max_nm"] == pytest.approx(2e-3)
+    assert r.loc["late", "miss_period_rate"] == r.loc["late", "miss_1ms_rate"] > 0.0
+    assert r.loc["slow_ok", "runs"] == 2 and r.loc["slow_ok", "ticks"] == 2000  # seeds pooled, backends not
+    assert r.loc["slow_ok", "tolerances"].startswith("eps_abs=1e-06") and r.loc["slow_ok", "route"] == "persistent"
+    assert "ship **slow_ok**" in text and "Over the sweep** (1 world(s)): ship **slow_ok**" in text
+    assert "fast_wrong: 20.00% wrong answers" in text and "late: " in text and "over the 1000 µs period" in text
+    assert solve_time_figure(tmp_path, frame, ["scenario", "solver"], plt) == ["qp_solve_times.png"]
+    assert (tmp_path / "qp_solve_times.png").stat().st_size > 10_000
+
+
+def test_paper_claims_do_not_pool_backends_as_seeds(tmp_path):
+    import pandas as pd
+
+    from taslel_bench.sweep.claims import paper_claims
+
+    frame = pd.DataFrame([{"scenario": "flat", "filter_enabled": True, "solver": s, "seed": 0, "fell": False,
+                           "grf_mae_z_n_stance": v, "grf_mae_z_n": v, "grf_mae_xy_n_stance": v, "grf_mae_xy_n": v}
+                          for s, v in (("osqp", 1.0), ("clarabel", 2.0), ("clarabel", 3.0))])  # fmt: skip
+    text = paper_claims(frame)
+    assert "`solver=clarabel` only" in text and "n=2" in text and "n=3" not in text

@@ -55,6 +55,9 @@ def paper_claims(finished: pd.DataFrame) -> str:
             frame = frame[~frame["filter_enabled"] | (gain == 0.0)]
             note = "Filter-on runs: `filter.contact_velocity_gain=0` (the paper's contact constraint) only. "
 
+    frame, pooled_note = _one_backend(frame)
+    note += pooled_note
+
     def runs(scenario: str, on: bool) -> pd.DataFrame:
         return frame[(frame["scenario"] == scenario) & (frame["filter_enabled"] == on)]
 
@@ -69,6 +72,24 @@ def paper_claims(finished: pd.DataFrame) -> str:
             "plant or filter normal force >= 1 N (the headline); *stance* = the filter's stance set with plant "
             "load (the paper's selection).\n\n" + markdown_table(table, fmt=str) + "\n### Claim by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
+
+
+def _one_backend(frame: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """Backends and formulations are not seeds: when the filter-on runs have several, keep the paper's full
+    formulation and the backend with the most runs (then by name); the note says which."""
+    on, note = frame["filter_enabled"], ""
+    for col, prefer in (("filter_formulation", "full"), ("solver", None)):
+        if col not in frame:
+            continue
+        values = frame.loc[on, col].astype(str)
+        if values.nunique() <= 1:
+            continue
+        counts = values.value_counts()
+        keep = prefer if prefer in counts else sorted(counts.index, key=lambda v: (-counts[v], v))[0]
+        frame = frame[~on | (frame[col].astype(str) == keep)]
+        on = frame["filter_enabled"]
+        note += f"Filter-on runs: `{col}={keep}` only (not pooled with the others as if they were seeds). "
+    return frame, note
 
 
 def _grf(runs: Runs, rows: list, sentences: list) -> None:
