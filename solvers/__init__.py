@@ -1,12 +1,13 @@
 """QP backends for the ID-CBF-QP safety filter (sweep axis 2).
 
 Every backend implements :class:`taslel_bench.interfaces.QPBackend`: ``solve(problem) -> QPSolution``
-(never raises for solver failures), ``reset()`` and ``describe()``. Two families:
+(never raises for solver failures), ``reset()`` and ``describe()``. Two routes:
 
+* the solver as a controller deploys it (``solver=osqp``, ``clarabel``, ``piqp``, ``proxqp``, ``daqp``):
+  persistent native backends that set the solver up once per QP layout, then update values each tick and
+  warm start where the solver can (Clarabel, an interior point, keeps only its setup);
 * :class:`solvers.qpsolvers_backend.QpsolversBackend` -- any solver installed behind ``qpsolvers``, set up
-  from scratch on every call;
-* persistent native backends (``osqp_persistent``, ``piqp_persistent``, ``proxqp_persistent``,
-  ``daqp_persistent``) that set the solver up once per QP layout, then update values and warm start.
+  from scratch on every call (``solver=qpsolvers solver.name=<name>``; ``solver=quadprog``).
 
 Every returned solution is checked against the *original* problem (primal residual, dual residual and
 duality gap, :mod:`solvers.checks`): a solver that claims success with a bad answer gets a non-solved status.

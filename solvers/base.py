@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from importlib import metadata
 
 import numpy as np
 
 from solvers.checks import Residuals, Tolerances, residuals_at_level, verdict
-from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution
+from taslel_bench.interfaces import SOLVED, QPProblem, QPSolution, all_finite
 
 
 @dataclass
@@ -92,7 +91,7 @@ def checked(
             None, native_status or "failed", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )
     x = np.array(x, dtype=float, copy=True)
-    if not math.isfinite(x @ x):  # all entries finite (and below ~1e154)
+    if not all_finite(x):
         return BackendSolution(
             None, "non-finite solution", solve_time_s, iterations, setup_time_s, overhead_s, native_status
         )

@@ -24,7 +24,7 @@ EQUALITY = 5
 
 
 class DaqpPersistent(PersistentBackend):
-    name = "daqp_persistent"
+    name = "daqp"
     package = "daqp"
 
     def __init__(self, settings: dict[str, Any] | None = None, **kwargs: Any) -> None:

@@ -52,7 +52,7 @@ DEFAULT_SETTINGS_WITH_EQUALITIES: dict[str, Any] = {"eps_abs": 1e-8, "scaling": 
 
 
 class OsqpPersistent(PersistentBackend):
-    name = "osqp_persistent"
+    name = "osqp"
     package = "osqp"
 
     def __init__(self, settings: dict[str, Any] | None = None,

@@ -27,7 +27,7 @@ DEFAULT_SETTINGS: dict[str, Any] = {"eps_abs": 1e-9, "eps_rel": 0.0, "verbose": 
 
 
 class PiqpPersistent(PersistentBackend):
-    name = "piqp_persistent"
+    name = "piqp"
     package = "piqp"
 
     def __init__(self, settings: dict[str, Any] | None = None, backend: str = "dense", **kwargs: Any) -> None:

@@ -36,7 +36,7 @@ DEFAULT_SETTINGS: dict[str, Any] = {
 
 
 class ProxqpPersistent(PersistentBackend):
-    name = "proxqp_persistent"
+    name = "proxqp"
     package = "proxsuite"
     validate_input = True  # ProxQP loops (practically) forever on NaN input
 

@@ -1,4 +1,5 @@
-"""Any solver installed behind ``qpsolvers``, by name, with its native settings (set up on every call)."""
+"""Any solver installed behind ``qpsolvers``, by name, with its native settings (set up on every call): the
+per-call route, ``solver=qpsolvers solver.name=<name>`` (:func:`qpsolvers_route`)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 from solvers.base import BackendSolution, checked, invalid_data, package_version
 from solvers.checks import Tolerances
 from solvers.presolve import Reduced, reduce
+from solvers.qpsolvers_settings import qpsolvers_defaults
 from solvers.settings import check_settings
 from solvers.sparse import PatternCache
 from taslel_bench.interfaces import QPProblem, choice, fail, flag
@@ -178,3 +180,24 @@ class QpsolversBackend:
             self._x_prev = out.x if out.ok else None
         out.overhead_s += time.perf_counter() - t2
         return out
+
+
+def qpsolvers_route(name: str, settings: Mapping[str, Any] | None = None, tuned: bool = True,
+                    **kwargs: Any) -> QpsolversBackend:  # fmt: skip
+    """The per-call route of solver ``name`` (``conf/solver/qpsolvers.yaml``): its accurate settings from
+    :mod:`solvers.qpsolvers_settings` (``tuned=False``: the solver's own defaults) with ``settings`` merged
+    over them; ``check``, ``presolve`` ... given in ``kwargs`` replace the table's. Its :attr:`name` is
+    ``qpsolvers:<name>``."""
+    if not isinstance(name, str):
+        raise fail("solver.name", name, "must be a qpsolvers solver name")
+    defaults = qpsolvers_defaults(name) if flag("solver.tuned", tuned) else {}
+    native = {**dict(defaults.pop("settings", None) or {}), **dict(check_settings(settings))}
+    kwargs = {**defaults, **{k: v for k, v in kwargs.items() if v is not None}}
+    try:
+        backend = QpsolversBackend(name, settings=native, **kwargs)
+    except ValueError as exc:
+        if str(exc).startswith("solver.solver="):
+            raise fail("solver.name", name, str(exc).split(": ", 1)[1]) from None
+        raise
+    backend.name = f"qpsolvers:{name}"
+    return backend

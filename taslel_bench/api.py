@@ -6,7 +6,7 @@ need beyond them: the project config, the safety filter, the controller, the pla
 from the project's Hydra config, so a solver or filter setting means the same thing in a data-collection
 run as in a benchmark run.
 
-    cfg = api.compose(["solver=daqp_persistent"])
+    cfg = api.compose(["solver=daqp"])
     safety_filter = api.build_safety_filter(cfg)          # SafetyFilter with cfg.solver's backend
     controller = api.build_controller(cfg)                # NominalController (trot, IK, joint PD)
     controller = api.NominalController(api.GaitParams(speed_mps=0.3), api.PDGains())  # or set by hand

@@ -22,6 +22,7 @@ from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
+from taslel_bench.util.jit import all_finite
 from taslel_bench.util.fields import (
     ConfigError,
     choice,
@@ -92,8 +93,7 @@ class QPSolution:
 
     @property
     def ok(self) -> bool:
-        # a finite x'x <=> all entries finite (entries beyond ~1e154, which overflow it, also read as not ok)
-        return self.status == SOLVED and self.x is not None and math.isfinite(self.x @ self.x)
+        return self.status == SOLVED and self.x is not None and all_finite(self.x)
 
 
 @runtime_checkable
@@ -191,7 +191,7 @@ class Estimator(Protocol):
 
 __all__ = [  # noqa: RUF022 - grouped by topic
     # QP
-    "SOLVED", "QPBackend", "QPProblem", "QPSolution",
+    "SOLVED", "QPBackend", "QPProblem", "QPSolution", "all_finite",
     # scenario and terrain
     "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "Log", "Plane", "Scenario", "Terrain",
     "TerrainPart",

@@ -52,8 +52,8 @@ def test_a_barrier_family_is_one_class_and_one_config_entry(tmp_path):
     built = Built(compose_cfg([*SHORT, toy]))
     assert [b.name for b in built.filter.barriers] == ["ceiling"]  # flat floor: the other families do not apply
     assert "FL_ceiling" in built.filter.problem.row_labels
-    summary = run(compose_cfg([*SHORT, toy]), tmp_path / "toy", {"scenario": "flat", "solver": "daqp_persistent"})
-    run(compose_cfg(SHORT), tmp_path / "plain", {"scenario": "flat", "solver": "daqp_persistent"})
+    summary = run(compose_cfg([*SHORT, toy]), tmp_path / "toy", {"scenario": "flat", "solver": "daqp"})
+    run(compose_cfg(SHORT), tmp_path / "plain", {"scenario": "flat", "solver": "daqp"})
     assert summary["status"] in ("ok", "degraded") and summary["qp_failed_rate"] == 0.0
     steps = pd.read_parquet(tmp_path / "toy" / "steps.parquet")
     walking = steps[steps.t_s >= 0.5]

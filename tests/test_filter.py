@@ -381,7 +381,7 @@ def test_persistent_osqp_leaves_out_vacuous_rows_and_keeps_its_setup(states):
     from solvers.registry import make_backend
 
     sts, pm = states
-    osqp_b, daqp_b = make_backend("osqp_persistent"), make_backend("daqp_persistent")
+    osqp_b, daqp_b = make_backend("osqp"), make_backend("daqp")
     f = SafetyFilter(FilterSettings(formulation="condensed"), TightReference(), clearance_rows())
     stance_sets = set()
     for st in sts:

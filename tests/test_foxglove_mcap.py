@@ -45,7 +45,7 @@ def logs_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("logs_run")
     before = time.time_ns()
     summary = run(compose_cfg(["scenario=logs", "duration=0.3", "progress=false", "scenario.first_x_m=0.45"]), out,
-                  {"scenario": "logs", "solver": "daqp_persistent"})  # fmt: skip
+                  {"scenario": "logs", "solver": "daqp"})  # fmt: skip
     messages: dict[str, list] = {}
     with open(out / FINAL_NAME, "rb") as f:
         reader = make_reader(f)

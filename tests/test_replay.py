@@ -36,13 +36,13 @@ def runs_set() -> qpset.QPSet:
 def test_record_in_a_run_and_load_round_trip(tmp_path):
     cfg = compose_cfg(["scenario=obstacle", "duration=0.1", "progress=false", "record.mcap=false",
                        "record.qps=true", "record.qps_every=50"])  # fmt: skip
-    summary = run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp_persistent"})
+    summary = run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp"})
     qs = qpset.load(tmp_path / qpset.FILENAME)
     n_ticks = 600  # 0.5 s stand + 0.1 s at 1 kHz
     assert summary["qps_recorded"] == len(qs) == n_ticks // 50
     assert list(qs.tick) == list(range(0, n_ticks, 50))
     np.testing.assert_allclose(qs.t_s, qs.tick * 1e-3)
-    assert qs.runs[0]["scenario"] == "obstacle" and qs.runs[0]["solver"] == "daqp_persistent"
+    assert qs.runs[0]["scenario"] == "obstacle" and qs.runs[0]["solver"] == "daqp"
     assert np.all(qs.build_time_s > 0) and np.all(qs.solve_time_s > 0) and set(qs.status) == {"solved"}
     for i in range(len(qs)):  # the stored solution used solves the stored QP
         p, x = qs.problem(i), qs.x_used_of(i)
@@ -144,9 +144,9 @@ def test_replaying_twice_gives_the_same_tables(runs_set, tmp_path):
     for k in range(2):
         frame = replay.replay(runs_set, ["osqp", "proxqp"], ["cold", "persistent"],
                               {"default": {"all": {"settings": {}, "check": {"level": "none"}},
-                                           "osqp_persistent": {"settings": {"eps_abs": 1e-3, "eps_rel": 1e-3},
+                                           "osqp": {"settings": {"eps_abs": 1e-3, "eps_rel": 1e-3},
                                                                "settings_with_equalities": {}},
-                                           "proxqp_persistent": {"settings": {"eps_abs": 1e-5,
+                                           "proxqp": {"settings": {"eps_abs": 1e-5,
                                                                               "check_duality_gap": False}}},
                                **HIGH}, 2, TOL, max_qps=15)  # fmt: skip
         s = summarize(frame)
@@ -184,7 +184,7 @@ def test_record_condensed_formulation_stores_what_the_backend_solved(tmp_path):
     """filter.formulation=condensed: the recorded QP is the 12-variable one the backend got, with its u."""
     cfg = compose_cfg(["scenario=obstacle", "duration=0.1", "progress=false", "record.mcap=false",
                        "record.qps=true", "record.qps_every=100", "filter.formulation=condensed"])  # fmt: skip
-    run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp_persistent"})
+    run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp"})
     qs = qpset.load(tmp_path / qpset.FILENAME)
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     u_cols = [c for c in steps.columns if c.startswith("u_") and not c.startswith("u_nom")]

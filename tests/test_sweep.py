@@ -151,7 +151,7 @@ def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_pa
 
     for mu in ("0.3", "1.0"):
         over = ["duration=0.2", "progress=false", "record.mcap=false", f"scenario.friction={mu}"]
-        run(compose_cfg(over), tmp_path / f"mu={mu}", {"scenario": "flat", "solver": "daqp_persistent"},
+        run(compose_cfg(over), tmp_path / f"mu={mu}", {"scenario": "flat", "solver": "daqp"},
             overrides=[f"scenario.friction={mu}", "duration=0.2"])
     monkeypatch.setattr(run_module, "build_backend", lambda cfg: NeverSolves())  # every tick fails
     bad = ["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp", "solver.settings.max_iter=1"]
@@ -162,8 +162,8 @@ def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_pa
     report = write_report(tmp_path, frame).read_text()
     header = "| scenario | solver | estimator | scenario.friction | solver.settings.max_iter | runs |"
     assert header in report
-    assert "| flat | daqp_persistent | oracle |  | 0.3 |" not in report  # the override is its own column
-    assert "| flat | daqp_persistent | oracle | 0.3 |  | 1 | 0 | 0 |" in report
-    assert "| flat | daqp_persistent | oracle | 1.0 |  | 1 | 0 | 0 |" in report
+    assert "| flat | daqp | oracle |  | 0.3 |" not in report  # the override is its own column
+    assert "| flat | daqp | oracle | 0.3 |  | 1 | 0 | 0 |" in report
+    assert "| flat | daqp | oracle | 1.0 |  | 1 | 0 | 0 |" in report
     assert "| flat | osqp | oracle |  | 1 | 1 | 0 | 1 |" in report
     assert "## Runs that ended degraded" in report and "qp_failed_rate=1 > 0.05" in report

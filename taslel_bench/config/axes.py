@@ -31,12 +31,12 @@ def build_axis(cfg: DictConfig, group: str) -> Any:
         return instantiate(cfg[group])
     except InstantiationException as exc:
         cause = exc.__cause__
-        if isinstance(cause, ConfigError) and str(cause).startswith(f"{group}."):
+        if isinstance(cause, ConfigError) and str(cause).startswith((f"{group}.", f"{group}=")):
             raise cause from None  # already names the field: shown once, where it was raised
         if not isinstance(cause, BUILD_ERRORS):
             raise
         message = str(cause) if str(cause) else type(cause).__name__
-        if not message.startswith(f"{group}."):
+        if not message.startswith((f"{group}.", f"{group}=")):
             message = f"{group} ({cfg[group].get('_target_')}): {type(cause).__name__}: {message}"
         raise ConfigError(message) from cause
 

@@ -149,6 +149,8 @@ def _top_level(cfg: DictConfig) -> int:
     for key in ("force", "progress", "record.mcap", "record.qps", "record.video"):
         flag(key, _get(cfg, key, False))
     integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
+    integer("record.reference_every", _get(cfg, "record.reference_every", 10), 0)
+    number("record.reference_tol_nm", _get(cfg, "record.reference_tol_nm", 1e-3), 0.0, lo_open=True, unit="N·m")
     if _get(cfg, "record.mcap_rate_hz", None) is not None:
         number("record.mcap_rate_hz", _get(cfg, "record.mcap_rate_hz"), 0.0, control, lo_open=True, unit="Hz",
                why="at most control_rate_hz; null: every tick")

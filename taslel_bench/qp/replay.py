@@ -10,7 +10,9 @@ by run in tick order (warm starts never cross runs), ``repeats`` passes:
 * ``cold``: ``reset()`` before every QP (no initial guess, solver set up from scratch);
 * ``warm``: the backend's previous answer as initial guess (``warm_start=true``; backends that cannot use a
   guess report the mode as unavailable);
-* ``persistent``: the ``<name>_persistent`` backend, set up once per layout and updated in place.
+* ``persistent``: ``solver=<name>``, set up once per layout and updated in place.
+
+``cold`` and ``warm`` run the qpsolvers route of the solver (``solver=qpsolvers solver.name=<name>``).
 
 Per QP and pass: the backend's status (success = ``"solved"``), correctness checked *here* (u within
 ``tolerances.u_nm`` of the tight reference ``conf/solver/reference.yaml``, primal residual, and dual
@@ -111,29 +113,38 @@ def solver_conf(name: str) -> DictConfig:
 
 
 def base_names() -> list[str]:
-    """Backends a ``solver=all`` replay covers: conf/solver files except the reference and the
-    ``_persistent`` ones (they are the persistent mode of their base name), plus persistent ones without one."""
+    """Backends a ``solver=all`` replay covers: the conf/solver files except the reference, the qpsolvers
+    route (the cold and warm modes of every name) and the old names that only refuse."""
     stems = sorted(p.stem for p in SOLVER_DIR.glob("*.yaml"))
-    bases = [s for s in stems if not s.endswith("_persistent") and s != "reference"]
-    bases += [s for s in stems if s.endswith("_persistent") and s.removesuffix("_persistent") not in stems]
-    return bases
+    return [s for s in stems if s not in ("reference", "qpsolvers") and not s.endswith("_persistent")]
+
+
+def _per_call(cfg: DictConfig) -> bool:
+    """A conf/solver entry of the qpsolvers route (set up on every call)."""
+    return str(cfg.get("_target_", "")).startswith("solvers.qpsolvers_backend.")
 
 
 def backend_conf(name: str, mode: str, overrides: dict[str, Any]) -> tuple[str, DictConfig]:
     """(conf name, config) of backend ``name`` in ``mode``, with a profile's ``overrides``
-    (``{"all": {...}, "<conf name>": {...}}``) applied."""
-    base = name.removesuffix("_persistent")
-    conf_name = f"{base}_persistent" if mode == "persistent" else name
-    if mode == "persistent" and not (SOLVER_DIR / f"{conf_name}.yaml").is_file():
-        if (SOLVER_DIR / f"{name}.yaml").is_file() and name.endswith("_persistent"):
-            conf_name = name
-        else:
-            raise Unavailable(f"no persistent backend (conf/solver/{base}_persistent.yaml)")
-    cfg = solver_conf(conf_name)
-    for key in ("all", conf_name):
+    (``{"all": {...}, "qpsolvers": {...}, "<conf name>": {...}}``, "qpsolvers" for every per-call backend)
+    applied. ``persistent``: ``conf/solver/<name>.yaml``; ``cold`` and ``warm``: the qpsolvers route of the
+    same solver (``conf/solver/qpsolvers.yaml`` with ``name``, conf name ``qpsolvers:<name>``)."""
+    base = name.removeprefix("qpsolvers:")
+    own = solver_conf(base)
+    if mode == "persistent":
+        if _per_call(own):
+            raise Unavailable(f"no persistent backend (conf/solver/{base}.yaml is the qpsolvers route)")
+        conf_name, cfg = base, own
+    elif _per_call(own):
+        conf_name, cfg = base, own
+    else:
+        conf_name, cfg = f"qpsolvers:{base}", solver_conf("qpsolvers")
+        cfg["name"] = base
+    keys = ("all", "qpsolvers", conf_name) if _per_call(cfg) else ("all", conf_name)
+    for key in keys:
         for k, v in dict(overrides.get(key) or {}).items():
             cfg[k] = v
-    if mode == "warm" and not conf_name.endswith("_persistent"):
+    if mode == "warm":
         cfg["warm_start"] = True
     return conf_name, cfg
 

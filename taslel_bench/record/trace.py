@@ -78,6 +78,7 @@ class EpisodeTrace:
         self.qp_build_us = np.full(c, np.nan)
         self.qp_solve_us = np.full(c, np.nan)
         self.qp_iterations = np.full(c, -1, np.int32)
+        self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
         self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
         self.vdot_filter = np.full((c, a1.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
         self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
@@ -336,8 +337,8 @@ class EpisodeTrace:
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
         cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
-        for name in ("qp_status", "qp_fallback", "qp_build_us", "qp_solve_us", "qp_iterations", "mu_hat", "mu_true",
-                     "mu_hat_ready", "tick_us"):
+        for name in ("qp_status", "qp_fallback", "qp_build_us", "qp_solve_us", "qp_iterations", "qp_u_error_nm",
+                     "mu_hat", "mu_true", "mu_hat_ready", "tick_us"):
             cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
 

@@ -25,6 +25,7 @@ from taslel_bench.filter.safety_filter import SafetyFilter
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.plant.build import PlantOptions, a1_spec, compile_plant, mjcf_spec
 from taslel_bench.plant.contacts import measure_contact_friction
+from taslel_bench.qp.reference_check import reference_check
 from taslel_bench.sim.episode import Episode
 
 FRICTION_CHECK_TOL = 1e-9
@@ -108,4 +109,7 @@ class Built:
             stance_from_contact=fs.stance_source == "contact",
             model=build_model(cfg),
         )
+        # record.reference_every: the backend's answers checked against the tight reference (None: off)
+        self.reference_check = reference_check(cfg) if self.filter is not None else None
+        self.episode.reference_check = self.reference_check
         self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from

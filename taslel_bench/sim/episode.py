@@ -15,6 +15,7 @@ every :meth:`Episode.run` starts from that same state (the friction check of the
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 import traceback
@@ -93,6 +94,9 @@ class Episode:
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
+        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck):
+        # on_tick(k, backend problem, solution) -> |u - u_ref| after the tick, off the clock (extras["reference_s"])
+        self.reference_check = None
         # --- streaming hook (record.mcap): chunk_sink(trace, k0, k1) after every chunk_ticks ticks, outside
         # the ticks' timers (its time is reported as recording_s, not in wall_time_s)
         self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
@@ -154,6 +158,8 @@ class Episode:
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
         """Reset, run every tick until the end, a fall or an error, then analyse the trace."""
         trace, res = self._start()
+        gc_was_enabled = gc.isenabled()
+        gc.disable()  # the loop makes no reference cycles: no collector pauses inside ticks (restored below)
         wall0 = time.perf_counter()
         try:
             for k in range(self.n_ticks):
@@ -163,9 +169,13 @@ class Episode:
         except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
             res.status, res.message = "error", f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
-        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s
+        finally:
+            if gc_was_enabled:
+                gc.enable()
+        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s
         res.n_ticks = trace.n
         res.extras["recording_s"] = self._recording_s
+        res.extras["reference_s"] = self._reference_s
         if self.s.analyse:
             trace.finalize()
             self._residuals(trace, res)
@@ -180,12 +190,17 @@ class Episode:
         self.initial_state()
         self.estimator.reset()
         trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain, self.contact_frames)
+        # views of the plant's arrays, made once (MjData makes a new numpy wrapper on every attribute read)
+        self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
         self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
         self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._t0_plant = self.d.time
         self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
+        self._reference_s = 0.0  # [s] spent in the reference check, outside the ticks' timers
+        if self.reference_check is not None:
+            self.reference_check.reset()
         res.extras["warmup_s"] = self._warm_up()
         return trace, res
 
@@ -194,9 +209,9 @@ class Episode:
         episode ends here (a fall or a non-finite state)."""
         tick0 = time.perf_counter()
         t = k * self.s.control_dt_s
-        d, q, v = self.d, self._q, self._v
-        self.bridge.state_pin(d.qpos, d.qvel, q, v)
-        true_mu = self.terrain.friction_at(d.qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
+        qpos, qvel, q, v = self._qpos, self._qvel, self._q, self._v
+        self.bridge.state_pin(qpos, qvel, q, v)
+        true_mu = self.terrain.friction_at(qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
         est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev))
         u_nom = self.controller.compute(t, q[7:], v[6:])
         gs = self.controller.gait_state(t)
@@ -207,12 +222,16 @@ class Episode:
         self._tau_prev[:] = u
         tick4 = time.perf_counter()
         trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
-        trace.record(k, t, d.qpos, d.qvel, d.sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
+        trace.record(k, t, qpos, qvel, self._sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                      tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         frames0 = time.perf_counter()
         self.contact_frames.record(d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
         self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
         trace.mu_hat_ready[k] = est.ready
+        if self.reference_check is not None and fres is not None:
+            ref0 = time.perf_counter()
+            trace.qp_u_error_nm[k] = self.reference_check.on_tick(k, self.filter.backend_problem, fres.solve)
+            self._reference_s += time.perf_counter() - ref0
         return self._ended(t, fall, unstable, res)
 
     def _filter(self, k: int, t: float, u_nom: np.ndarray, gs, in_stance: np.ndarray, est: FrictionEstimate,
@@ -234,16 +253,16 @@ class Episode:
     def _step_plant(self, u: np.ndarray, t: float) -> tuple[Fall | None, bool, bool, bool]:
         """Hold ``u`` for the tick's physics steps, checking the fall terms after each. Returns (the fall or
         None, a lower leg touched an obstacle, a lower leg touched the floor, MuJoCo reset the data)."""
-        m, d, contacts = self.m, self.d, self.contacts
+        m, d, contacts, qpos = self.m, self.d, self.contacts, self._qpos
         obstacle_touch = shin_touch = False
         for _ in range(self.physics_per_tick):
-            self.bridge.ctrl_mj(u, d.ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
+            self.bridge.ctrl_mj(u, self._ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
             self.scenario.on_tick(m, d, t)
             t_before = d.time
             mujoco.mj_step(m, d)
             if d.time <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
                 return None, obstacle_touch, shin_touch, True
-            fall = self.terminations.after_step(d.qpos, d, d.time - self._t0_plant)
+            fall = self.terminations.after_step(qpos, d, d.time - self._t0_plant)
             obstacle_touch |= contacts.non_foot_obstacle_contact
             shin_touch |= contacts.shin_contact
             if fall is not None:
@@ -254,7 +273,7 @@ class Episode:
 
     def _ended(self, t: float, fall: Fall | None, unstable: bool, res: EpisodeResult) -> bool:
         """Mark ``res`` if the tick ended the episode: a non-finite or exploding state (an error), a fall."""
-        if unstable or self.terminations.state_is_bad(self.d.qpos, self.d.qvel):
+        if unstable or self.terminations.state_is_bad(self._qpos, self._qvel):
             res.status, res.message = "error", f"non-finite or exploding plant state at t={t:.3f}s"
             return True
         if fall is not None:

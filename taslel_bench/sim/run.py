@@ -23,6 +23,7 @@ from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.residuals import alarm_events
 from taslel_bench.metrics.summary import summarize
 from taslel_bench.plant.comparison import plant_vs_model
+from taslel_bench.qp.reference_check import reference_metrics
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
@@ -190,6 +191,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
 def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, str], overrides: list[str] | None,
               config_hash: str, notes: dict[str, object]) -> dict[str, object]:
     """The episode and its files, in a folder prepared (and locked) by :func:`run`."""
+    if choices.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
+        choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
@@ -241,6 +244,9 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
     out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg))
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))
+    out["reference_s"] = float(res.extras.get("reference_s", 0.0))
+    n = res.trace.n  # record.reference_every: u error against the tight reference, deadline misses
+    out.update(reference_metrics(built.reference_check, res.trace.qp_u_error_nm[:n], res.trace.qp_solve_us[:n], dt))
     diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
         out.update({f"estimator_{k}": v for k, v in diagnostics().items()})

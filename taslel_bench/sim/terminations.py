@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.plant.contacts import FootContactReader
+from taslel_bench.util.jit import kernel
 
 TERMS = ("trunk_height", "trunk_tilt", "body_contact")
 
@@ -68,8 +69,20 @@ class Terminations:
 
     def state_is_bad(self, qpos: np.ndarray, qvel: np.ndarray) -> bool:
         """NaN/inf anywhere in the state or a speed beyond the bound (one dot product each)."""
-        return not (float(qvel @ qvel) < self._vmax_sq and math.isfinite(float(qpos @ qpos)))
+        return not _state_ok(qpos, qvel, self._vmax_sq)
 
     def on_grid(self, t_s: float) -> float:
         """``t_s`` rounded to the physics-step grid [s]."""
         return round(t_s / self.dt) * self.dt
+
+
+@kernel
+def _state_ok(qpos, qvel, vmax_sq):  # pragma: no cover - compiled
+    """||qvel||² < vmax_sq and every qpos entry finite (a NaN speed fails the first test)."""
+    v2 = 0.0
+    for x in qvel:
+        v2 += x * x
+    acc = 0.0
+    for x in qpos:
+        acc += x * 0.0
+    return v2 < vmax_sq and acc == 0.0

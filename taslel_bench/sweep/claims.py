@@ -91,7 +91,9 @@ def paper_claims(finished: pd.DataFrame) -> str:
 
 
 def _claims(frame: pd.DataFrame) -> str:
-    """Table and sentences of one filter setting (its filter-on runs and the nominal runs)."""
+    """Table and sentences of one filter setting (its filter-on runs and the nominal runs); one backend only
+    (:func:`_one_backend`: solvers are not seeds)."""
+    frame, backend_note = _one_backend(frame)
 
     def runs(scenario: str, on: bool) -> pd.DataFrame:
         return frame[(frame["scenario"] == scenario) & (frame["filter_enabled"] == on)]
@@ -103,7 +105,7 @@ def _claims(frame: pd.DataFrame) -> str:
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "nominal only", "filter on"])
-    return (markdown_table(table, fmt=str) + "\n#### Claim by claim\n\n"
+    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + "\n#### Claim by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
 
 
@@ -133,6 +135,24 @@ def _verdicts(runs: Runs, rows: list, sentences: list) -> None:
         sentences.append("**Safe runs** (the verdict: no fall, no trip, no sustained sliding, clearance and "
                          "friction cone kept; the same rules with the filter on or off), unsafe runs: "
                          + "; ".join(parts) + ".")
+
+
+def _one_backend(frame: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """Backends and formulations are not seeds: when the filter-on runs have several, keep the paper's full
+    formulation and the backend with the most runs (then by name); the note says which."""
+    on, note = frame["filter_enabled"], ""
+    for col, prefer in (("filter_formulation", "full"), ("solver", None)):
+        if col not in frame:
+            continue
+        values = frame.loc[on, col].astype(str)
+        if values.nunique() <= 1:
+            continue
+        counts = values.value_counts()
+        keep = prefer if prefer in counts else sorted(counts.index, key=lambda v: (-counts[v], v))[0]
+        frame = frame[~on | (frame[col].astype(str) == keep)]
+        on = frame["filter_enabled"]
+        note += f"Filter-on runs: `{col}={keep}` only (not pooled with the others as if they were seeds). "
+    return frame, note
 
 
 def _grf(runs: Runs, rows: list, sentences: list) -> None:

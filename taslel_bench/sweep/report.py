@@ -20,6 +20,7 @@ import pandas as pd
 from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
+from taslel_bench.sweep.solver_verdict import solve_time_figure, solver_verdict
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.verdict_table import verdict_section
 from taslel_bench.util.machine import machine_info
@@ -166,24 +167,11 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    made = []
-    times = solve_times(sweep_dir, frame)
-    if times:
-        fig, ax = plt.subplots(figsize=(7, 3.5))
-        names = sorted(times)
-        ax.boxplot([times[n] for n in names], showfliers=False)
-        ax.set_xticks(range(1, len(names) + 1), names, rotation=20)
-        ax.set_yscale("log")
-        ax.set_ylabel("QP solve time per tick [µs]")
-        ax.set_title("QP solve-time distribution (backend timer, whiskers 1.5 IQR)")
-        fig.tight_layout()
-        fig.savefig(sweep_dir / "qp_solve_times.png", dpi=120)
-        plt.close(fig)
-        made.append("qp_solve_times.png")
+    made = solve_time_figure(sweep_dir, frame, group_columns(frame), plt)  # every tick (sweep.solver_verdict)
     if "scenario" in table and len(table):
         ok = _finished(frame)
         rates = ok.groupby("scenario")["fell"].mean() if len(ok) else pd.Series(dtype=float)
-        if len(rates):
+        if len(rates) and rates.max() > 0:  # nothing fell: no empty axis
             fig, ax = plt.subplots(figsize=(6, 3))
             ax.bar(rates.index.astype(str), rates.to_numpy())
             ax.set_ylim(0, 1)
@@ -411,6 +399,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         markdown_table(safety) if len(table) else "_no runs found_\n",
         "## Cost per group of runs\n" if len(table) else "",
         markdown_table(cost) if len(table) else "",
+        solver_verdict(sweep_dir, frame, group_columns(frame))[0] if not frame.empty else "",
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
         paper_claims(_finished(frame)) if not frame.empty else "",
     ]

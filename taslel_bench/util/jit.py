@@ -20,3 +20,13 @@ F = TypeVar("F", bound=Callable)
 def kernel(fn: F) -> F:
     """Compile ``fn`` in nopython mode, cached on disk, no GIL needed."""
     return njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
+
+
+@kernel
+def all_finite(x):  # pragma: no cover - compiled
+    """Every entry of the 1-d array ``x`` is finite (one pass; ~4x cheaper than ``math.isfinite(x @ x)`` on
+    the tick's 12-42 entries, and no overflow for entries beyond 1e154)."""
+    acc = 0.0
+    for v in x:
+        acc += v * 0.0  # nan for nan or +-inf, 0 otherwise
+    return acc == 0.0
