@@ -21,6 +21,7 @@ from taslel_bench.plant.perturbation import ActuatorDelay, PlantPerturbation
 from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
+from taslel_bench.terrain.relief import HeightField, Ramp, rough_heights
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.fields import (
     ConfigError,
@@ -193,8 +194,8 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     # QP
     "SOLVED", "QPBackend", "QPProblem", "QPSolution",
     # scenario and terrain
-    "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "Log", "Plane", "Scenario", "Terrain",
-    "TerrainPart",
+    "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "HeightField", "Log", "Plane", "Ramp",
+    "Scenario", "Terrain", "TerrainPart", "rough_heights",
     # estimator
     "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "Proprioception", "overestimates",
     # the plant's perturbations
