@@ -19,12 +19,13 @@ class RoughGround(FlatGround):
     """Heightfield over world x in [-1 m, ``start_x_m`` + ``length_m``] (flat up to ``start_x_m``), |y| <=
     ``half_width_m`` [m],
     grid ``spacing_m`` [m]; relief = uniform noise smoothed over ``smoothing_cells`` cells, largest magnitude
-    ``amplitude_m`` [m], drawn from ``seed`` (None: the run's terrain stream) — blended in from 0 over the
+    ``amplitude_m`` [m], drawn from ``seed`` (None: from the terrain's generator when the plant is built, a
+    stream of the run seed) — blended in from 0 over the
     first ``ramp_m`` [m]. The floor (z = 0) is sunk to -``amplitude_m`` - 1 mm below the field."""
 
     def __init__(self, name: str = "rough", friction: float = 1.0, amplitude_m: float = 0.03, spacing_m: float = 0.05,
                  start_x_m: float = 0.3, length_m: float = 6.0, half_width_m: float = 1.0, ramp_m: float = 0.4,
-                 smoothing_cells: int = 1, seed: int | None = 0) -> None:  # fmt: skip
+                 smoothing_cells: int = 1, seed: int | None = None) -> None:  # fmt: skip
         super().__init__(name=name, friction=friction)
         self.amplitude_m = number("scenario.amplitude_m", amplitude_m, 0.0, 0.15, lo_open=True, unit="m")
         spacing = number("scenario.spacing_m", spacing_m, 0.01, 0.5, unit="m")
@@ -33,12 +34,15 @@ class RoughGround(FlatGround):
         half = number("scenario.half_width_m", half_width_m, 0.3, 5.0, unit="m")
         ramp = number("scenario.ramp_m", ramp_m, 0.0, 5.0, unit="m")
         k = integer("scenario.smoothing_cells", smoothing_cells, 0, 10)
-        s = integer("scenario.seed", seed, 0, 2**31 - 1) if seed is not None else 0
         x_lo, x_hi = -FLAT_BEHIND_M, start + length  # [m] the field, flat from x_lo to start
         ncol, nrow = int(round((x_hi - x_lo) / spacing)) + 1, int(round(2 * half / spacing)) + 1
-        heights = rough_heights(np.random.default_rng(s), nrow, ncol, self.amplitude_m, k,
-                                int(round((start - x_lo) / spacing)), int(round(ramp / spacing)))  # fmt: skip
-        field = HeightField(heights, centre_x_m=(x_lo + x_hi) / 2.0, centre_y_m=0.0, half_x_m=(x_hi - x_lo) / 2.0,
+        flat, blend, amp = int(round((start - x_lo) / spacing)), int(round(ramp / spacing)), self.amplitude_m
+
+        def draw(rng: np.random.Generator) -> np.ndarray:
+            return rough_heights(rng, nrow, ncol, amp, k, flat, blend)
+
+        heights = draw(np.random.default_rng(integer("scenario.seed", seed, 0, 2**31 - 1))) if seed is not None else None
+        field = HeightField(heights, draw=draw, centre_x_m=(x_lo + x_hi) / 2.0, centre_y_m=0.0, half_x_m=(x_hi - x_lo) / 2.0,
                             half_y_m=half, friction=self.friction, role=OBSTACLE)  # fmt: skip
         self.terrain = Terrain((SunkFloor(self.friction, -self.amplitude_m - 1e-3), field))
 

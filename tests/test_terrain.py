@@ -165,10 +165,25 @@ def test_terrain_scenarios_are_real_geometry():
     slope = Slope(angle_deg=10.0, start_x_m=0.6, run_m=2.0)
     assert slope.terrain.height_at(1.6, 0.0) == pytest.approx(math.tan(math.radians(10.0)))
     assert np.allclose(slope.terrain.normal_at(1.6, 0.0), [-math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
-    rough0, rough1 = RoughGround(seed=0), RoughGround(seed=1)
+    rough0, rough1 = RoughGround(seed=0), RoughGround(seed=1)  # fixed reliefs (default: drawn at build)
     h0 = np.array([rough0.terrain.height_at(x, 0.2) for x in np.linspace(1.0, 5.0, 200)])
     h1 = np.array([rough1.terrain.height_at(x, 0.2) for x in np.linspace(1.0, 5.0, 200)])
     assert 0.01 < np.max(np.abs(h0)) <= 0.03 + 1e-12 and not np.allclose(h0, h1)  # seeded, +-3 cm
     assert rough0.terrain.height_at(0.0, 0.0) == 0.0  # flat where the robot stands
     for sc in (steps, slope, rough0):
         build_plant(sc)  # compiles with the terrain's geoms
+
+
+def test_rough_relief_is_drawn_from_the_run_seed_when_built():
+    from scenarios.rough import RoughGround
+    from taslel_bench.sim.build import build_plant
+
+    a, b, a_again = RoughGround(), RoughGround(), RoughGround()
+    for sc, seed in ((a, 0), (b, 1), (a_again, 0)):
+        with pytest.raises(RuntimeError):
+            sc.terrain.height_at(2.0, 0.0)  # no relief before the plant is built
+        m = build_plant(sc, seed=seed)
+    xs = np.linspace(1.0, 5.0, 50)
+    ha, hb, hc = ([s.terrain.height_at(x, 0.1) for x in xs] for s in (a, b, a_again))
+    assert ha == hc and ha != hb
+    assert m.nhfield == 1

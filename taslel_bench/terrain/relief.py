@@ -8,6 +8,7 @@ answers what MuJoCo's collision geometry of the compiled plant gives (tests/test
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import mujoco
@@ -83,7 +84,7 @@ class HeightField:
     MuJoCo splits each cell into two triangles along the diagonal from (row r, col c) to (r + 1, c + 1); the
     surface here is the same triangulation, so heights, normals and distances are the plant's."""
 
-    heights_m: np.ndarray  # (nrow, ncol) [m]
+    heights_m: np.ndarray | None  # (nrow, ncol) [m]; None: drawn by ``draw`` when the plant is built
     centre_x_m: float
     centre_y_m: float
     half_x_m: float
@@ -91,10 +92,19 @@ class HeightField:
     friction: float = 1.0
     base_m: float = 0.05  # [m] depth of MuJoCo's solid base below the lowest vertex
     role: str = GROUND
+    draw: Callable[[np.random.Generator], np.ndarray] | None = None  # heights from the terrain's generator
     _grid: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        h = np.asarray(self.heights_m, float)
+        if self.heights_m is None:
+            if self.draw is None:
+                raise ValueError("HeightField: give heights_m or draw")
+            object.__setattr__(self, "_grid", None)
+            return
+        self._set_heights(self.heights_m)
+
+    def _set_heights(self, heights: np.ndarray) -> None:
+        h = np.asarray(heights, float)
         if h.ndim != 2 or min(h.shape) < 2:
             raise ValueError("HeightField: heights_m must be a (nrow >= 2, ncol >= 2) array")
         object.__setattr__(self, "heights_m", h)
@@ -103,6 +113,10 @@ class HeightField:
 
     # --------------------------------------------------------------------------------------- plant
     def add_to(self, spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, rng: np.random.Generator) -> None:
+        """The hfield asset and geom; a field without heights draws them from ``rng`` first (the one
+        generator of the terrain, seeded from the run seed)."""
+        if self.draw is not None and self.heights_m is None:
+            self._set_heights(self.draw(rng))
         h = self.heights_m
         lo, span = float(h.min()), max(float(h.max() - h.min()), 1e-9)
         spec.add_hfield(name=f"{name}_hfield", size=[self.half_x_m, self.half_y_m, span, self.base_m],
@@ -113,6 +127,8 @@ class HeightField:
 
     # ------------------------------------------------------------------------------------- surface
     def _cell(self, x: float, y: float) -> tuple[int, int, float, float] | None:
+        if self._grid is None:
+            raise RuntimeError("HeightField: heights are drawn when the plant is built (Terrain.build) first")
         x0, y0, dx, dy = self._grid
         u, w = (x - x0) / dx, (y - y0) / dy
         nrow, ncol = self.heights_m.shape
