@@ -11,7 +11,6 @@ import numpy as np
 from scenarios.flat import FlatGround
 from taslel_bench.interfaces import OBSTACLE, HeightField, Plane, Terrain, integer, number, rough_heights
 
-
 FLAT_BEHIND_M = 1.0  # [m] the field starts this far behind the robot (flat, z = 0, under the stand)
 
 
@@ -35,8 +34,8 @@ class RoughGround(FlatGround):
         ramp = number("scenario.ramp_m", ramp_m, 0.0, 5.0, unit="m")
         k = integer("scenario.smoothing_cells", smoothing_cells, 0, 10)
         x_lo, x_hi = -FLAT_BEHIND_M, start + length  # [m] the field, flat from x_lo to start
-        ncol, nrow = int(round((x_hi - x_lo) / spacing)) + 1, int(round(2 * half / spacing)) + 1
-        flat, blend, amp = int(round((start - x_lo) / spacing)), int(round(ramp / spacing)), self.amplitude_m
+        ncol, nrow = round((x_hi - x_lo) / spacing) + 1, round(2 * half / spacing) + 1
+        flat, blend, amp = round((start - x_lo) / spacing), round(ramp / spacing), self.amplitude_m
 
         def draw(rng: np.random.Generator) -> np.ndarray:
             return rough_heights(rng, nrow, ncol, amp, k, flat, blend)

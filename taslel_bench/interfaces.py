@@ -166,6 +166,9 @@ class Proprioception:
     # [-] friction the safety filter assumed on the previous tick, the one that produced tau_joints (the
     # controller knows what it asked for); NaN when no filter was in the loop on that tick
     filter_mu: float = math.nan
+    # [-] (4,) ground friction under each foot, LEGS order (oracle / metrics only; None unless the filter uses
+    # per-foot friction cones)
+    true_friction_per_foot: np.ndarray | None = None
 
 
 @dataclass
@@ -173,6 +176,8 @@ class FrictionEstimate:
     mu: float  # [-] estimate the filter uses
     sigma: float = 0.0  # [-] 1-sigma uncertainty, 0 when the estimator gives none
     ready: bool = True  # False while the estimator still uses its prior
+    # [-] (4,) per foot, LEGS order, for per-foot friction cones; None: ``mu`` is broadcast to the four feet
+    mu_per_foot: np.ndarray | None = None
 
 
 @runtime_checkable

@@ -28,7 +28,14 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.filter.robust import RobustSettings
-from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
+from taslel_bench.filter.safety_filter import (
+    FALLBACKS,
+    FORMULATIONS,
+    FRICTION_CONES,
+    REGULARIZATION_TARGETS,
+    RELAXATIONS,
+    STANCE_SOURCES,
+)
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.plant.perturbation import check_trunk_and_joints
@@ -37,7 +44,6 @@ from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
 AXES = ("scenario", "solver", "estimator")
-STANCE_SOURCES = ("schedule", "contact")
 MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
 MAX_SEED = 2**63 - 1
 MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
@@ -230,6 +236,13 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     )
     choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
     choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
+    choice(f"{f}.friction_cone", _get(cfg, f"{f}.friction_cone", "pyramid"), FRICTION_CONES)
+    choice(f"{f}.relaxation", _get(cfg, f"{f}.relaxation", "none"), RELAXATIONS)
+    for key in ("force_threshold_n", "min_swing_phase"):
+        value = _get(cfg, f"{f}.contact_estimate.{key}")
+        if value is not None:
+            number(f"{f}.contact_estimate.{key}", value, 0.0, 1.0 if key == "min_swing_phase" else 1000.0,
+                   unit="-" if key == "min_swing_phase" else "N")
     _robust(cfg)
 
 

@@ -16,6 +16,7 @@ from taslel_bench.config.settings import (
     build_barriers,
     build_controller,
     build_model,
+    contact_estimate,
     episode_settings,
     filter_settings,
     plant_options,
@@ -93,7 +94,8 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
-            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()))
+            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()),
+                         self.scenario.terrain)
             if self.backend is not None
             else None
         )
@@ -107,5 +109,6 @@ class Built:
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
             model=build_model(cfg),
+            contact_estimate=contact_estimate(cfg) if self.filter is not None and fs.stance_source == "estimate" else None,
         )
         self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from taslel_bench.control.contact_estimate import ContactEstimate
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
@@ -72,6 +73,7 @@ class Episode:
         rng: np.random.Generator,
         stance_from_contact: bool = False,
         model: A1Model | None = None,  # the controller's model (None: the URDF as is)
+        contact_estimate: ContactEstimate | None = None,  # filter.stance_source=estimate: the stance set
     ) -> None:
         self.s = settings
         self.scenario = scenario
@@ -85,6 +87,11 @@ class Episode:
         self.estimator = estimator
         self.rng = rng
         self.stance_from_contact = stance_from_contact
+        self.contact_estimate = contact_estimate
+        # the terrain-aware filter reads the feet's contact forces (contact estimate) and the friction under
+        # each foot (per-foot cones) every tick
+        self.per_foot_terrain = safety_filter is not None and safety_filter.settings.friction_cone == "terrain"
+        self._read_feet = contact_estimate is not None or self.per_foot_terrain
         self.contacts = FootContactReader(mj_model)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
@@ -177,6 +184,8 @@ class Episode:
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
+        if self.contact_estimate is not None:
+            self.contact_estimate.reset()
         trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain)
         self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
         self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
@@ -195,10 +204,19 @@ class Episode:
         d, q, v = self.d, self._q, self._v
         self.bridge.state_pin(d.qpos, d.qvel, q, v)
         true_mu = self.terrain.friction_at(d.qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
-        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev))
+        mu_feet = None
+        if self._read_feet:
+            self.contacts.read(d)
+            if self.per_foot_terrain:
+                mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
+        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
+                                                 mu_feet))  # fmt: skip
         u_nom = self.controller.compute(t, q[7:], v[6:])
         gs = self.controller.gait_state(t)
-        in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+        if self.contact_estimate is not None:
+            in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
+        else:
+            in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
         tick1 = time.perf_counter()
         u, fres, tick2, tick3 = self._filter(k, t, u_nom, gs, in_stance, est, tick1)
         fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
@@ -219,7 +237,8 @@ class Episode:
             return u_nom, None, tick1, tick1
         self.model.update(self._q, self._v)
         tick2 = time.perf_counter()
-        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate,
+                            est.mu_per_foot if self.per_foot_terrain else None)  # fmt: skip
         fres = self.filter.filter(inputs, u_nom)
         self._mu_filter_prev = est.mu
         if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used

@@ -173,8 +173,8 @@ class HeightField:
         """(T, 3, 3) world vertices of the triangles of the cells within ``reach`` cells of (x, y)."""
         x0, y0, dx, dy = self._grid
         nrow, ncol = self.heights_m.shape
-        c = min(max(int(math.floor((x - x0) / dx)), 0), ncol - 2)
-        r = min(max(int(math.floor((y - y0) / dy)), 0), nrow - 2)
+        c = min(max(math.floor((x - x0) / dx), 0), ncol - 2)
+        r = min(max(math.floor((y - y0) / dy), 0), nrow - 2)
         rows = np.arange(max(r - reach, 0), min(r + reach, nrow - 2) + 1)
         cols = np.arange(max(c - reach, 0), min(c + reach, ncol - 2) + 1)
         rr, cc = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))

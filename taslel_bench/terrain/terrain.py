@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.terrain.geoms import add_obstacle_sensors, obstacle_body
+from taslel_bench.terrain.packed import PackedTerrain
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Distances, Log, Plane, TerrainPart
 
 CAPSULE_SAMPLES = 9  # points along a capsule's axis in :meth:`Terrain.capsule_distance`
@@ -121,6 +122,15 @@ class Terrain:
             closer = dp < d
             d, normal[closer], point[closer] = np.where(closer, dp, d), n_p[closer], p_p[closer]
         return d, normal, point
+
+    def near_distance(self, centres: np.ndarray, radius: float) -> Distances:
+        """:meth:`sphere_distance` over every part, for the control tick: the simple parts through one compiled
+        kernel (:mod:`taslel_bench.terrain.packed`, same numbers), the others (a heightfield) in Python."""
+        packed = self.__dict__.get("_packed")
+        if packed is None:
+            packed = PackedTerrain(self.parts)
+            object.__setattr__(self, "_packed", packed)
+        return packed.sphere_distance(centres, radius)
 
     def obstacle_distance(self, centres: np.ndarray, radius: float) -> Distances:
         """:meth:`sphere_distance` to the obstacle parts only (+inf without obstacles)."""
