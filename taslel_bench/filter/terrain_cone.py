@@ -25,9 +25,14 @@ from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.terrain import Terrain
 
 
+CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upward normal (floor beside a log)
+
+
 def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray) -> np.ndarray:
-    """(4, 3) unit normals of the terrain at the foot spheres (the gradient of their distance to it)."""
-    _, normal, _ = terrain.near_distance(foot_pos_in_world, a1.FOOT_RADIUS_M)
+    """(4, 3) unit normals of the terrain at the foot spheres (the gradient of their distance to it; of two
+    parts within CORNER_TOL_M, the more upward one: a foot on the floor against a log's side stands on the
+    floor)."""
+    _, normal, _ = terrain.near_distance(foot_pos_in_world, a1.FOOT_RADIUS_M, CORNER_TOL_M)
     return normal
 
 

@@ -48,21 +48,28 @@ class PackedTerrain:
                 rows.append(row)
         self.rows = np.array(rows) if rows else np.zeros((0, ROW))
 
-    def sphere_distance(self, centres: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sphere_distance(self, centres: np.ndarray, radius: float,
+                        upward_tol_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+        """The smallest distance over the parts; with ``upward_tol_m`` > 0, among parts within that much of
+        the smallest, the one whose normal points most upward (a foot in the corner of the floor and a log's
+        or step's side stands on the floor: its contact normal is the floor's)."""
         c = np.ascontiguousarray(np.asarray(centres, float).reshape(-1, 3))
         d, normal, point = np.empty(len(c)), np.empty((len(c), 3)), np.empty((len(c), 3))
-        _packed_distance(self.rows, c, radius, d, normal, point)
+        _packed_distance(self.rows, c, radius, upward_tol_m, d, normal, point)
         for part in self.others:
             dp, n_p, p_p = part.sphere_distance(c, radius)
-            closer = dp < d
+            closer = (dp < d - upward_tol_m) | ((dp < d + upward_tol_m) & (n_p[:, 2] > normal[:, 2]))
+            if upward_tol_m == 0.0:
+                closer = dp < d
             d[closer], normal[closer], point[closer] = dp[closer], n_p[closer], p_p[closer]
         return d, normal, point
 
 
 @kernel
-def _packed_distance(rows, centres, radius, d_out, n_out, p_out):
+def _packed_distance(rows, centres, radius, upward_tol, d_out, n_out, p_out):
     """Per centre, the smallest signed distance over the packed parts (see :func:`pack`), its unit normal and
-    closest point (world) -- the members of the parts' own ``sphere_distance``."""
+    closest point (world) -- the members of the parts' own ``sphere_distance``; with ``upward_tol`` > 0 a
+    part within that of the best replaces it when its normal points more upward."""
     for k in range(centres.shape[0]):
         cx, cy, cz = centres[k, 0], centres[k, 1], centres[k, 2]
         best, bn0, bn1, bn2, bp0, bp1, bp2 = np.inf, 0.0, 0.0, 1.0, cx, cy, cz
@@ -118,7 +125,8 @@ def _packed_distance(rows, centres, radius, d_out, n_out, p_out):
                 q0 = c0 + rows[r, 7] * cl[0] + rows[r, 8] * cl[1] + rows[r, 9] * cl[2]
                 q1 = c1 + rows[r, 10] * cl[0] + rows[r, 11] * cl[1] + rows[r, 12] * cl[2]
                 q2 = c2 + rows[r, 13] * cl[0] + rows[r, 14] * cl[1] + rows[r, 15] * cl[2]
-            if dist < best:
+            if dist < best - upward_tol or (dist < best + upward_tol and (upward_tol == 0.0 or n2 > bn2)
+                                              and (upward_tol > 0.0 or dist < best)):
                 best, bn0, bn1, bn2, bp0, bp1, bp2 = dist, n0, n1, n2, q0, q1, q2
         d_out[k] = best
         n_out[k, 0], n_out[k, 1], n_out[k, 2] = bn0, bn1, bn2
