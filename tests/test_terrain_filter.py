@@ -108,7 +108,7 @@ def test_terrain_and_leg_barriers_hold_at_the_solution(states):
             active += int(np.isfinite(b.h).sum())
     assert active > 0
     # the terrain clearance's h on flat ground is the foot's height above it minus the lift profile
-    tc = TerrainClearance(world(terrain=Terrain((Plane(1.0),))), lift_m=0.0)
+    tc = TerrainClearance(world(terrain=Terrain((Plane(1.0),))), lift_m=0.0, touchdown_allowance_m=0.0)
     f2 = SafetyFilter(FilterSettings(), TightReference(), [tc])
     for state in st:
         x = inputs_for(pm, state, 1.0)
@@ -128,6 +128,9 @@ def test_contact_estimate_takes_early_touchdown_and_scheduled_lift_off():
     assert list(est.update(sched, np.array([0, 0.8, 0.8, 0]), loaded)) == [True, True, True, True]
     assert list(est.update(sched, np.array([0, 0.81, 0.81, 0]), free)) == [True, True, True, True]
     assert est.early_touchdowns == 2
+    # a late-swing foot pushed back (a toe stubbed on a riser), not up, stays in swing
+    est2 = ContactEstimate()
+    assert not est2.update(sched, np.array([0, 0.8, 0.8, 0]), np.tile([-60.0, 0, 10.0], (4, 1)))[1]
     # the schedule's stance takes over, then its lift-off is swing although the foot is loaded: no stall
     est.update(np.ones(4, bool), np.zeros(4), loaded)
     assert list(est.update(~sched, np.array([0.0, 0, 0, 0.0]), loaded)) == [False, True, True, False]

@@ -8,7 +8,9 @@ Rules per foot, every control tick:
 * scheduled stance -> stance (the schedule also ends every stance: a **scheduled lift-off is swing**, whatever
   the foot still carries, so a loaded foot can always lift off -- the stall of ``stance_source: contact``);
 * scheduled swing, swing phase >= ``min_swing_phase`` and the foot's contact force above
-  ``force_threshold_n`` -> stance (an **early touchdown**), latched until the schedule's stance ends;
+  ``force_threshold_n`` *and* pointing up (its world-z part at least ``min_force_vertical_share`` of its norm:
+  a toe stubbed against a step's riser or a log's side is pushed back, not up, and must not become a stance
+  foot held against the riser) -> stance (an **early touchdown**), latched until the schedule's stance ends;
 * otherwise swing (a late touchdown stays in the schedule's stance: the stance rows then hold the foot where
   it is, the paper's behaviour).
 
@@ -32,6 +34,7 @@ from taslel_bench.robot import a1
 class ContactEstimateSettings:
     force_threshold_n: float = 20.0  # [N] contact force norm above which a late-swing foot has touched down
     min_swing_phase: float = 0.5  # [-] earlier in the swing a force is a scuff, not a touchdown
+    min_force_vertical_share: float = 0.7  # [-] f_z / |f| of a touchdown (a stub on a riser pushes sideways)
 
 
 class ContactEstimate:
@@ -57,7 +60,9 @@ class ContactEstimate:
         scheduled = np.asarray(scheduled_stance, bool)
         lift_off = self._prev_scheduled & ~scheduled
         self.early &= ~(lift_off | scheduled)  # a new swing starts unlatched; stance takes over the latch
-        loaded = np.linalg.norm(foot_force_in_world, axis=1) > self.s.force_threshold_n
+        f = np.asarray(foot_force_in_world, float)
+        norm = np.linalg.norm(f, axis=1)
+        loaded = (norm > self.s.force_threshold_n) & (f[:, 2] >= self.s.min_force_vertical_share * norm)
         touchdown = ~scheduled & ~self.early & loaded & (np.asarray(swing_phase) >= self.s.min_swing_phase)
         self.early_touchdowns += int(touchdown.sum())
         self.early |= touchdown

@@ -24,7 +24,6 @@ from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.terrain import Terrain
 
-
 CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upward normal (floor beside a log)
 
 

@@ -55,6 +55,8 @@ class PackedTerrain:
         or step's side stands on the floor: its contact normal is the floor's)."""
         c = np.ascontiguousarray(np.asarray(centres, float).reshape(-1, 3))
         d, normal, point = np.empty(len(c)), np.empty((len(c), 3)), np.empty((len(c), 3))
+        if len(self.rows) == 0:
+            d[:], normal[:], point[:] = np.inf, (0.0, 0.0, 1.0), c
         _packed_distance(self.rows, c, radius, upward_tol_m, d, normal, point)
         for part in self.others:
             dp, n_p, p_p = part.sphere_distance(c, radius)

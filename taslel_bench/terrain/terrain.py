@@ -123,14 +123,17 @@ class Terrain:
             d, normal[closer], point[closer] = np.where(closer, dp, d), n_p[closer], p_p[closer]
         return d, normal, point
 
-    def near_distance(self, centres: np.ndarray, radius: float, upward_tol_m: float = 0.0) -> Distances:
+    def near_distance(self, centres: np.ndarray, radius: float, upward_tol_m: float = 0.0,
+                      role: str | None = None) -> Distances:
         """:meth:`sphere_distance` over every part, for the control tick: the simple parts through one compiled
         kernel (:mod:`taslel_bench.terrain.packed`, same numbers), the others (a heightfield) in Python.
-        ``upward_tol_m``: see :meth:`PackedTerrain.sphere_distance` (the contact normal of a foot in a corner)."""
-        packed = self.__dict__.get("_packed")
+        ``upward_tol_m``: see :meth:`PackedTerrain.sphere_distance` (the contact normal of a foot in a corner).
+        ``role``: only the parts of that role (+inf distances without any)."""
+        key = f"_packed_{role}"
+        packed = self.__dict__.get(key)
         if packed is None:
-            packed = PackedTerrain(self.parts)
-            object.__setattr__(self, "_packed", packed)
+            packed = PackedTerrain([p for p in self.parts if role is None or p.role == role])
+            object.__setattr__(self, key, packed)
         return packed.sphere_distance(centres, radius, upward_tol_m)
 
     def obstacle_distance(self, centres: np.ndarray, radius: float) -> Distances:

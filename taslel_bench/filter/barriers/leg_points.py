@@ -27,6 +27,12 @@ class LegPoints:
             support = pm.supports[j][1:]
             self.cols.append(np.array([pm.joints[s].idx_v + k for s in support for k in range(pm.joints[s].nv)],
                                       dtype=np.int64))
+        self.cols_array = np.array(self.cols)  # (4, 9) velocity columns that move each calf body
+
+    def knees(self) -> np.ndarray:
+        """(4, 3) world positions [m] of the four knees."""
+        oMi = self.model.data.oMi
+        return np.array([oMi[j].translation for j in self.knee_joints])
 
     def knee(self, leg: int) -> np.ndarray:
         """World position [m] of leg ``leg``'s calf joint (the knee)."""
