@@ -14,8 +14,10 @@ class OracleEstimator:
         """Nothing to forget."""
 
     def step(self, obs: Proprioception) -> FrictionEstimate:
-        """``mu`` = ``obs.true_friction`` [-], ``sigma`` = 0, always ready."""
-        return FrictionEstimate(mu=float(obs.true_friction), sigma=0.0, ready=True)
+        """``mu`` = ``obs.true_friction`` [-], ``sigma`` = 0, always ready; the friction under each foot when
+        the observation carries it (``true_friction_per_foot``)."""
+        return FrictionEstimate(mu=float(obs.true_friction), sigma=0.0, ready=True,
+                                mu_per_foot=obs.true_friction_per_foot)
 
 
 SAFE_FLOOR_MU = 0.2  # [-] lowest floor friction the deployment must handle (the filtered trot falls below it)

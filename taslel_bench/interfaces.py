@@ -21,6 +21,7 @@ from taslel_bench.plant.perturbation import ActuatorDelay, PlantPerturbation
 from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
+from taslel_bench.terrain.relief import HeightField, Ramp, rough_heights
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import all_finite
 from taslel_bench.util.fields import (
@@ -165,6 +166,9 @@ class Proprioception:
     # [-] friction the safety filter assumed on the previous tick, the one that produced tau_joints (the
     # controller knows what it asked for); NaN when no filter was in the loop on that tick
     filter_mu: float = math.nan
+    # [-] (4,) ground friction under each foot, LEGS order (oracle / metrics only; None unless the filter uses
+    # per-foot friction cones)
+    true_friction_per_foot: np.ndarray | None = None
 
 
 @dataclass
@@ -172,6 +176,8 @@ class FrictionEstimate:
     mu: float  # [-] estimate the filter uses
     sigma: float = 0.0  # [-] 1-sigma uncertainty, 0 when the estimator gives none
     ready: bool = True  # False while the estimator still uses its prior
+    # [-] (4,) per foot, LEGS order, for per-foot friction cones; None: ``mu`` is broadcast to the four feet
+    mu_per_foot: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -193,8 +199,8 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     # QP
     "SOLVED", "QPBackend", "QPProblem", "QPSolution", "all_finite",
     # scenario and terrain
-    "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "Log", "Plane", "Scenario", "Terrain",
-    "TerrainPart",
+    "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "HeightField", "Log", "Plane", "Ramp",
+    "Scenario", "Terrain", "TerrainPart", "rough_heights",
     # estimator
     "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "Proprioception", "overestimates",
     # the plant's perturbations

@@ -9,6 +9,7 @@ from typing import Any
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
@@ -65,7 +66,16 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         formulation=str(f.get("formulation", "full")),
         robust=robust_settings(f.get("robust")),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
+        friction_cone=str(f.get("friction_cone", "pyramid")),
+        relaxation=str(f.get("relaxation", "none")),
     )
+
+
+def contact_estimate(cfg: DictConfig) -> ContactEstimate:
+    """The contact estimate of ``filter.stance_source: estimate`` from ``filter.contact_estimate`` (absent:
+    the defaults of :class:`ContactEstimateSettings`)."""
+    node = _get(cfg, "filter.contact_estimate") or {}
+    return ContactEstimate(ContactEstimateSettings(**{k: float(v) for k, v in node.items()}))
 
 
 def robust_settings(node) -> RobustSettings:

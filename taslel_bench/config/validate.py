@@ -29,7 +29,14 @@ from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.filter.robust import RobustSettings
-from taslel_bench.filter.safety_filter import FALLBACKS, FORMULATIONS, REGULARIZATION_TARGETS
+from taslel_bench.filter.safety_filter import (
+    FALLBACKS,
+    FORMULATIONS,
+    FRICTION_CONES,
+    REGULARIZATION_TARGETS,
+    RELAXATIONS,
+    STANCE_SOURCES,
+)
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.plant.perturbation import check_trunk_and_joints
@@ -38,7 +45,6 @@ from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
 AXES = ("scenario", "solver", "estimator")
-STANCE_SOURCES = ("schedule", "contact")
 MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
 MAX_SEED = 2**63 - 1
 MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
@@ -276,6 +282,13 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     )
     choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
     choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
+    choice(f"{f}.friction_cone", _get(cfg, f"{f}.friction_cone", "pyramid"), FRICTION_CONES)
+    choice(f"{f}.relaxation", _get(cfg, f"{f}.relaxation", "none"), RELAXATIONS)
+    for key, hi, unit in (("force_threshold_n", 1000.0, "N"), ("min_swing_phase", 1.0, "-"),
+                          ("min_force_vertical_share", 1.0, "-")):
+        value = _get(cfg, f"{f}.contact_estimate.{key}")
+        if value is not None:
+            number(f"{f}.contact_estimate.{key}", value, 0.0, hi, unit=unit)
     _robust(cfg)
 
 

@@ -35,3 +35,4 @@ class TickInputs:
     mu: float  # [-] friction coefficient the filter assumes
     swing_phase: np.ndarray  # [-] (4,) progress of each swing in [0, 1]
     swing_phase_rate: float  # [1/s]
+    mu_per_foot: np.ndarray | None = None  # [-] (4,) friction under each foot (None: ``mu`` for all four)

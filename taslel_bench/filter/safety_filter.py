@@ -39,15 +39,20 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier
 from taslel_bench.filter.constraints import ContactOrSwing, EqualityFamily, EquationsOfMotion, FrictionCone
 from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_free
-from taslel_bench.filter.layout import LAM, N_VARS, NL, NU, NV, VDOT, TickInputs, U
+from taslel_bench.filter.layout import INACTIVE_RHS, LAM, N_VARS, NL, NU, NV, VDOT, TickInputs, U
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
+from taslel_bench.filter.terrain_cone import TerrainFrictionCone
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import a1
+from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
 REGULARIZATION_TARGETS = ("nominal", "zero")
 FORMULATIONS = ("full", "condensed")
+FRICTION_CONES = ("pyramid", "terrain")  # the paper's (world z, one mu) | per foot about the terrain normal
+RELAXATIONS = ("none", "priority")  # on an infeasible QP: fall back at once | drop barrier families, last first
+STANCE_SOURCES = ("schedule", "contact", "estimate")  # gait | plant contact flags | contact estimate
 
 
 @dataclass(frozen=True)
@@ -66,6 +71,8 @@ class FilterSettings:
     formulation: str = "full"  # "full" (backend sees X = (vdot, u, lambda)) or "condensed" (u only)
     robust: RobustSettings = field(default_factory=RobustSettings)  # margins for a wrong model (off)
     control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
+    friction_cone: str = "pyramid"  # "pyramid" (paper: world z, one mu) | "terrain" (per foot, terrain normal)
+    relaxation: str = "none"  # "none" (failure -> fallback) | "priority" (drop barrier families, last first)
 
 
 @dataclass
@@ -78,6 +85,7 @@ class FilterResult:
     build_time_s: float
     solve: QPSolution | None = field(default=None)
     ecbf_margin_mps2: float = 0.0  # [m/s²] robust margin the ECBF rows had this tick (0: the paper's rows)
+    relaxed: tuple[str, ...] = ()  # barrier families dropped this tick to make the QP feasible (relaxation)
 
 
 class SafetyFilter:
@@ -88,9 +96,11 @@ class SafetyFilter:
         settings: FilterSettings,
         backend: QPBackend,
         barriers: Sequence[Barrier] = (),
+        terrain: Terrain | None = None,
     ) -> None:
-        """``barriers``: the barrier families (rows in this order after the friction rows); with
-        ``settings.ecbf_enabled`` false the filter has none."""
+        """``barriers``: the barrier families (rows in this order after the friction rows, which is also
+        their priority: ``relaxation: priority`` drops the last first); with ``settings.ecbf_enabled`` false
+        the filter has none. ``terrain``: the world's geometry (needed by ``friction_cone: terrain``)."""
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
         if settings.regularization_target not in REGULARIZATION_TARGETS:
@@ -100,10 +110,21 @@ class SafetyFilter:
             )
         if settings.formulation not in FORMULATIONS:
             raise ValueError(f"filter.formulation={settings.formulation!r}; valid: {', '.join(FORMULATIONS)}")
+        if settings.friction_cone not in FRICTION_CONES:
+            raise ValueError(f"filter.friction_cone={settings.friction_cone!r}; valid: {', '.join(FRICTION_CONES)}")
+        if settings.relaxation not in RELAXATIONS:
+            raise ValueError(f"filter.relaxation={settings.relaxation!r}; valid: {', '.join(RELAXATIONS)}")
         self.settings = settings
         self.backend = backend
         self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
-        self.friction = FrictionCone(settings.lambda_min_n)
+        if settings.friction_cone == "terrain":
+            if terrain is None:
+                raise ValueError("filter.friction_cone=terrain needs the world's terrain")
+            self.friction: FrictionCone = TerrainFrictionCone(settings.lambda_min_n, terrain)
+        else:
+            self.friction = FrictionCone(settings.lambda_min_n)
+        self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families
+        self.relaxed_by_family: dict[str, int] = {}  # family name -> ticks it was dropped
         self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
         self.robust = RobustMargin(settings.robust, settings.ecbf_alpha2, settings.control_dt_s)
         tau = settings.robust.observer_time_constant_s if settings.robust.enabled else 0.0
@@ -214,10 +235,47 @@ class SafetyFilter:
         sv, eps = self._equalities, self.settings.regularization
         _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
 
+    def _solve(self, qp: QPProblem) -> QPSolution:
+        """The backend's answer to this tick's QP (the condensed one with ``formulation: condensed``)."""
+        try:
+            if self.condensed is None:
+                return self.backend.solve(qp)
+            if self._condensed_ok:
+                return self.backend.solve(self.condensed)
+            return QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
+        except Exception as exc:  # noqa: BLE001 - a backend bug must not end the episode: record it
+            return QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
+
+    def _relax(self, qp: QPProblem, u_nom: np.ndarray, sol: QPSolution) -> tuple[QPSolution, tuple[str, ...]]:
+        """``relaxation: priority``: the QP failed; drop the barrier families one at a time, last in the list
+        first (their rows become inactive, 0 <= INACTIVE_RHS, and their h nan), re-solving after each, until a
+        solve succeeds. Returns (the last solution, the families dropped); counts the tick when one succeeds.
+        The equations of motion, contact rows, friction cones and torque limits are never relaxed."""
+        dropped: list[str] = []
+        for barrier in reversed(self.barriers):
+            rows = slice(barrier.start, barrier.start + barrier.n_rows)
+            if np.all(qp.h[rows] == INACTIVE_RHS):
+                continue
+            qp.G[rows] = 0.0
+            qp.h[rows] = INACTIVE_RHS
+            barrier.h[:], barrier.h_e[:] = np.nan, np.nan
+            dropped.append(barrier.name)
+            if self.condensed is not None:
+                self._condensed_ok = self._condense(qp, u_nom)
+            sol = self._solve(qp)
+            if sol.ok:
+                self.relaxed_ticks += 1
+                for name in dropped:
+                    self.relaxed_by_family[name] = self.relaxed_by_family.get(name, 0) + 1
+                break
+        return sol, tuple(dropped)
+
     def reset(self) -> None:
         """Forget the backend's warm start and the last filtered u (a new episode)."""
         self.backend.reset()
         self._last_u = None
+        self.relaxed_ticks = 0
+        self.relaxed_by_family = {}
         self.robust.reset()
         if self.observer is not None:
             self.observer.reset()
@@ -238,15 +296,10 @@ class SafetyFilter:
         if robust:
             self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
-        try:
-            if self.condensed is None:
-                sol = self.backend.solve(qp)
-            elif self._condensed_ok:
-                sol = self.backend.solve(self.condensed)
-            else:
-                sol = QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
-        except Exception as exc:  # noqa: BLE001 - a backend bug must not end the episode: record it
-            sol = QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
+        sol = self._solve(qp)
+        relaxed: tuple[str, ...] = ()
+        if not sol.ok and self.settings.relaxation == "priority" and self.barriers:
+            sol, relaxed = self._relax(qp, u_nom, sol)
         if sol.ok:
             u, lam, vdot = np.empty(a1.N_JOINTS), np.empty(NL), np.empty(NV)
             # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
@@ -263,7 +316,7 @@ class SafetyFilter:
                 self.observer.remember(inputs.v, m.M, m.h, u, jac_t_lambda, inputs.in_stance)
             self._last_u = u
             margin = self.barriers[0].margin_mps2 if self.barriers else 0.0
-            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol, margin)
+            return FilterResult(u, lam, vdot, sol.status, False, build_s, sol, margin, relaxed)
         for barrier in self.barriers:  # nothing planned on this tick
             barrier.psi_planned[:] = np.nan
         if self.observer is not None:

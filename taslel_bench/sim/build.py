@@ -16,6 +16,7 @@ from taslel_bench.config.settings import (
     build_barriers,
     build_controller,
     build_model,
+    contact_estimate,
     episode_settings,
     filter_settings,
     plant_options,
@@ -94,7 +95,8 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
         self.controller = build_controller(cfg)
         self.filter = (
-            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()))
+            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()),
+                         self.scenario.terrain)
             if self.backend is not None
             else None
         )
@@ -108,6 +110,7 @@ class Built:
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
             model=build_model(cfg),
+            contact_estimate=contact_estimate(cfg) if self.filter is not None and fs.stance_source == "estimate" else None,
         )
         # record.reference_every: the backend's answers checked against the tight reference (None: off)
         self.reference_check = reference_check(cfg) if self.filter is not None else None

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from taslel_bench.control.contact_estimate import ContactEstimate
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
@@ -74,6 +75,7 @@ class Episode:
         rng: np.random.Generator,
         stance_from_contact: bool = False,
         model: A1Model | None = None,  # the controller's model (None: the URDF as is)
+        contact_estimate: ContactEstimate | None = None,  # filter.stance_source=estimate: the stance set
     ) -> None:
         self.s = settings
         self.scenario = scenario
@@ -87,6 +89,11 @@ class Episode:
         self.estimator = estimator
         self.rng = rng
         self.stance_from_contact = stance_from_contact
+        self.contact_estimate = contact_estimate
+        # the terrain-aware filter reads the feet's contact forces (contact estimate) and the friction under
+        # each foot (per-foot cones) every tick
+        self.per_foot_terrain = safety_filter is not None and safety_filter.settings.friction_cone == "terrain"
+        self._read_feet = contact_estimate is not None or self.per_foot_terrain
         self.contacts = FootContactReader(mj_model)
         self.contact_frames = ContactFrameReader(mj_model)  # every foot contact in its own frame (metrics)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
@@ -189,6 +196,8 @@ class Episode:
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
+        if self.contact_estimate is not None:
+            self.contact_estimate.reset()
         trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain, self.contact_frames)
         # views of the plant's arrays, made once (MjData makes a new numpy wrapper on every attribute read)
         self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
@@ -212,10 +221,19 @@ class Episode:
         qpos, qvel, q, v = self._qpos, self._qvel, self._q, self._v
         self.bridge.state_pin(qpos, qvel, q, v)
         true_mu = self.terrain.friction_at(qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
-        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev))
+        mu_feet = None
+        if self._read_feet:
+            self.contacts.read(self.d)
+            if self.per_foot_terrain:
+                mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
+        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
+                                                 mu_feet))  # fmt: skip
         u_nom = self.controller.compute(t, q[7:], v[6:])
         gs = self.controller.gait_state(t)
-        in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+        if self.contact_estimate is not None:
+            in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
+        else:
+            in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
         tick1 = time.perf_counter()
         u, fres, tick2, tick3 = self._filter(k, t, u_nom, gs, in_stance, est, tick1)
         fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
@@ -225,7 +243,7 @@ class Episode:
         trace.record(k, t, qpos, qvel, self._sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
                      tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         frames0 = time.perf_counter()
-        self.contact_frames.record(d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
+        self.contact_frames.record(self.d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
         self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
         trace.mu_hat_ready[k] = est.ready
         if self.reference_check is not None and fres is not None:
@@ -243,7 +261,8 @@ class Episode:
             return u_nom, None, tick1, tick1
         self.model.update(self._q, self._v)
         tick2 = time.perf_counter()
-        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate)
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate,
+                            est.mu_per_foot if self.per_foot_terrain else None)  # fmt: skip
         fres = self.filter.filter(inputs, u_nom)
         self._mu_filter_prev = est.mu
         if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used

@@ -252,6 +252,12 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
         out.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.backend is not None:
         out["solver_settings"] = str(built.backend.describe())
+    if built.filter is not None:  # filter.relaxation=priority: ticks solved only after dropping barrier families
+        out["filter_relaxed_ticks"] = int(built.filter.relaxed_ticks)
+        out.update({f"filter_relaxed_{k}_ticks": int(v) for k, v in built.filter.relaxed_by_family.items()})
+    estimate = built.episode.contact_estimate
+    if estimate is not None:  # filter.stance_source=estimate: early touchdowns taken as stance
+        out["contact_early_touchdowns"] = int(estimate.early_touchdowns)
     return out
 
 

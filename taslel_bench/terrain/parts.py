@@ -172,6 +172,9 @@ class Log:
     def friction_at(self, x: float, y: float) -> float:
         return self.friction
 
+    def x_range(self) -> tuple[float, float]:
+        return self.x_m - self.radius_m, self.x_m + self.radius_m
+
     def sphere_distance(self, centres: np.ndarray, radius: float) -> Distances:
         c = np.asarray(centres, float).reshape(-1, 3)
         dx, dz = c[:, 0] - self.x_m, c[:, 2] - self.z_m
@@ -208,25 +211,34 @@ class Box:
     def friction_at(self, x: float, y: float) -> float:
         return self.friction
 
+    def x_range(self) -> tuple[float, float]:
+        return self.centre_m[0] - self.half_size_m[0], self.centre_m[0] + self.half_size_m[0]
+
     def sphere_distance(self, centres: np.ndarray, radius: float) -> Distances:
-        c = np.asarray(centres, float).reshape(-1, 3)
-        centre, half = np.asarray(self.centre_m, float), np.asarray(self.half_size_m, float)
-        local = c - centre
-        closest = np.clip(local, -half, half)
-        outside = local - closest
-        out_dist = np.linalg.norm(outside, axis=1)
-        inside = out_dist == 0.0
-        d = out_dist.copy()
-        normal = outside / np.maximum(out_dist, 1e-12)[:, None]
-        if inside.any():  # inside: distance to the nearest face (negative), normal of that face
-            gap = half - np.abs(local[inside])
-            axis = np.argmin(gap, axis=1)
-            rows = np.arange(axis.size)
-            d[inside] = -gap[rows, axis]
-            n_in = np.zeros((axis.size, 3))
-            n_in[rows, axis] = np.sign(local[inside][rows, axis]) + (local[inside][rows, axis] == 0.0)
-            normal[inside] = n_in
-            pts = local[inside].copy()
-            pts[rows, axis] = half[axis] * n_in[rows, axis]
-            closest[inside] = pts
+        centre = np.asarray(self.centre_m, float)
+        d, normal, closest = box_distance(np.asarray(centres, float).reshape(-1, 3) - centre,
+                                          np.asarray(self.half_size_m, float))
         return d - radius, normal, closest + centre
+
+
+def box_distance(local: np.ndarray, half: np.ndarray) -> Distances:
+    """Points ``local`` (n, 3) in the frame of a box of half sizes ``half`` [m] centred at the origin: signed
+    distance to its surface (< 0 inside), the outward unit normal (gradient) and the closest surface point."""
+    closest = np.clip(local, -half, half)
+    outside = local - closest
+    out_dist = np.linalg.norm(outside, axis=1)
+    inside = out_dist == 0.0
+    d = out_dist.copy()
+    normal = outside / np.maximum(out_dist, 1e-12)[:, None]
+    if inside.any():  # inside: distance to the nearest face (negative), normal of that face
+        gap = half - np.abs(local[inside])
+        axis = np.argmin(gap, axis=1)
+        rows = np.arange(axis.size)
+        d[inside] = -gap[rows, axis]
+        n_in = np.zeros((axis.size, 3))
+        n_in[rows, axis] = np.sign(local[inside][rows, axis]) + (local[inside][rows, axis] == 0.0)
+        normal[inside] = n_in
+        pts = local[inside].copy()
+        pts[rows, axis] = half[axis] * n_in[rows, axis]
+        closest[inside] = pts
+    return d, normal, closest

@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.terrain.geoms import add_obstacle_sensors, obstacle_body
+from taslel_bench.terrain.packed import PackedTerrain
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Distances, Log, Plane, TerrainPart
 
 CAPSULE_SAMPLES = 9  # points along a capsule's axis in :meth:`Terrain.capsule_distance`
@@ -98,21 +99,42 @@ class Terrain:
         return out.reshape(xy.shape[:-1])
 
     # --------------------------------------------------------------------------------------- distances
-    def sphere_distance(self, centres: np.ndarray, radius: float, role: str | None = None) -> Distances:
+    def sphere_distance(self, centres: np.ndarray, radius: float, role: str | None = None,
+                        reach_m: float | None = None) -> Distances:
         """For spheres (n, 3) [m] of radius ``radius`` [m]: signed distance [m] to the nearest part (of
         ``role`` if given), its unit normal (the gradient wrt the centre) and the closest point. Distances
-        are +inf (normals up) when no part has the role."""
+        are +inf (normals up) when no part has the role. ``reach_m``: skip parts with an ``x_range`` farther
+        than this along x from every centre (their distance is then larger than ``reach_m``; a per-tick
+        query near the robot)."""
         c = np.asarray(centres, float).reshape(-1, 3)
         d = np.full(len(c), np.inf)
         normal = np.tile(np.array([0.0, 0.0, 1.0]), (len(c), 1))
         point = c.copy()
+        x_lo, x_hi = (float(c[:, 0].min()), float(c[:, 0].max())) if len(c) else (0.0, 0.0)
         for part in self.parts:
             if role is not None and part.role != role:
                 continue
+            if reach_m is not None and hasattr(part, "x_range"):
+                a, b = part.x_range()
+                if a - x_hi > reach_m or x_lo - b > reach_m:
+                    continue
             dp, n_p, p_p = part.sphere_distance(c, radius)
             closer = dp < d
             d, normal[closer], point[closer] = np.where(closer, dp, d), n_p[closer], p_p[closer]
         return d, normal, point
+
+    def near_distance(self, centres: np.ndarray, radius: float, upward_tol_m: float = 0.0,
+                      role: str | None = None) -> Distances:
+        """:meth:`sphere_distance` over every part, for the control tick: the simple parts through one compiled
+        kernel (:mod:`taslel_bench.terrain.packed`, same numbers), the others (a heightfield) in Python.
+        ``upward_tol_m``: see :meth:`PackedTerrain.sphere_distance` (the contact normal of a foot in a corner).
+        ``role``: only the parts of that role (+inf distances without any)."""
+        key = f"_packed_{role}"
+        packed = self.__dict__.get(key)
+        if packed is None:
+            packed = PackedTerrain([p for p in self.parts if role is None or p.role == role])
+            object.__setattr__(self, key, packed)
+        return packed.sphere_distance(centres, radius, upward_tol_m)
 
     def obstacle_distance(self, centres: np.ndarray, radius: float) -> Distances:
         """:meth:`sphere_distance` to the obstacle parts only (+inf without obstacles)."""

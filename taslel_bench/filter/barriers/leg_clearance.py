@@ -1,0 +1,91 @@
+"""Whole-leg clearance (``filter.barriers.shin`` and ``filter.barriers.knee``, preset ``filter=terrain``): the
+lower leg (a capsule from the knee towards the foot) or the knee (a sphere at the calf joint) kept off the
+terrain and its obstacles, for every leg (a stance leg's shin can hit a log as the trunk moves over it)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
+from taslel_bench.filter.barriers.leg_points import SHIN_RADIUS_M, LegPoints, _point_terms
+from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
+from taslel_bench.interfaces import OBSTACLE, QPProblem
+from taslel_bench.util.jit import kernel
+
+PARTS = ("shin", "knee")
+SHIN_SAMPLES = 6  # points along the shin's axis (the closest of them is the capsule's closest point)
+
+
+class LegClearance(Barrier):
+    """One row per leg: h = d >= 0, d the distance [m] of a lower-leg piece to the terrain, with the Jacobian
+    of the closest point. ``part``: ``shin`` -- a capsule of radius ``radius_m`` on the axis knee -> foot
+    centre, from the knee to ``axis_fraction`` of the way (the rest is inside the foot sphere's reach), its
+    distance the smallest over SHIN_SAMPLES points of the axis; ``knee`` -- a sphere of
+    radius ``radius_m`` at the calf joint. A row is active only where h < ``activation_m`` (far legs get an
+    inactive row, the solver sees fewer binding rows). ``role``: the parts measured -- by default the obstacles
+    (logs, steps, a rough field): a shin on the flat floor is not a trip, and rows against the floor under a
+    stance leg made the QP infeasible on 6 % of flat-ground ticks (measured, seed 0).
+
+    With n the unit normal from the terrain to the closest axis point p (fixed to the calf body for this tick),
+    hdot = n . v_p, hddot >= n . (J_p vdot + J̇_p v) (the distance's Hessian, positive semi-definite, dropped:
+    conservative): -n'J_p vdot <= a2 h_e + a1 hdot + n . J̇_p v."""
+
+    def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = SHIN_RADIUS_M,
+                 axis_fraction: float = 0.7, activation_m: float = 0.08, role: str | None = OBSTACLE) -> None:  # fmt: skip
+        super().__init__(world, name)
+        if part not in PARTS:
+            raise ValueError(f"filter.barriers.{name}.part={part!r}; valid: {', '.join(PARTS)}")
+        self.terrain, self.part = world.terrain, part
+        self.radius_m, self.axis_fraction, self.activation_m = float(radius_m), float(axis_fraction), float(activation_m)
+        self.role = role  # the terrain parts it keeps clear of (default the obstacles; None: every part)
+        self._points: LegPoints | None = None
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        m, r0 = x.model, self.start
+        if self._points is None or self._points.model is not m:
+            self._points = LegPoints(m)
+        knees = self._points.knees()  # [m] (4, 3)
+        if self.part == "knee":
+            axis = knees[:, None, :]
+        else:  # SHIN_SAMPLES points from the knee to axis_fraction of the way to the foot centre, per leg
+            s = np.linspace(0.0, self.axis_fraction, SHIN_SAMPLES)[None, :, None]
+            axis = knees[:, None, :] + s * (m.foot_pos_in_world - knees)[:, None, :]
+        points = np.ascontiguousarray(axis.reshape(-1, 3))
+        dist, normal, _ = self.terrain.near_distance(points, self.radius_m, role=self.role)
+        d = m.data
+        _leg_rows(qp.G, qp.h, r0, dist, normal, points, axis.shape[1], d.J, d.dJ, self._points.cols_array, x.v,
+                  self.alpha1, self.alpha2, self.activation_m, self.h, self.h_e)  # fmt: skip
+        self.tighten(qp)
+
+
+@kernel
+def _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation,
+              h_out, he_out):  # fmt: skip
+    """Row r0 + i per leg i (see :class:`LegClearance`): the closest of the leg's ``n_per_leg`` axis points
+    (``dist``, ``normal`` from the terrain query), its Jacobian on the calf body, the ECBF row; inactive
+    (0 <= INACTIVE_RHS, nan h) where the distance is not finite or not below ``activation``."""
+    nv = G.shape[1]
+    jac = np.zeros((3, NV))
+    vel, jdotv = np.zeros(3), np.zeros(3)
+    for i in range(cols.shape[0]):
+        r = r0 + i
+        for c in range(nv):
+            G[r, c] = 0.0
+        hvec[r] = INACTIVE_RHS
+        h_out[i], he_out[i] = np.nan, np.nan
+        k = i * n_per_leg
+        for j in range(i * n_per_leg + 1, (i + 1) * n_per_leg):
+            if dist[j] < dist[k]:
+                k = j
+        d = dist[k]
+        if not np.isfinite(d) or d >= activation:
+            continue
+        jac[:] = 0.0
+        _point_terms(J_world, dJ_world, cols[i], points[k], v, jac, vel, jdotv)
+        n0, n1, n2 = normal[k, 0], normal[k, 1], normal[k, 2]
+        hdot = n0 * vel[0] + n1 * vel[1] + n2 * vel[2]
+        h_e = hdot + alpha1 * d
+        for c in range(NV):
+            G[r, c] = -(n0 * jac[0, c] + n1 * jac[1, c] + n2 * jac[2, c])
+        hvec[r] = alpha2 * h_e + alpha1 * hdot + n0 * jdotv[0] + n1 * jdotv[1] + n2 * jdotv[2]
+        h_out[i], he_out[i] = d, h_e

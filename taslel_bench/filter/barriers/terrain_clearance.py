@@ -1,0 +1,70 @@
+"""Swing-foot clearance of the real terrain (``filter.barriers.terrain_clearance``, preset ``filter=terrain``):
+an exponential CBF on the foot sphere's distance to the terrain object (every part: floor, steps, slope,
+heightfield, logs), instead of the paper's phase polynomial over a flat floor."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_barrier_row
+from taslel_bench.filter.layout import TickInputs
+from taslel_bench.interfaces import QPProblem
+from taslel_bench.robot import a1
+from taslel_bench.util.jit import kernel
+
+
+class TerrainClearance(Barrier):
+    """One row per swing foot: h = d(p) - c(s) >= 0 with d the signed distance [m] of the foot sphere (centre p,
+    world) to the terrain (:meth:`taslel_bench.terrain.terrain.Terrain.sphere_distance`; on flat ground or a
+    slope the height above the surface under the foot along its normal, at a step's edge or a log the
+    Euclidean distance) and c(s) = ``lift_m`` 16 s² (1 - s)² - ``touchdown_allowance_m`` s⁴ the required
+    lift over the swing phase s (0 at lift-off, ~``lift_m`` mid-swing, -allowance at touchdown: the foot may
+    reach the ground at the nominal speed instead of approaching it exponentially -- without the allowance
+    the foot still hovers when its stance begins, and the stance rows then plan support from a foot in the
+    air: the trot fell on flat ground in 2 of 3 seeds within 5 s).
+
+    With n = grad d (the unit normal from the closest terrain point to p): hdot = n . v - c'(s) sdot and
+    hddot >= n . (J vdot + J̇v) - c''(s) sdot² (the distance's Hessian is positive semi-definite for the convex
+    pieces the terrain is made of, so dropping it makes the row conservative). The row enforces
+    hdot_e + a2 h_e >= 0 with h_e = hdot + a1 h:  -n'J vdot <= a2 h_e + a1 hdot + n . J̇v - c'' sdot².
+    Stance feet (the filter's stance set) get an inactive row."""
+
+    def __init__(self, world: BarrierWorld, name: str = "terrain_clearance", lift_m: float = 0.02,
+                 touchdown_allowance_m: float = 0.015) -> None:  # fmt: skip
+        super().__init__(world, name)
+        self.terrain = world.terrain
+        self.lift_m = float(lift_m)  # [m]
+        self.touchdown_allowance_m = float(touchdown_allowance_m)  # [m]
+
+    def write(self, qp: QPProblem, x: TickInputs) -> None:
+        m = x.model
+        dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world, a1.FOOT_RADIUS_M)
+        _terrain_rows(qp.G, qp.h, self.start, dist, normal, m.foot_vel_in_world, m.foot_jac_in_world,
+                      m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
+                      self.touchdown_allowance_m, self.alpha1, self.alpha2, self.h, self.h_e)  # fmt: skip
+        self.tighten(qp)
+
+
+@kernel
+def _terrain_rows(G, hvec, r0, dist, normal, foot_vel, foot_jac, foot_jdotv, in_stance, swing_phase, sdot, k_lift,
+                  allowance, alpha1, alpha2, h_out, he_out):  # fmt: skip
+    """Row r0 + i per foot (see :class:`TerrainClearance`), c(s) = k_lift s² (1 - s)² - allowance s⁴."""
+    nv = foot_jac.shape[2]
+    for i in range(foot_jac.shape[0]):
+        r = r0 + i
+        if in_stance[i] or not np.isfinite(dist[i]):
+            _inactive_barrier_row(G, hvec, r, h_out, he_out, i)
+            continue
+        s = swing_phase[i]
+        c = k_lift * s * s * (1 - s) ** 2 - allowance * s**4
+        dc = k_lift * (2 * s - 6 * s * s + 4 * s**3) - 4.0 * allowance * s**3
+        ddc = k_lift * (2 - 12 * s + 12 * s * s) - 12.0 * allowance * s * s
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        h = dist[i] - c
+        hdot = n0 * foot_vel[i, 0] + n1 * foot_vel[i, 1] + n2 * foot_vel[i, 2] - dc * sdot
+        h_e = hdot + alpha1 * h
+        for col in range(nv):
+            G[r, col] = -(n0 * foot_jac[i, 0, col] + n1 * foot_jac[i, 1, col] + n2 * foot_jac[i, 2, col])
+        hvec[r] = (alpha2 * h_e + alpha1 * hdot + n0 * foot_jdotv[i, 0] + n1 * foot_jdotv[i, 1]
+                   + n2 * foot_jdotv[i, 2] - ddc * sdot * sdot)
+        h_out[i], he_out[i] = h, h_e

@@ -1,0 +1,162 @@
+"""The terrain-aware filter's parts (``filter=terrain``): per-foot cones about the terrain normal, the terrain,
+shin and knee barriers, the contact estimate, the priority relaxation, the packed distance kernel."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
+from taslel_bench.filter.barriers.leg_clearance import LegClearance
+from taslel_bench.filter.barriers.leg_points import LegPoints
+from taslel_bench.filter.barriers.terrain_clearance import TerrainClearance
+from taslel_bench.filter.layout import LAM, NV, TickInputs
+from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
+from taslel_bench.filter.terrain_cone import TerrainFrictionCone, tangent_basis
+from taslel_bench.interfaces import Box, Log, Plane, QPSolution, Ramp, Terrain
+from taslel_bench.terrain.packed import PackedTerrain
+from tests.test_filter import TightReference, inputs_for, walking_states, world
+
+
+@pytest.fixture(scope="module")
+def states():
+    return walking_states(8)
+
+
+def test_terrain_cone_on_flat_ground_is_the_papers_pyramid(states):
+    st, pm = states
+    paper = SafetyFilter(FilterSettings(), TightReference())
+    ours = SafetyFilter(FilterSettings(friction_cone="terrain"), TightReference(), terrain=Terrain((Plane(0.6),)))
+    for state in st[:4]:
+        a, b = paper.build(inputs_for(pm, state, 0.6), state[3]), ours.build(inputs_for(pm, state, 0.6), state[3])
+        assert np.array_equal(a.G, b.G) and np.array_equal(a.h, b.h)
+
+
+def test_terrain_cone_follows_the_normal_and_each_feet_mu(states):
+    st, pm = states
+    angle = math.radians(2.0)
+    ramp = Ramp(start_x_m=-1.0, run_m=3.0, angle_deg=2.0)  # every foot on the incline (within its top 5 cm)
+    assert isinstance(SafetyFilter(FilterSettings(friction_cone="terrain"), TightReference(),
+                                   terrain=Terrain((ramp,))).friction, TerrainFrictionCone)
+    f = SafetyFilter(FilterSettings(friction_cone="terrain"), TightReference(), terrain=Terrain((ramp,)))
+    cone = f.friction
+    q, v, gs, u = st[2]
+    pm.update(q, v)
+    mu = np.array([0.2, 0.4, 0.6, 0.8])
+    x = TickInputs(pm, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate, mu)
+    qp = f.build(x, u)
+    n = np.array([-math.sin(angle), 0.0, math.cos(angle)])
+    t1, t2 = tangent_basis(n)
+    assert np.allclose(t1, [math.cos(angle), 0, math.sin(angle)]) and np.allclose(t2, [0, 1, 0])
+    for i in np.flatnonzero(gs.in_stance):
+        rows = qp.G[cone.start + 5 * i : cone.start + 5 * i + 5, LAM][:, 3 * i : 3 * i + 3]
+        mt = mu[i] / math.sqrt(2)
+        assert np.allclose(rows, [-n, t1 - mt * n, -t1 - mt * n, t2 - mt * n, -t2 - mt * n])
+    # a force on the cone's edge about n satisfies the rows, the same force about world z would not
+    i = int(np.flatnonzero(gs.in_stance)[0])
+    rows = qp.G[cone.start + 5 * i : cone.start + 5 * i + 5, LAM][:, 3 * i : 3 * i + 3]
+    force = 50.0 * n + 0.99 * mu[i] / math.sqrt(2) * 50.0 * t1
+    assert np.all(rows @ force <= qp.h[cone.start + 5 * i : cone.start + 5 * i + 5])
+    sol = f.filter(x, u)
+    lam = sol.lam.reshape(4, 3)
+    for i in np.flatnonzero(gs.in_stance):  # the solution's forces lie in each foot's own cone about n
+        fn = lam[i] @ n
+        assert fn >= 1.0 - 1e-6
+        assert abs(lam[i] @ t1) <= mu[i] / math.sqrt(2) * fn + 1e-6
+
+
+def test_packed_distance_equals_the_parts():
+    rng = np.random.default_rng(3)
+    terrain = Terrain((Plane(1.0), Log(1.0, -0.04, 0.1), Box((2.0, 0.0, 0.03), (0.3, 0.5, 0.03)),
+                       Ramp(start_x_m=2.5, run_m=1.0, angle_deg=12.0)))  # fmt: skip
+    c = np.column_stack([rng.uniform(0, 4, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.05, 0.3, 400)])
+    for a, b in zip(terrain.sphere_distance(c, 0.02), PackedTerrain(terrain.parts).sphere_distance(c, 0.02)):
+        assert np.max(np.abs(a - b)) < 1e-12
+
+
+def test_leg_point_terms_are_the_models_foot_terms_at_the_foot(states):
+    st, pm = states
+    q, v, _, _ = st[1]
+    pm.update(q, v)
+    points = LegPoints(pm)
+    for i in range(4):
+        jac, vel, jdotv = points.point_terms(i, pm.foot_pos_in_world[i], v)
+        assert np.allclose(jac, pm.foot_jac_in_world[i], atol=1e-12)
+        assert np.allclose(vel, pm.foot_vel_in_world[i], atol=1e-12)
+        assert np.allclose(jdotv, pm.foot_jdotv_in_world[i], atol=1e-12)
+        knee_to_foot = np.linalg.norm(pm.foot_pos_in_world[i] - points.knee(i))
+        assert knee_to_foot == pytest.approx(0.2, abs=1e-3)  # the calf: 0.2 m
+
+
+def test_terrain_and_leg_barriers_hold_at_the_solution(states):
+    st, pm = states
+    terrain = Terrain((Plane(1.0), Log(0.25, 0.0, 0.06)))  # a log under the front legs
+    w = world(terrain=terrain)
+    barriers = [TerrainClearance(w), LegClearance(w, "shin"), LegClearance(w, "knee", part="knee", radius_m=0.02)]
+    f = SafetyFilter(FilterSettings(), TightReference(), barriers)
+    active = 0
+    for state in st:
+        x = inputs_for(pm, state, 1.0)
+        res = f.filter(x, state[3])
+        assert not res.used_fallback
+        for b in barriers:
+            rows = slice(b.start, b.start + 4)
+            lhs = f.problem.G[rows, :NV] @ res.vdot
+            assert np.all(lhs <= f.problem.h[rows] + 1e-6)
+            active += int(np.isfinite(b.h).sum())
+    assert active > 0
+    # the terrain clearance's h on flat ground is the foot's height above it minus the lift profile
+    tc = TerrainClearance(world(terrain=Terrain((Plane(1.0),))), lift_m=0.0, touchdown_allowance_m=0.0)
+    f2 = SafetyFilter(FilterSettings(), TightReference(), [tc])
+    for state in st:
+        x = inputs_for(pm, state, 1.0)
+        f2.build(x, state[3])
+        swing = ~x.in_stance
+        assert np.allclose(tc.h[swing], pm.foot_pos_in_world[swing, 2] - 0.02)
+        assert np.all(np.isnan(tc.h[~swing]))
+
+
+def test_contact_estimate_takes_early_touchdown_and_scheduled_lift_off():
+    est = ContactEstimate(ContactEstimateSettings(force_threshold_n=20.0, min_swing_phase=0.5))
+    loaded, free = np.tile([0, 0, 60.0], (4, 1)), np.zeros((4, 3))
+    sched = np.array([True, False, False, True])
+    # early in the swing a force is a scuff: swing
+    assert list(est.update(sched, np.array([0, 0.3, 0.3, 0]), loaded)) == [True, False, False, True]
+    # late swing and loaded: stance (early touchdown), latched through an unloaded tick
+    assert list(est.update(sched, np.array([0, 0.8, 0.8, 0]), loaded)) == [True, True, True, True]
+    assert list(est.update(sched, np.array([0, 0.81, 0.81, 0]), free)) == [True, True, True, True]
+    assert est.early_touchdowns == 2
+    # a late-swing foot pushed back (a toe stubbed on a riser), not up, stays in swing
+    est2 = ContactEstimate()
+    assert not est2.update(sched, np.array([0, 0.8, 0.8, 0]), np.tile([-60.0, 0, 10.0], (4, 1)))[1]
+    # the schedule's stance takes over, then its lift-off is swing although the foot is loaded: no stall
+    est.update(np.ones(4, bool), np.zeros(4), loaded)
+    assert list(est.update(~sched, np.array([0.0, 0, 0, 0.0]), loaded)) == [False, True, True, False]
+
+
+class FailsWithBarriers(TightReference):
+    """Reports infeasible while any barrier row is active (to exercise the relaxation)."""
+
+    def __init__(self, start):
+        self.start = start
+
+    def solve(self, p):
+        if np.any(p.h[self.start :] < 1e5):
+            return QPSolution(None, "infeasible", 0.0)
+        return super().solve(p)
+
+
+def test_priority_relaxation_drops_the_last_family_first_and_counts(states):
+    st, pm = states
+    w = world(terrain=Terrain((Plane(1.0),)))
+    barriers = [TerrainClearance(w, "first"), TerrainClearance(w, "second")]
+    f = SafetyFilter(FilterSettings(relaxation="priority"), TightReference(), barriers)
+    f.backend = FailsWithBarriers(barriers[0].start)
+    state = next(s for s in st if (~s[2].in_stance).any())
+    res = f.filter(inputs_for(pm, state, 1.0), state[3])
+    assert not res.used_fallback and res.relaxed == ("second", "first")
+    assert f.relaxed_ticks == 1 and f.relaxed_by_family == {"second": 1, "first": 1}
+    plain = SafetyFilter(FilterSettings(), FailsWithBarriers(barriers[0].start), barriers)
+    assert plain.filter(inputs_for(pm, state, 1.0), state[3]).used_fallback  # relaxation none: fallback
