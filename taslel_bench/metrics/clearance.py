@@ -98,8 +98,10 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
     rearm = max(1, round(TRIP_REARM_S / dt))
     on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
     new = onsets(on_obstacle, rearm)
+    link_new = onsets(tr.leg_link_obstacle_contact[w], rearm)
     foot_trips = int((new & swing).sum())
-    link_trips = int(onsets(tr.leg_link_obstacle_contact[w], rearm).sum())
+    link_trips = int(link_new.sum())
+    trip_ticks = np.flatnonzero((new & swing).any(axis=1) | link_new.any(axis=1))
     touch = on_obstacle & swing
     ds = d[swing]
     out.update({
@@ -107,6 +109,8 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
         "foot_trips": foot_trips,
         "shin_trips": link_trips,  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
         "stance_obstacle_contacts": int((new & ~swing).sum()),
+        # [s] episode time of the first trip (the report's still strips start there); nan without one
+        "first_trip_s": float(tr.t_s[w.start + trip_ticks[0]]) if trip_ticks.size else math.nan,
         "obstacle_touch_swing_rate": float(np.mean(touch[swing])) if swing.any() else math.nan,
         "obstacle_clearance_min_m": float(ds.min()) if ds.size else math.nan,
     })  # fmt: skip
