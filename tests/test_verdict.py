@@ -190,3 +190,13 @@ def test_the_first_trip_time_is_the_first_counted_onset():
     set_contact(tr, slice(40, 42), 0, 5.0, obstacle=True)  # a trip at 40 ms
     m = clearance_metrics(tr, 0, DT)
     assert m["trips"] == 1 and m["first_trip_s"] == pytest.approx(0.040)
+
+
+def test_barrier_negative_rate_has_a_worst_window_too():
+    tr = synthetic_trace(n=2000)
+    tr.in_stance[:, 0] = False
+    tr.barriers["clearance"].h_m[:2000, 0] = 0.01
+    tr.barriers["clearance"].h_m[100:150, 0] = -0.01  # 50 ms of h < 0 in 2 s of swing
+    m = clearance_metrics(tr, 0, DT)
+    assert m["barrier_negative_rate"] == pytest.approx(50 / 2000)
+    assert m["barrier_negative_rate_worst_window"] == pytest.approx(50 / 500)

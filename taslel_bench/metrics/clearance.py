@@ -80,7 +80,7 @@ def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str,
                                                     if has_profile else math.nan)
     out.update(_depths(-c[violated], "clearance_violation_depth"))
     out.update(_obstacle_metrics(tr, w, swing, dt))
-    out.update(_barrier_metrics(tr, w, swing))
+    out.update(_barrier_metrics(tr, w, swing, dt))
     return out
 
 
@@ -118,16 +118,19 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
     return out
 
 
-def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray) -> dict[str, float]:
+def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) -> dict[str, float]:
     """The filter's own barrier values h (its model's foot positions): the share of swing ticks with
     h < -tolerance on a tick whose QP was solved — the filter reports success while its own safety
-    condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow)."""
+    condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow); and the
+    same over the worst 0.5 s window."""
+    none = {"barrier_negative_rate": math.nan, "barrier_negative_rate_worst_window": math.nan}
     if not tr.filter_on:
-        return {"barrier_negative_rate": math.nan}
+        return none
     h = tr.barrier_h_min(w)  # the smallest over the barrier families
     judged = swing & np.isfinite(h)
     if not judged.any():
-        return {"barrier_negative_rate": math.nan}
+        return none
     solved = (tr.qp_status[w] == 0)[:, None]
     negative = judged & solved & (h < -CLEARANCE_TOLERANCE_M)
-    return {"barrier_negative_rate": float(negative.sum() / judged.sum())}
+    return {"barrier_negative_rate": float(negative.sum() / judged.sum()),
+            "barrier_negative_rate_worst_window": worst_window_rate(negative, judged, window_ticks(dt))}
