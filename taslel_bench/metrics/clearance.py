@@ -14,9 +14,9 @@ Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <
   obstacle within the last :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the
   same contact flickering, is not new);
 * a **leg-link trip** is the onset of a non-foot link of a leg (calf, thigh, hip) touching an obstacle;
-* a **stance strike** is the onset, during the foot's stance, of a foot contact whose normal is more than
-  45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every new obstacle contact in
-  stance.
+* a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
+  whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
+  new obstacle contact in stance.
 """
 
 from __future__ import annotations
@@ -89,13 +89,12 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
     feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall)."""
     out: dict[str, float] = {"shin_floor_contact_rate": float(np.mean(tr.shin_floor_contact[w]))
                              if tr.n > w.start else math.nan}  # fmt: skip
-    touching = tr.contact_touching[w]
-    flank = touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-    out["stance_flank_strikes"] = int((onsets(flank.any(axis=2)) & ~swing).sum())
+    rearm = max(1, round(TRIP_REARM_S / dt))
+    flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
+    out["stance_flank_strikes"] = int((onsets(flank.any(axis=2), rearm) & ~swing).sum())
     d = tr.obstacle_clearance_m[w]
     if not np.isfinite(d).any():
         return out
-    rearm = max(1, round(TRIP_REARM_S / dt))
     on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
     new = onsets(on_obstacle, rearm)
     link_new = onsets(tr.leg_link_obstacle_contact[w], rearm)
