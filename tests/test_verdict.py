@@ -178,3 +178,25 @@ def test_the_verdict_table_counts_unsafe_runs_and_reasons_per_group():
     got = {(r["filter_enabled"], r["filter.ecbf.enabled"]): (r["unsafe"], r["clearance"], r["fell"])
            for _, r in table.iterrows()}
     assert got == {(False, ""): ("2/2", 2, 0), (True, "false"): ("2/2", 2, 0), (True, "true"): ("0/2", 0, 0)}
+
+
+def test_the_first_trip_time_is_the_first_counted_onset():
+    tr = synthetic_trace(n=60)
+    tr.t_s[:60] = np.arange(60) * DT
+    tr.obstacle_clearance_m[:] = 0.05
+    clear_contact(tr, slice(None), 0)
+    set_contact(tr, slice(0, 23), 0, 50.0, obstacle=True)  # lift-off from a log at 20: not a trip
+    tr.in_stance[20:, 0] = False
+    set_contact(tr, slice(40, 42), 0, 5.0, obstacle=True)  # a trip at 40 ms
+    m = clearance_metrics(tr, 0, DT)
+    assert m["trips"] == 1 and m["first_trip_s"] == pytest.approx(0.040)
+
+
+def test_barrier_negative_rate_has_a_worst_window_too():
+    tr = synthetic_trace(n=2000)
+    tr.in_stance[:, 0] = False
+    tr.barriers["clearance"].h_m[:2000, 0] = 0.01
+    tr.barriers["clearance"].h_m[100:150, 0] = -0.01  # 50 ms of h < 0 in 2 s of swing
+    m = clearance_metrics(tr, 0, DT)
+    assert m["barrier_negative_rate"] == pytest.approx(50 / 2000)
+    assert m["barrier_negative_rate_worst_window"] == pytest.approx(50 / 500)

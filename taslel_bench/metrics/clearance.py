@@ -14,9 +14,9 @@ Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <
   obstacle within the last :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the
   same contact flickering, is not new);
 * a **leg-link trip** is the onset of a non-foot link of a leg (calf, thigh, hip) touching an obstacle;
-* a **stance strike** is the onset, during the foot's stance, of a foot contact whose normal is more than
-  45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every new obstacle contact in
-  stance.
+* a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
+  whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
+  new obstacle contact in stance.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str,
                                                     if has_profile else math.nan)
     out.update(_depths(-c[violated], "clearance_violation_depth"))
     out.update(_obstacle_metrics(tr, w, swing, dt))
-    out.update(_barrier_metrics(tr, w, swing))
+    out.update(_barrier_metrics(tr, w, swing, dt))
     return out
 
 
@@ -89,17 +89,18 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
     feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall)."""
     out: dict[str, float] = {"shin_floor_contact_rate": float(np.mean(tr.shin_floor_contact[w]))
                              if tr.n > w.start else math.nan}  # fmt: skip
-    touching = tr.contact_touching[w]
-    flank = touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-    out["stance_flank_strikes"] = int((onsets(flank.any(axis=2)) & ~swing).sum())
+    rearm = max(1, round(TRIP_REARM_S / dt))
+    flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
+    out["stance_flank_strikes"] = int((onsets(flank.any(axis=2), rearm) & ~swing).sum())
     d = tr.obstacle_clearance_m[w]
     if not np.isfinite(d).any():
         return out
-    rearm = max(1, round(TRIP_REARM_S / dt))
     on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
     new = onsets(on_obstacle, rearm)
+    link_new = onsets(tr.leg_link_obstacle_contact[w], rearm)
     foot_trips = int((new & swing).sum())
-    link_trips = int(onsets(tr.leg_link_obstacle_contact[w], rearm).sum())
+    link_trips = int(link_new.sum())
+    trip_ticks = np.flatnonzero((new & swing).any(axis=1) | link_new.any(axis=1))
     touch = on_obstacle & swing
     ds = d[swing]
     out.update({
@@ -107,6 +108,8 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
         "foot_trips": foot_trips,
         "shin_trips": link_trips,  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
         "stance_obstacle_contacts": int((new & ~swing).sum()),
+        # [s] episode time of the first trip (the report's still strips start there); nan without one
+        "first_trip_s": float(tr.t_s[w.start + trip_ticks[0]]) if trip_ticks.size else math.nan,
         "obstacle_touch_swing_rate": float(np.mean(touch[swing])) if swing.any() else math.nan,
         "obstacle_clearance_min_m": float(ds.min()) if ds.size else math.nan,
     })  # fmt: skip
@@ -114,16 +117,19 @@ def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) 
     return out
 
 
-def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray) -> dict[str, float]:
+def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) -> dict[str, float]:
     """The filter's own barrier values h (its model's foot positions): the share of swing ticks with
     h < -tolerance on a tick whose QP was solved — the filter reports success while its own safety
-    condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow)."""
+    condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow); and the
+    same over the worst 0.5 s window."""
+    none = {"barrier_negative_rate": math.nan, "barrier_negative_rate_worst_window": math.nan}
     if not tr.filter_on:
-        return {"barrier_negative_rate": math.nan}
+        return none
     h = tr.barrier_h_min(w)  # the smallest over the barrier families
     judged = swing & np.isfinite(h)
     if not judged.any():
-        return {"barrier_negative_rate": math.nan}
+        return none
     solved = (tr.qp_status[w] == 0)[:, None]
     negative = judged & solved & (h < -CLEARANCE_TOLERANCE_M)
-    return {"barrier_negative_rate": float(negative.sum() / judged.sum())}
+    return {"barrier_negative_rate": float(negative.sum() / judged.sum()),
+            "barrier_negative_rate_worst_window": worst_window_rate(negative, judged, window_ticks(dt))}

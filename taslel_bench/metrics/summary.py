@@ -15,6 +15,7 @@ from taslel_bench.metrics.contacts import contact_metrics
 from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.metrics.residuals import residual_metrics
 from taslel_bench.metrics.verdict import SafetyLimits, judge
+from taslel_bench.metrics.windows import window_ticks, worst_window_rate
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import TICK_PARTS
 
@@ -55,7 +56,7 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
         out[f"tick_{part}_us_median"] = _median(tr.tick_parts_us[:n, j])
     k0 = min(round(stand_duration_s / control_dt_s), n)  # first walking tick
     out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
-    out.update(filter_metrics(res, k0))
+    out.update(filter_metrics(res, k0, control_dt_s))
     out.update(contact_metrics(tr, k0, control_dt_s, stance_duration_s))
     out.update(clearance_metrics(tr, k0, control_dt_s))
     out.update(residual_metrics(tr, k0, limits))
@@ -87,10 +88,11 @@ def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[st
     }
 
 
-def filter_metrics(res: EpisodeResult, k0: int = 0) -> dict[str, float]:
+def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[str, float]:
     """Intervention = mean over the walking ticks ``k0:n`` of ||u - u_nom||_2 [N·m], beside its reference
     magnitude ``u_nom_nm_mean`` = mean ||u_nom||_2 over the same ticks (what the nominal controller asks for);
-    QP counts and timings from the backend's own timer (solve) and the filter's (build), every filtered tick."""
+    QP counts and timings from the backend's own timer (solve) and the filter's (build), every filtered tick;
+    ``qp_failed_rate_worst_window``: the failed share over the worst 0.5 s window (``dt`` [s] control period)."""
     tr, n = res.trace, res.trace.n
     du = np.linalg.norm(tr.u[k0:n] - tr.u_nom[k0:n], axis=1)
     u_nom = np.linalg.norm(tr.u_nom[k0:n], axis=1)
@@ -109,6 +111,7 @@ def filter_metrics(res: EpisodeResult, k0: int = 0) -> dict[str, float]:
         qp_solves=int(filtered.sum()),
         qp_failed=int(tr.qp_fallback[:n].sum()),
         qp_failed_rate=float(tr.qp_fallback[:n][filtered].mean()) if filtered.any() else math.nan,
+        qp_failed_rate_worst_window=worst_window_rate(tr.qp_fallback[:n] & filtered, filtered, window_ticks(dt)),
         qp_solve_us_median=_median(solve),
         qp_solve_us_p99=_pct(solve, 99),
         qp_solve_us_max=float(solve.max()) if solve.size else math.nan,

@@ -3,9 +3,8 @@ as a row of frames (PNG) rendered from the run's steps.parquet (:mod:`taslel_ben
 the run's ``video.mp4`` or, when the run has none (``record.video=false``), to a clip of the event
 rendered beside the strip (from 2 s before to 0.5 s after it).
 
-The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the first trip: the first
-walking tick on which a swing foot (outside the filter's stance set) or a lower leg touches a physical
-obstacle (MuJoCo contacts; the onsets ``trips`` counts, :mod:`taslel_bench.metrics.clearance`).
+The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the first trip
+(``first_trip_s``: the first of the onsets ``trips`` counts, :mod:`taslel_bench.metrics.clearance`).
 Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``).
 """
 
@@ -36,12 +35,15 @@ def event_of_run(run_dir: Path, row: pd.Series) -> tuple[str, float] | None:
     trips = row.get("trips")
     if trips is None or not np.isfinite(float(trips)) or float(trips) <= 0:
         return None
-    t = first_trip_s(run_dir)
-    return ("trip", t) if t is not None else None
+    t = row.get("first_trip_s")  # the summary's own first trip (taslel_bench.metrics.clearance)
+    if t is None or not np.isfinite(float(t)):
+        t = first_trip_s(run_dir)  # a summary written before first_trip_s existed
+    return ("trip", float(t)) if t is not None else None
 
 
 def first_trip_s(run_dir: Path) -> float | None:
-    """Simulated time [s] of the first walking tick with a swing foot or a lower leg on an obstacle."""
+    """Simulated time [s] of the first walking tick with a swing foot or a lower leg on an obstacle (from
+    steps.parquet, for summaries without ``first_trip_s``; it also counts a contact continuing from stance)."""
     cfg = OmegaConf.load(Path(run_dir) / "config.yaml")
     legs = [*(f"{leg}_obstacle_contact" for leg in a1.LEGS), *(f"{leg}_stance" for leg in a1.LEGS)]
     steps = pd.read_parquet(Path(run_dir) / run_files.STEPS, columns=["t_s", "nonfoot_obstacle_contact", *legs])
