@@ -222,8 +222,9 @@ def test_stale_lock_of_a_dead_process_is_taken_over_and_said(tmp_path):
     [
         (["seed=0,0"], "#0 (seed=0", "#1 (seed=0"),
         (["record.mcap=true,false"], "#0 (record.mcap=True", "#1 (record.mcap=False"),
+        (["hydra/launcher=ray", "seed=0,0"], "#0 (seed=0", "#1 (seed=0"),
     ],
-    ids=["seed=0,0", "record.mcap=true,false"],
+    ids=["seed=0,0", "record.mcap=true,false", "ray seed=0,0"],
 )
 def test_sweep_mapping_two_jobs_to_one_folder_is_refused_before_it_starts(sweep, first, second, tmp_path):
     cmd = [sys.executable, "-m", "taslel_bench", "-m", *sweep, *TINY[:2], f"hydra.sweep.dir={tmp_path}"]
