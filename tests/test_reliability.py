@@ -389,6 +389,17 @@ def test_a_sweep_with_an_error_run_exits_1_and_all_ok_exits_0(tmp_path, capsys):
     assert callback_module.exit_code() == 1
 
 
+def test_a_full_disk_error_names_the_result_file_not_the_temporary_one(tmp_path):
+    def full(tmp: Path) -> None:
+        tmp.write_bytes(b"partial")
+        raise OSError(errno.ENOSPC, "Error writing bytes to file")  # as pyarrow raises it: no file name
+
+    with pytest.raises(OSError) as err:
+        run_files.atomic_write(tmp_path / "steps.parquet", full)
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "steps.parquet")
+    assert list(tmp_path.iterdir()) == []  # the partial temporary file is removed
+
+
 def test_job_that_could_not_write_its_folder_still_has_a_row(tmp_path):
     """The launcher's record of a job whose folder holds no summary (full disk) is the table's row."""
     sweep = _sweep_of_three(tmp_path)
