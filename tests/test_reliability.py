@@ -222,8 +222,9 @@ def test_stale_lock_of_a_dead_process_is_taken_over_and_said(tmp_path):
     [
         (["seed=0,0"], "#0 (seed=0", "#1 (seed=0"),
         (["record.mcap=true,false"], "#0 (record.mcap=True", "#1 (record.mcap=False"),
+        (["hydra/launcher=ray", "seed=0,0"], "#0 (seed=0", "#1 (seed=0"),
     ],
-    ids=["seed=0,0", "record.mcap=true,false"],
+    ids=["seed=0,0", "record.mcap=true,false", "ray seed=0,0"],
 )
 def test_sweep_mapping_two_jobs_to_one_folder_is_refused_before_it_starts(sweep, first, second, tmp_path):
     cmd = [sys.executable, "-m", "taslel_bench", "-m", *sweep, *TINY[:2], f"hydra.sweep.dir={tmp_path}"]
@@ -386,6 +387,17 @@ def test_a_sweep_with_an_error_run_exits_1_and_all_ok_exits_0(tmp_path, capsys):
     run_files.write_json(sweep / "seed=1" / "summary.json", summary)
     callback_module.SweepCallback().on_multirun_end(_Cfg(sweep).node)
     assert callback_module.exit_code() == 1
+
+
+def test_a_full_disk_error_names_the_result_file_not_the_temporary_one(tmp_path):
+    def full(tmp: Path) -> None:
+        tmp.write_bytes(b"partial")
+        raise OSError(errno.ENOSPC, "Error writing bytes to file")  # as pyarrow raises it: no file name
+
+    with pytest.raises(OSError) as err:
+        run_files.atomic_write(tmp_path / "steps.parquet", full)
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "steps.parquet")
+    assert list(tmp_path.iterdir()) == []  # the partial temporary file is removed
 
 
 def test_job_that_could_not_write_its_folder_still_has_a_row(tmp_path):

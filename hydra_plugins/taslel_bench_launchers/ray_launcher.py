@@ -3,7 +3,10 @@
 The joblib launcher plugin fixes its backend to loky; this launcher runs the same per-job function
 (``hydra_joblib_launcher._core.execute_job``) with ``joblib.Parallel(backend="ray")`` instead, after
 ``ray.init`` on a new local instance (``address: local``) or a running cluster (``address: auto`` or
-``<head>:6379``). Each job writes its own run folder; the sweep callback aggregates the folder.
+``<head>:6379``). Each job writes its own run folder; the sweep callback aggregates the folder. As with the
+local launcher, a job list mapping two jobs to one run folder is refused before anything runs (exit 2), and a
+job that raised is an error row; a Ray worker that dies still ends the batch (Ray's joblib backend raises;
+not handled here, unlike the local launcher).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from hydra.plugins.launcher import Launcher
 from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf
 
+from taslel_bench.sweep.jobs import check_one_folder_per_job, settle
 from taslel_bench.sweep.launchers import require_launcher_package
 
 log = logging.getLogger(__name__)
@@ -66,6 +70,7 @@ class RayLauncher(Launcher):
         assert self.config is not None and self.task_function is not None and self.hydra_context is not None
         setup_globals()
         configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
+        folders = check_one_folder_per_job(self.config, job_overrides, self.hydra_context, initial_job_idx)
         sweep_dir = Path(str(self.config.hydra.sweep.dir))
         sweep_dir.mkdir(parents=True, exist_ok=True)
 
@@ -99,4 +104,5 @@ class RayLauncher(Launcher):
         finally:
             if started_here:
                 ray.shutdown()
-        return list(runs)
+        # a job that raised outside the task function is an error row, not the end of the sweep
+        return [settle(r, overrides, folder) for r, overrides, folder in zip(runs, job_overrides, folders)]

@@ -20,11 +20,17 @@ OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may
 
 
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Call ``write(tmp_path)`` then rename to ``path`` (same folder, atomic on POSIX)."""
+    """Call ``write(tmp_path)`` then rename to ``path`` (same folder, atomic on POSIX). An OSError (a full
+    disk) is raised naming ``path``, not the temporary file."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         write(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        if exc.filename not in (None, str(tmp), tmp):
+            raise
+        reason = exc.strerror or " ".join(str(exc).split())
+        raise OSError(exc.errno, reason, str(path)) from exc
     finally:
         if tmp.exists():
             tmp.unlink()
