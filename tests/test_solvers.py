@@ -384,3 +384,14 @@ def test_paper_claims_do_not_pool_backends_as_seeds(tmp_path):
                           for s, v in (("osqp", 1.0), ("clarabel", 2.0), ("clarabel", 3.0))])  # fmt: skip
     text = paper_claims(frame)
     assert "`solver=clarabel` only" in text and "n=2" in text and "n=3" not in text
+
+
+def test_bench_sum_of_parts_limit_counts_mj_step_per_physics_step():
+    from taslel_bench.qp.tick_bench import _solver_overrides, sum_of_parts_limit
+
+    parts = {"mj_step": 10.0, "controller": 2.0, "pinocchio_update": 8.0, "contact_check": 0.0, "qp_build": 10.0,
+             "qp_solve": 20.0, "not_a_part": 1e6}  # fmt: skip
+    assert sum_of_parts_limit(parts, 1e-3, 1) == pytest.approx(1000.0 / 50.0)
+    assert sum_of_parts_limit(parts, 2e-3, 2) == pytest.approx(2000.0 / 60.0)
+    assert _solver_overrides("qpsolvers:osqp") == ["solver=qpsolvers", "solver.name=osqp"]
+    assert _solver_overrides("osqp") == ["solver=osqp"]
