@@ -22,7 +22,6 @@ from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
-from taslel_bench.util.jit import all_finite
 from taslel_bench.util.fields import (
     ConfigError,
     choice,
@@ -34,6 +33,7 @@ from taslel_bench.util.fields import (
     number_or_list,
     numbers,
 )
+from taslel_bench.util.jit import all_finite
 
 # ----------------------------------------------------------------------------------------------- QP
 

@@ -323,7 +323,7 @@ def test_a_run_checks_its_answers_off_the_clock(tmp_path):
 # ---------------------------------------------------------------------------------- solver verdict
 
 
-def _fake_sweep(root: Path) -> "pd.DataFrame":
+def _fake_sweep(root: Path):
     """Three backends x 2 seeds on one world, 1 kHz: 'slow_ok' (solves 200-400 µs, right), 'fast_wrong'
     (10 µs, u off by 2e-3 N·m on some checks), 'late' (right, 1 % of solves over 1 ms)."""
     import pandas as pd
