@@ -395,3 +395,15 @@ def test_bench_sum_of_parts_limit_counts_mj_step_per_physics_step():
     assert sum_of_parts_limit(parts, 2e-3, 2) == pytest.approx(2000.0 / 60.0)
     assert _solver_overrides("qpsolvers:osqp") == ["solver=qpsolvers", "solver.name=osqp"]
     assert _solver_overrides("osqp") == ["solver=osqp"]
+
+
+def test_report_has_the_verdict_and_draws_no_empty_fall_figure(tmp_path):
+    from taslel_bench.sweep.report import write_report
+
+    frame = _fake_sweep(tmp_path).drop(columns="filter_enabled")  # no on/off pairs: no episode figures
+    text = write_report(tmp_path, frame).read_text()
+    assert "## Solver verdict" in text and "ship **slow_ok**" in text
+    assert (tmp_path / "qp_solve_times.png").is_file() and not (tmp_path / "fall_rates.png").exists()
+    frame.loc[0, "fell"] = True  # one run fell: the figure is drawn
+    write_report(tmp_path, frame)
+    assert (tmp_path / "fall_rates.png").is_file()
