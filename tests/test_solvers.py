@@ -318,6 +318,12 @@ def test_a_run_checks_its_answers_off_the_clock(tmp_path):
 
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     assert np.isfinite(steps["qp_u_error_nm"]).sum() == s["qp_reference_checks"]
+    off = run(api.compose(["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp",
+                           "record.reference_every=0"]), tmp_path / "off", {"scenario": "flat", "solver": "osqp"})
+    assert "qp_wrong_rate" not in off and off["reference_s"] == 0.0
+    steps_off = pd.read_parquet(tmp_path / "off" / "steps.parquet")
+    u_cols = [c for c in steps.columns if c.startswith("u_")]
+    np.testing.assert_array_equal(steps[u_cols].to_numpy(), steps_off[u_cols].to_numpy())  # checks change nothing
 
 
 # ---------------------------------------------------------------------------------- solver verdict
