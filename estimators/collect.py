@@ -13,7 +13,7 @@ episode; windows ending later than ``fall_margin_s`` before the fall are dropped
 With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
 the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
 in the loop, built through the core's façade :mod:`taslel_bench.api` from the project config
-(``--filter-overrides``, e.g. ``solver=daqp_persistent``); the features then hold the *filtered* torque, as
+(``--filter-overrides``, e.g. ``solver=daqp``); the features then hold the *filtered* torque, as
 the episode runner feeds estimators. The filter's friction is the true floor friction times a factor drawn
 per episode from ``--filter-mu-scale lo hi`` (default 1 1): in the loop the filter gets an estimate, not
 the truth, and a model that only learned the filter's clipping at the true mu would read its own estimate
@@ -471,7 +471,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--friction-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="floor friction ~ U(LO, HI) in every split instead of the training range (evaluation sets)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
-                    help="Hydra overrides of the project config for the filter, e.g. solver=daqp_persistent")
+                    help="Hydra overrides of the project config for the filter, e.g. solver=daqp")
     return ap
 
 

@@ -23,7 +23,6 @@ from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Lo
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.relief import HeightField, Ramp, rough_heights
 from taslel_bench.terrain.terrain import Terrain
-from taslel_bench.util.jit import all_finite
 from taslel_bench.util.fields import (
     ConfigError,
     choice,
@@ -35,6 +34,7 @@ from taslel_bench.util.fields import (
     number_or_list,
     numbers,
 )
+from taslel_bench.util.jit import all_finite
 
 # ----------------------------------------------------------------------------------------------- QP
 

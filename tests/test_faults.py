@@ -41,6 +41,8 @@ FAULTS = [
     (["max_memory_gb=0"], "max_memory_gb", "0"),
     (["physics_rate_hz=50", "control_rate_hz=50"], "physics_rate_hz", "50"),
     (["record.qps_every=0"], "record.qps_every", "0"),
+    (["record.reference_every=-1"], "record.reference_every", "-1"),
+    (["record.reference_tol_nm=0"], "record.reference_tol_nm", "0"),
     (["progress=maybe"], "progress", "'maybe'"),
     # controller, filter, robot
     (["controller.period=1e6"], "controller.period", "1000000.0"),

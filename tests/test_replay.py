@@ -35,7 +35,7 @@ def runs_set() -> qpset.QPSet:
 
 def test_record_in_a_run_and_load_round_trip(tmp_path):
     cfg = compose_cfg(["scenario=obstacle", "duration=0.1", "progress=false", "record.mcap=false",
-                       "record.qps=true", "record.qps_every=50"])  # fmt: skip
+                       "record.qps=true", "record.qps_every=50", "filter.formulation=full"])  # fmt: skip
     summary = run(cfg, tmp_path, {"scenario": "obstacle", "solver": "daqp"})
     qs = qpset.load(tmp_path / qpset.FILENAME)
     n_ticks = 600  # 0.5 s stand + 0.1 s at 1 kHz

@@ -318,12 +318,18 @@ def test_a_run_checks_its_answers_off_the_clock(tmp_path):
 
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     assert np.isfinite(steps["qp_u_error_nm"]).sum() == s["qp_reference_checks"]
+    off = run(api.compose(["duration=0.2", "progress=false", "record.mcap=false", "solver=osqp",
+                           "record.reference_every=0"]), tmp_path / "off", {"scenario": "flat", "solver": "osqp"})
+    assert "qp_wrong_rate" not in off and off["reference_s"] == 0.0
+    steps_off = pd.read_parquet(tmp_path / "off" / "steps.parquet")
+    u_cols = [c for c in steps.columns if c.startswith("u_")]
+    np.testing.assert_array_equal(steps[u_cols].to_numpy(), steps_off[u_cols].to_numpy())  # checks change nothing
 
 
 # ---------------------------------------------------------------------------------- solver verdict
 
 
-def _fake_sweep(root: Path) -> "pd.DataFrame":
+def _fake_sweep(root: Path):
     """Three backends x 2 seeds on one world, 1 kHz: 'slow_ok' (solves 200-400 µs, right), 'fast_wrong'
     (10 µs, u off by 2e-3 N·m on some checks), 'late' (right, 1 % of solves over 1 ms)."""
     import pandas as pd
@@ -384,3 +390,26 @@ def test_paper_claims_do_not_pool_backends_as_seeds(tmp_path):
                           for s, v in (("osqp", 1.0), ("clarabel", 2.0), ("clarabel", 3.0))])  # fmt: skip
     text = paper_claims(frame)
     assert "`solver=clarabel` only" in text and "n=2" in text and "n=3" not in text
+
+
+def test_bench_sum_of_parts_limit_counts_mj_step_per_physics_step():
+    from taslel_bench.qp.tick_bench import _solver_overrides, sum_of_parts_limit
+
+    parts = {"mj_step": 10.0, "controller": 2.0, "pinocchio_update": 8.0, "contact_check": 0.0, "qp_build": 10.0,
+             "qp_solve": 20.0, "not_a_part": 1e6}  # fmt: skip
+    assert sum_of_parts_limit(parts, 1e-3, 1) == pytest.approx(1000.0 / 50.0)
+    assert sum_of_parts_limit(parts, 2e-3, 2) == pytest.approx(2000.0 / 60.0)
+    assert _solver_overrides("qpsolvers:osqp") == ["solver=qpsolvers", "solver.name=osqp"]
+    assert _solver_overrides("osqp") == ["solver=osqp"]
+
+
+def test_report_has_the_verdict_and_draws_no_empty_fall_figure(tmp_path):
+    from taslel_bench.sweep.report import write_report
+
+    frame = _fake_sweep(tmp_path).drop(columns="filter_enabled")  # no on/off pairs: no episode figures
+    text = write_report(tmp_path, frame).read_text()
+    assert "## Solver verdict" in text and "ship **slow_ok**" in text
+    assert (tmp_path / "qp_solve_times.png").is_file() and not (tmp_path / "fall_rates.png").exists()
+    frame.loc[0, "fell"] = True  # one run fell: the figure is drawn
+    write_report(tmp_path, frame)
+    assert (tmp_path / "fall_rates.png").is_file()

@@ -63,7 +63,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         ecbf_alpha2=float(f.ecbf.alpha2),
         fallback=str(f.fallback),
         stance_source=str(f.stance_source),
-        formulation=str(f.get("formulation", "full")),
+        formulation=str(f.get("formulation", "condensed")),
         robust=robust_settings(f.get("robust")),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
         friction_cone=str(f.get("friction_cone", "pyramid")),

@@ -15,8 +15,8 @@ target is therefore (vdot_nom, lambda_nom), the prediction for u = u_nom (one so
 per tick): when no inequality binds, u = u_nom exactly for any eps. ``regularization_target: zero`` gives
 the textbook form.
 
-Formulation (``formulation``): ``full`` (default, the paper's) hands the backend the QP in X = (vdot, u,
-lambda). ``condensed`` hands it the *same* minimisation with the 30 equality rows eliminated: one solve
+Formulation (``formulation``): ``full`` (the paper's) hands the backend the QP in X = (vdot, u,
+lambda). ``condensed`` (default) hands it the *same* minimisation with the 30 equality rows eliminated: one solve
 with the (vdot, lambda) columns of the equality rows (:mod:`taslel_bench.filter.equality_solve`, leg by leg)
 gives (vdot, lambda) = z0 - Z u, so the backend sees a 12-variable QP in u (P = I + eps Z'Z, the G rows
 and the torque bounds), and (vdot, lambda) is recovered from its u. Both have the same minimiser (tested
@@ -68,7 +68,7 @@ class FilterSettings:
     ecbf_alpha2: float = 20.0  # [1/s]
     fallback: str = "nominal"  # on QP failure: pass u_nom ("nominal") or the last filtered u ("hold_last")
     stance_source: str = "schedule"  # "schedule" (gait) or "contact" (plant contact flags)
-    formulation: str = "full"  # "full" (backend sees X = (vdot, u, lambda)) or "condensed" (u only)
+    formulation: str = "condensed"  # "condensed" (backend sees u only) or "full" (X = (vdot, u, lambda), paper)
     robust: RobustSettings = field(default_factory=RobustSettings)  # margins for a wrong model (off)
     control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
     friction_cone: str = "pyramid"  # "pyramid" (paper: world z, one mu) | "terrain" (per foot, terrain normal)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.compose import CONF_DIR

@@ -1,10 +1,19 @@
 """Per-tick cost and real-time factor of an episode, with a breakdown of the tick's parts.
 
-    python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp_persistent] [--scenario obstacle]
+    python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp,qpsolvers:osqp] [--scenario obstacle]
+                                 [--main osqp,clarabel]
 
 Prints, for the nominal-only loop and for the filter with each solver and formulation: median tick time,
-real-time factor, the median cost of each part of the tick measured inside the loop, and the same parts
-measured in isolation on the episode's final state. Runs share one process and are reported side by side.
+real-time factor, the median cost of each part of the tick measured inside the loop, the same parts
+measured in isolation on the episode's final state, and the *sum-of-parts limit*: the real-time factor the
+loop would reach if a tick cost only the sum of its parts timed alone (mj_step x physics steps per tick,
+controller, Pinocchio update, contact check, QP build, QP solve), with the loop's factor as a share of it.
+Runs share one process and are reported side by side. A solver ``qpsolvers:<name>`` is the per-call route
+(``solver=qpsolvers solver.name=<name>``).
+
+``--main osqp,clarabel`` also runs the main command, ``python -m taslel_bench -m solver=osqp,clarabel`` (its
+default config: two 10 s runs as two parallel jobs sharing the cores), in a temporary sweep folder and reports
+each run's real-time factor from its ``summary.json``.
 """
 
 from __future__ import annotations
@@ -12,6 +21,9 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import time
 from datetime import datetime
 from pathlib import Path
@@ -69,8 +81,9 @@ def part_costs(built: Built) -> dict[str, float]:
     return costs
 
 
-_COLUMNS = ("loop", "tick µs (median)", "real-time factor", "status", "fell", "in the loop µs (median)",
-           "isolated µs (median)")  # fmt: skip
+_COLUMNS = ("loop", "tick µs (median)", "real-time factor", "sum-of-parts limit", "share of limit", "status",
+            "fell", "in the loop µs (median)", "isolated µs (median)")  # fmt: skip
+LIMIT_PARTS = ("mj_step", "controller", "pinocchio_update", "contact_check", "qp_build", "qp_solve")
 _NOTES = (
     "Tick = wall time of one 1 kHz control tick (state read, estimator, controller, bridge + Pinocchio, "
     "QP build + solve, physics step, contact check), median over the episode. Real-time factor = "
@@ -80,8 +93,17 @@ _NOTES = (
     "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
     "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
     "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+    "Sum-of-parts limit = control period / (the isolated parts summed, mj_step once per physics step): the "
+    "real-time factor of a loop that costs nothing but its parts; share of limit = real-time factor / limit. "
     "Other processes on the machine inflate all numbers alike.\n"
 )
+
+
+def sum_of_parts_limit(isolated: dict[str, float], control_dt_s: float, physics_per_tick: int) -> float:
+    """Real-time factor of a tick costing only its isolated parts (see the notes)."""
+    parts = {k: v for k, v in isolated.items() if k in LIMIT_PARTS}
+    total_us = sum(parts.values()) + parts.get("mj_step", 0.0) * (physics_per_tick - 1)
+    return control_dt_s * 1e6 / total_us if total_us > 0 else float("nan")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -89,20 +111,44 @@ def main(argv: list[str] | None = None) -> None:
     args = _parse_args(argv)
     load_before = os.getloadavg()[0]
     rows = [_run_loop(label, extra, args) for label, extra in _loop_configs(args.solvers, args.formulations)]
+    main_rtf = main_command(args.main) if args.main else {}
     _print_table(rows, args)
+    if main_rtf:
+        print(_main_text(args.main, main_rtf))
     if args.out is not None:
-        _write_markdown(rows, args, load_before)
+        _write_markdown(rows, args, load_before, main_rtf)
+
+
+def main_command(solvers: str) -> dict[str, float]:
+    """Run ``python -m taslel_bench -m solver=<solvers>`` (the default config otherwise; its jobs run in
+    parallel) into a temporary sweep folder; {solver: real-time factor of its run}."""
+    import pandas as pd
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "taslel_bench", "-m", f"solver={solvers}", "progress=false",
+               f"hydra.sweep.dir={tmp}"]  # fmt: skip
+        subprocess.run(cmd, check=True, capture_output=True, text=True)
+        table = pd.read_parquet(Path(tmp) / "summary.parquet")
+    return {str(r["solver"]): float(r["real_time_factor"]) for _, r in table.iterrows()}
+
+
+def _main_text(solvers: str, rtf: dict[str, float]) -> str:
+    runs = ", ".join(f"{s} {v:.1f}x" for s, v in sorted(rtf.items()))
+    return (f"Main command `python -m taslel_bench -m solver={solvers}` (default config, its two jobs in parallel "
+            f"on the machine's cores): real-time factor per run: {runs}.")
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     """The command line: episode duration [s], solvers, formulations, scenario, markdown output file."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=5.0, help="walking time per episode [s]")
-    ap.add_argument("--solvers", default="daqp,osqp_persistent,osqp", help="comma-separated solver options")
+    ap.add_argument("--solvers", default="daqp,osqp,clarabel,qpsolvers:osqp",
+                    help="comma-separated solver options (qpsolvers:<name>: the per-call route)")
     ap.add_argument("--formulations", default="full,condensed",
                     help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
+    ap.add_argument("--main", default="", help="also run the main command with these solvers, e.g. osqp,clarabel")
     return ap.parse_args(argv)
 
 
@@ -110,15 +156,22 @@ def _loop_configs(solvers: str, formulations: str) -> list[tuple[str, list[str]]
     """(label, config overrides) of each loop: the nominal-only loop, then the filter with each solver
     (comma-separated ``solvers``) in each formulation (comma-separated ``formulations``)."""
     return [("nominal only", ["filter.enabled=false"])] + [
-        (f"filter ({form}) + {s}", [f"solver={s}", f"filter.formulation={form}"])
+        (f"filter ({form}) + {s}", [*_solver_overrides(s), f"filter.formulation={form}"])
         for s in solvers.split(",") if s
         for form in formulations.split(",") if form
     ]
 
 
+def _solver_overrides(name: str) -> list[str]:
+    """``solver=<name>``, or for ``qpsolvers:<name>`` the per-call route's two overrides."""
+    if name.startswith("qpsolvers:"):
+        return ["solver=qpsolvers", f"solver.name={name.removeprefix('qpsolvers:')}"]
+    return [f"solver={name}"]
+
+
 def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
-    factor, status, fell, {part: median µs in the loop}, {part: median µs in isolation})."""
+    factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation})."""
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
@@ -127,7 +180,9 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
     if built.filter is None:
         del in_loop["model"], in_loop["filter"]
-    return label, float(np.median(tr.tick_us[:n])), rtf, res.status, res.fell, in_loop, part_costs(built)
+    isolated = part_costs(built)
+    limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), built.episode.physics_per_tick)
+    return label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated
 
 
 def _fmt_parts(parts: dict[str, float]) -> str:
@@ -141,13 +196,14 @@ def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
     for col in _COLUMNS:
         table.add_column(col)
-    for label, tick, rtf, status, fell, in_loop, isolated in rows:
-        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", status, str(fell), _fmt_parts(in_loop),
-                      _fmt_parts(isolated))  # fmt: skip
+    for label, tick, rtf, limit, status, fell, in_loop, isolated in rows:
+        table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, str(fell),
+                      _fmt_parts(in_loop), _fmt_parts(isolated))  # fmt: skip
     Console(width=220).print(table)
 
 
-def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float) -> None:
+def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
+                    main_rtf: dict[str, float] | None = None) -> None:  # fmt: skip
     """Write the rows as markdown to ``args.out`` (with the command, machine, 1-min load average at the
     start ``load_before`` and now, and what the columns mean) and the figure next to it (``.png``)."""
     info = machine_info()
@@ -156,15 +212,19 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     lines = [
         "# Control-tick cost\n",
         (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
-         f"{args.formulations} --scenario {args.scenario}` · {stamp}\n"),
+         f"{args.formulations} --scenario {args.scenario}" + (f" --main {args.main}" if args.main else "")
+         + f"` · {stamp}\n"),
         (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
          f"load average during the run (1 min): {load_before:.1f} at start, {load_after:.1f} at end  \n"
          f"Packages: {info['packages']}  \nCode: {info['code']}\n"),
         _NOTES,
     ]
-    cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", status, fell, _fmt_parts(in_loop), _fmt_parts(isolated))
-             for label, tick, rtf, status, fell, in_loop, isolated in rows]  # fmt: skip
+    cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, fell,
+              _fmt_parts(in_loop), _fmt_parts(isolated))
+             for label, tick, rtf, limit, status, fell, in_loop, isolated in rows]  # fmt: skip
     lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
+    if main_rtf:
+        lines += ["", _main_text(args.main, main_rtf)]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     figure = args.out.with_suffix(".png")
     lines += ["", f"![tick parts in the loop]({figure.name})"]
@@ -184,7 +244,7 @@ def _plot_parts(rows: list, scenario: str, path: Path) -> None:
     labels = [r[0] for r in rows]
     left = np.zeros(len(rows))
     for part in TICK_PARTS:
-        widths = np.array([r[5].get(part, 0.0) for r in rows])
+        widths = np.array([r[6].get(part, 0.0) for r in rows])
         ax.barh(labels, widths, left=left, label=part)
         left += widths
     for i, r in enumerate(rows):

@@ -32,6 +32,7 @@ from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT, ContactLog
 from taslel_bench.robot import a1
 from taslel_bench.terrain.terrain import Terrain
+from taslel_bench.util.jit import kernel
 
 TICK_PARTS = ("controller", "model", "filter", "physics")
 QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
@@ -132,18 +133,9 @@ class EpisodeTrace:
                barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
         """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
         outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
-        self.t_s[k] = t
-        self.qpos_mj[k] = qpos
-        self.qvel_mj[k] = qvel
-        self.sensordata_mj[k] = sensordata
-        self.u_nom[k] = u_nom
-        self.u[k] = u
-        self.gait_phase[k] = gs.phi
-        self.in_stance[k] = in_stance
-        self.swing_phase[k] = gs.swing_phase
-        self.mu_hat[k] = mu_hat
-        self.mu_true[k] = mu_true
-        self.tick_us[k] = tick_s * 1e6
+        _copy_rows(k, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
+                   gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
+                   self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_true, self.tick_us)  # fmt: skip
         if fres is not None:
             self._grf_filter_flat[k] = fres.lam
             if fres.used_fallback:
@@ -341,6 +333,21 @@ class EpisodeTrace:
                      "mu_hat", "mu_true", "mu_hat_ready", "tick_us"):
             cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
+
+
+@kernel
+def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_nom, u, in_stance, swing_phase,
+               T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_swing, T_mu_hat, T_mu_true,
+               T_tick):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of the raw per-tick arrays (one compiled call instead of a dozen numpy assignments)."""
+    T_t[k], T_phase[k], T_mu_hat[k], T_mu_true[k], T_tick[k] = t, phi, mu_hat, mu_true, tick_us
+    T_qpos[k, :] = qpos
+    T_qvel[k, :] = qvel
+    T_sensordata[k, :] = sensordata
+    T_u_nom[k, :] = u_nom
+    T_u[k, :] = u
+    T_stance[k, :] = in_stance
+    T_swing[k, :] = swing_phase
 
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:

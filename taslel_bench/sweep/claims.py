@@ -148,7 +148,7 @@ def _one_backend(frame: pd.DataFrame) -> tuple[pd.DataFrame, str]:
         if values.nunique() <= 1:
             continue
         counts = values.value_counts()
-        keep = prefer if prefer in counts else sorted(counts.index, key=lambda v: (-counts[v], v))[0]
+        keep = prefer if prefer in counts else min(counts.index, key=lambda v: (-counts[v], v))
         frame = frame[~on | (frame[col].astype(str) == keep)]
         on = frame["filter_enabled"]
         note += f"Filter-on runs: `{col}={keep}` only (not pooled with the others as if they were seeds). "

@@ -170,13 +170,16 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
     made = solve_time_figure(sweep_dir, frame, group_columns(frame), plt)  # every tick (sweep.solver_verdict)
     if "scenario" in table and len(table):
         ok = _finished(frame)
-        rates = ok.groupby("scenario")["fell"].mean() if len(ok) else pd.Series(dtype=float)
+        by = ["scenario", "solver"] if "solver" in ok else ["scenario"]  # backends are not seeds
+        rates = ok.groupby(by)["fell"].mean() if len(ok) else pd.Series(dtype=float)
         if len(rates) and rates.max() > 0:  # nothing fell: no empty axis
-            fig, ax = plt.subplots(figsize=(6, 3))
-            ax.bar(rates.index.astype(str), rates.to_numpy())
+            fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(rates)), 3))
+            names = ["\n".join(map(str, k)) if isinstance(k, tuple) else str(k) for k in rates.index]
+            ax.bar(names, rates.to_numpy())
             ax.set_ylim(0, 1)
             ax.set_ylabel("fall rate")
-            ax.set_title("Fall rate per scenario (all solvers/estimators/seeds pooled)")
+            ax.tick_params(axis="x", labelsize=6)
+            ax.set_title("Fall rate per scenario and solver (estimators and seeds pooled)")
             fig.tight_layout()
             fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
             plt.close(fig)

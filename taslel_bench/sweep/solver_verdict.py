@@ -137,13 +137,13 @@ def _qualifies(r: pd.Series) -> bool:
 
 def _why_not(r: pd.Series) -> str:
     parts = []
-    if not r["success_rate"] == 1.0:
+    if r["success_rate"] != 1.0:
         parts.append(f"{1 - r['success_rate']:.2%} failed solves")
     if r["checks"] == 0:
         parts.append("no reference checks")
-    elif not r["wrong_rate"] == 0.0:
+    elif r["wrong_rate"] != 0.0:
         parts.append(f"{r['wrong_rate']:.2%} wrong answers (u error up to {r['u_err_max_nm']:.2g} N·m)")
-    if not r["miss_period_rate"] == 0.0:
+    if r["miss_period_rate"] != 0.0:
         parts.append(f"{r['miss_period_rate']:.2%} solves over the {r['period_us']:.0f} µs period")
     return ", ".join(parts)
 
@@ -168,14 +168,14 @@ def solver_verdict(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> tup
     if rows.empty:
         return "", rows
     lines = ["## Solver verdict: which backend to ship\n",
-             "Per world, one row per backend (seeds pooled, backends never): per-tick rates over the filtered "
+             ("Per world, one row per backend (seeds pooled, backends never): per-tick rates over the filtered "
              "ticks of its finished runs. `wrong_rate`: share of the reference-checked ticks "
              "(`record.reference_every`) whose solved u is off the tight reference (quadprog x DAQP) by more than "
              "`record.reference_tol_nm`; `u_err_*`: max_j |u_j - u_ref,j| on those ticks; `solve_*`: the backend's "
              "own timer; `miss_period_rate` / `miss_1ms_rate`: solves longer than the control period / 1 ms; "
              "`route`: persistent (set up once, updated every tick) or qpsolvers (set up every call). The backend "
              "to ship is the fastest by solve p99 among those with no failed solve, no wrong answer and no "
-             "deadline miss.\n"]
+             "deadline miss.\n")]
     shown = [c for c in rows.columns if c not in ("scenario", "period_us")]
     for world, g in rows.groupby("scenario", sort=True):
         lines += [f"### {world}\n", markdown_table(g[shown]), _sentence(str(world), g) + "\n"]
