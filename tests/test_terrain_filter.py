@@ -170,3 +170,17 @@ def test_terrain_barriers_measure_obstacles_only_by_default(states):
     f.build(inputs_for(pm, st[0], 1.0), st[0][3])
     assert np.all(np.isnan(tc.h)) and np.all(np.isnan(shin.h))
     assert np.all(f.problem.h[tc.start : tc.start + 8] == 1e6)
+
+
+def test_packed_heightfield_distance_equals_the_part():
+    from taslel_bench.interfaces import HeightField, rough_heights
+
+    field = HeightField(rough_heights(np.random.default_rng(5), 21, 31, 0.03, 1, 3, 4), centre_x_m=1.5,
+                        centre_y_m=0.0, half_x_m=0.75, half_y_m=0.5)  # fmt: skip
+    rng = np.random.default_rng(6)
+    c = np.column_stack([rng.uniform(0.6, 2.4, 300), rng.uniform(-0.6, 0.6, 300), rng.uniform(-0.04, 0.2, 300)])
+    ours = PackedTerrain((field,)).sphere_distance(c, 0.02)
+    for a, b in zip(field.sphere_distance(c, 0.02), ours):
+        finite = np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1)
+        assert np.array_equal(np.isfinite(a), np.isfinite(b))
+        assert np.max(np.abs(a[finite] - b[finite])) < 1e-12
