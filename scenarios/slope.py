@@ -1,10 +1,12 @@
 """An incline up the path (``slope``): flat floor, a plane rising at ``angle_deg`` over ``run_m``, then a flat
-plateau at the top. Real geometry in the plant (a pitched box and a box) and in the terrain object."""
+plateau at the top. Real geometry in the plant (a pitched box and a box) and in the terrain object; both are
+obstacles in the terrain's sense (a swing foot touching the incline is a trip, the filter's terrain barriers
+keep the feet and shins clear of it)."""
 
 from __future__ import annotations
 
 from scenarios.flat import FlatGround
-from taslel_bench.interfaces import Box, Plane, Ramp, Terrain, number
+from taslel_bench.interfaces import OBSTACLE, Box, Plane, Ramp, Terrain, number
 
 
 class Slope(FlatGround):
@@ -20,10 +22,11 @@ class Slope(FlatGround):
         run = number("scenario.run_m", run_m, 0.2, 50.0, unit="m")
         plateau = number("scenario.plateau_m", plateau_m, 0.0, 100.0, unit="m")
         half = number("scenario.half_width_m", half_width_m, 0.3, 5.0, unit="m")
-        ramp = Ramp(start_x_m=start, run_m=run, angle_deg=self.angle_deg, half_width_m=half, friction=self.friction)
+        ramp = Ramp(start_x_m=start, run_m=run, angle_deg=self.angle_deg, half_width_m=half, friction=self.friction,
+                    role=OBSTACLE)
         parts = [Plane(self.friction), ramp]
         if plateau > 0.0:
             top = ramp.rise_m
             parts.append(Box(centre_m=(start + run + plateau / 2.0, 0.0, top / 2.0),
-                             half_size_m=(plateau / 2.0, half, top / 2.0), friction=self.friction))
+                             half_size_m=(plateau / 2.0, half, top / 2.0), friction=self.friction, role=OBSTACLE))
         self.terrain = Terrain(tuple(parts))

@@ -108,7 +108,7 @@ def test_terrain_and_leg_barriers_hold_at_the_solution(states):
             active += int(np.isfinite(b.h).sum())
     assert active > 0
     # the terrain clearance's h on flat ground is the foot's height above it minus the lift profile
-    tc = TerrainClearance(world(terrain=Terrain((Plane(1.0),))), lift_m=0.0, touchdown_allowance_m=0.0)
+    tc = TerrainClearance(world(terrain=Terrain((Plane(1.0),))), lift_m=0.0, touchdown_allowance_m=0.0, role=None)
     f2 = SafetyFilter(FilterSettings(), TightReference(), [tc])
     for state in st:
         x = inputs_for(pm, state, 1.0)
@@ -151,7 +151,7 @@ class FailsWithBarriers(TightReference):
 def test_priority_relaxation_drops_the_last_family_first_and_counts(states):
     st, pm = states
     w = world(terrain=Terrain((Plane(1.0),)))
-    barriers = [TerrainClearance(w, "first"), TerrainClearance(w, "second")]
+    barriers = [TerrainClearance(w, "first", role=None), TerrainClearance(w, "second", role=None)]
     f = SafetyFilter(FilterSettings(relaxation="priority"), TightReference(), barriers)
     f.backend = FailsWithBarriers(barriers[0].start)
     state = next(s for s in st if (~s[2].in_stance).any())
@@ -160,3 +160,27 @@ def test_priority_relaxation_drops_the_last_family_first_and_counts(states):
     assert f.relaxed_ticks == 1 and f.relaxed_by_family == {"second": 1, "first": 1}
     plain = SafetyFilter(FilterSettings(), FailsWithBarriers(barriers[0].start), barriers)
     assert plain.filter(inputs_for(pm, state, 1.0), state[3]).used_fallback  # relaxation none: fallback
+
+
+def test_terrain_barriers_measure_obstacles_only_by_default(states):
+    st, pm = states
+    terrain = Terrain((Plane(1.0),))  # no obstacle: no rows (the floor is where a foot lands)
+    tc, shin = TerrainClearance(world(terrain=terrain)), LegClearance(world(terrain=terrain), "shin")
+    f = SafetyFilter(FilterSettings(), TightReference(), [tc, shin])
+    f.build(inputs_for(pm, st[0], 1.0), st[0][3])
+    assert np.all(np.isnan(tc.h)) and np.all(np.isnan(shin.h))
+    assert np.all(f.problem.h[tc.start : tc.start + 8] == 1e6)
+
+
+def test_packed_heightfield_distance_equals_the_part():
+    from taslel_bench.interfaces import HeightField, rough_heights
+
+    field = HeightField(rough_heights(np.random.default_rng(5), 21, 31, 0.03, 1, 3, 4), centre_x_m=1.5,
+                        centre_y_m=0.0, half_x_m=0.75, half_y_m=0.5)  # fmt: skip
+    rng = np.random.default_rng(6)
+    c = np.column_stack([rng.uniform(0.6, 2.4, 300), rng.uniform(-0.6, 0.6, 300), rng.uniform(-0.04, 0.2, 300)])
+    ours = PackedTerrain((field,)).sphere_distance(c, 0.02)
+    for a, b in zip(field.sphere_distance_reference(c, 0.02), ours):
+        finite = np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1)
+        assert np.array_equal(np.isfinite(a), np.isfinite(b))
+        assert np.max(np.abs(a[finite] - b[finite])) < 1e-12

@@ -25,13 +25,17 @@ from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.terrain import Terrain
 
 CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upward normal (floor beside a log)
+CONTACT_TOL_M = 0.005  # [m] a foot farther than this from the terrain takes the normal of the surface under it
 
 
 def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray) -> np.ndarray:
-    """(4, 3) unit normals of the terrain at the foot spheres (the gradient of their distance to it; of two
-    parts within CORNER_TOL_M, the more upward one: a foot on the floor against a log's side stands on the
-    floor)."""
-    _, normal, _ = terrain.near_distance(foot_pos_in_world, a1.FOOT_RADIUS_M, CORNER_TOL_M)
+    """(4, 3) unit normals of the terrain at the foot spheres: for a foot within CONTACT_TOL_M of the terrain
+    the gradient of its distance to it (of two parts within CORNER_TOL_M, the more upward one: a foot on the
+    floor against a log's side stands on the floor); for a foot farther away (a stance foot that has not
+    landed yet) the normal of the surface under it -- the nearest part could be a log's side beside it."""
+    dist, normal, _ = terrain.near_distance(foot_pos_in_world, a1.FOOT_RADIUS_M, CORNER_TOL_M)
+    for i in np.flatnonzero(dist > CONTACT_TOL_M):
+        normal[i] = terrain.normal_at(float(foot_pos_in_world[i, 0]), float(foot_pos_in_world[i, 1]))
     return normal
 
 

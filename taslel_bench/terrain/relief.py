@@ -16,6 +16,7 @@ import numpy as np
 
 from taslel_bench.terrain.geoms import add_terrain_geom, make_terrain
 from taslel_bench.terrain.parts import GROUND, Distances, box_distance
+from taslel_bench.util.jit import kernel
 
 
 @dataclass(frozen=True)
@@ -189,7 +190,13 @@ class HeightField:
     def sphere_distance(self, centres: np.ndarray, radius: float) -> Distances:
         """Distance of each sphere to the triangulated surface (the closest triangle of the cells within two
         cells of the centre; exact up to that horizontal reach), negative below the surface. Outside the grid:
-        +inf."""
+        +inf. Compiled (:func:`heightfield_distance`); :meth:`sphere_distance_reference` is the same in numpy."""
+        if self._grid is None:
+            raise RuntimeError("HeightField: heights are drawn when the plant is built (Terrain.build) first")
+        return heightfield_distance(self, centres, radius)
+
+    def sphere_distance_reference(self, centres: np.ndarray, radius: float) -> Distances:
+        """:meth:`sphere_distance` in numpy, triangle by triangle (the reference of the compiled one)."""
         c = np.asarray(centres, float).reshape(-1, 3)
         n = len(c)
         d, normal, point = np.full(n, np.inf), np.tile([0.0, 0.0, 1.0], (n, 1)), c.copy()
@@ -255,3 +262,101 @@ def rough_heights(rng: np.random.Generator, nrow: int, ncol: int, amplitude_m: f
     smooth *= amplitude_m / max(np.abs(smooth).max(), 1e-12)
     blend = np.clip((np.arange(ncol) - flat_cols) / max(ramp_cols, 1), 0.0, 1.0)
     return smooth * blend[None, :]
+
+
+def heightfield_distance(field, centres: np.ndarray, radius: float) -> Distances:
+    """:meth:`HeightField.sphere_distance_reference` compiled (the same triangles within two cells, the same
+    signs)."""
+    c = np.ascontiguousarray(np.asarray(centres, float).reshape(-1, 3))
+    d, normal, point = np.empty(len(c)), np.empty((len(c), 3)), np.empty((len(c), 3))
+    x0, y0, dx, dy = field._grid
+    _hfield_distance(field.heights_m, x0, y0, dx, dy, c, radius, 2, d, normal, point)
+    return d, normal, point
+
+
+@kernel
+def _closest_on_triangle(p, a, b, c, out):
+    """Closest point ``out`` (3,) on triangle (a, b, c) to ``p``; returns its distance."""
+    ab, ac = b - a, c - a
+    n = np.cross(ab, ac)
+    n /= np.sqrt(n @ n)
+    proj = p - ((p - a) @ n) * n
+    v2 = proj - a
+    d00, d01, d11 = ab @ ab, ab @ ac, ac @ ac
+    d20, d21 = v2 @ ab, v2 @ ac
+    den = d00 * d11 - d01 * d01
+    bv, bw = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
+    best = np.inf
+    if bv >= 0.0 and bw >= 0.0 and bv + bw <= 1.0:
+        out[:] = proj
+        best = np.sqrt((proj - p) @ (proj - p))
+    for e in range(3):
+        e0 = a if e == 0 else (b if e == 1 else c)
+        e1 = b if e == 0 else (c if e == 1 else a)
+        seg = e1 - e0
+        t = min(max(((p - e0) @ seg) / (seg @ seg), 0.0), 1.0)
+        q = e0 + t * seg
+        gap = np.sqrt((q - p) @ (q - p))
+        if gap < best:
+            best = gap
+            out[:] = q
+    return best
+
+
+@kernel
+def _hfield_top(h, x0, y0, dx, dy, x, y):
+    """(z, dz/dx, dz/dy, inside) of the triangulated surface at (x, y) (MuJoCo's diagonal r,c -> r+1,c+1)."""
+    nrow, ncol = h.shape
+    u, w = (x - x0) / dx, (y - y0) / dy
+    if not (0.0 <= u <= ncol - 1 and 0.0 <= w <= nrow - 1):
+        return -np.inf, 0.0, 0.0, False
+    c, r = min(int(u), ncol - 2), min(int(w), nrow - 2)
+    a, b = u - c, w - r
+    h00, h11 = h[r, c], h[r + 1, c + 1]
+    if a >= b:
+        ga, gb = h[r, c + 1] - h00, h11 - h[r, c + 1]
+    else:
+        ga, gb = h11 - h[r + 1, c], h[r + 1, c] - h00
+    return h00 + ga * a + gb * b, ga / dx, gb / dy, True
+
+
+@kernel
+def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_out):
+    nrow, ncol = h.shape
+    q = np.empty(3)
+    best_q = np.empty(3)
+    A, B, C, D = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    for k in range(centres.shape[0]):
+        p = centres[k]
+        surface, gx, gy, inside = _hfield_top(h, x0, y0, dx, dy, p[0], p[1])
+        d_out[k] = np.inf
+        n_out[k, 0], n_out[k, 1], n_out[k, 2] = 0.0, 0.0, 1.0
+        p_out[k, 0], p_out[k, 1], p_out[k, 2] = p[0], p[1], p[2]
+        if not inside:
+            continue
+        c0 = min(max(int(np.floor((p[0] - x0) / dx)), 0), ncol - 2)
+        r0 = min(max(int(np.floor((p[1] - y0) / dy)), 0), nrow - 2)
+        best = np.inf
+        for r in range(max(r0 - reach, 0), min(r0 + reach, nrow - 2) + 1):
+            for c in range(max(c0 - reach, 0), min(c0 + reach, ncol - 2) + 1):
+                A[0], A[1], A[2] = x0 + c * dx, y0 + r * dy, h[r, c]
+                B[0], B[1], B[2] = x0 + (c + 1) * dx, y0 + r * dy, h[r, c + 1]
+                C[0], C[1], C[2] = x0 + c * dx, y0 + (r + 1) * dy, h[r + 1, c]
+                D[0], D[1], D[2] = x0 + (c + 1) * dx, y0 + (r + 1) * dy, h[r + 1, c + 1]
+                g = _closest_on_triangle(p, A, B, D, q)
+                if g < best:
+                    best = g
+                    best_q[:] = q
+                g = _closest_on_triangle(p, A, C, D, q)
+                if g < best:
+                    best = g
+                    best_q[:] = q
+        sign = -1.0 if p[2] < surface else 1.0
+        d_out[k] = sign * best - radius
+        if best > 1e-12:
+            for a in range(3):
+                n_out[k, a] = sign * (p[a] - best_q[a]) / best
+        else:
+            nz = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
+            n_out[k, 0], n_out[k, 1], n_out[k, 2] = -gx * nz, -gy * nz, nz
+        p_out[k, 0], p_out[k, 1], p_out[k, 2] = best_q[0], best_q[1], best_q[2]
