@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from taslel_bench.record.run_lock import RunFolderLocked, RunLock
+
 SUMMARY = "summary.json"
 STEPS = "steps.parquet"
 EVENTS = "events.json"
@@ -141,3 +143,23 @@ def remove_stale(run_dir: Path, partial_names: tuple[str, ...] = ()) -> list[str
     for path in stale:
         path.unlink()
     return sorted(p.name for p in stale)
+
+
+def write_error_folder(out_dir: Path, summary: dict, tb: str) -> None:
+    """Write an error ``summary`` (and ``traceback.txt``) into ``out_dir`` under its lock, a result already
+    there put aside first; a folder locked by a live writer is not touched."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = RunLock(out_dir).acquire()
+    except RunFolderLocked:
+        return
+    try:
+        moved = supersede(out_dir, "before-error")  # a result in the folder is put aside, not overwritten
+        if moved is not None:
+            summary["superseded"] = str(moved.relative_to(out_dir))
+        atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
+        summary[MANIFEST_KEY] = manifest(out_dir)
+        write_json(out_dir / SUMMARY, summary)
+    finally:
+        lock.release()

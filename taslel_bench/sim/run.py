@@ -369,28 +369,8 @@ def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, ex
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
     }
     if not isinstance(exc, RunFolderLocked):
-        write_error_folder(out_dir, summary, traceback.format_exc())
+        run_files.write_error_folder(out_dir, summary, traceback.format_exc())
     return summary
-
-
-def write_error_folder(out_dir: Path, summary: dict, tb: str) -> None:
-    """Write an error ``summary`` (and ``traceback.txt``) into ``out_dir`` under its lock, a result already
-    there put aside first; a folder locked by a live writer is not touched."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        lock = RunLock(out_dir).acquire()
-    except RunFolderLocked:
-        return
-    try:
-        moved = run_files.supersede(out_dir, "before-error")  # a result in the folder is put aside, not overwritten
-        if moved is not None:
-            summary["superseded"] = str(moved.relative_to(out_dir))
-        run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(tb))
-        summary[run_files.MANIFEST_KEY] = run_files.manifest(out_dir)
-        run_files.write_json(out_dir / run_files.SUMMARY, summary)
-    finally:
-        lock.release()
 
 
 def _seed_or_minus_one(cfg: DictConfig) -> int:
@@ -402,4 +382,4 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
-__all__ = ["record_job_error", "run", "write_error_folder"]
+__all__ = ["record_job_error", "run"]

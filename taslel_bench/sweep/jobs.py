@@ -19,12 +19,14 @@ from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from hydra.types import HydraContext
 from omegaconf import DictConfig
 
-from taslel_bench.record.run_files import OVERRIDE_SEPARATOR, read_summary
+from taslel_bench.record.run_files import OVERRIDE_SEPARATOR, read_summary, write_error_folder
 
 EXIT_BAD_INPUT = 2
 
 # run folder (absolute, as text) -> the row of a job that could not leave a readable summary.json
 JOB_OUTCOMES: dict[str, dict[str, Any]] = {}
+# run folder -> the job's axes (scenario, solver, estimator, seed) from its composed config, for its error row
+JOB_AXES: dict[str, dict[str, Any]] = {}
 
 
 class SweepRefused(SystemExit):
@@ -45,9 +47,22 @@ def job_folders(config: DictConfig, job_overrides: Sequence[Sequence[str]],
         sweep_dir = str(OmegaConf.select(job_cfg, "hydra.sweep.dir"))
         subdir = str(OmegaConf.select(job_cfg, "hydra.sweep.subdir"))
         folders.append(Path(sweep_dir, subdir).absolute())
+        JOB_AXES[str(folders[-1])] = _axes(job_cfg)
     if before is not None:
         HydraConfig.instance().set_config(before)
     return folders
+
+
+def _axes(job_cfg: DictConfig) -> dict[str, Any]:
+    """The axes of a job's composed config (the option chosen in each axis group, the seed)."""
+    from omegaconf import OmegaConf
+
+    choices = OmegaConf.select(job_cfg, "hydra.runtime.choices") or {}
+    axes: dict[str, Any] = {k: str(choices[k]) for k in ("scenario", "solver", "estimator") if choices.get(k)}
+    seed = OmegaConf.select(job_cfg, "seed", default=None, throw_on_resolution_failure=False)
+    if isinstance(seed, int) and not isinstance(seed, bool):
+        axes["seed"] = seed
+    return axes
 
 
 def check_one_folder_per_job(config: DictConfig, job_overrides: Sequence[Sequence[str]],
@@ -74,10 +89,9 @@ def check_one_folder_per_job(config: DictConfig, job_overrides: Sequence[Sequenc
 def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "") -> JobReturn:
     """A completed JobReturn holding an error summary for a job that could not run or finish; the error is
     written into its folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
-    from taslel_bench.sim.run import write_error_folder
-
     summary: dict[str, Any] = {"status": "error", "message": message, "fell": False, "seed": -1,
                                "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}  # fmt: skip
+    summary.update(JOB_AXES.get(str(folder), {}))
     for item in overrides:
         key, _, value = item.partition("=")
         if key in ("scenario", "solver", "estimator"):
@@ -108,5 +122,5 @@ def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
     return error_return(overrides, folder, f"{type(exc).__name__}: {exc}", tb)
 
 
-__all__ = ["EXIT_BAD_INPUT", "JOB_OUTCOMES", "SweepRefused", "check_one_folder_per_job", "error_return",
+__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SweepRefused", "check_one_folder_per_job", "error_return",
            "job_folders", "settle"]
