@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from taslel_bench.robot import a1
+from taslel_bench.util.jit import kernel
 
 
 @dataclass(frozen=True)
@@ -57,15 +58,28 @@ class ContactEstimate:
                foot_force_in_world: np.ndarray) -> np.ndarray:  # fmt: skip
         """The stance set (4,) bool for this tick from the schedule (``scheduled_stance``, ``swing_phase``)
         and the contact force on each foot (4, 3) [N]."""
-        scheduled = np.asarray(scheduled_stance, bool)
-        lift_off = self._prev_scheduled & ~scheduled
-        self.early &= ~(lift_off | scheduled)  # a new swing starts unlatched; stance takes over the latch
-        f = np.asarray(foot_force_in_world, float)
-        norm = np.linalg.norm(f, axis=1)
-        loaded = (norm > self.s.force_threshold_n) & (f[:, 2] >= self.s.min_force_vertical_share * norm)
-        touchdown = ~scheduled & ~self.early & loaded & (np.asarray(swing_phase) >= self.s.min_swing_phase)
-        self.early_touchdowns += int(touchdown.sum())
-        self.early |= touchdown
-        self._prev_scheduled = scheduled.copy()
-        np.logical_or(scheduled, self.early, out=self.in_stance)
+        self.early_touchdowns += _update(np.asarray(scheduled_stance), np.asarray(swing_phase, float),
+                                         np.asarray(foot_force_in_world, float), self.s.force_threshold_n,
+                                         self.s.min_swing_phase, self.s.min_force_vertical_share, self.early,
+                                         self._prev_scheduled, self.in_stance)  # fmt: skip
         return self.in_stance.copy()
+
+
+@kernel
+def _update(scheduled, swing_phase, force, threshold, min_phase, min_vertical, early, prev_scheduled, in_stance):
+    """The rules of the module doc, per foot, in place (``early``, ``prev_scheduled``, ``in_stance``); returns
+    the number of new early touchdowns."""
+    n_new = 0
+    for i in range(scheduled.shape[0]):
+        sched = scheduled[i]
+        if sched or (prev_scheduled[i] and not sched):  # stance takes over the latch; a lift-off clears it
+            early[i] = False
+        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
+        norm = np.sqrt(fx * fx + fy * fy + fz * fz)
+        loaded = norm > threshold and fz >= min_vertical * norm
+        if not sched and not early[i] and loaded and swing_phase[i] >= min_phase:
+            early[i] = True
+            n_new += 1
+        prev_scheduled[i] = sched
+        in_stance[i] = sched or early[i]
+    return n_new

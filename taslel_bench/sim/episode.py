@@ -207,7 +207,7 @@ class Episode:
         mu_feet = None
         if self._read_feet:
             self.contacts.read(d)
-            if self.per_foot_terrain:
+            if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
         est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet))  # fmt: skip

@@ -38,10 +38,13 @@ class LegClearance(Barrier):
         self.terrain, self.part = world.terrain, part
         self.radius_m, self.axis_fraction, self.activation_m = float(radius_m), float(axis_fraction), float(activation_m)
         self.role = role  # the terrain parts it keeps clear of (default the obstacles; None: every part)
+        self._has_parts = any(role is None or part.role == role for part in world.terrain.parts)
         self._points: LegPoints | None = None
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m, r0 = x.model, self.start
+        if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
+            return
         if self._points is None or self._points.model is not m:
             self._points = LegPoints(m)
         knees = self._points.knees()  # [m] (4, 3)
