@@ -69,7 +69,7 @@ class ContactEstimate:
                foot_force_in_world: np.ndarray) -> np.ndarray:  # fmt: skip
         """The stance set (4,) bool for this tick from the schedule (``scheduled_stance``, ``swing_phase``)
         and the contact force on each foot (4, 3) [N]."""
-        late_ticks = int(round(self.s.late_touchdown_max_s / self.s.control_dt_s))
+        late_ticks = round(self.s.late_touchdown_max_s / self.s.control_dt_s)
         new, late = _update(np.asarray(scheduled_stance), np.asarray(swing_phase, float),
                             np.asarray(foot_force_in_world, float), self.s.force_threshold_n, self.s.min_swing_phase,
                             self.s.min_force_vertical_share, late_ticks, self.early, self._prev_scheduled,
