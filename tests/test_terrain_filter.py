@@ -192,6 +192,7 @@ def test_contact_estimate_late_touchdown_stays_swing_until_loaded_or_timeout():
     free, loaded = np.zeros((4, 3)), np.tile([0, 0, 60.0], (4, 1))
     est.update(swing, np.full(4, 0.9), free)  # swing, nothing touched
     assert not est.update(stance, np.zeros(4), free).any()  # scheduled stance, not landed: swing
+    assert np.all(est.swing_phase(np.zeros(4)) == 1.0)  # ... at the end of its swing for the barriers
     assert est.update(stance, np.zeros(4), loaded).all()  # loaded: stance
     est.update(swing, np.full(4, 0.2), free)
     flags = [est.update(stance, np.zeros(4), free)[0] for _ in range(5)]

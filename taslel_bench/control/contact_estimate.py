@@ -76,7 +76,18 @@ class ContactEstimate:
                             self.touched, self.ticks_in_stance, self.in_stance)  # fmt: skip
         self.early_touchdowns += new
         self.late_touchdown_ticks += late
+        self._late = np.asarray(scheduled_stance, bool) & ~self.in_stance
         return self.in_stance.copy()
+
+    def swing_phase(self, scheduled_phase: np.ndarray) -> np.ndarray:
+        """The swing phase the filter's barriers should see: the schedule's, and 1 (the end of the swing) for a
+        foot in a late touchdown (scheduled stance, phase 0 in the schedule, not landed)."""
+        late = getattr(self, "_late", None)
+        if late is None or not late.any():
+            return scheduled_phase
+        phase = np.array(scheduled_phase, float)
+        phase[late] = 1.0
+        return phase
 
 
 @kernel

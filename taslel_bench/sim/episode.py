@@ -237,7 +237,8 @@ class Episode:
             return u_nom, None, tick1, tick1
         self.model.update(self._q, self._v)
         tick2 = time.perf_counter()
-        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate,
+        phase = self.contact_estimate.swing_phase(gs.swing_phase) if self.contact_estimate is not None else gs.swing_phase
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, phase, gs.swing_phase_rate,
                             est.mu_per_foot if self.per_foot_terrain else None)  # fmt: skip
         fres = self.filter.filter(inputs, u_nom)
         self._mu_filter_prev = est.mu
