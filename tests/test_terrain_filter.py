@@ -184,3 +184,17 @@ def test_packed_heightfield_distance_equals_the_part():
         finite = np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1)
         assert np.array_equal(np.isfinite(a), np.isfinite(b))
         assert np.max(np.abs(a[finite] - b[finite])) < 1e-12
+
+
+def test_contact_estimate_late_touchdown_stays_swing_until_loaded_or_timeout():
+    est = ContactEstimate(ContactEstimateSettings(late_touchdown_max_s=0.003, control_dt_s=0.001))
+    swing, stance = np.zeros(4, bool), np.ones(4, bool)
+    free, loaded = np.zeros((4, 3)), np.tile([0, 0, 60.0], (4, 1))
+    est.update(swing, np.full(4, 0.9), free)  # swing, nothing touched
+    assert not est.update(stance, np.zeros(4), free).any()  # scheduled stance, not landed: swing
+    assert np.all(est.swing_phase(np.zeros(4)) == 1.0)  # ... at the end of its swing for the barriers
+    assert est.update(stance, np.zeros(4), loaded).all()  # loaded: stance
+    est.update(swing, np.full(4, 0.2), free)
+    flags = [est.update(stance, np.zeros(4), free)[0] for _ in range(5)]
+    assert flags == [False, False, False, True, True]  # stance anyway after 3 ticks
+    assert est.late_touchdown_ticks == 4 * 1 + 4 * 3

@@ -75,7 +75,8 @@ def contact_estimate(cfg: DictConfig) -> ContactEstimate:
     """The contact estimate of ``filter.stance_source: estimate`` from ``filter.contact_estimate`` (absent:
     the defaults of :class:`ContactEstimateSettings`)."""
     node = _get(cfg, "filter.contact_estimate") or {}
-    return ContactEstimate(ContactEstimateSettings(**{k: float(v) for k, v in node.items()}))
+    return ContactEstimate(ContactEstimateSettings(**{k: float(v) for k, v in node.items()},
+                                                   control_dt_s=1.0 / float(cfg.control_rate_hz)))
 
 
 def robust_settings(node) -> RobustSettings:

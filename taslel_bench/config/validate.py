@@ -285,7 +285,7 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     choice(f"{f}.friction_cone", _get(cfg, f"{f}.friction_cone", "pyramid"), FRICTION_CONES)
     choice(f"{f}.relaxation", _get(cfg, f"{f}.relaxation", "none"), RELAXATIONS)
     for key, hi, unit in (("force_threshold_n", 1000.0, "N"), ("min_swing_phase", 1.0, "-"),
-                          ("min_force_vertical_share", 1.0, "-")):
+                          ("min_force_vertical_share", 1.0, "-"), ("late_touchdown_max_s", 1.0, "s")):
         value = _get(cfg, f"{f}.contact_estimate.{key}")
         if value is not None:
             number(f"{f}.contact_estimate.{key}", value, 0.0, hi, unit=unit)

@@ -224,7 +224,7 @@ class Episode:
         mu_feet = None
         if self._read_feet:
             self.contacts.read(self.d)
-            if self.per_foot_terrain:
+            if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
         est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet))  # fmt: skip
@@ -261,7 +261,8 @@ class Episode:
             return u_nom, None, tick1, tick1
         self.model.update(self._q, self._v)
         tick2 = time.perf_counter()
-        inputs = TickInputs(self.model, self._v, in_stance, est.mu, gs.swing_phase, gs.swing_phase_rate,
+        phase = self.contact_estimate.swing_phase(gs.swing_phase) if self.contact_estimate is not None else gs.swing_phase
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, phase, gs.swing_phase_rate,
                             est.mu_per_foot if self.per_foot_terrain else None)  # fmt: skip
         fres = self.filter.filter(inputs, u_nom)
         self._mu_filter_prev = est.mu

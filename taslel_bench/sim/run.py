@@ -258,6 +258,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     estimate = built.episode.contact_estimate
     if estimate is not None:  # filter.stance_source=estimate: early touchdowns taken as stance
         out["contact_early_touchdowns"] = int(estimate.early_touchdowns)
+        out["contact_late_touchdown_foot_ticks"] = int(estimate.late_touchdown_ticks)
     return out
 
 

@@ -275,32 +275,47 @@ def heightfield_distance(field, centres: np.ndarray, radius: float) -> Distances
 
 
 @kernel
+def _closest_on_segment(px, py, pz, ax, ay, az, bx, by, bz):
+    """(squared distance, closest point) from p to the segment a-b."""
+    sx, sy, sz = bx - ax, by - ay, bz - az
+    t = ((px - ax) * sx + (py - ay) * sy + (pz - az) * sz) / (sx * sx + sy * sy + sz * sz)
+    t = min(max(t, 0.0), 1.0)
+    qx, qy, qz = ax + t * sx, ay + t * sy, az + t * sz
+    return (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2, qx, qy, qz
+
+
+@kernel
 def _closest_on_triangle(p, a, b, c, out):
-    """Closest point ``out`` (3,) on triangle (a, b, c) to ``p``; returns its distance."""
-    ab, ac = b - a, c - a
-    n = np.cross(ab, ac)
-    n /= np.sqrt(n @ n)
-    proj = p - ((p - a) @ n) * n
-    v2 = proj - a
-    d00, d01, d11 = ab @ ab, ab @ ac, ac @ ac
-    d20, d21 = v2 @ ab, v2 @ ac
+    """Closest point ``out`` (3,) on triangle (a, b, c) to ``p``; returns its distance (scalar arithmetic:
+    the projection on the plane when inside, else the closest of the three edges)."""
+    px, py, pz = p[0], p[1], p[2]
+    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    nx, ny, nz = aby * acz - abz * acy, abz * acx - abx * acz, abx * acy - aby * acx
+    nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz = nx / nn, ny / nn, nz / nn
+    off = (px - a[0]) * nx + (py - a[1]) * ny + (pz - a[2]) * nz
+    jx, jy, jz = px - off * nx, py - off * ny, pz - off * nz
+    vx, vy, vz = jx - a[0], jy - a[1], jz - a[2]
+    d00 = abx * abx + aby * aby + abz * abz
+    d01 = abx * acx + aby * acy + abz * acz
+    d11 = acx * acx + acy * acy + acz * acz
+    d20 = vx * abx + vy * aby + vz * abz
+    d21 = vx * acx + vy * acy + vz * acz
     den = d00 * d11 - d01 * d01
     bv, bw = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
-    best = np.inf
     if bv >= 0.0 and bw >= 0.0 and bv + bw <= 1.0:
-        out[:] = proj
-        best = np.sqrt((proj - p) @ (proj - p))
-    for e in range(3):
-        e0 = a if e == 0 else (b if e == 1 else c)
-        e1 = b if e == 0 else (c if e == 1 else a)
-        seg = e1 - e0
-        t = min(max(((p - e0) @ seg) / (seg @ seg), 0.0), 1.0)
-        q = e0 + t * seg
-        gap = np.sqrt((q - p) @ (q - p))
-        if gap < best:
-            best = gap
-            out[:] = q
-    return best
+        out[0], out[1], out[2] = jx, jy, jz
+        return abs(off)
+    best, qx, qy, qz = _closest_on_segment(px, py, pz, a[0], a[1], a[2], b[0], b[1], b[2])
+    g, rx, ry, rz = _closest_on_segment(px, py, pz, b[0], b[1], b[2], c[0], c[1], c[2])
+    if g < best:
+        best, qx, qy, qz = g, rx, ry, rz
+    g, rx, ry, rz = _closest_on_segment(px, py, pz, c[0], c[1], c[2], a[0], a[1], a[2])
+    if g < best:
+        best, qx, qy, qz = g, rx, ry, rz
+    out[0], out[1], out[2] = qx, qy, qz
+    return np.sqrt(best)
 
 
 @kernel

@@ -153,6 +153,11 @@ class Terrain:
 
     # ---------------------------------------------------------------------------------------- queries
     @property
+    def uniform_friction(self) -> float | None:
+        """The one Coulomb coefficient [-] of every part, None when the friction varies over the terrain."""
+        return self._uniform_friction
+
+    @property
     def has_obstacles(self) -> bool:
         return any(p.role == OBSTACLE for p in self.parts)
 

@@ -10,6 +10,7 @@ from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.barriers.leg_points import SHIN_RADIUS_M, LegPoints, _point_terms
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
+from taslel_bench.robot import a1
 from taslel_bench.util.jit import kernel
 
 PARTS = ("shin", "knee")
@@ -31,17 +32,22 @@ class LegClearance(Barrier):
     conservative): -n'J_p vdot <= a2 h_e + a1 hdot + n . J̇_p v."""
 
     def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = SHIN_RADIUS_M,
-                 axis_fraction: float = 0.7, activation_m: float = 0.08, role: str | None = OBSTACLE) -> None:  # fmt: skip
+                 axis_fraction: float = 0.7, activation_m: float = 0.08, role: str | None = OBSTACLE,
+                 swing_only: bool = False) -> None:  # fmt: skip
         super().__init__(world, name)
         if part not in PARTS:
             raise ValueError(f"filter.barriers.{name}.part={part!r}; valid: {', '.join(PARTS)}")
         self.terrain, self.part = world.terrain, part
         self.radius_m, self.axis_fraction, self.activation_m = float(radius_m), float(axis_fraction), float(activation_m)
         self.role = role  # the terrain parts it keeps clear of (default the obstacles; None: every part)
+        self._has_parts = any(role is None or part.role == role for part in world.terrain.parts)
+        self.swing_only = bool(swing_only)  # rows for swing legs only (a stance leg's rows constrain the trunk)
         self._points: LegPoints | None = None
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m, r0 = x.model, self.start
+        if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
+            return
         if self._points is None or self._points.model is not m:
             self._points = LegPoints(m)
         knees = self._points.knees()  # [m] (4, 3)
@@ -53,14 +59,15 @@ class LegClearance(Barrier):
         points = np.ascontiguousarray(axis.reshape(-1, 3))
         dist, normal, _ = self.terrain.near_distance(points, self.radius_m, role=self.role)
         d = m.data
+        legs = ~np.asarray(x.in_stance, bool) if self.swing_only else np.ones(a1.N_LEGS, bool)
         _leg_rows(qp.G, qp.h, r0, dist, normal, points, axis.shape[1], d.J, d.dJ, self._points.cols_array, x.v,
-                  self.alpha1, self.alpha2, self.activation_m, self.h, self.h_e)  # fmt: skip
+                  self.alpha1, self.alpha2, self.activation_m, legs, self.h, self.h_e)  # fmt: skip
         self.tighten(qp)
 
 
 @kernel
 def _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation,
-              h_out, he_out):  # fmt: skip
+              legs, h_out, he_out):  # fmt: skip
     """Row r0 + i per leg i (see :class:`LegClearance`): the closest of the leg's ``n_per_leg`` axis points
     (``dist``, ``normal`` from the terrain query), its Jacobian on the calf body, the ECBF row; inactive
     (0 <= INACTIVE_RHS, nan h) where the distance is not finite or not below ``activation``."""
@@ -78,7 +85,7 @@ def _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, c
             if dist[j] < dist[k]:
                 k = j
         d = dist[k]
-        if not np.isfinite(d) or d >= activation:
+        if not legs[i] or not np.isfinite(d) or d >= activation:
             continue
         jac[:] = 0.0
         _point_terms(J_world, dJ_world, cols[i], points[k], v, jac, vel, jdotv)

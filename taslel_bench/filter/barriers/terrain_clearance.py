@@ -36,12 +36,15 @@ class TerrainClearance(Barrier):
                  touchdown_allowance_m: float = 0.015, role: str | None = OBSTACLE) -> None:  # fmt: skip
         super().__init__(world, name)
         self.role = role  # the terrain parts it keeps the foot clear of (default the obstacles; None: all)
+        self._has_parts = any(role is None or part.role == role for part in world.terrain.parts)
         self.terrain = world.terrain
         self.lift_m = float(lift_m)  # [m]
         self.touchdown_allowance_m = float(touchdown_allowance_m)  # [m]
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m = x.model
+        if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
+            return
         dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world, a1.FOOT_RADIUS_M, role=self.role)
         _terrain_rows(qp.G, qp.h, self.start, dist, normal, m.foot_vel_in_world, m.foot_jac_in_world,
                       m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
