@@ -377,6 +377,9 @@ def test_solver_verdict_ships_the_fastest_backend_with_no_wrong_answer_and_no_mi
     assert "ship **slow_ok**" in text and "Over the sweep** (1 world(s)): ship **slow_ok**" in text
     assert "fast_wrong: 20.00% wrong answers" in text and "late: " in text and "over the 1000 µs period" in text
     assert solve_time_figure(tmp_path, frame, ["scenario", "solver"], plt) == ["qp_solve_times.png"]
+    late_only = frame[frame["solver"] != "slow_ok"]  # nobody qualifies: the closest one is named
+    text, _ = solver_verdict(tmp_path, late_only, ["scenario", "solver"])
+    assert "no backend qualifies" in text and "Closest: **late**" in text
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 10_000
 
 

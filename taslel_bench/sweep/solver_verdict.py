@@ -46,7 +46,8 @@ def _label(row: pd.Series, keys: list[str]) -> str:
 
 def _varied(done: pd.DataFrame, keys: list[str]) -> list[str]:
     """The group keys other than world and backend that take more than one value among the filtered runs."""
-    return [k for k in keys if k not in ("scenario", "solver") and k in done and done[k].astype(str).nunique() > 1]
+    return [k for k in keys if k not in ("scenario", "solver") and not k.startswith("solver.") and k in done
+            and done[k].astype(str).nunique() > 1]  # solver.<key> overrides: part of the backend's name
 
 
 def _ticks(sweep_dir: Path, runs: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -153,7 +154,14 @@ def _sentence(world: str, rows: pd.DataFrame) -> str:
     out = rows[~rows.index.isin(ok.index)]
     rejected = "; ".join(f"{r['backend']}: {_why_not(r)}" for _, r in out.iterrows() if _why_not(r))
     if ok.empty:
-        return f"**{world}**: no backend qualifies" + (f" ({rejected})." if rejected else ".")
+        right = rows[(rows["success_rate"] == 1.0) & (rows["checks"] > 0) & (rows["wrong_rate"] == 0.0)]
+        closest = ""
+        if len(right):
+            c = right.sort_values(["miss_period_rate", "solve_p99_us"]).iloc[0]
+            closest = (f" Closest: **{c['backend']}**, no failed solve and no wrong answer, the fewest solves over "
+                       f"the period ({c['miss_period_rate']:.2%}; median {c['solve_p50_us']:.0f} µs, p99 "
+                       f"{c['solve_p99_us']:.0f} µs).")
+        return f"**{world}**: no backend qualifies" + (f" ({rejected})." if rejected else ".") + closest
     best = ok.iloc[0]
     text = (f"**{world}**: ship **{best['backend']}** -- the fastest (solve p99 {best['solve_p99_us']:.0f} µs, median "
             f"{best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) of the {len(ok)} backend(s) with no "
