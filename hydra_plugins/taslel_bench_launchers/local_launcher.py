@@ -20,14 +20,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from hydra.core.singleton import Singleton
-from hydra.core.utils import JobReturn, configure_log, filter_overrides, setup_globals
+from hydra.core.utils import JobReturn, filter_overrides
 from hydra_plugins.hydra_joblib_launcher._core import execute_job
 from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
 from joblib import cpu_count
 from joblib.externals.loky import get_reusable_executor
 from joblib.externals.loky.process_executor import BrokenProcessPool
 
-from taslel_bench.sweep.jobs import check_one_folder_per_job, error_return, settle
+from taslel_bench.sweep.jobs import begin_launch, error_return, settle
 
 log = logging.getLogger(__name__)
 MAX_RESUBMITS = 3  # rounds for jobs that had not started when a worker died
@@ -44,11 +44,7 @@ class RobustJoblibLauncher(JoblibLauncher):
 
     def launch(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int) -> Sequence[JobReturn]:
         assert self.config is not None and self.task_function is not None and self.hydra_context is not None
-        setup_globals()
-        configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
-        folders = check_one_folder_per_job(self.config, job_overrides, self.hydra_context, initial_job_idx)
-        sweep_dir = Path(str(self.config.hydra.sweep.dir))
-        sweep_dir.mkdir(parents=True, exist_ok=True)
+        folders, sweep_dir = begin_launch(self.config, job_overrides, self.hydra_context, initial_job_idx)
         n_jobs = int(self.joblib.get("n_jobs", -1) or -1)
         n_jobs = cpu_count() if n_jobs < 0 else n_jobs
         log.info(f"launching {len(job_overrides)} jobs, {n_jobs} at a time, sweep output dir: {sweep_dir}")

@@ -13,16 +13,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from hydra.core.singleton import Singleton
-from hydra.core.utils import JobReturn, configure_log, filter_overrides, setup_globals
+from hydra.core.utils import JobReturn, filter_overrides
 from hydra.plugins.launcher import Launcher
 from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench.sweep.jobs import check_one_folder_per_job, settle
+from taslel_bench.sweep.jobs import begin_launch, settle
 from taslel_bench.sweep.launchers import require_launcher_package
 
 log = logging.getLogger(__name__)
@@ -68,11 +67,7 @@ class RayLauncher(Launcher):
         from ray.util.joblib import register_ray
 
         assert self.config is not None and self.task_function is not None and self.hydra_context is not None
-        setup_globals()
-        configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
-        folders = check_one_folder_per_job(self.config, job_overrides, self.hydra_context, initial_job_idx)
-        sweep_dir = Path(str(self.config.hydra.sweep.dir))
-        sweep_dir.mkdir(parents=True, exist_ok=True)
+        folders, sweep_dir = begin_launch(self.config, job_overrides, self.hydra_context, initial_job_idx)
 
         started_here = not ray.is_initialized()
         if started_here:

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hydra.core.utils import JobReturn, JobStatus, filter_overrides
+from hydra.core.utils import JobReturn, JobStatus, configure_log, filter_overrides, setup_globals
 from hydra.types import HydraContext
 from omegaconf import DictConfig
 
@@ -84,6 +84,19 @@ def check_one_folder_per_job(config: DictConfig, job_overrides: Sequence[Sequenc
             raise SweepRefused(EXIT_BAD_INPUT)
         seen[folder] = i
     return folders
+
+
+def begin_launch(config: DictConfig, job_overrides: Sequence[Sequence[str]], hydra_context: HydraContext,
+                 first_idx: int = 0) -> tuple[list[Path], Path]:
+    """What every launcher of this package does before it runs a job: Hydra's globals and logging, the
+    one-folder-per-job check (:func:`check_one_folder_per_job`), the sweep folder made. Returns (the jobs' run
+    folders, the sweep folder)."""
+    setup_globals()
+    configure_log(config.hydra.hydra_logging, config.hydra.verbose)
+    folders = check_one_folder_per_job(config, job_overrides, hydra_context, first_idx)
+    sweep_dir = Path(str(config.hydra.sweep.dir))
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    return folders, sweep_dir
 
 
 def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "") -> JobReturn:
