@@ -13,8 +13,8 @@ class FrictionPatch(FlatGround):
     """Two floor strips: friction ``friction`` for world x < ``change_at_m``, ``friction_after`` beyond."""
 
     def __init__(self, name: str = "friction_patch", friction: float = 0.8, friction_after: float = 0.2,
-                 change_at_m: float = 1.2) -> None:
-        super().__init__(name=name, friction=friction)
+                 change_at_m: float = 1.2, **plant) -> None:
+        super().__init__(name=name, friction=friction, **plant)
         self.friction_after = friction_coefficient("scenario.friction_after", friction_after)
         self.change_at_m = number("scenario.change_at_m", change_at_m, -HALF_LENGTH_M, HALF_LENGTH_M,
                                   unit="m", why="the floor patches are 100 m long")

@@ -23,8 +23,8 @@ class LogRow(FlatGround):
 
     def __init__(self, name: str = "logs", friction: float = 1.0, height_m: float = 0.06, radius_m: float = 0.1,
                  first_x_m: float = 0.6, spacing_m: float = 0.7, count: int = 8, half_width_m: float = 0.5,
-                 coefficients: Sequence[float] | None = None) -> None:  # fmt: skip
-        super().__init__(name=name, friction=friction)
+                 coefficients: Sequence[float] | None = None, **plant) -> None:  # fmt: skip
+        super().__init__(name=name, friction=friction, **plant)
         radius = number("scenario.radius_m", radius_m, 0.0, 1.0, lo_open=True, unit="m")
         height = number("scenario.height_m", height_m, 0.0, 2.0 * radius, lo_open=True, unit="m",
                         why="the log lies on the floor, sunk to height_m - radius_m")

@@ -24,8 +24,8 @@ class RoughGround(FlatGround):
 
     def __init__(self, name: str = "rough", friction: float = 1.0, amplitude_m: float = 0.03, spacing_m: float = 0.05,
                  start_x_m: float = 0.3, length_m: float = 6.0, half_width_m: float = 1.0, ramp_m: float = 0.4,
-                 smoothing_cells: int = 1, seed: int | None = None) -> None:  # fmt: skip
-        super().__init__(name=name, friction=friction)
+                 smoothing_cells: int = 1, seed: int | None = None, **plant) -> None:  # fmt: skip
+        super().__init__(name=name, friction=friction, **plant)
         self.amplitude_m = number("scenario.amplitude_m", amplitude_m, 0.0, 0.15, lo_open=True, unit="m")
         spacing = number("scenario.spacing_m", spacing_m, 0.01, 0.5, unit="m")
         start = number("scenario.start_x_m", start_x_m, 0.25, 50.0, unit="m", why="clear of the standing robot")

@@ -14,8 +14,8 @@ class Slope(FlatGround):
     [m], a plateau ``plateau_m`` [m] long at the top; ``half_width_m`` [m] half their extent along y."""
 
     def __init__(self, name: str = "slope", friction: float = 1.0, angle_deg: float = 10.0, start_x_m: float = 0.6,
-                 run_m: float = 2.0, plateau_m: float = 5.0, half_width_m: float = 1.0) -> None:  # fmt: skip
-        super().__init__(name=name, friction=friction)
+                 run_m: float = 2.0, plateau_m: float = 5.0, half_width_m: float = 1.0, **plant) -> None:  # fmt: skip
+        super().__init__(name=name, friction=friction, **plant)
         self.angle_deg = number("scenario.angle_deg", angle_deg, 0.0, 30.0, lo_open=True, unit="deg",
                                 why="an incline the trot can stand on")
         start = number("scenario.start_x_m", start_x_m, 0.4, 50.0, unit="m", why="clear of the standing robot")

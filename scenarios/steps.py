@@ -14,8 +14,8 @@ class Steps(FlatGround):
     extent along y. Each step is one box from the floor to its top (heights h, 2h, ..., then down)."""
 
     def __init__(self, name: str = "steps", friction: float = 1.0, height_m: float = 0.05, depth_m: float = 0.6,
-                 first_x_m: float = 0.8, count_up: int = 2, half_width_m: float = 0.8) -> None:  # fmt: skip
-        super().__init__(name=name, friction=friction)
+                 first_x_m: float = 0.8, count_up: int = 2, half_width_m: float = 0.8, **plant) -> None:  # fmt: skip
+        super().__init__(name=name, friction=friction, **plant)
         self.height_m = number("scenario.height_m", height_m, 0.0, 0.3, lo_open=True, unit="m")
         depth = number("scenario.depth_m", depth_m, 0.2, 5.0, unit="m", why="a foot (0.04 m) and a stride fit")
         first = number("scenario.first_x_m", first_x_m, 0.4, 50.0, unit="m",

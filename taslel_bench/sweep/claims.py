@@ -50,7 +50,7 @@ def _falls(runs: pd.DataFrame) -> str:
     return f"{int(runs['fell'].astype(bool).sum())}/{len(runs)}" if len(runs) else "—"
 
 
-FILTER_SETTING_COLUMNS = ("filter_formulation", "filter_contact_velocity_gain", "estimator")
+FILTER_SETTING_COLUMNS = ("filter_formulation", "filter_contact_velocity_gain", "estimator", "filter_variant")
 NOT_FILTER_SETTINGS = ("filter.enabled", "filter_enabled")
 
 

@@ -22,6 +22,7 @@ from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, over
 from taslel_bench.sweep.claims import paper_claims
 from taslel_bench.sweep.solver_verdict import solve_time_figure, solver_verdict
 from taslel_bench.sweep.stills import still_strips
+from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
@@ -404,7 +405,8 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
         markdown_table(cost) if len(table) else "",
         solver_verdict(sweep_dir, frame, group_columns(frame))[0] if not frame.empty else "",
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
-        paper_claims(_finished(frame)) if not frame.empty else "",
+        terrain_section(frame) if not frame.empty else "",
+        paper_claims(_finished(urdf_plant_runs(frame))) if not frame.empty else "",
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
     lines += _run_list(frame, "error", "message", "Runs that ended in an error")
