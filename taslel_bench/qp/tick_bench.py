@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
@@ -51,8 +52,55 @@ def _median_us(fn, n: int = 2000) -> float:
     return float(np.median(times) * 1e6)
 
 
+REPLAY_TICKS = 1000  # walking ticks whose QPs the isolated solve replays in order
+
+
+class QPSequence:
+    """Episode hook (``Episode.qp_recorder``): copies of the backend QP's values on ``n`` consecutive ticks
+    from tick ``k0``, for replaying them in order (each solve warm-started from the previous tick's answer,
+    as in the loop). Used on an extra, untimed run of the episode."""
+
+    FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
+
+    def __init__(self, k0: int, n: int) -> None:
+        self.k0, self.n = k0, n
+        self.values: list[tuple[np.ndarray, ...]] = []
+
+    def on_tick(self, k: int, t_s: float, problem, result) -> None:
+        if self.k0 <= k < self.k0 + self.n:
+            self.values.append(tuple(getattr(problem, f).copy() for f in self.FIELDS))
+
+
+def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
+    """Median µs of the backend solving the QPs of ``n`` consecutive walking ticks in order, timed alone:
+    one more (untimed) run of the episode records them, then they are written into the filter's backend
+    problem one by one and solved (a fresh solver, warm-started from tick to tick as in the loop). Solving
+    one tick's QP again and again would warm-start each solve from its own answer (no iterations): a
+    lower bound the loop cannot reach."""
+    e = built.episode
+    seq = QPSequence(round(e.controller.stand_duration_s / e.s.control_dt_s) + 1, n)
+    e.qp_recorder, analyse = seq, e.s.analyse
+    e.s = replace(e.s, analyse=False)
+    try:
+        e.run()
+    finally:
+        e.qp_recorder, e.s = None, replace(e.s, analyse=analyse)
+    problem, backend = built.filter.backend_problem, built.backend
+    backend.reset()
+    times = np.empty(len(seq.values))
+    for i, values in enumerate(seq.values):
+        for field, value in zip(QPSequence.FIELDS, values):
+            np.copyto(getattr(problem, field), value)
+        t0 = time.perf_counter()
+        backend.solve(problem)
+        times[i] = time.perf_counter() - t0
+    return float(np.median(times[1:]) * 1e6) if len(times) > 1 else float("nan")  # [0]: the setup
+
+
 def part_costs(built: Built) -> dict[str, float]:
-    """Median µs of each tick part at the episode's final state."""
+    """Median µs of each tick part at the episode's final state (the QP solve: over a replayed sequence of
+    the episode's QPs, :func:`replayed_solve_us`). Only the parts the loop runs: no Pinocchio update and
+    no QP without a filter."""
     e = built.episode
     m, d, br = e.m, e.d, e.bridge
     qj, qdj = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
@@ -68,16 +116,15 @@ def part_costs(built: Built) -> dict[str, float]:
     costs = {
         "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
         "controller": _median_us(ctrl),
-        "pinocchio_update": _median_us(lambda: e.model.update(q, v)),
         "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
     }
     if built.filter is not None:
+        costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
         gs = e.controller.gait_state(t[0])
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
-        backend_qp = built.filter.backend_problem
-        costs["qp_solve"] = _median_us(lambda: built.backend.solve(backend_qp), 500)
+        costs["qp_solve"] = replayed_solve_us(built)
     return costs
 
 
@@ -92,7 +139,10 @@ _NOTES = (
     "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
     "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
     "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
-    "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+    "tight loop on the final state (2000 calls), the QP solve over the QPs of 1000 consecutive walking "
+    "ticks replayed in order (warm-started tick to tick as in the loop; re-solving one QP would start from "
+    "its own answer); the difference is what interleaving costs (caches). The nominal-only loop's parts "
+    "are those it runs (no Pinocchio update, no QP). "
     "Sum-of-parts limit = control period / (the isolated parts summed, mj_step once per physics step): the "
     "real-time factor of a loop that costs nothing but its parts; share of limit = real-time factor / limit. "
     "Other processes on the machine inflate all numbers alike.\n"
