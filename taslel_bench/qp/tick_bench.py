@@ -156,6 +156,30 @@ def sum_of_parts_limit(isolated: dict[str, float], control_dt_s: float, physics_
     return control_dt_s * 1e6 / total_us if total_us > 0 else float("nan")
 
 
+# each timed part of the loop's tick (TICK_PARTS) and the isolated parts it contains
+ISOLATED_IN_PART = {"controller": ("controller",), "model": ("pinocchio_update",),
+                    "filter": ("qp_build", "qp_solve"), "physics": ("mj_step", "contact_check")}
+
+
+def wall_accounting(wall_per_tick_us: float, tick_mean_us: float, parts_mean_us: dict[str, float],
+                    isolated: dict[str, float], physics_per_tick: int) -> dict[str, float]:
+    """Where the loop's wall time per tick goes, as means [µs] (the real-time factor is a mean):
+    ``isolated`` = the sum-of-parts limit's parts; ``<part> excess`` = the part's mean in the loop minus the
+    isolated parts it contains (its glue code and running with caches the rest of the tick evicted);
+    ``outside the tick`` = wall time per tick minus the mean tick (trace copy, end checks, loop). The
+    entries after ``wall`` add up to it."""
+    excess, iso_total = {}, 0.0
+    for part in TICK_PARTS:
+        if part not in parts_mean_us:
+            continue
+        iso = sum(isolated.get(k, 0.0) * (physics_per_tick if k == "mj_step" else 1)
+                  for k in ISOLATED_IN_PART[part])  # fmt: skip
+        iso_total += iso
+        excess[f"{part} excess"] = parts_mean_us[part] - iso
+    return {"wall": wall_per_tick_us, "isolated": iso_total, **excess,
+            "outside the tick": wall_per_tick_us - tick_mean_us}
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run each loop, print the table and, with ``--out``, write it as markdown with a figure."""
     args = _parse_args(argv)
@@ -221,7 +245,8 @@ def _solver_overrides(name: str) -> list[str]:
 
 def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
-    factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation})."""
+    factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
+    :func:`wall_accounting`)."""
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
@@ -230,9 +255,15 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
     if built.filter is None:
         del in_loop["model"], in_loop["filter"]
+    parts_mean = {part: float(np.mean(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)
+                  if part in in_loop}  # fmt: skip
+    wall_us, tick_mean_us = res.wall_time_s / n * 1e6, float(np.mean(tr.tick_us[:n]))
     isolated = part_costs(built)
-    limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), built.episode.physics_per_tick)
-    return label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated
+    ppt = built.episode.physics_per_tick
+    limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), ppt)
+    accounting = wall_accounting(wall_us, tick_mean_us, parts_mean, isolated, ppt)
+    return (label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated,
+            accounting)
 
 
 def _fmt_parts(parts: dict[str, float]) -> str:
@@ -246,10 +277,21 @@ def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
     for col in _COLUMNS:
         table.add_column(col)
-    for label, tick, rtf, limit, status, fell, in_loop, isolated in rows:
+    for label, tick, rtf, limit, status, fell, in_loop, isolated, _ in rows:
         table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, str(fell),
                       _fmt_parts(in_loop), _fmt_parts(isolated))  # fmt: skip
     Console(width=220).print(table)
+    print(_accounting_text(rows))
+
+
+def _accounting_text(rows: list[tuple]) -> str:
+    """The :func:`wall_accounting` of each loop as a markdown table (mean µs per tick)."""
+    keys = list(dict.fromkeys(k for r in rows for k in r[8]))
+    cells = [(r[0], *(f"{r[8][k]:.1f}" if k in r[8] else "-" for k in keys)) for r in rows]
+    head = ("Where the wall time per tick goes (means, µs; `isolated` = the limit's parts, `<part> excess` = "
+            "the part in the loop minus its isolated parts: glue code and caches the rest of the tick evicted, "
+            "`outside the tick` = trace copy, end checks, loop; they add up to `wall`):\n")
+    return head + markdown_table(cells, ("loop", *keys), fmt=str).rstrip("\n")
 
 
 def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
@@ -271,8 +313,9 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     ]
     cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, fell,
               _fmt_parts(in_loop), _fmt_parts(isolated))
-             for label, tick, rtf, limit, status, fell, in_loop, isolated in rows]  # fmt: skip
+             for label, tick, rtf, limit, status, fell, in_loop, isolated, _ in rows]  # fmt: skip
     lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
+    lines += ["", _accounting_text(rows)]
     if main_rtf:
         lines += ["", _main_text(args.main, main_rtf)]
     args.out.parent.mkdir(parents=True, exist_ok=True)
