@@ -156,6 +156,56 @@ def sum_of_parts_limit(isolated: dict[str, float], control_dt_s: float, physics_
     return control_dt_s * 1e6 / total_us if total_us > 0 else float("nan")
 
 
+COLD_PARTS = ("controller", "pinocchio_update", "qp_build")  # idempotent calls: timed twice in a row
+
+
+def cold_vs_warm(built: Built) -> dict[str, tuple[float, float]]:
+    """{part: (median µs of its call in the loop, median µs of the same call repeated at once)} from one more
+    (instrumented, untimed) run of the episode: the controller, the Pinocchio update and (with a filter) the
+    QP build are called twice in a row on every tick, the same code on the same data, so the second call
+    finds its code and data in the caches the rest of the tick evicts; mj_step: its call in the loop vs
+    :func:`part_costs`' tight loop (measured separately). The gap is the cost of interleaving the parts, which no
+    glue-code cut removes."""
+    e = built.episode
+    calls = {"controller": (e.controller, "compute"), "pinocchio_update": (e.model, "update")}
+    if built.filter is not None:
+        calls["qp_build"] = (built.filter, "build")
+    else:
+        del calls["pinocchio_update"]
+    times: dict[str, list[tuple[float, float]]] = {k: [] for k in calls}
+    times["mj_step"] = []
+
+    def twice(label, fn):
+        def call(*args):
+            t0 = time.perf_counter()
+            fn(*args)
+            t1 = time.perf_counter()
+            out = fn(*args)
+            times[label].append((t1 - t0, time.perf_counter() - t1))
+            return out
+        return call
+
+    step = mujoco.mj_step
+
+    def timed_step(m, d):
+        t0 = time.perf_counter()
+        step(m, d)
+        times["mj_step"].append((time.perf_counter() - t0, float("nan")))
+
+    for label, (obj, name) in calls.items():
+        setattr(obj, name, twice(label, getattr(obj, name)))
+    analyse, e.s = e.s.analyse, replace(e.s, analyse=False)
+    mujoco.mj_step = timed_step
+    try:
+        e.run()
+    finally:
+        mujoco.mj_step = step
+        e.s = replace(e.s, analyse=analyse)
+        for obj, name in calls.values():
+            delattr(obj, name)  # the instance attribute: the method again
+    return {k: tuple(float(x) for x in np.median(np.array(v[1:]) * 1e6, axis=0)) for k, v in times.items() if v}
+
+
 # each timed part of the loop's tick (TICK_PARTS) and the isolated parts it contains
 ISOLATED_IN_PART = {"controller": ("controller",), "model": ("pinocchio_update",),
                     "filter": ("qp_build", "qp_solve"), "physics": ("mj_step", "contact_check")}
@@ -222,6 +272,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
+    ap.add_argument("--cold", action="store_true",
+                    help="also time idempotent parts twice in a row in one more run (cost of interleaving)")
     ap.add_argument("--main", default="", help="also run the main command with these solvers, e.g. osqp,clarabel")
     return ap.parse_args(argv)
 
@@ -246,7 +298,7 @@ def _solver_overrides(name: str) -> list[str]:
 def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
     factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
-    :func:`wall_accounting`)."""
+    :func:`wall_accounting`, :func:`cold_vs_warm` or {} without ``--cold``)."""
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
@@ -262,8 +314,9 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     ppt = built.episode.physics_per_tick
     limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), ppt)
     accounting = wall_accounting(wall_us, tick_mean_us, parts_mean, isolated, ppt)
+    cold = cold_vs_warm(built) if args.cold else {}
     return (label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated,
-            accounting)
+            accounting, cold)
 
 
 def _fmt_parts(parts: dict[str, float]) -> str:
@@ -277,11 +330,13 @@ def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
     for col in _COLUMNS:
         table.add_column(col)
-    for label, tick, rtf, limit, status, fell, in_loop, isolated, _ in rows:
+    for label, tick, rtf, limit, status, fell, in_loop, isolated, *_ in rows:
         table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, str(fell),
                       _fmt_parts(in_loop), _fmt_parts(isolated))  # fmt: skip
     Console(width=220).print(table)
     print(_accounting_text(rows))
+    if args.cold:
+        print(_cold_text(rows))
 
 
 def _accounting_text(rows: list[tuple]) -> str:
@@ -294,6 +349,18 @@ def _accounting_text(rows: list[tuple]) -> str:
     return head + markdown_table(cells, ("loop", *keys), fmt=str).rstrip("\n")
 
 
+def _cold_text(rows: list[tuple]) -> str:
+    """The :func:`cold_vs_warm` of each loop as a markdown table."""
+    cells = []
+    for r in rows:
+        for part, (first, second) in r[9].items():
+            warm = r[7].get("mj_step", float("nan")) if part == "mj_step" else second
+            cells.append((r[0], part, f"{first:.1f}", f"{warm:.1f}", f"{first - warm:.1f}"))
+    head = ("Interleaving (`--cold`): each call in the loop vs the same call repeated at once (mj_step: vs its "
+            "isolated tight loop), median µs:\n")
+    return head + markdown_table(cells, ("loop", "part", "in the loop", "warm", "cold penalty"), fmt=str).rstrip("\n")
+
+
 def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
                     main_rtf: dict[str, float] | None = None) -> None:  # fmt: skip
     """Write the rows as markdown to ``args.out`` (with the command, machine, 1-min load average at the
@@ -304,7 +371,8 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     lines = [
         "# Control-tick cost\n",
         (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
-         f"{args.formulations} --scenario {args.scenario}" + (f" --main {args.main}" if args.main else "")
+         f"{args.formulations} --scenario {args.scenario}" + (" --cold" if args.cold else "")
+         + (f" --main {args.main}" if args.main else "")
          + f"` · {stamp}\n"),
         (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
          f"load average during the run (1 min): {load_before:.1f} at start, {load_after:.1f} at end  \n"
@@ -313,9 +381,11 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     ]
     cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, fell,
               _fmt_parts(in_loop), _fmt_parts(isolated))
-             for label, tick, rtf, limit, status, fell, in_loop, isolated, _ in rows]  # fmt: skip
+             for label, tick, rtf, limit, status, fell, in_loop, isolated, *_ in rows]  # fmt: skip
     lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
     lines += ["", _accounting_text(rows)]
+    if args.cold:
+        lines += ["", _cold_text(rows)]
     if main_rtf:
         lines += ["", _main_text(args.main, main_rtf)]
     args.out.parent.mkdir(parents=True, exist_ok=True)
