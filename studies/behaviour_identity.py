@@ -3,13 +3,17 @@
     python -m studies.behaviour_identity record --out /tmp/identity/before     # on the old code
     python -m studies.behaviour_identity record --out /tmp/identity/after      # on the new code
     python -m studies.behaviour_identity compare /tmp/identity/before /tmp/identity/after
+    python -m studies.behaviour_identity record --set speed --out /tmp/identity/before   # the tick-speed set
 
 Each case is one ``python -m taslel_bench`` run (the command line users type, so the script works on any
 version of the package) into ``<out>/<case>_s<seed>/``. ``compare`` reads both folders' ``summary.json``
 and ``steps.parquet`` and prints one row per run: summary keys compared, keys that differ (wall-clock
-timings excluded), and the largest |difference| of the applied torques and the trunk position over every
-tick (columns present in both). A refactor that preserves behaviour shows 0 differing keys and 0.0 there.
-Produced the before/after identity table of the core redesign (issue 22).
+timings excluded), the largest |difference| of the applied torques and the trunk position over every
+tick, and the number of ``steps.parquet`` columns that are not bit-identical (every column but the timers,
+names ending ``_us``: trunk, joints, torques, contact forces and flags, QP status and iterations, metrics;
+NaN equal to NaN; columns present in both). A refactor that preserves
+behaviour shows 0 differing keys, 0.0 and 0 columns there. ``--set all`` (default) is the issue 22 set that
+produced the core redesign's identity table; ``--set speed`` the issue 25 tick-speed set (10 s runs).
 """
 
 from __future__ import annotations
@@ -53,16 +57,35 @@ CASES: dict[str, list[str]] = {
     "contact_gain": ["scenario=low_friction", "filter.contact_velocity_gain=50"],
     "filter_late": ["scenario=obstacle", "filter.start_time=3"],
 }
+# the tick-speed set (issue 25): worlds x {default backend, osqp}, 10 s each, one seed
+SPEED_WORLDS: dict[str, list[str]] = {
+    "flat": ["scenario=flat"],
+    "obstacle": ["scenario=obstacle"],
+    "logs_terrain": ["scenario=logs", "filter=terrain"],
+    "low_friction_nominal": ["scenario=low_friction", "filter.enabled=false"],
+    "push": ["scenario=push"],
+}
+SPEED_CASES: dict[str, list[str]] = {
+    **{name: [*o, "duration=10"] for name, o in SPEED_WORLDS.items()},
+    **{f"{name}_osqp": [*o, "duration=10", "solver=osqp"] for name, o in SPEED_WORLDS.items()
+       if "filter.enabled=false" not in o},
+}
+SETS = {"all": (CASES, SEEDS), "speed": (SPEED_CASES, (0,))}
 COMMON = ["record.mcap=false", "progress=false"]
+# steps.parquet columns that time the code (µs): the only ones a behaviour-preserving change may alter
+TIMER_SUFFIX = "_us"
 # summary keys that measure wall-clock time (or say where/when a run happened), not behaviour
-TIMING_WORDS = ("_us", "wall_time", "real_time_factor", "warmup_s", "residuals_s", "recording_s", "_sha256",
-                "git_", "machine", "started", "plant_source", "model_source")
+# (the deadline-miss rates count wall-clock solve times; file sizes and memory follow the timer columns)
+TIMING_WORDS = ("_us", "wall_time", "real_time_factor", "warmup_s", "residuals_s", "recording_s", "reference_s",
+                "deadline_miss", "over_1ms", "memory_peak", "result_files", "_sha256", "git_", "machine",
+                "started", "plant_source", "model_source")
 
 
-def record(out: Path, jobs: int) -> None:
+def record(out: Path, jobs: int, case_set: str = "all") -> None:
     out.mkdir(parents=True, exist_ok=True)
-    runs = [(f"{name}_s{seed}", [*overrides, f"seed={seed}", *COMMON]) for name, overrides in CASES.items()
-            for seed in SEEDS]
+    cases, seeds = SETS[case_set]
+    runs = [(f"{name}_s{seed}", [*overrides, f"seed={seed}", *COMMON]) for name, overrides in cases.items()
+            for seed in seeds]
 
     def one(item: tuple[str, list[str]]) -> tuple[str, int]:
         name, overrides = item
@@ -91,14 +114,14 @@ def _same(a: object, b: object) -> bool:
 def compare(before: Path, after: Path) -> int:
     names = sorted(p.parent.name for p in before.glob("*/summary.json"))
     print("| run | keys compared | keys differing | only before | only after | max abs diff u [N·m] | "
-          "max abs diff trunk pos [m] |")
-    print("|---|---|---|---|---|---|---|")
+          "max abs diff trunk pos [m] | columns not identical (timers excepted) |")
+    print("|---|---|---|---|---|---|---|---|")
     bad = 0
     for name in names:
         a = json.loads((before / name / "summary.json").read_text())
         path_b = after / name / "summary.json"
         if not path_b.is_file():
-            print(f"| {name} | missing after | | | | | |")
+            print(f"| {name} | missing after | | | | | | |")
             bad += 1
             continue
         b = json.loads(path_b.read_text())
@@ -106,24 +129,38 @@ def compare(before: Path, after: Path) -> int:
         differ = [k for k in keys if not _same(a[k], b[k])]
         only_a = sorted(k for k in set(a) - set(b) if not _timing(k))
         only_b = sorted(k for k in set(b) - set(a) if not _timing(k))
-        du, dp = _trajectory_diff(before / name, after / name)
-        bad += bool(differ) or du != 0.0 or dp != 0.0
+        du, dp, cols = _trajectory_diff(before / name, after / name)
+        bad += bool(differ) or du != 0.0 or dp != 0.0 or not cols.startswith("0 ")
         shown = ", ".join(f"{k} ({a[k]!r} -> {b[k]!r})" for k in differ[:4]) + (" ..." if len(differ) > 4 else "")
         print(f"| {name} | {len(keys)} | {len(differ)}{': ' + shown if differ else ''} | "
-              f"{', '.join(only_a) or '-'} | {', '.join(only_b) or '-'} | {du:.3g} | {dp:.3g} |")
+              f"{', '.join(only_a) or '-'} | {', '.join(only_b) or '-'} | {du:.3g} | {dp:.3g} | {cols} |")
     print(f"\n{len(names)} runs, {bad} with a difference")
     return 1 if bad else 0
 
 
-def _trajectory_diff(a: Path, b: Path) -> tuple[float, float]:
+def _physics_columns_differing(fa: pd.DataFrame, fb: pd.DataFrame) -> str:
+    """How many columns present in both frames, timers excepted, are not bit-identical (NaN == NaN), of how
+    many, with the first few names."""
+    cols = [c for c in fa.columns if not c.endswith(TIMER_SUFFIX) and c in fb.columns]
+    bad = [c for c in cols if not _column_identical(fa[c].to_numpy(), fb[c].to_numpy())]
+    return f"{len(bad)}" + (f" of {len(cols)}: {', '.join(bad[:4])}" if bad else f" (of {len(cols)})")
+
+
+def _column_identical(a: np.ndarray, b: np.ndarray) -> bool:
+    if a.dtype.kind == "f" and b.dtype.kind == "f":
+        return bool(np.array_equal(a, b, equal_nan=True))
+    return bool(np.array_equal(a, b))
+
+
+def _trajectory_diff(a: Path, b: Path) -> tuple[float, float, str]:
     fa, fb = pd.read_parquet(a / "steps.parquet"), pd.read_parquet(b / "steps.parquet")
     if len(fa) != len(fb):
-        return math.inf, math.inf
+        return math.inf, math.inf, "length differs"
     u = [c for c in fa.columns if c.startswith("u_") and c.endswith("_nm") and c in fb.columns]
     p = [c for c in ("base_x_w_m", "base_y_w_m", "base_z_w_m") if c in fa.columns and c in fb.columns]
     du = float(np.nanmax(np.abs(fa[u].to_numpy() - fb[u].to_numpy()))) if u and len(fa) else 0.0
     dp = float(np.nanmax(np.abs(fa[p].to_numpy() - fb[p].to_numpy()))) if p and len(fa) else 0.0
-    return du, dp
+    return du, dp, _physics_columns_differing(fa, fb)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -132,12 +169,13 @@ def main(argv: list[str] | None = None) -> int:
     rec = sub.add_parser("record")
     rec.add_argument("--out", type=Path, required=True)
     rec.add_argument("--jobs", type=int, default=2)
+    rec.add_argument("--set", dest="case_set", choices=sorted(SETS), default="all")
     cmp_ = sub.add_parser("compare")
     cmp_.add_argument("before", type=Path)
     cmp_.add_argument("after", type=Path)
     a = ap.parse_args(argv)
     if a.cmd == "record":
-        record(a.out, a.jobs)
+        record(a.out, a.jobs, a.case_set)
         return 0
     return compare(a.before, a.after)
 

@@ -248,3 +248,23 @@ def test_estimator_sees_the_mu_the_filter_used_on_the_previous_tick(filter_on):
     before = t <= start + 1e-9  # tick k sees tick k-1: the first filtered tick (t = 0.1) is seen at 0.101
     assert np.isnan(seen[before]).all()
     np.testing.assert_array_equal(seen[~before], np.array(est.reported)[:-1][~before[1:]])
+
+
+def test_does_nothing_tells_empty_hooks_from_working_ones():
+    from taslel_bench.sim.episode import does_nothing
+
+    def empty(model, data, t):
+        """Only a docstring."""
+
+    def returns_none(model, data, t):
+        return None
+
+    def works(model, data, t):
+        data.qvel[0] = 0.0
+
+    def returns_value(model, data, t):
+        return 1
+
+    assert does_nothing(empty) and does_nothing(returns_none)
+    assert not does_nothing(works) and not does_nothing(returns_value) and not does_nothing(print)
+

@@ -406,6 +406,37 @@ def test_bench_sum_of_parts_limit_counts_mj_step_per_physics_step():
     assert _solver_overrides("osqp") == ["solver=osqp"]
 
 
+def test_bench_wall_accounting_adds_up_and_maps_parts_to_their_isolated_parts():
+    from taslel_bench.qp.tick_bench import wall_accounting
+
+    isolated = {"mj_step": 10.0, "controller": 2.0, "pinocchio_update": 8.0, "contact_check": 1.0,
+                "qp_build": 10.0, "qp_solve": 20.0}  # fmt: skip
+    in_loop = {"controller": 5.0, "model": 12.0, "filter": 40.0, "physics": 30.0}
+    acc = wall_accounting(100.0, 87.0, in_loop, isolated, physics_per_tick=2)
+    assert acc["isolated"] == pytest.approx(2.0 + 8.0 + 30.0 + 2 * 10.0 + 1.0)
+    assert acc["physics excess"] == pytest.approx(30.0 - 21.0) and acc["filter excess"] == pytest.approx(10.0)
+    assert acc["outside the tick"] == pytest.approx(13.0)
+    assert sum(v for k, v in acc.items() if k != "wall") == pytest.approx(100.0)
+    nominal = wall_accounting(50.0, 40.0, {"controller": 5.0, "physics": 35.0}, isolated, 1)
+    assert "model excess" not in nominal and nominal["isolated"] == pytest.approx(13.0)
+
+
+@pytest.mark.slow
+def test_bench_replays_the_episode_qps_and_times_cold_and_warm_calls():
+    from taslel_bench.api import compose
+    from taslel_bench.qp.tick_bench import cold_vs_warm, part_costs
+    from taslel_bench.sim.build import Built
+
+    built = Built(compose(["duration=0.3", "progress=false", "record.mcap=false"]))
+    built.episode.run()
+    costs = part_costs(built)
+    assert set(costs) == {"mj_step", "controller", "contact_check", "pinocchio_update", "qp_build", "qp_solve"}
+    assert all(np.isfinite(v) and v > 0 for v in costs.values())
+    cold = cold_vs_warm(built)
+    assert set(cold) == {"controller", "pinocchio_update", "qp_build", "mj_step"}
+    assert "compute" not in vars(built.episode.controller)  # the instrumented methods are restored
+
+
 def test_report_has_the_verdict_and_draws_no_empty_fall_figure(tmp_path):
     from taslel_bench.sweep.report import write_report
 

@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
@@ -51,8 +52,55 @@ def _median_us(fn, n: int = 2000) -> float:
     return float(np.median(times) * 1e6)
 
 
+REPLAY_TICKS = 1000  # walking ticks whose QPs the isolated solve replays in order
+
+
+class QPSequence:
+    """Episode hook (``Episode.qp_recorder``): copies of the backend QP's values on ``n`` consecutive ticks
+    from tick ``k0``, for replaying them in order (each solve warm-started from the previous tick's answer,
+    as in the loop). Used on an extra, untimed run of the episode."""
+
+    FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
+
+    def __init__(self, k0: int, n: int) -> None:
+        self.k0, self.n = k0, n
+        self.values: list[tuple[np.ndarray, ...]] = []
+
+    def on_tick(self, k: int, t_s: float, problem, result) -> None:
+        if self.k0 <= k < self.k0 + self.n:
+            self.values.append(tuple(getattr(problem, f).copy() for f in self.FIELDS))
+
+
+def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
+    """Median µs of the backend solving the QPs of ``n`` consecutive walking ticks in order, timed alone:
+    one more (untimed) run of the episode records them, then they are written into the filter's backend
+    problem one by one and solved (a fresh solver, warm-started from tick to tick as in the loop). Solving
+    one tick's QP again and again would warm-start each solve from its own answer (no iterations): a
+    lower bound the loop cannot reach."""
+    e = built.episode
+    seq = QPSequence(round(e.controller.stand_duration_s / e.s.control_dt_s) + 1, n)
+    e.qp_recorder, analyse = seq, e.s.analyse
+    e.s = replace(e.s, analyse=False)
+    try:
+        e.run()
+    finally:
+        e.qp_recorder, e.s = None, replace(e.s, analyse=analyse)
+    problem, backend = built.filter.backend_problem, built.backend
+    backend.reset()
+    times = np.empty(len(seq.values))
+    for i, values in enumerate(seq.values):
+        for field, value in zip(QPSequence.FIELDS, values):
+            np.copyto(getattr(problem, field), value)
+        t0 = time.perf_counter()
+        backend.solve(problem)
+        times[i] = time.perf_counter() - t0
+    return float(np.median(times[1:]) * 1e6) if len(times) > 1 else float("nan")  # [0]: the setup
+
+
 def part_costs(built: Built) -> dict[str, float]:
-    """Median µs of each tick part at the episode's final state."""
+    """Median µs of each tick part at the episode's final state (the QP solve: over a replayed sequence of
+    the episode's QPs, :func:`replayed_solve_us`). Only the parts the loop runs: no Pinocchio update and
+    no QP without a filter."""
     e = built.episode
     m, d, br = e.m, e.d, e.bridge
     qj, qdj = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
@@ -68,16 +116,15 @@ def part_costs(built: Built) -> dict[str, float]:
     costs = {
         "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
         "controller": _median_us(ctrl),
-        "pinocchio_update": _median_us(lambda: e.model.update(q, v)),
         "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
     }
     if built.filter is not None:
+        costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
         gs = e.controller.gait_state(t[0])
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
-        backend_qp = built.filter.backend_problem
-        costs["qp_solve"] = _median_us(lambda: built.backend.solve(backend_qp), 500)
+        costs["qp_solve"] = replayed_solve_us(built)
     return costs
 
 
@@ -92,7 +139,10 @@ _NOTES = (
     "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
     "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
     "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
-    "tight loop on the final state (2000 calls); the difference is what interleaving costs (caches). "
+    "tight loop on the final state (2000 calls), the QP solve over the QPs of 1000 consecutive walking "
+    "ticks replayed in order (warm-started tick to tick as in the loop; re-solving one QP would start from "
+    "its own answer); the difference is what interleaving costs (caches). The nominal-only loop's parts "
+    "are those it runs (no Pinocchio update, no QP). "
     "Sum-of-parts limit = control period / (the isolated parts summed, mj_step once per physics step): the "
     "real-time factor of a loop that costs nothing but its parts; share of limit = real-time factor / limit. "
     "Other processes on the machine inflate all numbers alike.\n"
@@ -104,6 +154,80 @@ def sum_of_parts_limit(isolated: dict[str, float], control_dt_s: float, physics_
     parts = {k: v for k, v in isolated.items() if k in LIMIT_PARTS}
     total_us = sum(parts.values()) + parts.get("mj_step", 0.0) * (physics_per_tick - 1)
     return control_dt_s * 1e6 / total_us if total_us > 0 else float("nan")
+
+
+COLD_PARTS = ("controller", "pinocchio_update", "qp_build")  # idempotent calls: timed twice in a row
+
+
+def cold_vs_warm(built: Built) -> dict[str, tuple[float, float]]:
+    """{part: (median µs of its call in the loop, median µs of the same call repeated at once)} from one more
+    (instrumented, untimed) run of the episode: the controller, the Pinocchio update and (with a filter) the
+    QP build are called twice in a row on every tick, the same code on the same data, so the second call
+    finds its code and data in the caches the rest of the tick evicts; mj_step: its call in the loop vs
+    :func:`part_costs`' tight loop (measured separately). The gap is the cost of interleaving the parts, which no
+    glue-code cut removes."""
+    e = built.episode
+    calls = {"controller": (e.controller, "compute"), "pinocchio_update": (e.model, "update")}
+    if built.filter is not None:
+        calls["qp_build"] = (built.filter, "build")
+    else:
+        del calls["pinocchio_update"]
+    times: dict[str, list[tuple[float, float]]] = {k: [] for k in calls}
+    times["mj_step"] = []
+
+    def twice(label, fn):
+        def call(*args):
+            t0 = time.perf_counter()
+            fn(*args)
+            t1 = time.perf_counter()
+            out = fn(*args)
+            times[label].append((t1 - t0, time.perf_counter() - t1))
+            return out
+        return call
+
+    step = mujoco.mj_step
+
+    def timed_step(m, d):
+        t0 = time.perf_counter()
+        step(m, d)
+        times["mj_step"].append((time.perf_counter() - t0, float("nan")))
+
+    for label, (obj, name) in calls.items():
+        setattr(obj, name, twice(label, getattr(obj, name)))
+    analyse, e.s = e.s.analyse, replace(e.s, analyse=False)
+    mujoco.mj_step = timed_step
+    try:
+        e.run()
+    finally:
+        mujoco.mj_step = step
+        e.s = replace(e.s, analyse=analyse)
+        for obj, name in calls.values():
+            delattr(obj, name)  # the instance attribute: the method again
+    return {k: tuple(float(x) for x in np.median(np.array(v[1:]) * 1e6, axis=0)) for k, v in times.items() if v}
+
+
+# each timed part of the loop's tick (TICK_PARTS) and the isolated parts it contains
+ISOLATED_IN_PART = {"controller": ("controller",), "model": ("pinocchio_update",),
+                    "filter": ("qp_build", "qp_solve"), "physics": ("mj_step", "contact_check")}
+
+
+def wall_accounting(wall_per_tick_us: float, tick_mean_us: float, parts_mean_us: dict[str, float],
+                    isolated: dict[str, float], physics_per_tick: int) -> dict[str, float]:
+    """Where the loop's wall time per tick goes, as means [µs] (the real-time factor is a mean):
+    ``isolated`` = the sum-of-parts limit's parts; ``<part> excess`` = the part's mean in the loop minus the
+    isolated parts it contains (its glue code and running with caches the rest of the tick evicted);
+    ``outside the tick`` = wall time per tick minus the mean tick (trace copy, end checks, loop). The
+    entries after ``wall`` add up to it."""
+    excess, iso_total = {}, 0.0
+    for part in TICK_PARTS:
+        if part not in parts_mean_us:
+            continue
+        iso = sum(isolated.get(k, 0.0) * (physics_per_tick if k == "mj_step" else 1)
+                  for k in ISOLATED_IN_PART[part])  # fmt: skip
+        iso_total += iso
+        excess[f"{part} excess"] = parts_mean_us[part] - iso
+    return {"wall": wall_per_tick_us, "isolated": iso_total, **excess,
+            "outside the tick": wall_per_tick_us - tick_mean_us}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -148,6 +272,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
+    ap.add_argument("--cold", action="store_true",
+                    help="also time idempotent parts twice in a row in one more run (cost of interleaving)")
     ap.add_argument("--main", default="", help="also run the main command with these solvers, e.g. osqp,clarabel")
     return ap.parse_args(argv)
 
@@ -171,7 +297,8 @@ def _solver_overrides(name: str) -> list[str]:
 
 def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
-    factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation})."""
+    factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
+    :func:`wall_accounting`, :func:`cold_vs_warm` or {} without ``--cold``)."""
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
@@ -180,9 +307,16 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
     if built.filter is None:
         del in_loop["model"], in_loop["filter"]
+    parts_mean = {part: float(np.mean(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)
+                  if part in in_loop}  # fmt: skip
+    wall_us, tick_mean_us = res.wall_time_s / n * 1e6, float(np.mean(tr.tick_us[:n]))
     isolated = part_costs(built)
-    limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), built.episode.physics_per_tick)
-    return label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated
+    ppt = built.episode.physics_per_tick
+    limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), ppt)
+    accounting = wall_accounting(wall_us, tick_mean_us, parts_mean, isolated, ppt)
+    cold = cold_vs_warm(built) if args.cold else {}
+    return (label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated,
+            accounting, cold)
 
 
 def _fmt_parts(parts: dict[str, float]) -> str:
@@ -196,10 +330,35 @@ def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
                   f"({platform.processor() or platform.machine()}, {os.cpu_count()} cores)")
     for col in _COLUMNS:
         table.add_column(col)
-    for label, tick, rtf, limit, status, fell, in_loop, isolated in rows:
+    for label, tick, rtf, limit, status, fell, in_loop, isolated, *_ in rows:
         table.add_row(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, str(fell),
                       _fmt_parts(in_loop), _fmt_parts(isolated))  # fmt: skip
     Console(width=220).print(table)
+    print(_accounting_text(rows))
+    if args.cold:
+        print(_cold_text(rows))
+
+
+def _accounting_text(rows: list[tuple]) -> str:
+    """The :func:`wall_accounting` of each loop as a markdown table (mean µs per tick)."""
+    keys = list(dict.fromkeys(k for r in rows for k in r[8]))
+    cells = [(r[0], *(f"{r[8][k]:.1f}" if k in r[8] else "-" for k in keys)) for r in rows]
+    head = ("Where the wall time per tick goes (means, µs; `isolated` = the limit's parts, `<part> excess` = "
+            "the part in the loop minus its isolated parts: glue code and caches the rest of the tick evicted, "
+            "`outside the tick` = trace copy, end checks, loop; they add up to `wall`):\n")
+    return head + markdown_table(cells, ("loop", *keys), fmt=str).rstrip("\n")
+
+
+def _cold_text(rows: list[tuple]) -> str:
+    """The :func:`cold_vs_warm` of each loop as a markdown table."""
+    cells = []
+    for r in rows:
+        for part, (first, second) in r[9].items():
+            warm = r[7].get("mj_step", float("nan")) if part == "mj_step" else second
+            cells.append((r[0], part, f"{first:.1f}", f"{warm:.1f}", f"{first - warm:.1f}"))
+    head = ("Interleaving (`--cold`): each call in the loop vs the same call repeated at once (mj_step: vs its "
+            "isolated tight loop), median µs:\n")
+    return head + markdown_table(cells, ("loop", "part", "in the loop", "warm", "cold penalty"), fmt=str).rstrip("\n")
 
 
 def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
@@ -212,7 +371,8 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     lines = [
         "# Control-tick cost\n",
         (f"`python -m taslel_bench.bench --duration {args.duration} --solvers {args.solvers} --formulations "
-         f"{args.formulations} --scenario {args.scenario}" + (f" --main {args.main}" if args.main else "")
+         f"{args.formulations} --scenario {args.scenario}" + (" --cold" if args.cold else "")
+         + (f" --main {args.main}" if args.main else "")
          + f"` · {stamp}\n"),
         (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
          f"load average during the run (1 min): {load_before:.1f} at start, {load_after:.1f} at end  \n"
@@ -221,8 +381,11 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     ]
     cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, fell,
               _fmt_parts(in_loop), _fmt_parts(isolated))
-             for label, tick, rtf, limit, status, fell, in_loop, isolated in rows]  # fmt: skip
+             for label, tick, rtf, limit, status, fell, in_loop, isolated, *_ in rows]  # fmt: skip
     lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
+    lines += ["", _accounting_text(rows)]
+    if args.cold:
+        lines += ["", _cold_text(rows)]
     if main_rtf:
         lines += ["", _main_text(args.main, main_rtf)]
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -15,6 +15,7 @@ every :meth:`Episode.run` starts from that same state (the friction check of the
 
 from __future__ import annotations
 
+import dis
 import gc
 import math
 import time
@@ -98,6 +99,7 @@ class Episode:
         self.contact_frames = ContactFrameReader(mj_model)  # every foot contact in its own frame (metrics)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
+        self._scenario_step: Callable | None = None  # scenario.on_tick, None if it does nothing (per run)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
@@ -144,8 +146,11 @@ class Episode:
 
     def _warm_up(self) -> float:
         """Run the tick's compiled kernels once on the initial state, before the episode clock starts (the
-        first call of a kernel in a process loads or compiles it). Returns the time it took [s]."""
+        first call of a kernel in a process loads or compiles it), and resolve the scenario's per-step hook
+        (per run: it may be replaced after construction). Returns the time it took [s]."""
         t0 = time.perf_counter()
+        hook = self.scenario.on_tick
+        self._scenario_step = None if does_nothing(hook) else hook  # most scenarios do nothing per step
         q, v = self._q, self._v
         self.bridge.state_pin(self.d.qpos, self.d.qvel, q, v)
         if self.filter is not None:
@@ -273,16 +278,21 @@ class Episode:
     def _step_plant(self, u: np.ndarray, t: float) -> tuple[Fall | None, bool, bool, bool]:
         """Hold ``u`` for the tick's physics steps, checking the fall terms after each. Returns (the fall or
         None, a lower leg touched an obstacle, a lower leg touched the floor, MuJoCo reset the data)."""
-        m, d, contacts, qpos = self.m, self.d, self.contacts, self._qpos
+        m, d, contacts, qpos, ctrl = self.m, self.d, self.contacts, self._qpos, self._ctrl
+        after_step, scenario_step, act, t0_plant = self.terminations.after_step, self._scenario_step, \
+            self.bridge.actuator_ids, self._t0_plant
         obstacle_touch = shin_touch = False
+        ctrl[act] = u  # joint torques [N·m], core order -> MuJoCo actuators (Episode.bridge.ctrl_mj)
         for _ in range(self.physics_per_tick):
-            self.bridge.ctrl_mj(u, self._ctrl)  # the scenario may alter ctrl (e.g. actuator delay) each step
-            self.scenario.on_tick(m, d, t)
+            if scenario_step is not None:  # the scenario may alter ctrl (e.g. actuator delay) each step
+                ctrl[act] = u
+                scenario_step(m, d, t)
             t_before = d.time
             mujoco.mj_step(m, d)
-            if d.time <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
+            t_after = d.time
+            if t_after <= t_before:  # MuJoCo reset the data (NaN/huge qpos, qvel or qacc): no fall check
                 return None, obstacle_touch, shin_touch, True
-            fall = self.terminations.after_step(qpos, d, d.time - self._t0_plant)
+            fall = after_step(qpos, d, t_after - t0_plant)
             obstacle_touch |= contacts.non_foot_obstacle_contact
             shin_touch |= contacts.shin_contact
             if fall is not None:
@@ -322,3 +332,18 @@ class Episode:
         except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
             res.extras["residuals_error"] = traceback.format_exc().strip().splitlines()[-1]
         res.extras["residuals_s"] = time.perf_counter() - t0
+
+
+_NOOP_OPS = ("RESUME", "NOP", "LOAD_CONST", "RETURN_VALUE", "RETURN_CONST")
+
+
+def does_nothing(method: Callable) -> bool:
+    """True if ``method``'s body only returns None (``...``, ``return None``, a docstring): its calls can be
+    skipped. Anything else (or no Python code to read) counts as doing something."""
+    code = getattr(getattr(method, "__func__", method), "__code__", None)
+    if code is None:
+        return False
+    ops = list(dis.get_instructions(code))
+    return all(op.opname in _NOOP_OPS for op in ops) and all(
+        op.argval is None for op in ops if op.opname in ("LOAD_CONST", "RETURN_CONST"))
+

@@ -54,13 +54,12 @@ class Terminations:
 
     def after_step(self, qpos: np.ndarray, data: mujoco.MjData, t_s: float) -> Fall | None:
         """The first fall term crossed by the state ``qpos`` a physics step produced at episode time ``t_s``."""
-        a = self.a
-        z = qpos[a + 2]
-        cos_tilt = 1.0 - 2.0 * (qpos[a + 4] * qpos[a + 4] + qpos[a + 5] * qpos[a + 5])  # trunk z . world z
-        if z < self.rule.height_m:
+        term = _trunk_term(qpos, self.a, self.rule.height_m, self._cos_tilt_min)  # one compiled call
+        if term == _HEIGHT:
+            z = qpos[self.a + 2]
             return Fall("trunk_height", f"trunk height {z:.3f} m < {self.rule.height_m} m", t_s)
-        if cos_tilt < self._cos_tilt_min:
-            tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
+        if term == _TILT:
+            tilt = math.degrees(math.acos(max(-1.0, min(1.0, _cos_tilt(qpos, self.a)))))
             return Fall("trunk_tilt", f"trunk tilt {tilt:.0f} deg", t_s)
         if self.contacts.check_non_foot_contact(data):  # contacts of the step's starting state
             name = self.contacts.non_foot_contact_name
@@ -74,6 +73,26 @@ class Terminations:
     def on_grid(self, t_s: float) -> float:
         """``t_s`` rounded to the physics-step grid [s]."""
         return round(t_s / self.dt) * self.dt
+
+
+_NONE, _HEIGHT, _TILT = 0, 1, 2  # what _trunk_term found
+
+
+@kernel
+def _cos_tilt(qpos, a):  # pragma: no cover - compiled
+    """cos of the angle between trunk z and world z from the trunk quaternion qpos[a + 3 : a + 7] (w, x, y, z)."""
+    return 1.0 - 2.0 * (qpos[a + 4] * qpos[a + 4] + qpos[a + 5] * qpos[a + 5])
+
+
+@kernel
+def _trunk_term(qpos, a, height_m, cos_tilt_min):  # pragma: no cover - compiled
+    """_HEIGHT if the trunk origin qpos[a + 2] is below ``height_m`` [m], else _TILT if the trunk tilt's cos
+    is below ``cos_tilt_min``, else _NONE (the order of :data:`TERMS`)."""
+    if qpos[a + 2] < height_m:
+        return _HEIGHT
+    if _cos_tilt(qpos, a) < cos_tilt_min:
+        return _TILT
+    return _NONE
 
 
 @kernel
