@@ -44,6 +44,17 @@ class _Rms(_Mean):
         return float(np.sqrt(self.s / self.c)) if self.c else math.nan
 
 
+class _Ratio:
+    def __init__(self) -> None:
+        self.num, self.den = 0, 0
+
+    def add(self, num, den) -> None:
+        self.num, self.den = self.num + num.item() if hasattr(num, "item") else self.num + num, self.den + int(den)
+
+    def value(self) -> float:
+        return float(self.num / self.den) if self.den else math.nan
+
+
 class _Series:
     def __init__(self, reduce) -> None:
         self.parts: list[np.ndarray] = []
@@ -137,6 +148,10 @@ class Reducer:
 
     def window(self, key: str, bad: np.ndarray, judged: np.ndarray, ticks: int) -> None:
         self._op(key, lambda: _Window(ticks)).add(bad, judged)
+
+    def ratio(self, key: str, num, den) -> None:
+        """sum(num) / sum(den) over the chunks (nan while sum(den) is 0)."""
+        self._op(key, _Ratio).add(num, den)
 
     def count(self, key: str, x) -> None:
         """An integer total (counts of flags)."""
