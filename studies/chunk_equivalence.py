@@ -26,7 +26,7 @@ RUNS = {
 }
 VOLATILE = ("wall_time", "_s_", "real_time", "tick_", "memory_", "warmup", "recording_s", "reference_s",
             "residuals_s", "qp_solve_us", "qp_build_us", "git_", "code_", "manifest", "config_sha256",
-            "intervention_ms")
+            "intervention_ms", "qp_deadline", "qp_solve_over", "result_files")
 
 
 def run_all(out: Path, extra: list[str]) -> None:

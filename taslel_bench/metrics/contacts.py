@@ -119,7 +119,7 @@ class ContactStream:
             acc.pct(f"friction_ratio_p95{key}", ratio, 95)  # capped at mu by the plant's cone: not a violation
             acc.mean(f"slip_mps_mean{key}", slip[sel])
             acc.pct(f"slip_mps_p95{key}", slip[sel], 95)
-            acc.total(f"sliding_distance_m{key}", slip_main[feet].sum())
+            acc.total(f"sliding_distance_m{key}", slip_main[feet])
         acc.window(f"friction_cone_edge_rate_worst_window{suffix}", edge, loaded_c, window_ticks(dt))
         acc.mean(f"touchdown_slip_mps_mean{suffix}", slip_main[self.touchdowns(plant_loaded)])
         if tr.filter_on:

@@ -2,9 +2,10 @@
 
 A :class:`Reducer` holds one reduction per summary key, fed chunk by chunk and read once at the end:
 
-* ``mean`` (sum and count), ``total``, ``ratio`` (two counts), ``max``/``min``: a few numbers each; counts
-  of booleans are exact, so means of selections are the same numbers as over the whole series (float means
-  differ from numpy's pairwise sum of the whole series in the last bits only, ~1e-16 relative);
+* ``mean``/``rms`` (sum and count), ``total``, ``ratio`` (two counts), ``max``/``min``: a few numbers each.
+  Sums are exact (:class:`ExactSum`: the float values summed as integers) and rounded once at the end, so a
+  mean is the same number whatever the chunks (it is the correctly rounded mean; numpy's pairwise sum over
+  the whole series can differ from it in the last bit or two, ~1e-16 relative);
 * ``pct``/``median``: exact percentiles need every value: the selected values are kept as a 1-D float64
   series (8 bytes per selected value; the summary states which keys do this, :data:`SERIES_KEYS`);
 * ``window``: the worst sliding-window rate (:mod:`taslel_bench.metrics.windows`) with the last window's
@@ -19,18 +20,56 @@ import math
 
 import numpy as np
 
+_SCALE_BITS = 1200  # every float64 (subnormals too) is an integer multiple of 2**-1074 (+ 53 bits of margin)
+
+
+class ExactSum:
+    """The exact sum of float64 values fed in any grouping (each value x = m 2**(e - 53) with an integer
+    mantissa m; mantissas summed per exponent in int64 halves, combined as one Python integer scaled by
+    2**_SCALE_BITS). Non-finite values are summed apart (nan or ±inf, as a float sum would give)."""
+
+    def __init__(self) -> None:
+        self.scaled, self.nonfinite = 0, 0.0
+
+    def add(self, x: np.ndarray) -> None:
+        x = np.asarray(x, float).ravel()
+        finite = np.isfinite(x)
+        if not finite.all():
+            self.nonfinite += float(x[~finite].sum())
+            x = x[finite]
+        if not x.size:
+            return
+        mant, exp = np.frexp(x)
+        m = (mant * 2.0**53).astype(np.int64)  # exact: |m| < 2**53
+        hi = m >> 26
+        lo = m - (hi << 26)
+        exps, inverse = np.unique(exp, return_inverse=True)
+        sum_hi, sum_lo = np.zeros(exps.size, np.int64), np.zeros(exps.size, np.int64)
+        np.add.at(sum_hi, inverse, hi)
+        np.add.at(sum_lo, inverse, lo)
+        for e, h, low in zip(exps.tolist(), sum_hi.tolist(), sum_lo.tolist()):
+            self.scaled += ((h << 26) + low) << (int(e) - 53 + _SCALE_BITS)
+
+    def divided(self, count: int) -> float:
+        """The sum / ``count``, rounded once (nan without values)."""
+        if not count:
+            return math.nan
+        if self.nonfinite != 0.0 or math.isnan(self.nonfinite):
+            return float(self.nonfinite)
+        return self.scaled / (count << _SCALE_BITS)
+
 
 class _Mean:
     def __init__(self) -> None:
-        self.s, self.c = 0, 0
+        self.s, self.c = ExactSum(), 0
 
     def add(self, x: np.ndarray) -> None:
         if x.size:
-            self.s += x.sum().item() if x.dtype != bool else int(np.count_nonzero(x))
+            self.s.add(x)
             self.c += x.size
 
     def value(self) -> float:
-        return float(self.s / self.c) if self.c else math.nan
+        return float(self.s.divided(self.c))
 
 
 class _Rms(_Mean):
@@ -41,7 +80,12 @@ class _Rms(_Mean):
         super().add(x * x)
 
     def value(self) -> float:
-        return float(np.sqrt(self.s / self.c)) if self.c else math.nan
+        return float(np.sqrt(self.s.divided(self.c))) if self.c else math.nan
+
+
+class _Total(_Mean):
+    def value(self) -> float:
+        return float(self.s.divided(1)) if self.c else 0.0
 
 
 class _Ratio:
@@ -158,10 +202,9 @@ class Reducer:
         self.fixed[key] = int(self.fixed.get(key, 0)) + int(x)
         self.ops.setdefault(key, None)
 
-    def total(self, key: str, x: float) -> None:
-        """A float total (a sum of per-chunk sums)."""
-        self.fixed[key] = float(self.fixed.get(key, 0.0)) + float(x)
-        self.ops.setdefault(key, None)
+    def total(self, key: str, x: np.ndarray) -> None:
+        """The exact sum of the values, rounded once."""
+        self._op(key, _Total).add(np.asarray(x))
 
     def first(self, key: str, x: float) -> None:
         """The first value given for ``key`` (nan until one is)."""
