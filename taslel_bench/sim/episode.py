@@ -186,7 +186,7 @@ class Episode:
         finally:
             if gc_was_enabled:
                 gc.enable()
-        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s
+        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s - self._residuals_s
         res.n_ticks = trace.n
         self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
         trace.unwrap()
@@ -324,6 +324,9 @@ class Episode:
         if self.chunk_ticks and trace.n - trace.offset == int(self.chunk_ticks) + 1:
             self._process_chunk(trace, None, int(self.chunk_ticks))
             trace.roll(int(self.chunk_ticks))
+            rec0 = time.perf_counter()
+            gc.collect()  # the collector is off in the loop: free the chunk's cyclic garbage (tables, frames)
+            self._recording_s += time.perf_counter() - rec0
 
     def _process_chunk(self, trace: EpisodeTrace, res: EpisodeResult | None, rows: int) -> None:
         """The first ``rows`` rows of the trace: derived quantities, model residuals (``analyse``), then the
