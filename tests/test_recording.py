@@ -107,8 +107,11 @@ def test_killed_run_leaves_a_partial_mcap_that_a_rerun_puts_aside(tmp_path):
     counts = Counter(topic for topic, _, _ in read_messages(partial))
     assert counts["/tick"] >= 200 and counts["/tick"] % 100 == 0  # whole seconds at record.mcap_rate_hz=100
     assert counts["/tf"] == counts["/tick"] and counts["/scene/robot"] == counts["/tick"] // 100  # the 3D channels too
+    # steps.parquet streams into a temporary file (record.chunk_ticks): never a half table under its name
+    assert not (run_dir / "steps.parquet").exists() and list(run_dir.glob(".steps.parquet.tmp-*"))
     summary = run(compose_cfg(["duration=0.2", "progress=false", "filter.enabled=false"]), run_dir)
     assert summary["superseded"].endswith("_killed")
+    assert summary["stale_files_removed"].startswith(".steps.parquet.tmp-")
     assert (run_dir / summary["superseded"] / PARTIAL_NAME).is_file()
     assert (run_dir / "episode.mcap").is_file() and not partial.exists()
 

@@ -67,3 +67,21 @@ def test_sweep_on_a_real_full_disk_exits_1_with_one_line(tmp_path):
         assert "3 runs" in out.stdout  # the table, printed when it cannot be written
     finally:
         subprocess.run(["umount", str(mount)], check=False)
+
+
+@pytest.mark.slow
+def test_ray_launcher_turns_a_dead_worker_into_an_error_row(tmp_path):
+    """hydra/launcher=ray: the worker of seed=1 is SIGKILLed (and again on Ray's one retry): that job is an
+    error row naming it, the other jobs run on, the table is complete, exit 1."""
+    folder = tmp_path / "sweep"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(FAULTS), str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           "TASLEL_FAULTS": "kill=seed=1", "RAY_ADDRESS": "127.0.0.1:1"}  # fmt: skip
+    cmd = [sys.executable, "-m", "taslel_bench", "-m", "hydra/launcher=ray", "hydra.launcher.num_cpus=2",
+           "seed=0,1,2", *TINY, f"hydra.sweep.dir={folder}"]  # fmt: skip
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900, check=False)
+    assert out.returncode == 1, out.stdout[-3000:] + out.stderr[-3000:]
+    table = pd.read_parquet(folder / "summary.parquet")
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    assert sorted(rows) == [0, 1, 2]
+    assert rows[0]["status"] == "ok" and rows[2]["status"] == "ok"
+    assert rows[1]["status"] == "error" and "died twice" in rows[1]["message"]

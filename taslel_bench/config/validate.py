@@ -68,11 +68,14 @@ MAX_IMPRATIO = 100.0  # [-]
 MAX_SOLREF_TIMECONST_S = 1.0  # [s]
 MAX_SOLREF_DAMPRATIO = 10.0  # [-]
 MAX_FOOT_MARGIN_M = 0.05  # [m]
-# peak resident memory of one run [GB] = base + per tick x control ticks (stand + walk): the trace is held in
-# memory until the end. Fitted to runs of 10 / 60 / 300 s at 1 kHz, record.mcap on (peak 0.41 / 0.65 /
-# 1.60 GB; studies/notes/reliability.md)
+# peak resident memory of one run [GB] = base + per tick x control ticks held in memory. record.chunk_ticks=null
+# holds the whole trace until the end: fitted to runs of 10 / 60 / 300 s at 1 kHz, record.mcap on (peak 0.41 /
+# 0.65 / 1.60 GB; studies/notes/reliability.md). In chunks (the default) the trace holds one chunk, and what
+# grows with the run is the 1-D series of the exact percentiles (taslel_bench.metrics.stream) and the
+# parquet footer: MEMORY_SERIES_PER_TICK_GB per tick (README "Reliability" gives the measured peaks)
 MEMORY_BASE_GB = 0.40
 MEMORY_PER_TICK_GB = 4.0e-6
+MEMORY_SERIES_PER_TICK_GB = 2.5e-7
 
 
 def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
@@ -155,6 +158,8 @@ def _top_level(cfg: DictConfig) -> int:
     for key in ("force", "progress", "record.mcap", "record.qps", "record.video"):
         flag(key, _get(cfg, key, False))
     integer("record.qps_every", _get(cfg, "record.qps_every", 1), 1)
+    if _get(cfg, "record.chunk_ticks", None) is not None:
+        integer("record.chunk_ticks", _get(cfg, "record.chunk_ticks"), 1)
     integer("record.reference_every", _get(cfg, "record.reference_every", 10), 0)
     number("record.reference_tol_nm", _get(cfg, "record.reference_tol_nm", 1e-3), 0.0, lo_open=True, unit="N·m")
     if _get(cfg, "record.mcap_rate_hz", None) is not None:
@@ -167,7 +172,10 @@ def _top_level(cfg: DictConfig) -> int:
 def memory_estimate_gb(cfg: DictConfig) -> float:
     """[GB] the peak resident memory a run of ``cfg`` is expected to need (see :data:`MEMORY_PER_TICK_GB`)."""
     ticks = (float(cfg.controller.stand_duration) + float(cfg.duration)) * float(cfg.control_rate_hz)
-    return MEMORY_BASE_GB + MEMORY_PER_TICK_GB * ticks
+    chunk = _get(cfg, "record.chunk_ticks", None)
+    if chunk is None:
+        return MEMORY_BASE_GB + MEMORY_PER_TICK_GB * ticks
+    return MEMORY_BASE_GB + MEMORY_PER_TICK_GB * min(int(chunk) + 1, ticks) + MEMORY_SERIES_PER_TICK_GB * ticks
 
 
 def _memory(cfg: DictConfig, control_rate_hz: int) -> None:
@@ -176,12 +184,16 @@ def _memory(cfg: DictConfig, control_rate_hz: int) -> None:
     limit = number("max_memory_gb", _get(cfg, "max_memory_gb", 8.0), 0.0, 1e4, lo_open=True, unit="GB")
     need = memory_estimate_gb(cfg)
     if need > limit:
-        longest = (limit - MEMORY_BASE_GB) / (MEMORY_PER_TICK_GB * control_rate_hz) - float(cfg.controller.stand_duration)
+        whole = _get(cfg, "record.chunk_ticks", None) is None
+        per_tick = MEMORY_PER_TICK_GB if whole else MEMORY_SERIES_PER_TICK_GB
+        longest = (limit - MEMORY_BASE_GB) / (per_tick * control_rate_hz) - float(cfg.controller.stand_duration)
+        held = ("record.chunk_ticks=null: the whole trace is held in memory until the end; the default chunks "
+                "need far less" if whole else "record.chunk_ticks: the series of the exact percentiles grow")
         raise fail("duration", _get(cfg, "duration"),
-                   f"this run needs ~{need:.1f} GB by estimate ({MEMORY_PER_TICK_GB * 1e6:.0f} kB per control tick at "
-                   f"control_rate_hz={control_rate_hz}: the trace is held in memory until the end), more than "
-                   f"max_memory_gb={limit:g}; the longest run within it is ~{max(longest, 0):.0f} s (shorten the run, "
-                   f"lower control_rate_hz, or raise max_memory_gb if the machine has the memory)")
+                   f"this run needs ~{need:.1f} GB by estimate ({per_tick * 1e6:.2f} kB per control tick at "
+                   f"control_rate_hz={control_rate_hz}; {held}), more than max_memory_gb={limit:g}; the longest "
+                   f"run within it is ~{max(longest, 0):.0f} s (shorten the run, lower control_rate_hz, or raise "
+                   f"max_memory_gb if the machine has the memory)")
 
 
 def _meaningful(cfg: DictConfig) -> None:

@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from taslel_bench.metrics.contacts import FLANK_COS, MIN_NORMAL_FORCE_N
-from taslel_bench.metrics.windows import window_ticks, worst_window_rate
+from taslel_bench.metrics.stream import Onsets, Reducer
+from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.trace import EpisodeTrace
 
 CLEARANCE_TOLERANCE_M = 0.001  # [m] below the profile by more than this = a violation
@@ -36,100 +37,95 @@ TRIP_REARM_S = 0.01  # [s] an obstacle contact starting within this of the foot'
 def onsets(mask: np.ndarray, rearm_ticks: int = 1) -> np.ndarray:
     """Bool array like ``mask`` (ticks on axis 0): True where ``mask`` turns on after at least ``rearm_ticks``
     ticks off (a run under way at the first row is not an onset: it continues from before)."""
-    n = mask.shape[0]
-    out = np.zeros_like(mask)
-    if n == 0:
-        return out
-    ticks = np.arange(n).reshape(-1, *([1] * (mask.ndim - 1)))
-    last_on = np.where(mask, ticks, -(10**9))
-    last_on = np.maximum.accumulate(last_on, axis=0)
-    prev_on = np.concatenate([np.zeros((1, *mask.shape[1:]), int), last_on[:-1]])  # row 0 continues
-    out[1:] = mask[1:] & (ticks[1:] - prev_on[1:] > rearm_ticks)
-    return out
+    return Onsets(rearm_ticks)(mask)
 
 
-def _depths(x: np.ndarray, prefix: str) -> dict[str, float]:
+def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
     """Distribution of violation depths [m] (positive numbers); nan when there is none."""
-    if x.size == 0:
-        return {f"{prefix}_p50_m": math.nan, f"{prefix}_p95_m": math.nan, f"{prefix}_max_m": math.nan}
-    return {f"{prefix}_p50_m": float(np.median(x)), f"{prefix}_p95_m": float(np.percentile(x, 95)),
-            f"{prefix}_max_m": float(x.max())}  # fmt: skip
+    acc.median(f"{prefix}_p50_m", x)
+    acc.pct(f"{prefix}_p95_m", x, 95)
+    acc.max(f"{prefix}_max_m", x)
 
 
 def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str, float]:
     """Virtual-profile clearance, physical-obstacle trips and strikes, and the filter's barrier values over the
     walking ticks ``k0:n`` (``dt`` [s] control period). Keys are nan when the run has no profile / no
     obstacles / no filter."""
-    w = slice(k0, tr.n)
-    swing = ~tr.in_stance[w]
-    loaded = (tr.contact_fn_n[w] >= MIN_NORMAL_FORCE_N).any(axis=2)
-    early = tr.swing_phase[w] >= 0.5
-    c = tr.clearance_m[w]
-    has_profile = bool(np.isfinite(c).any())
-    judged = swing & np.isfinite(c)
-    violated = judged & (c < -CLEARANCE_TOLERANCE_M)
-    out: dict[str, float] = {}
-    parts = (("", judged), ("_unloaded", judged & ~loaded), ("_lift_off_lag", judged & loaded & ~early),
-             ("_early_touchdown", judged & loaded & early))
-    for name, sel in parts:
-        v = c[sel] if has_profile else np.zeros(0)
-        out[f"clearance_violation_rate{name}"] = float(np.mean(v < -CLEARANCE_TOLERANCE_M)) if v.size else math.nan
-        out[f"clearance_min_m{name}"] = float(v.min()) if v.size else math.nan
-    out["clearance_loaded_swing_rate"] = float(np.mean(loaded[judged])) if has_profile and judged.any() else math.nan
-    out["clearance_violation_rate_worst_window"] = (worst_window_rate(violated, judged, window_ticks(dt))
-                                                    if has_profile else math.nan)
-    out.update(_depths(-c[violated], "clearance_violation_depth"))
-    out.update(_obstacle_metrics(tr, w, swing, dt))
-    out.update(_barrier_metrics(tr, w, swing, dt))
-    return out
+    stream = ClearanceStream(dt)
+    stream.feed(tr, slice(k0, tr.n))
+    return stream.result()
 
 
-def _obstacle_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) -> dict[str, float]:
-    """Trips and stance strikes from contact onsets (see the module doc), the geometric clearance of swing
-    feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall)."""
-    out: dict[str, float] = {"shin_floor_contact_rate": float(np.mean(tr.shin_floor_contact[w]))
-                             if tr.n > w.start else math.nan}  # fmt: skip
-    rearm = max(1, round(TRIP_REARM_S / dt))
-    flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-    out["stance_flank_strikes"] = int((onsets(flank.any(axis=2), rearm) & ~swing).sum())
-    d = tr.obstacle_clearance_m[w]
-    if not np.isfinite(d).any():
-        return out
-    on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
-    new = onsets(on_obstacle, rearm)
-    link_new = onsets(tr.leg_link_obstacle_contact[w], rearm)
-    foot_trips = int((new & swing).sum())
-    link_trips = int(link_new.sum())
-    trip_ticks = np.flatnonzero((new & swing).any(axis=1) | link_new.any(axis=1))
-    touch = on_obstacle & swing
-    ds = d[swing]
-    out.update({
-        "trips": foot_trips + link_trips,
-        "foot_trips": foot_trips,
-        "shin_trips": link_trips,  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
-        "stance_obstacle_contacts": int((new & ~swing).sum()),
+class ClearanceStream:
+    """:func:`clearance_metrics` fed chunk by chunk (rows of the trace's current chunk); contact onsets
+    carried across chunks."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt, self.acc = dt, Reducer()
+        rearm = max(1, round(TRIP_REARM_S / dt))
+        self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
+
+    def result(self) -> dict[str, float]:
+        return self.acc.result()
+
+    def feed(self, tr: EpisodeTrace, w: slice) -> None:
+        acc, dt = self.acc, self.dt
+        swing = ~tr.in_stance[w]
+        loaded = (tr.contact_fn_n[w] >= MIN_NORMAL_FORCE_N).any(axis=2)
+        early = tr.swing_phase[w] >= 0.5
+        c = tr.clearance_m[w]
+        judged = swing & np.isfinite(c)  # without a profile c is nan: nothing is judged
+        violated = judged & (c < -CLEARANCE_TOLERANCE_M)
+        parts = (("", judged), ("_unloaded", judged & ~loaded), ("_lift_off_lag", judged & loaded & ~early),
+                 ("_early_touchdown", judged & loaded & early))
+        for name, sel in parts:
+            v = c[sel]
+            acc.mean(f"clearance_violation_rate{name}", v < -CLEARANCE_TOLERANCE_M)
+            acc.min(f"clearance_min_m{name}", v)
+        acc.mean("clearance_loaded_swing_rate", loaded[judged])
+        acc.window("clearance_violation_rate_worst_window", violated, judged, window_ticks(dt))
+        _depths(acc, -c[violated], "clearance_violation_depth")
+        self._obstacles(tr, w, swing)
+        _barrier_metrics(acc, tr, w, swing, dt)
+
+    def _obstacles(self, tr: EpisodeTrace, w: slice, swing: np.ndarray) -> None:
+        """Trips and stance strikes from contact onsets (see the module doc), the geometric clearance of swing
+        feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall)."""
+        acc = self.acc
+        acc.mean("shin_floor_contact_rate", tr.shin_floor_contact[w])
+        flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
+        acc.count("stance_flank_strikes", (self.flank(flank.any(axis=2)) & ~swing).sum())
+        d = tr.obstacle_clearance_m[w]
+        if not np.isfinite(d).any():  # no obstacles in the terrain (nan distances): no obstacle keys
+            return
+        on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
+        new = self.foot(on_obstacle)
+        link_new = self.link(tr.leg_link_obstacle_contact[w])
+        trip_ticks = np.flatnonzero((new & swing).any(axis=1) | link_new.any(axis=1))
+        touch = on_obstacle & swing
+        acc.count("trips", (new & swing).sum() + link_new.sum())
+        acc.count("foot_trips", (new & swing).sum())
+        acc.count("shin_trips", link_new.sum())  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
+        acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
-        "first_trip_s": float(tr.t_s[w.start + trip_ticks[0]]) if trip_ticks.size else math.nan,
-        "obstacle_touch_swing_rate": float(np.mean(touch[swing])) if swing.any() else math.nan,
-        "obstacle_clearance_min_m": float(ds.min()) if ds.size else math.nan,
-    })  # fmt: skip
-    out.update(_depths(-d[touch & (d < 0)], "obstacle_penetration"))
-    return out
+        acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)
+        acc.mean("obstacle_touch_swing_rate", touch[swing])
+        acc.min("obstacle_clearance_min_m", d[swing])
+        _depths(acc, -d[touch & (d < 0)], "obstacle_penetration")
 
 
-def _barrier_metrics(tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) -> dict[str, float]:
+def _barrier_metrics(acc: Reducer, tr: EpisodeTrace, w: slice, swing: np.ndarray, dt: float) -> None:
     """The filter's own barrier values h (its model's foot positions): the share of swing ticks with
     h < -tolerance on a tick whose QP was solved — the filter reports success while its own safety
     condition does not hold (a wrong model, an infeasible recovery, or a profile it cannot follow); and the
-    same over the worst 0.5 s window."""
-    none = {"barrier_negative_rate": math.nan, "barrier_negative_rate_worst_window": math.nan}
+    same over the worst 0.5 s window (nan without a filter or a judged tick)."""
     if not tr.filter_on:
-        return none
+        acc.first("barrier_negative_rate", math.nan)
+        acc.first("barrier_negative_rate_worst_window", math.nan)
+        return
     h = tr.barrier_h_min(w)  # the smallest over the barrier families
     judged = swing & np.isfinite(h)
-    if not judged.any():
-        return none
     solved = (tr.qp_status[w] == 0)[:, None]
     negative = judged & solved & (h < -CLEARANCE_TOLERANCE_M)
-    return {"barrier_negative_rate": float(negative.sum() / judged.sum()),
-            "barrier_negative_rate_worst_window": worst_window_rate(negative, judged, window_ticks(dt))}
+    acc.ratio("barrier_negative_rate", negative.sum(), judged.sum())
+    acc.window("barrier_negative_rate_worst_window", negative, judged, window_ticks(dt))

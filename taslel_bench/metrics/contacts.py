@@ -25,7 +25,8 @@ import math
 
 import numpy as np
 
-from taslel_bench.metrics.windows import window_ticks, worst_window_rate
+from taslel_bench.metrics.stream import Reducer, Touchdowns
+from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.trace import EpisodeTrace
 
 MIN_NORMAL_FORCE_N = 1.0  # [N] a contact carries load from this normal force on
@@ -34,26 +35,10 @@ CONE_RTOL = 1e-6  # relative tolerance of "beyond the cone" for the filter's pla
 TOUCHDOWN_FRACTION = 0.1  # touchdown slip: the first 10 % of the stance duration after a touchdown
 
 
-def _mean(x: np.ndarray) -> float:
-    return float(x.mean()) if x.size else math.nan
-
-
-def _pct(x: np.ndarray, p: float) -> float:
-    return float(np.percentile(x, p)) if x.size else math.nan
-
-
 def touchdown_window(loaded: np.ndarray, n_ticks: int) -> np.ndarray:
     """(n, 4) bool: the first ``n_ticks`` ticks of every run of consecutive loaded ticks of each foot (a run
     already under way at the first tick is not a touchdown)."""
-    n = loaded.shape[0]
-    out = np.zeros_like(loaded)
-    ticks = np.arange(n)
-    for i in range(loaded.shape[1]):
-        col = loaded[:, i]
-        starts = col & ~np.concatenate([[True], col[:-1]])  # rising edges after the first tick
-        start_tick = np.maximum.accumulate(np.where(starts, ticks, -1))  # latest touchdown at or before k
-        out[:, i] = col & (start_tick >= 0) & (ticks - start_tick < n_ticks)
-    return out
+    return Touchdowns(n_ticks)(loaded)
 
 
 def terrain_normals(tr: EpisodeTrace, ticks: slice, sel: np.ndarray) -> np.ndarray:
@@ -77,75 +62,89 @@ def terrain_normals(tr: EpisodeTrace, ticks: slice, sel: np.ndarray) -> np.ndarr
 def contact_metrics(tr: EpisodeTrace, k0: int, dt: float, stance_duration_s: float) -> dict[str, float]:
     """All contact metrics of the walking ticks ``k0:n`` (see the module doc), plus the stand's ``_stand``
     GRF error and slip. ``dt`` [s] control period; ``stance_duration_s`` [s] scheduled stance length."""
-    n = tr.n
-    out = _contact_set(tr, slice(k0, n), dt, stance_duration_s, suffix="")
-    stand = _contact_set(tr, slice(0, k0), dt, stance_duration_s, suffix="_stand")
-    out.update({k: v for k, v in stand.items() if k.startswith(("grf_mae", "slip_mps_mean", "contacts_loaded"))
-                and "worst_window" not in k})
-    return out
+    walk, stand = ContactStream(dt, stance_duration_s, ""), ContactStream(dt, stance_duration_s, "_stand")
+    walk.feed(tr, slice(k0, tr.n))
+    stand.feed(tr, slice(0, k0))
+    return {**walk.result(), **stand_part(stand.result())}
 
 
-def _contact_set(tr: EpisodeTrace, ticks: slice, dt: float, stance_s: float, suffix: str) -> dict[str, float]:
-    fn, ft = tr.contact_fn_n[ticks], tr.contact_ft_n[ticks]  # [N] (n, 4, K) in each contact's frame
-    mu_c, slip = tr.contact_mu[ticks], tr.contact_slip_mps[ticks]  # [-], [m/s]
-    loaded_c = fn >= MIN_NORMAL_FORCE_N  # (n, 4, K) loaded contacts
-    plant_loaded = loaded_c.any(axis=2)  # (n, 4) feet
-    in_stance = tr.in_stance[ticks]
-    stance_c = loaded_c & in_stance[..., None]
-    edge = loaded_c & (ft >= CONE_EDGE_FRACTION * mu_c * fn)
-    main = np.argmax(fn, axis=2)[..., None]
-    slip_main = np.take_along_axis(slip, main, 2)[..., 0]  # [m/s] of each foot's most loaded contact
-    lam = tr.grf_filter_w[ticks]  # [N] filter's prediction, world axes (nan: filter off or QP failed)
-    lam_ok = np.all(np.isfinite(lam), axis=2)
-    filter_loaded = np.zeros_like(plant_loaded)
-    normals = None
-    if tr.filter_on:
-        normals = terrain_normals(tr, ticks, lam_ok & (np.nan_to_num(lam[..., 2]) > 0.0))
-        filter_loaded = lam_ok & (np.einsum("nlj,nlj->nl", np.nan_to_num(lam), normals) >= MIN_NORMAL_FORCE_N)
-    loaded = plant_loaded | filter_loaded
-    out: dict[str, float] = {
-        f"contacts_loaded{suffix}": int(loaded.sum()),
-        f"contacts_loaded_outside_stance{suffix}": int((loaded & ~in_stance).sum()),
-        f"contacts_loaded_flank{suffix}": int((loaded_c & (tr.contact_normal_w[ticks][..., 2] < FLANK_COS)).sum()),
-    }
-    for name, sel, feet in (("", loaded_c, plant_loaded), ("_stance", stance_c, plant_loaded & in_stance)):
-        key = name + suffix
-        ratio = ft[sel] / fn[sel]
-        out[f"friction_cone_edge_rate{key}"] = _mean(edge[sel])
-        out[f"friction_ratio_p95{key}"] = _pct(ratio, 95)  # capped at mu by the plant's cone: not a violation
-        out[f"slip_mps_mean{key}"] = _mean(slip[sel])
-        out[f"slip_mps_p95{key}"] = _pct(slip[sel], 95)
-        out[f"sliding_distance_m{key}"] = float(slip_main[feet].sum() * dt)
-    out[f"friction_cone_edge_rate_worst_window{suffix}"] = worst_window_rate(edge, loaded_c, window_ticks(dt))
-    touchdown = touchdown_window(plant_loaded, max(1, round(TOUCHDOWN_FRACTION * stance_s / dt)))
-    out[f"touchdown_slip_mps_mean{suffix}"] = _mean(slip_main[touchdown])
-    if tr.filter_on:
-        out.update(_filter_forces(tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix))
-    return out
+def stand_part(stand: dict[str, float]) -> dict[str, float]:
+    """The keys of the stand's contact set that the summary keeps."""
+    return {k: v for k, v in stand.items() if k.startswith(("grf_mae", "slip_mps_mean", "contacts_loaded"))
+            and "worst_window" not in k}
+
+
+class ContactStream:
+    """The contact metrics of one tick set (walking: ``suffix=""``, the stand: ``"_stand"``) fed chunk by
+    chunk (:meth:`feed`, rows of the trace's current chunk), touchdowns and windows carried across chunks."""
+
+    def __init__(self, dt: float, stance_s: float, suffix: str) -> None:
+        self.dt, self.suffix = dt, suffix
+        self.acc = Reducer()
+        self.touchdowns = Touchdowns(max(1, round(TOUCHDOWN_FRACTION * stance_s / dt)))
+
+    def result(self) -> dict[str, float]:
+        out = self.acc.result()
+        for name in ("", "_stance"):  # [m] the slip integral of the most loaded contact of loaded feet
+            key = f"sliding_distance_m{name}{self.suffix}"
+            out[key] = float(out.get(key, 0.0) * self.dt)
+        return out
+
+    def feed(self, tr: EpisodeTrace, ticks: slice) -> None:
+        acc, suffix, dt = self.acc, self.suffix, self.dt
+        fn, ft = tr.contact_fn_n[ticks], tr.contact_ft_n[ticks]  # [N] (n, 4, K) in each contact's frame
+        mu_c, slip = tr.contact_mu[ticks], tr.contact_slip_mps[ticks]  # [-], [m/s]
+        loaded_c = fn >= MIN_NORMAL_FORCE_N  # (n, 4, K) loaded contacts
+        plant_loaded = loaded_c.any(axis=2)  # (n, 4) feet
+        in_stance = tr.in_stance[ticks]
+        stance_c = loaded_c & in_stance[..., None]
+        edge = loaded_c & (ft >= CONE_EDGE_FRACTION * mu_c * fn)
+        main = np.argmax(fn, axis=2)[..., None] if fn.shape[0] else np.zeros((0, fn.shape[1], 1), int)
+        slip_main = np.take_along_axis(slip, main, 2)[..., 0]  # [m/s] of each foot's most loaded contact
+        lam = tr.grf_filter_w[ticks]  # [N] filter's prediction, world axes (nan: filter off or QP failed)
+        lam_ok = np.all(np.isfinite(lam), axis=2)
+        filter_loaded = np.zeros_like(plant_loaded)
+        normals = None
+        if tr.filter_on:
+            normals = terrain_normals(tr, ticks, lam_ok & (np.nan_to_num(lam[..., 2]) > 0.0))
+            filter_loaded = lam_ok & (np.einsum("nlj,nlj->nl", np.nan_to_num(lam), normals) >= MIN_NORMAL_FORCE_N)
+        loaded = plant_loaded | filter_loaded
+        acc.count(f"contacts_loaded{suffix}", loaded.sum())
+        acc.count(f"contacts_loaded_outside_stance{suffix}", (loaded & ~in_stance).sum())
+        acc.count(f"contacts_loaded_flank{suffix}", (loaded_c & (tr.contact_normal_w[ticks][..., 2] < FLANK_COS)).sum())
+        for name, sel, feet in (("", loaded_c, plant_loaded), ("_stance", stance_c, plant_loaded & in_stance)):
+            key = name + suffix
+            ratio = ft[sel] / fn[sel]
+            acc.mean(f"friction_cone_edge_rate{key}", edge[sel])
+            acc.pct(f"friction_ratio_p95{key}", ratio, 95)  # capped at mu by the plant's cone: not a violation
+            acc.mean(f"slip_mps_mean{key}", slip[sel])
+            acc.pct(f"slip_mps_p95{key}", slip[sel], 95)
+            acc.total(f"sliding_distance_m{key}", slip_main[feet])
+        acc.window(f"friction_cone_edge_rate_worst_window{suffix}", edge, loaded_c, window_ticks(dt))
+        acc.mean(f"touchdown_slip_mps_mean{suffix}", slip_main[self.touchdowns(plant_loaded)])
+        if tr.filter_on:
+            _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix)
 
 
 FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank
 
 
-def _filter_forces(tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,
+def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,
                    loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
-                   suffix: str) -> dict[str, float]:
+                   suffix: str) -> None:
     """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
     filter's planned force against the true cone about the terrain normal under the foot."""
-    out: dict[str, float] = {}
     f = tr.grf_plant_w[ticks]  # [N] net force on each foot (foot sensor), world axes
     # lambda = 0 for a foot the filter treats as swing; ticks whose QP failed have no lambda (qp_failed)
     err = np.where(lam_ok[..., None], lam, np.nan) - f
     for name, sel in (("", loaded & lam_ok), ("_stance", in_stance & lam_ok)):
-        out[f"grf_mae_z_n{name}{suffix}"] = _mean(np.abs(err[..., 2][sel]))
-        out[f"grf_mae_xy_n{name}{suffix}"] = _mean(np.hypot(err[..., 0], err[..., 1])[sel])
+        acc.mean(f"grf_mae_z_n{name}{suffix}", np.abs(err[..., 2][sel]))
+        acc.mean(f"grf_mae_xy_n{name}{suffix}", np.hypot(err[..., 0], err[..., 1])[sel])
     # beyond the TRUE cone: the plant had to refuse the force the filter planned (over-estimated mu, or a
     # wrong contact model); the square pyramid's corners lie on the cone up to rounding (CONE_RTOL)
     lam0 = np.nan_to_num(lam)
     lam_n = np.einsum("nlj,nlj->nl", lam0, normals)
     lam_t = np.linalg.norm(lam0 - lam_n[..., None] * normals, axis=2)
     beyond = filter_loaded & (lam_t > tr.mu_foot[ticks] * lam_n * (1 + CONE_RTOL))
-    out[f"filter_demand_beyond_cone_rate{suffix}"] = _mean(beyond[filter_loaded])
-    out[f"filter_demand_beyond_cone_rate_worst_window{suffix}"] = worst_window_rate(beyond, filter_loaded,
-                                                                                    window_ticks(dt))
-    return out
+    acc.mean(f"filter_demand_beyond_cone_rate{suffix}", beyond[filter_loaded])
+    acc.window(f"filter_demand_beyond_cone_rate_worst_window{suffix}", beyond, filter_loaded, window_ticks(dt))

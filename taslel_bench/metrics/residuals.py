@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from taslel_bench.metrics.stream import Reducer
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import a1
@@ -48,9 +49,17 @@ def _skew(d: np.ndarray) -> np.ndarray:
 def compute(trace: EpisodeTrace, setup: ResidualSetup) -> None:
     """Fill ``trace.model_residual`` (n, 18), ``trace.foot_acc_error_w`` (n, 4, 3) and
     every barrier family's ``psi_realized_mps2`` (n, 4) (nan where undefined)."""
-    n, br, m, dt = trace.n, setup.bridge, setup.model, setup.control_dt_s
-    qpos = np.vstack([setup.initial_qpos[None], trace.qpos_mj[:n]])  # state before tick k: row k
-    qvel = np.vstack([setup.initial_qvel[None], trace.qvel_mj[:n]])
+    compute_rows(trace, setup, trace.n - trace.offset, setup.initial_qpos, setup.initial_qvel)
+
+
+def compute_rows(trace: EpisodeTrace, setup: ResidualSetup, n: int, qpos_before: np.ndarray,
+                 qvel_before: np.ndarray) -> None:
+    """:func:`compute` for the first ``n`` rows of the trace's current chunk: ``q*_before`` is the MuJoCo
+    state before its first row (the last row of the previous chunk); a row after them, if recorded, gives
+    the last row's realised barrier condition (the same numbers as over the whole episode)."""
+    br, m, dt = setup.bridge, setup.model, setup.control_dt_s
+    qpos = np.vstack([qpos_before[None], trace.qpos_mj[:n]])  # state before tick k: row k
+    qvel = np.vstack([qvel_before[None], trace.qvel_mj[:n]])
     residual = np.full((n, a1.NV), np.nan)
     acc_error = np.full((n, a1.N_LEGS, 3), np.nan)
     q_all, v_all = np.zeros((n, a1.NQ)), np.zeros((n, a1.NV))
@@ -78,8 +87,9 @@ def compute(trace: EpisodeTrace, setup: ResidualSetup) -> None:
             acc_error[k] = m.foot_jac_in_world @ (trace.vdot_filter[k] - vdot_all[k])
     trace.model_residual = residual
     trace.foot_acc_error_w = acc_error
+    ahead = min(n + 1, trace.n - trace.offset)  # the next row, where it is recorded
     for log in trace.barriers.values():
-        log.psi_realized_mps2 = realised_condition(log.he_mps[:n], dt, setup.alpha2)
+        log.psi_realized_mps2 = realised_condition(log.he_mps[:ahead], dt, setup.alpha2)[:n]
 
 
 def realised_acceleration(br: StateBridge, qpos: np.ndarray, qvel: np.ndarray, v: np.ndarray,
@@ -127,47 +137,75 @@ def residual_metrics(trace: EpisodeTrace, k0: int, limits) -> dict[str, float]:
     the alarm shares :mod:`taslel_bench.metrics.health` judges: ``residual_alarm_rate`` (ticks whose trunk-force
     residual norm exceeds ``limits.residual_trunk_force_n_max`` or whose largest joint residual exceeds
     ``limits.residual_joint_nm_max``) and ``barrier_psi_realized_negative_rate`` (swing ticks the QP solved
-    whose realised ECBF condition is below -PSI_TOLERANCE_MPS2)."""
-    n = trace.n
-    if trace.model_residual.shape[0] < n or n <= k0:
+    whose realised ECBF condition is below -PSI_TOLERANCE_MPS2). Empty before the residuals are computed."""
+    if trace.model_residual.shape[0] < trace.n or trace.n <= k0:
         return {}
-    r = trace.model_residual[k0:n]
-    force, torque, joint = (np.linalg.norm(r[:, s], axis=1) for s in (slice(0, 3), slice(3, 6), slice(6, None)))
-    joint_max = np.abs(r[:, 6:]).max(axis=1)
-    alarm = (force > limits.residual_trunk_force_n_max) | (joint_max > limits.residual_joint_nm_max)
-    out = {
-        "residual_trunk_force_n_rms": _rms(force),
-        "residual_trunk_torque_nm_rms": _rms(torque),
-        "residual_joint_nm_rms": _rms(joint),
-        "residual_joint_nm_p95": float(np.percentile(joint_max, 95)),
-        "residual_alarm_rate": float(alarm.mean()),
-    }
-    if trace.filter_on:
-        stance = trace.in_stance[k0:n]
-        acc = np.linalg.norm(trace.foot_acc_error_w[k0:n], axis=2)  # [m/s²] predicted - realised, per foot
-        out["foot_acc_error_stance_mps2_rms"] = _rms(acc[stance])
-        out["foot_acc_error_swing_mps2_rms"] = _rms(acc[~stance])
-        errors, negative, judged = [], 0, 0
-        solved = (trace.qp_status[k0:n] == 0)[:, None]
-        for real, plan in ((log.psi_realized_mps2, log.psi_planned_mps2) for log in trace.barriers.values()):
-            both = np.isfinite(real[k0:n]) & np.isfinite(plan[k0:n]) & solved
-            errors.append((real[k0:n] - plan[k0:n])[both])
-            negative += int((real[k0:n][both] < -PSI_TOLERANCE_MPS2).sum())
-            judged += int(both.sum())
-        out["barrier_psi_error_mps2_rms"] = _rms(np.concatenate(errors)) if errors else math.nan
-        out["barrier_psi_realized_negative_rate"] = negative / judged if judged else math.nan
-    return out
+    stream = ResidualStream(limits)
+    stream.feed(trace, slice(k0, trace.n))
+    return stream.result()
+
+
+class ResidualStream:
+    """:func:`residual_metrics` and :func:`alarm_events` fed chunk by chunk (rows of the current chunk
+    whose residuals are computed); the alarm state carried across chunks."""
+
+    def __init__(self, limits, max_events: int = 20) -> None:
+        self.limits, self.max_events, self.acc = limits, max_events, Reducer()
+        self.prev_alarm, self.events = False, []
+        self.psi_negative, self.psi_judged, self.fed = 0, 0, False
+
+    def result(self) -> dict[str, float]:
+        if not self.fed:
+            return {}
+        out = self.acc.result()
+        if "barrier_psi_error_mps2_rms" in out:
+            out["barrier_psi_realized_negative_rate"] = (self.psi_negative / self.psi_judged if self.psi_judged
+                                                         else math.nan)  # fmt: skip
+        return out
+
+    def feed(self, trace: EpisodeTrace, w: slice) -> None:
+        r = trace.model_residual[w]
+        if r.shape[0] == 0:
+            return
+        self.fed = True
+        acc, limits = self.acc, self.limits
+        force, torque, joint = (np.linalg.norm(r[:, s], axis=1) for s in (slice(0, 3), slice(3, 6), slice(6, None)))
+        joint_max = np.abs(r[:, 6:]).max(axis=1)
+        alarm = (force > limits.residual_trunk_force_n_max) | (joint_max > limits.residual_joint_nm_max)
+        acc.rms("residual_trunk_force_n_rms", force)
+        acc.rms("residual_trunk_torque_nm_rms", torque)
+        acc.rms("residual_joint_nm_rms", joint)
+        acc.pct("residual_joint_nm_p95", joint_max, 95)
+        acc.mean("residual_alarm_rate", alarm)
+        self._alarms(trace.t_s[w], alarm, force, joint_max)
+        if not trace.filter_on:
+            return
+        stance = trace.in_stance[w]
+        acc_err = np.linalg.norm(trace.foot_acc_error_w[w], axis=2)  # [m/s²] predicted - realised, per foot
+        acc.rms("foot_acc_error_stance_mps2_rms", acc_err[stance])
+        acc.rms("foot_acc_error_swing_mps2_rms", acc_err[~stance])
+        solved = (trace.qp_status[w] == 0)[:, None]
+        for log in trace.barriers.values():
+            real, plan = log.psi_realized_mps2[w], log.psi_planned_mps2[w]
+            both = np.isfinite(real) & np.isfinite(plan) & solved
+            acc.rms("barrier_psi_error_mps2_rms", (real - plan)[both])
+            self.psi_negative += int((real[both] < -PSI_TOLERANCE_MPS2).sum())
+            self.psi_judged += int(both.sum())
+        acc.first("barrier_psi_error_mps2_rms", math.nan)  # registered without barrier families too
+
+    def _alarms(self, t_s: np.ndarray, alarm: np.ndarray, force: np.ndarray, joint: np.ndarray) -> None:
+        onsets = np.flatnonzero(alarm & ~np.concatenate([[self.prev_alarm], alarm[:-1]]))
+        self.prev_alarm = bool(alarm[-1])
+        for j in onsets[: max(0, self.max_events - len(self.events))]:
+            self.events.append({"t_s": float(t_s[j]), "kind": "alarm",
+                                "message": f"model residual: trunk force {force[j]:.3g} N, largest joint "
+                                           f"{joint[j]:.3g} N·m"})  # fmt: skip
 
 
 def alarm_events(trace: EpisodeTrace, k0: int, limits, max_events: int = 20) -> list[dict[str, object]]:
     """The first ``max_events`` onsets of a residual alarm (see :func:`residual_metrics`), as events."""
-    n = trace.n
-    if trace.model_residual.shape[0] < n or n <= k0:
+    if trace.model_residual.shape[0] < trace.n or trace.n <= k0:
         return []
-    r = trace.model_residual[k0:n]
-    force, joint = np.linalg.norm(r[:, :3], axis=1), np.abs(r[:, 6:]).max(axis=1)
-    alarm = (force > limits.residual_trunk_force_n_max) | (joint > limits.residual_joint_nm_max)
-    onsets = np.flatnonzero(alarm & ~np.concatenate([[False], alarm[:-1]]))[:max_events]
-    return [{"t_s": float(trace.t_s[k0 + j]), "kind": "alarm",
-             "message": f"model residual: trunk force {force[j]:.3g} N, largest joint {joint[j]:.3g} N·m"}
-            for j in onsets]  # fmt: skip
+    stream = ResidualStream(limits, max_events)
+    stream.feed(trace, slice(k0, trace.n))
+    return stream.events

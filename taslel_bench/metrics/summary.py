@@ -10,14 +10,15 @@ import math
 import numpy as np
 
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, overestimates
-from taslel_bench.metrics.clearance import clearance_metrics
-from taslel_bench.metrics.contacts import contact_metrics
+from taslel_bench.metrics.clearance import ClearanceStream
+from taslel_bench.metrics.contacts import ContactStream, stand_part
 from taslel_bench.metrics.health import HealthLimits, assess
-from taslel_bench.metrics.residuals import residual_metrics
+from taslel_bench.metrics.residuals import ResidualStream
+from taslel_bench.metrics.stream import Reducer
 from taslel_bench.metrics.verdict import SafetyLimits, judge
-from taslel_bench.metrics.windows import window_ticks, worst_window_rate
+from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.result import EpisodeResult
-from taslel_bench.record.trace import TICK_PARTS
+from taslel_bench.record.trace import TICK_PARTS, rpy_from_quat
 
 
 def _pct(x: np.ndarray, p: float) -> float:
@@ -28,6 +29,7 @@ def _median(x: np.ndarray) -> float:
     return float(np.median(x)) if x.size else math.nan
 
 
+ONE_MS_US = 1000.0  # [µs] (taslel_bench.qp.reference_check.ONE_MS_US)
 DEFAULT_LIMITS = HealthLimits()
 DEFAULT_SAFETY = SafetyLimits()
 
@@ -35,8 +37,18 @@ DEFAULT_SAFETY = SafetyLimits()
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
               limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY) -> dict[str, object]:  # fmt: skip
     """The run's summary. ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip window);
-    ``limits``: when the run is ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``."""
-    tr, n = res.trace, res.trace.n
+    ``limits``: when the run is ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``. The
+    numbers come from the episode's :class:`SummaryStream` (fed chunk by chunk during the episode) when it
+    was made with these settings, else from the whole trace (which must then hold every tick)."""
+    stream = res.extras.get("metrics")
+    if not isinstance(stream, SummaryStream) or stream.settings != (control_dt_s, stand_duration_s,
+                                                                     stance_duration_s, limits):  # fmt: skip
+        if res.trace.offset:
+            raise ValueError("summarize: the trace holds only the last chunk and the episode's metrics were "
+                             "made with other settings")
+        stream = SummaryStream(control_dt_s, stand_duration_s, stance_duration_s, limits)
+        stream.feed(res.trace, res.trace.n)
+    n = res.trace.n
     out: dict[str, object] = {
         "status": res.status,
         "message": res.message,
@@ -49,43 +61,150 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
         # compiled kernels loaded (or compiled) before the episode clock starts; not in wall_time_s
         "warmup_s": float(res.extras.get("warmup_s", math.nan)),
         "real_time_factor": float(n * control_dt_s / res.wall_time_s) if res.wall_time_s > 0 else math.nan,
-        "tick_us_median": _median(tr.tick_us[:n]),
-        "tick_us_p99": _pct(tr.tick_us[:n], 99),
     }
-    for j, part in enumerate(TICK_PARTS):  # where the tick's time goes, measured inside the loop
-        out[f"tick_{part}_us_median"] = _median(tr.tick_parts_us[:n, j])
-    k0 = min(round(stand_duration_s / control_dt_s), n)  # first walking tick
-    out.update(locomotion_metrics(res, control_dt_s, stand_duration_s))
-    out.update(filter_metrics(res, k0, control_dt_s))
-    out.update(contact_metrics(tr, k0, control_dt_s, stance_duration_s))
-    out.update(clearance_metrics(tr, k0, control_dt_s))
-    out.update(residual_metrics(tr, k0, limits))
+    out.update(stream.result())
     out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
     if "residuals_error" in res.extras:
         out["residuals_error"] = str(res.extras["residuals_error"])
-    out.update(estimator_metrics(res))
+    for key in [k for k in out if k.startswith("estimator_")]:
+        out[key] = out.pop(key)  # after the residuals, as the summary always had them
     out["status"], out["degraded_reasons"] = assess(out, limits)
     out["safe"], out["unsafe_reasons"] = judge(out, safety)
     return out
 
 
+class SummaryStream:
+    """Every metric of :func:`summarize` fed chunk by chunk: :meth:`feed` after each chunk of the episode
+    (its derived quantities and residuals computed), :meth:`result` at the end. Memory: a few numbers per
+    key, except the exact percentiles (:data:`taslel_bench.metrics.stream` series)."""
+
+    def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS) -> None:
+        self.settings = (dt, stand_s, stance_s, limits)
+        self.dt, self.k_walk = dt, round(stand_s / dt)  # first walking tick
+        self.acc, self.n, self.filter_on = Reducer(), 0, False
+        self.walk_contacts = ContactStream(dt, stance_s, "")
+        self.stand_contacts = ContactStream(dt, stance_s, "_stand")
+        self.clearance, self.residuals = ClearanceStream(dt), ResidualStream(limits)
+        self.estimator = EstimatorStream()
+        self.ends: dict[str, np.ndarray] = {}  # trunk position and yaw of the first walking and the last tick
+        self.fed = {"walk": False, "stand": False}
+        self.reference = Reducer()  # deadline rates for taslel_bench.qp.reference_check
+        self._u_errors: list[np.ndarray] = []
+
+    def feed(self, tr, n: int) -> None:
+        """The trace's rows up to episode tick ``n`` (every row of its current chunk that is processed)."""
+        k0, rows = tr.offset, n - tr.offset
+        self.filter_on = tr.filter_on
+        self.n = n
+        acc = self.acc
+        acc.median("tick_us_median", tr.tick_us[:rows])
+        acc.pct("tick_us_p99", tr.tick_us[:rows], 99)
+        for j, part in enumerate(TICK_PARTS):  # where the tick's time goes, measured inside the loop
+            acc.median(f"tick_{part}_us_median", tr.tick_parts_us[:rows, j])
+        split = min(max(self.k_walk - k0, 0), rows)  # local row of the first walking tick
+        stand, walk = slice(0, split), slice(split, rows)
+        self._locomotion(tr, rows, walk)
+        self._filter(tr, rows, walk)
+        if split > 0 or not self.fed["stand"]:
+            self.stand_contacts.feed(tr, stand)
+            self.fed["stand"] = True
+        if rows > split or not self.fed["walk"]:
+            self.walk_contacts.feed(tr, walk)
+            self.clearance.feed(tr, walk)
+            self.fed["walk"] = True
+        if tr.model_residual.shape[0] >= rows:
+            self.residuals.feed(tr, walk)
+        self.estimator.feed(tr, rows)
+        err = np.asarray(tr.qp_u_error_nm[:rows])
+        self._u_errors.append(err[np.isfinite(err)])  # the reference-checked ticks only (record.reference_every)
+
+    def _locomotion(self, tr, rows: int, walk: slice) -> None:
+        if rows == 0:
+            return
+        rpy = rpy_from_quat(tr.base_quat_wxyz[:rows])
+        if walk.stop > walk.start and "walk" not in self.ends:
+            self.ends["walk"] = np.array([*tr.base_pos_w[walk.start], rpy[walk.start, 2]])
+        self.ends["last"] = np.array([*tr.base_pos_w[rows - 1], rpy[rows - 1, 2]])
+        self.acc.mean("trunk_height_mean_m", tr.base_pos_w[walk, 2])
+
+    def _filter(self, tr, rows: int, walk: slice) -> None:
+        """See :func:`filter_metrics`."""
+        acc = self.acc
+        du = np.linalg.norm(tr.u[walk] - tr.u_nom[walk], axis=1)
+        acc.mean("intervention_nm_mean", du)
+        acc.mean("u_nom_nm_mean", np.linalg.norm(tr.u_nom[walk], axis=1))
+        if not tr.filter_on:
+            return
+        solve = tr.qp_solve_us[:rows]
+        solve = solve[np.isfinite(solve)]
+        build = tr.qp_build_us[:rows]
+        filtered = tr.qp_status[:rows] >= 0  # ticks the filter ran (filter.start_time may delay it)
+        fallback = tr.qp_fallback[:rows]
+        acc.count("qp_solves", filtered.sum())
+        acc.count("qp_failed", fallback.sum())
+        acc.ratio("qp_failed_rate", (fallback & filtered).sum(), filtered.sum())
+        acc.window("qp_failed_rate_worst_window", fallback & filtered, filtered, window_ticks(self.dt))
+        acc.median("qp_solve_us_median", solve)
+        acc.pct("qp_solve_us_p99", solve, 99)
+        acc.max("qp_solve_us_max", solve)
+        acc.median("qp_build_us_median", build[np.isfinite(build)])
+        acc.max("intervention_nm_max", du)
+        it = tr.qp_iterations[:rows]
+        acc.median("qp_iterations_median", it[it >= 0])
+        self.reference.mean("qp_deadline_miss_rate", solve > self.dt * 1e6)
+        self.reference.mean("qp_solve_over_1ms_rate", solve > ONE_MS_US)
+
+    def result(self) -> dict[str, object]:
+        out = {k: v for k, v in self.acc.result().items() if not k.startswith(("trunk_height", "intervention", "u_nom"))}
+        acc = self.acc.result()
+        loco = self._locomotion_result(acc.get("trunk_height_mean_m", math.nan))
+        filt = {k: acc[k] for k in ("intervention_nm_mean", "u_nom_nm_mean") if k in acc}
+        if not self.filter_on:
+            filt.update(qp_solves=0, qp_failed_rate=math.nan)
+        else:
+            for key in ("qp_solves", "qp_failed", "qp_failed_rate", "qp_failed_rate_worst_window",
+                        "qp_solve_us_median", "qp_solve_us_p99", "qp_solve_us_max", "qp_build_us_median",
+                        "intervention_nm_max"):
+                filt[key] = out.pop(key, acc.get(key))
+            iterations = out.pop("qp_iterations_median", math.nan)
+            if not math.isnan(iterations):
+                filt["qp_iterations_median"] = iterations
+        head = {k: out[k] for k in out if k.startswith("tick_")}
+        return {**head, **loco, **filt, **self.walk_contacts.result(), **stand_part(self.stand_contacts.result()),
+                **self.clearance.result(), **self.residuals.result(), **self.estimator.result(self.n)}
+
+    def _locomotion_result(self, trunk_height: float) -> dict[str, float]:
+        """See :func:`locomotion_metrics` (an episode that never walked: the last tick is its first walking one)."""
+        if self.n == 0:
+            return {"distance_m": math.nan, "mean_speed_mps": math.nan, "lateral_drift_m": math.nan}
+        last = self.ends["last"]
+        first = self.ends.get("walk", last)
+        k0 = min(self.k_walk, self.n - 1)
+        walk_time = (self.n - 1 - k0) * self.dt
+        dx = last[0] - first[0]
+        return {
+            "distance_m": float(dx),
+            "mean_speed_mps": float(dx / walk_time) if walk_time > 0 else math.nan,
+            "lateral_drift_m": float(abs(last[1] - first[1])),
+            "yaw_change_deg": float(np.degrees(last[3] - first[3])),
+            "trunk_height_mean_m": trunk_height if "walk" in self.ends else float(last[2]),
+        }
+
+    def alarm_events(self) -> list[dict[str, object]]:
+        """The first onsets of a residual alarm (:func:`taslel_bench.metrics.residuals.alarm_events`)."""
+        return list(self.residuals.events)
+
+    def u_errors(self) -> np.ndarray:
+        """[N·m] |u - u_ref| of every reference-checked tick (:mod:`taslel_bench.qp.reference_check`)."""
+        return np.concatenate(self._u_errors) if self._u_errors else np.zeros(0)
+
+
 def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[str, float]:
     """Distance = world-x displacement of the trunk origin from the start of walking to the last tick;
     mean speed = that distance / walking time; drift = |y| displacement; yaw change in degrees."""
-    tr, n = res.trace, res.trace.n
-    k0 = min(round(stand_s / dt), max(n - 1, 0))
-    if n == 0:
-        return {"distance_m": math.nan, "mean_speed_mps": math.nan, "lateral_drift_m": math.nan}
-    walk_time = (n - 1 - k0) * dt
-    dx = tr.base_pos_w[n - 1, 0] - tr.base_pos_w[k0, 0]
-    yaw = tr.base_rpy()[:, 2]
-    return {
-        "distance_m": float(dx),
-        "mean_speed_mps": float(dx / walk_time) if walk_time > 0 else math.nan,
-        "lateral_drift_m": float(abs(tr.base_pos_w[n - 1, 1] - tr.base_pos_w[k0, 1])),
-        "yaw_change_deg": float(np.degrees(yaw[-1] - yaw[k0])),
-        "trunk_height_mean_m": float(np.mean(tr.base_pos_w[k0:n, 2])),
-    }
+    keys = ("distance_m", "mean_speed_mps", "lateral_drift_m", "yaw_change_deg", "trunk_height_mean_m")
+    full = summarize(res, dt, stand_s)
+    return {k: full[k] for k in keys if k in full}
 
 
 def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[str, float]:
@@ -93,51 +212,119 @@ def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[s
     magnitude ``u_nom_nm_mean`` = mean ||u_nom||_2 over the same ticks (what the nominal controller asks for);
     QP counts and timings from the backend's own timer (solve) and the filter's (build), every filtered tick;
     ``qp_failed_rate_worst_window``: the failed share over the worst 0.5 s window (``dt`` [s] control period)."""
-    tr, n = res.trace, res.trace.n
-    du = np.linalg.norm(tr.u[k0:n] - tr.u_nom[k0:n], axis=1)
-    u_nom = np.linalg.norm(tr.u_nom[k0:n], axis=1)
-    out: dict[str, float] = {
-        "intervention_nm_mean": float(du.mean()) if du.size else math.nan,
-        "u_nom_nm_mean": float(u_nom.mean()) if du.size else math.nan,
-    }
-    if not tr.filter_on:
-        out.update(qp_solves=0, qp_failed_rate=math.nan)
-        return out
-    solve = tr.qp_solve_us[:n]
-    solve = solve[np.isfinite(solve)]
-    build = tr.qp_build_us[:n]
-    filtered = tr.qp_status[:n] >= 0  # ticks the filter ran (filter.start_time may delay it)
-    out.update(
-        qp_solves=int(filtered.sum()),
-        qp_failed=int(tr.qp_fallback[:n].sum()),
-        qp_failed_rate=float(tr.qp_fallback[:n][filtered].mean()) if filtered.any() else math.nan,
-        qp_failed_rate_worst_window=worst_window_rate(tr.qp_fallback[:n] & filtered, filtered, window_ticks(dt)),
-        qp_solve_us_median=_median(solve),
-        qp_solve_us_p99=_pct(solve, 99),
-        qp_solve_us_max=float(solve.max()) if solve.size else math.nan,
-        qp_build_us_median=_median(build[np.isfinite(build)]),
-        intervention_nm_max=float(du.max()) if du.size else math.nan,
-    )
-    it = tr.qp_iterations[:n]
-    if np.any(it >= 0):
-        out["qp_iterations_median"] = float(np.median(it[it >= 0]))
-    return out
+    full = summarize(res, dt, k0 * dt)
+    keys = ("intervention_nm_mean", "u_nom_nm_mean", "qp_solves", "qp_failed", "qp_failed_rate",
+            "qp_failed_rate_worst_window", "qp_solve_us_median", "qp_solve_us_p99", "qp_solve_us_max",
+            "qp_build_us_median", "intervention_nm_max", "qp_iterations_median")
+    return {k: full[k] for k in keys if k in full}
 
 
 def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
     """mu_hat (what the filter used) vs the true friction under the trunk, every tick."""
-    tr, n = res.trace, res.trace.n
-    err = tr.mu_hat[:n] - tr.mu_true[:n]
-    if n == 0:
-        return {}
-    out = {
-        "estimator_mae": float(np.abs(err).mean()),
-        "estimator_bias": float(err.mean()),
-        "estimator_overestimate_rate": float(np.mean(overestimates(tr.mu_hat[:n], tr.mu_true[:n]))),
-    }
-    out["estimator_settle_s"] = settle_time(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n])
-    out.update(estimator_safety_metrics(tr.t_s[:n], tr.mu_true[:n], tr.mu_hat[:n], tr.mu_hat_ready[:n]))
-    return out
+    stream = EstimatorStream()
+    stream.feed(res.trace, res.trace.n - res.trace.offset)
+    return stream.result(res.trace.n)
+
+
+class EstimatorStream:
+    """:func:`estimator_metrics` fed chunk by chunk: means from sums and counts; the first friction change,
+    the first drop and the first ready tick found once; the last tick outside the band carried."""
+
+    def __init__(self) -> None:
+        self.acc, self.k, self.t01 = Reducer(), 0, []
+        self.prev_mu: float | None = None
+        self.first_ready: int | None = None
+        self.settle = _UntilClear(lambda mu, prev: mu != prev, lambda hat, mu: np.abs(hat - mu) > SETTLE_BAND)
+        self.safe = _UntilClear(lambda mu, prev: mu < prev, lambda hat, mu: hat > mu + SETTLE_BAND)
+
+    def feed(self, tr, rows: int) -> None:
+        if rows == 0:
+            return
+        t, mu, hat, ready = tr.t_s[:rows], tr.mu_true[:rows], tr.mu_hat[:rows], tr.mu_hat_ready[:rows]
+        acc, k = self.acc, self.k
+        self.t01 = [*self.t01, *t[: 2 - len(self.t01)]][:2]
+        err = hat - mu
+        over = overestimates(hat, mu)
+        acc.mean("estimator_mae", np.abs(err))
+        acc.mean("estimator_bias", err)
+        acc.mean("estimator_overestimate_rate", over)
+        prev = mu[0] if self.prev_mu is None else self.prev_mu
+        self.settle.feed(t, mu, hat, prev, k)
+        self.safe.feed(t, mu, hat, prev, k)
+        acc.mean("estimator_low_overestimate_rate", over[mu < LOW_FRICTION])
+        if self.first_ready is None and ready.any():
+            self.first_ready = k + int(np.argmax(ready))
+        start = rows if self.first_ready is None else max(self.first_ready - k, 0)
+        acc.mean("estimator_startup_overestimate_rate", over[:start])
+        after = slice(start, rows)
+        acc.mean("estimator_ready_overestimate_rate", over[after])
+        acc.count("notready_after", (~ready[after]).sum())
+        useful = hat[after] >= np.minimum(mu[after], USEFUL_CAP) - USEFUL_SLACK
+        capped = np.abs(np.minimum(hat[after], CAPPED_MAE_CAP) - np.minimum(mu[after], CAPPED_MAE_CAP))
+        acc.mean("estimator_useful_rate", useful)
+        acc.mean("estimator_capped_mae", capped)
+        self.prev_mu, self.k = float(mu[-1]), k + rows
+
+    def result(self, n: int) -> dict[str, float]:
+        if self.k == 0:
+            return {}
+        a = self.acc.result()
+        dt = float(self.t01[1] - self.t01[0]) if len(self.t01) > 1 else 0.0
+        first_ready = self.first_ready if self.first_ready is not None else self.k
+        return {
+            "estimator_mae": a["estimator_mae"], "estimator_bias": a["estimator_bias"],
+            "estimator_overestimate_rate": a["estimator_overestimate_rate"],
+            "estimator_settle_s": self.settle.value(),
+            "estimator_low_overestimate_rate": a["estimator_low_overestimate_rate"],
+            "estimator_startup_s": float(first_ready * dt),
+            "estimator_startup_overestimate_rate": a["estimator_startup_overestimate_rate"] if first_ready else math.nan,
+            "estimator_ready_overestimate_rate": a["estimator_ready_overestimate_rate"],
+            "estimator_notready_after_startup_s": float(a["notready_after"] * dt),
+            "estimator_useful_rate": a["estimator_useful_rate"],
+            "estimator_capped_mae": a["estimator_capped_mae"],
+            "estimator_time_to_safe_s": self.safe.value(),
+        }  # fmt: skip
+
+
+class _UntilClear:
+    """:func:`_time_until_clear` from the first tick where ``trigger(mu[k], mu[k-1])`` holds, fed chunk by
+    chunk: the trigger's time, the last bad tick and the time of the tick after it carried."""
+
+    def __init__(self, trigger, bad) -> None:
+        self.trigger, self.bad = trigger, bad
+        self.t0: float | None = None
+        self.last_bad: int | None = None
+        self.t_after: float | None = None  # time of the tick after the last bad one (None: not seen yet)
+        self.end = 0
+
+    def feed(self, t: np.ndarray, mu: np.ndarray, hat: np.ndarray, prev_mu: float, k: int) -> None:
+        n = t.shape[0]
+        if self.last_bad is not None and self.t_after is None and self.last_bad == k - 1:
+            self.t_after = float(t[0])
+        start = 0
+        if self.t0 is None:
+            hits = np.flatnonzero(self.trigger(mu, np.concatenate([[prev_mu], mu[:-1]])))
+            hits = hits[(hits + k) > 0]  # tick 0 has no predecessor
+            if hits.size == 0:
+                self.end = k + n
+                return
+            start = int(hits[0])
+            self.t0 = float(t[start])
+        bad = np.flatnonzero(self.bad(hat[start:], mu[start:]))
+        if bad.size:
+            j = start + int(bad[-1])
+            self.last_bad = k + j
+            self.t_after = float(t[j + 1]) if j + 1 < n else None
+        self.end = k + n
+
+    def value(self) -> float:
+        if self.t0 is None:
+            return math.nan
+        if self.last_bad is None:
+            return 0.0
+        if self.last_bad == self.end - 1:
+            return math.inf
+        return float(self.t_after - self.t0)
 
 
 SETTLE_BAND = OVERESTIMATE_MARGIN  # [-] |mu_hat - mu| band for the settle time

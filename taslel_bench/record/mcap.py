@@ -8,8 +8,8 @@ Channels (every ``record.mcap_rate_hz``-th of a second, i.e. every :attr:`McapSt
   once per streamed chunk so a seek or a partial file shows them), ``/scene/contact`` (force arrows of the
   plant and of the filter per foot, the swing feet's barrier state);
 * the signals, JSON with named fields (:mod:`taslel_bench.record.signals`): ``/base_state``,
-  ``/joint_state``, ``/torques``, ``/contact_force``, ``/qp``, ``/tick``, ``/barrier``, ``/friction``, and at
-  close ``/residual`` (computed after the episode);
+  ``/joint_state``, ``/torques``, ``/contact_force``, ``/qp``, ``/tick``, ``/barrier``, ``/friction``, ``/residual``
+  (the model residuals, computed for each chunk before it is written);
 * ``/events`` (JSON) and ``/log`` (``foxglove.Log``): QP failures, falls, errors, the end; ``/summary``.
 
 Log time = the run's wall-clock start [ns since the Unix epoch] + simulated time; publish time = simulated
@@ -17,10 +17,10 @@ time [ns] (and ``t_s`` in every JSON message, ``t_s`` in every scene entity's me
 records: ``run`` (start time, rates, frames), ``config`` (the resolved config.yaml), ``versions``
 (packages, git commit) and, at close, ``summary``.
 
-Written *while* the episode runs: :class:`McapStream` is the episode's chunk sink; every chunk of ticks (1 s
-of simulated time) is flushed to ``episode.partial.mcap`` as one zstd-compressed MCAP chunk. A killed run
-leaves that partial file, readable up to its last chunk; :meth:`McapStream.close` adds the channels
-computed after the episode, the events, the summary and the MCAP summary section and renames the file.
+Written *while* the episode runs: :class:`McapStream` is the episode's chunk sink; every chunk of ticks
+(``record.chunk_ticks``, 5 s of simulated time at 1 kHz by default) is flushed to ``episode.partial.mcap`` as
+one zstd-compressed MCAP chunk. A killed run leaves that partial file, readable up to its last chunk;
+:meth:`McapStream.close` adds the events, the summary and the MCAP summary section and renames the file.
 """
 
 from __future__ import annotations
@@ -126,15 +126,17 @@ class McapStream:
         return np.arange(first, k1, self.every)
 
     def __call__(self, trace: EpisodeTrace, k0: int, k1: int) -> None:
-        """Write the recorded ticks of ``k0:k1`` (the rows steps.parquet will hold) and flush them to disk."""
+        """Write the recorded ticks of ``k0:k1`` (episode ticks the trace holds: the rows steps.parquet will
+        hold, with their model residuals when computed) and flush them to disk."""
         if k1 <= k0:
             return
         ticks = self.recorded(k0, k1)
         if len(ticks):
             frame = trace.frame(k0, k1).iloc[ticks - k0].reset_index(drop=True)
             if self.plant is not None:
-                self._write_3d(trace.qpos_mj[ticks], frame)
+                self._write_3d(trace.qpos_mj[ticks - trace.offset], frame)
             self._write_signals(frame, self.channels)
+            self._write_signals(frame, signals.AFTER_EPISODE)
         self._writer.flush()
         self.ticks_written = k1
 
@@ -160,15 +162,11 @@ class McapStream:
             update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()})
             self._put("/scene/contact", float(t), update.encode())
 
-    def close(self, trace: EpisodeTrace, events: list[dict], summary: dict, steps: pd.DataFrame | None = None) -> Path:
-        """Write the ticks not streamed yet, the channels computed after the episode (from ``steps``, the
-        whole episode's frame, when the caller has it), the events, the summary (a channel and a metadata
-        record); finish; rename to episode.mcap."""
+    def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:
+        """Write the ticks not streamed yet, the events, the summary (a channel and a metadata record);
+        finish; rename to episode.mcap."""
         self(trace, self.ticks_written, trace.n)
-        if trace.n:
-            frame = steps if steps is not None else trace.frame(0, trace.n)
-            self._write_signals(frame.iloc[self.recorded(0, trace.n)].reset_index(drop=True), signals.AFTER_EPISODE)
-        t_end = float(trace.t_s[trace.n - 1]) if trace.n else 0.0
+        t_end = float(trace.t_s[trace.n - 1 - trace.offset]) if trace.n else 0.0
         for e in [*events, {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}]:
             self._write_event(float(e.get("t_s") if e.get("t_s") is not None else t_end), str(e["kind"]), str(e["message"]))
         safe = {k: (v if not (isinstance(v, float) and not np.isfinite(v)) else None) for k, v in summary.items()}

@@ -71,7 +71,7 @@ CHANNELS: dict[str, Spec] = {
     }),
     "/friction": {"mu_hat": "mu_hat", "mu_true": "mu_true", "mu_hat_ready": "mu_hat_ready"},
 }
-# computed after the episode (taslel_bench.metrics.residuals): written for every recorded tick at close
+# computed for each chunk after its ticks (taslel_bench.metrics.residuals): written with the chunk
 AFTER_EPISODE: dict[str, Spec] = {
     "/residual": {
         "trunk_force_n": "residual_trunk_force_n",

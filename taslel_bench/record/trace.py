@@ -59,7 +59,9 @@ class EpisodeTrace:
     def __init__(self, capacity: int, filter_on: bool, nq: int = a1.NQ, nv: int = a1.NV,
                  nsensordata: int = 0, barrier_names: Sequence[str] = ()) -> None:  # fmt: skip
         c, nl = capacity, a1.N_LEGS
-        self.n = 0
+        self.n = 0  # ticks recorded in the episode (global count)
+        self.offset = 0  # global tick of row 0: the trace holds ticks offset .. n - 1 (see roll())
+        self.capacity = capacity
         self.filter_on = filter_on
         self.finalized = False
         # --- raw rows written in the loop
@@ -128,37 +130,64 @@ class EpisodeTrace:
         self.obstacle_contact = np.zeros((0, nl), bool)  # foot sphere touches a physical obstacle
         self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
         self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
+        self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
+        self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
+        for owner, name in ((self, "tick_parts_s"), (self, "mu_hat_ready"), (self, "qp_u_error_nm"),
+                            *((self.contact_log, n) for n in vars(self.contact_log))):  # fmt: skip
+            rows = TickRows(getattr(owner, name))
+            setattr(owner, name, rows)
+            self._by_tick.append(rows)
+
+    def unwrap(self) -> None:
+        """After the episode: the arrays the loop wrote through :class:`TickRows` as plain arrays again."""
+        for owner in (self, self.contact_log):
+            for name, value in list(vars(owner).items()):
+                if isinstance(value, TickRows):
+                    setattr(owner, name, value.a)
+
+    def roll(self, m: int) -> None:
+        """Drop the first ``m`` rows (a processed chunk): the rows after them move to the front, the rest
+        are reset to their initial values, and ``offset`` advances by ``m``."""
+        keep = self.n - self.offset - m
+        for a, fill in self._raw:
+            a[:keep] = a[m : m + keep]
+            a[keep:] = fill
+        self.offset += m
+        for rows in self._by_tick:
+            rows.offset = self.offset
+        self.finalized = False
 
     def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
                barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
         """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
         outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
-        _copy_rows(k, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
+        r = k - self.offset
+        _copy_rows(r, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
                    gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
                    self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_true, self.tick_us)  # fmt: skip
         if fres is not None:
-            self._grf_filter_flat[k] = fres.lam
+            self._grf_filter_flat[r] = fres.lam
             if fres.used_fallback:
-                self.qp_status[k] = 1
-                self.qp_fallback[k] = True
+                self.qp_status[r] = 1
+                self.qp_fallback[r] = True
                 self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
             else:
-                self.qp_status[k] = 0
-            self.qp_build_us[k] = fres.build_time_s * 1e6
+                self.qp_status[r] = 0
+            self.qp_build_us[r] = fres.build_time_s * 1e6
             sol = fres.solve
             if sol is not None:
-                self.qp_solve_us[k] = sol.solve_time_s * 1e6
+                self.qp_solve_us[r] = sol.solve_time_s * 1e6
                 if sol.iterations is not None:
-                    self.qp_iterations[k] = sol.iterations
-            self.vdot_filter[k] = fres.vdot
-            self.ecbf_margin_mps2[k] = fres.ecbf_margin_mps2
+                    self.qp_iterations[r] = sol.iterations
+            self.vdot_filter[r] = fres.vdot
+            self.ecbf_margin_mps2[r] = fres.ecbf_margin_mps2
             for barrier in barriers:
                 log = self.barriers[barrier.name]
-                log.h_m[k] = barrier.h
-                log.he_mps[k] = barrier.h_e
-                log.psi_planned_mps2[k] = barrier.psi_planned if not fres.used_fallback else np.nan
-        self.nonfoot_obstacle_contact[k] = nonfoot_obstacle_contact
-        self.shin_floor_contact[k] = shin_floor_contact
+                log.h_m[r] = barrier.h
+                log.he_mps[r] = barrier.h_e
+                log.psi_planned_mps2[r] = barrier.psi_planned if not fres.used_fallback else np.nan
+        self.nonfoot_obstacle_contact[r] = nonfoot_obstacle_contact
+        self.shin_floor_contact[r] = shin_floor_contact
         self.n = k + 1
 
     def main_contact(self, ticks: slice = slice(None)) -> np.ndarray:
@@ -185,8 +214,9 @@ class EpisodeTrace:
         return self._context[3] if self._context is not None else None
 
     def derive(self, k0: int, k1: int) -> dict[str, np.ndarray]:
-        """The named plant quantities of ticks ``k0:k1`` from their raw rows (vectorised; the same
-        definitions for a chunk written during the episode as for the whole episode after it)."""
+        """The named plant quantities of ticks ``k0:k1`` (episode ticks, held by the trace) from their raw
+        rows (vectorised; the same definitions for a chunk as for the whole episode)."""
+        k0, k1 = k0 - self.offset, k1 - self.offset
         if self._context is None:
             raise RuntimeError("EpisodeTrace.bind() must be called before deriving quantities")
         br, contacts, profile, terrain, frames = self._context
@@ -217,14 +247,16 @@ class EpisodeTrace:
             clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
         out["clearance_m"] = clearance
         if frames is not None:
-            out.update(frames.frames(self.contact_log, k0, k1))
+            out.update(frames.frames(_plain(self.contact_log), k0, k1))
         return out
 
-    def finalize(self) -> None:
-        """Derive the named plant quantities of the ``n`` recorded ticks into attributes (idempotent)."""
+    def finalize(self, rows: int | None = None) -> None:
+        """Derive the named plant quantities of the first ``rows`` rows (default: every recorded tick the
+        trace holds) into attributes (idempotent until :meth:`roll`)."""
         if self.finalized:
             return
-        derived = self.derive(0, self.n)
+        rows = self.n - self.offset if rows is None else rows
+        derived = self.derive(self.offset, self.offset + rows)
         for name, value in derived.items():
             setattr(self, name, value)
         self._derived_names = tuple(derived)
@@ -238,20 +270,21 @@ class EpisodeTrace:
     # ------------------------------------------------------------------------------------------ derived
     def base_rpy(self) -> np.ndarray:
         """(n, 3) roll, pitch, yaw [rad] of the trunk (ZYX convention)."""
-        return rpy_from_quat(self.base_quat_wxyz[: self.n])
+        return rpy_from_quat(self.base_quat_wxyz[: self.n - self.offset])
 
     def to_frame(self, dt: float | None = None) -> pd.DataFrame:
-        """One row per control tick, typed columns, units in the names (all ``n`` ticks)."""
-        return self.frame(0, self.n)
+        """One row per control tick, typed columns, units in the names (every tick the trace holds)."""
+        return self.frame(self.offset, self.n)
 
     def frame(self, k0: int, k1: int) -> pd.DataFrame:
-        """Rows ``k0:k1`` as :meth:`to_frame` gives them (derived from the raw rows: usable during the
-        episode, for streaming)."""
-        t = slice(k0, k1)
+        """Episode ticks ``k0:k1`` (held by the trace) as :meth:`to_frame` gives them (derived from the raw
+        rows: usable during the episode, for streaming)."""
+        t = slice(k0 - self.offset, k1 - self.offset)
+        k0, k1 = t.start, t.stop
         if self.finalized:  # the derived arrays are already there: slice them
             d = {name: getattr(self, name)[t] for name in self._derived_names}
         else:
-            d = self.derive(k0, k1)
+            d = self.derive(k0 + self.offset, k1 + self.offset)
         cols: dict[str, np.ndarray] = {"t_s": self.t_s[t]}
         self._state_columns(cols, d, t)
         self._leg_columns(cols, d, t)
@@ -333,6 +366,52 @@ class EpisodeTrace:
                      "mu_hat", "mu_true", "mu_hat_ready", "tick_us"):
             cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
+
+
+class TickRows:
+    """An array of the trace's current chunk written by episode tick (``rows[k] = ...``, ``rows[k, :m] =
+    ...``): row ``k - offset``. The loop writes a few arrays by its tick index; the trace keeps a chunk."""
+
+    __slots__ = ("a", "offset")
+
+    def __init__(self, a: np.ndarray) -> None:
+        self.a, self.offset = a, 0
+
+    def _row(self, key):
+        if isinstance(key, tuple):
+            return (key[0] - self.offset, *key[1:])
+        return key - self.offset if not isinstance(key, slice) else key
+
+    def __setitem__(self, key, value) -> None:
+        self.a[self._row(key)] = value
+
+    def __getitem__(self, key):
+        return self.a[self._row(key)]
+
+    def __array__(self, dtype=None, copy=None):
+        return self.a if dtype is None else self.a.astype(dtype)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.a.shape
+
+
+def _plain(obj):
+    """A namespace with ``obj``'s attributes, :class:`TickRows` replaced by their arrays."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(**{k: (v.a if isinstance(v, TickRows) else v) for k, v in vars(obj).items()})
+
+
+def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
+    """(array, initial value) of every per-tick array (first axis ``capacity``) of ``owners`` that owns its
+    data: the rows :meth:`EpisodeTrace.roll` moves and resets."""
+    out = []
+    for owner in owners:
+        for value in vars(owner).values():
+            if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == capacity and value.base is None:
+                out.append((value, value.flat[0] if value.size else 0))
+    return out
 
 
 @kernel

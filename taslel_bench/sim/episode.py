@@ -106,10 +106,17 @@ class Episode:
         # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck):
         # on_tick(k, backend problem, solution) -> |u - u_ref| after the tick, off the clock (extras["reference_s"])
         self.reference_check = None
-        # --- streaming hook (record.mcap): chunk_sink(trace, k0, k1) after every chunk_ticks ticks, outside
-        # the ticks' timers (its time is reported as recording_s, not in wall_time_s)
+        # --- the trace in chunks (record.chunk_ticks): None keeps the whole episode in memory (one chunk,
+        # processed after the episode; result.trace holds every tick); a number processes every chunk_ticks
+        # ticks (derived quantities, residuals, then the hooks below) and keeps only the current chunk.
+        # The hooks run outside the ticks' timers (their time is reported as recording_s, not wall_time_s):
+        # chunk_sink(trace, k0, k1) (record.mcap), steps_sink(frame of the chunk) (steps.parquet) and
+        # metrics.feed(trace, k1) (a taslel_bench.metrics.summary.SummaryStream, in result.extras["metrics"])
         self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
-        self.chunk_ticks = 1000
+        self.steps_sink: Callable[[object], None] | None = None
+        self.metrics = None
+        self.chunk_ticks: int | None = None
+        self.sink_ticks: int | None = None  # chunk_sink in pieces of this many ticks (None: one per chunk)
         self.initial_qpos, self.initial_qvel = self._draw_initial_state()
         self.initial_state()
 
@@ -184,19 +191,22 @@ class Episode:
         finally:
             if gc_was_enabled:
                 gc.enable()
-        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s
+        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s - self._residuals_s
         res.n_ticks = trace.n
+        self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
+        trace.unwrap()
         res.extras["recording_s"] = self._recording_s
         res.extras["reference_s"] = self._reference_s
-        if self.s.analyse:
-            trace.finalize()
-            self._residuals(trace, res)
+        res.extras["residuals_s"] = self._residuals_s
+        if self.metrics is not None:
+            res.extras["metrics"] = self.metrics
         return res
 
     def _start(self) -> tuple[EpisodeTrace, EpisodeResult]:
         """A fresh trace and result, the plant at its initial state, the per-run buffers, warmed kernels."""
         self._barriers = self.filter.barriers if self.filter is not None else []
-        trace = EpisodeTrace(self.n_ticks, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
+        capacity = self.n_ticks if not self.chunk_ticks else min(self.n_ticks, int(self.chunk_ticks) + 1)
+        trace = EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
                              nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
         res = EpisodeResult(trace=trace)
         self.initial_state()
@@ -213,6 +223,9 @@ class Episode:
         self._t0_plant = self.d.time
         self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
         self._reference_s = 0.0  # [s] spent in the reference check, outside the ticks' timers
+        self._residuals_error = ""  # the first residual computation's error ("" none)
+        self._residuals_s = 0.0  # [s] spent computing the model residuals (chunk by chunk)
+        self._state_before = (self.initial_qpos.copy(), self.initial_qvel.copy())  # before the chunk's first row
         if self.reference_check is not None:
             self.reference_check.reset()
         res.extras["warmup_s"] = self._warm_up()
@@ -313,25 +326,57 @@ class Episode:
         return False
 
     def _between_ticks(self, k: int, trace: EpisodeTrace, progress: Callable[[float], None] | None) -> None:
-        """Progress and streaming recording, outside the tick's timers."""
+        """Progress and the chunk's processing (record.chunk_ticks), outside the tick's timers. A chunk is
+        processed once the tick after it is recorded (the realised barrier condition of its last tick needs
+        the next one), then dropped from the trace."""
         if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
             progress(k * self.s.control_dt_s)
-        chunk = max(1, int(self.chunk_ticks))
-        if self.chunk_sink is not None and (k + 1) % chunk == 0:
+        if self.chunk_ticks and trace.n - trace.offset == int(self.chunk_ticks) + 1:
+            self._process_chunk(trace, None, int(self.chunk_ticks))
+            trace.roll(int(self.chunk_ticks))
             rec0 = time.perf_counter()
-            self.chunk_sink(trace, k + 1 - chunk, k + 1)
+            gc.collect()  # the collector is off in the loop: free the chunk's cyclic garbage (tables, frames)
             self._recording_s += time.perf_counter() - rec0
 
-    def _residuals(self, trace: EpisodeTrace, res: EpisodeResult) -> None:
-        """The controller model's residuals against the recorded plant motion (after the episode)."""
+    def _process_chunk(self, trace: EpisodeTrace, res: EpisodeResult | None, rows: int) -> None:
+        """The first ``rows`` rows of the trace: derived quantities, model residuals (``analyse``), then the
+        MCAP sink, the steps sink and the metrics (their time is recording_s)."""
+        rec0 = time.perf_counter()
+        if self.s.analyse:
+            trace.finalize(rows)
+            self._residuals(trace, rows)
+        k0, k1 = trace.offset, trace.offset + rows
+        if self.chunk_sink is not None and rows:
+            step, a = int(self.sink_ticks or rows), k0
+            while a < k1:  # pieces ending at multiples of sink_ticks (from tick 0 on)
+                b = min(k1, (a // step + 1) * step)
+                self.chunk_sink(trace, a, b)
+                a = b
+        if self.steps_sink is not None and (rows or k0 == 0):
+            self.steps_sink(trace.frame(k0, k1))
+        if self.metrics is not None:
+            self.metrics.feed(trace, k1)
+        if rows:
+            self._state_before = (trace.qpos_mj[rows - 1].copy(), trace.qvel_mj[rows - 1].copy())
+        if self._residuals_error and res is not None:
+            res.extras["residuals_error"] = self._residuals_error
+        self._recording_s += time.perf_counter() - rec0
+
+    def _residuals(self, trace: EpisodeTrace, rows: int) -> None:
+        """The controller model's residuals against the recorded plant motion of the chunk's rows (after
+        their ticks; the first error is noted and stops them for the rest of the episode)."""
+        if self._residuals_error:
+            return
         t0 = time.perf_counter()
         alpha2 = self.filter.settings.ecbf_alpha2 if self.filter is not None else 20.0
         setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s, alpha2)
         try:
-            residuals.compute(trace, setup)
+            residuals.compute_rows(trace, setup, rows, *self._state_before)
         except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
-            res.extras["residuals_error"] = traceback.format_exc().strip().splitlines()[-1]
-        res.extras["residuals_s"] = time.perf_counter() - t0
+            self._residuals_error = traceback.format_exc().strip().splitlines()[-1]
+        dt = time.perf_counter() - t0
+        self._residuals_s += dt
+        self._recording_s -= dt  # reported as residuals_s
 
 
 _NOOP_OPS = ("RESUME", "NOP", "LOAD_CONST", "RETURN_VALUE", "RETURN_CONST")

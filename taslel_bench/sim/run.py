@@ -20,14 +20,14 @@ from omegaconf import DictConfig, OmegaConf
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits
 from taslel_bench.config.validate import memory_estimate_gb, validate
-from taslel_bench.metrics.residuals import alarm_events
-from taslel_bench.metrics.summary import summarize
+from taslel_bench.metrics.summary import SummaryStream, summarize
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.qp.reference_check import reference_metrics
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
+from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
@@ -68,6 +68,7 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
+DEFAULT_CHUNK_TICKS = 5000  # record.chunk_ticks when the config has none
 SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
 
 
@@ -87,6 +88,7 @@ def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
     plain = OmegaConf.to_container(cfg, resolve=True)
     for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
+    plain.get("record", {}).pop("chunk_ticks", None)  # how the trace is processed, not what it holds
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
     mjcf = cfg.robot.get("plant_mjcf")
     hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [a1.a1_urdf_path()])
@@ -195,17 +197,36 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
         choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
     qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
+    steps = _stream_chunks(cfg, built, out_dir)  # record.chunk_ticks: steps.parquet and metrics per chunk
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
-    res: EpisodeResult = built.episode.run(progress=show)
-    if show is not None:
-        print(file=sys.stderr)
-    summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
-    summary.update(_episode_summary(cfg, built, res))
-    events = _events(cfg, res, out_dir)
-    video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
-    _write_results(out_dir, res, summary, events, sink, qp_recorder, video)
+    try:
+        res: EpisodeResult = built.episode.run(progress=show)
+        if show is not None:
+            print(file=sys.stderr)
+        summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
+        summary.update(_episode_summary(cfg, built, res))
+        events = _events(cfg, res, out_dir)
+        video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
+        _write_results(out_dir, res, summary, events, sink, qp_recorder, steps, video)
+    except BaseException:
+        steps.abandon()  # no half-written table under any name
+        raise
     return summary
+
+
+def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
+    """The episode in chunks of ``record.chunk_ticks`` ticks (null: the whole episode in memory): each
+    chunk's rows go to steps.parquet (a temporary file until the end) and to the summary's metrics."""
+    chunk = cfg.record.get("chunk_ticks", DEFAULT_CHUNK_TICKS)
+    episode = built.episode
+    episode.chunk_ticks = int(chunk) if chunk is not None else None
+    dt = 1.0 / float(cfg.control_rate_hz)
+    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
+    episode.metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg))
+    writer = StepsWriter(out_dir / run_files.STEPS)
+    episode.steps_sink = writer.append
+    return writer
 
 
 def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overrides: list[str] | None,
@@ -245,8 +266,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg))
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))
     out["reference_s"] = float(res.extras.get("reference_s", 0.0))
-    n = res.trace.n  # record.reference_every: u error against the tight reference, deadline misses
-    out.update(reference_metrics(built.reference_check, res.trace.qp_u_error_nm[:n], res.trace.qp_solve_us[:n], dt))
+    out.update(_reference_summary(built, res, dt))  # record.reference_every: u error against the reference
     diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
         out.update({f"estimator_{k}": v for k, v in diagnostics().items()})
@@ -262,13 +282,24 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     return out
 
 
+def _reference_summary(built: Built, res: EpisodeResult, dt: float) -> dict[str, float]:
+    """:func:`taslel_bench.qp.reference_check.reference_metrics` from the episode's metrics stream (the
+    deadline rates as means, the u errors of the checked ticks as their series)."""
+    stream = res.extras["metrics"]
+    errors = stream.u_errors()
+    out = reference_metrics(built.reference_check, errors, np.zeros(0), dt)
+    rates = stream.reference.result()
+    for key in ("qp_deadline_miss_rate", "qp_solve_over_1ms_rate"):
+        out[key] = rates.get(key, math.nan)
+    return out
+
+
 def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
     """QP failures, residual alarms, the fall and the error of the run (with simulated times); an error's
     traceback goes to ``traceback.txt``."""
     dt = 1.0 / float(cfg.control_rate_hz)
     events = list(res.trace.events)
-    k0 = min(round(float(cfg.controller.stand_duration) / dt), res.trace.n)
-    events += alarm_events(res.trace, k0, health_limits(cfg))
+    events += res.extras["metrics"].alarm_events()
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
     if res.status == "error":
@@ -279,19 +310,19 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
 
 
 def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict],
-                   sink: _GuardedSink | None, qp_recorder, video=None) -> None:
-    """episode.mcap (finished), qps.npz, steps.parquet, events.json, video.mp4 and, last (it marks the run
-    complete), summary.json; a recording failure is noted in the summary, never loses the run."""
-    steps = res.trace.to_frame()
+                   sink: _GuardedSink | None, qp_recorder, steps: StepsWriter, video=None) -> None:
+    """episode.mcap (finished), qps.npz, steps.parquet (streamed: renamed now), events.json, video.mp4 and,
+    last (it marks the run complete), summary.json; a recording failure is noted in the summary, never
+    loses the run."""
     if sink is not None:
-        _close_mcap(sink, res, events, summary, steps)
+        _close_mcap(sink, res, events, summary)
     if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.record.qpset)
         try:
             qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.sim.run"})
             summary["qps_recorded"] = len(qp_recorder)
         except Exception:  # noqa: BLE001 - recording must not lose the run
             summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
-    run_files.write_parquet(out_dir / run_files.STEPS, steps)
+    steps.finish()
     run_files.write_json(out_dir / run_files.EVENTS, events)
     if video is not None:
         video(summary)
@@ -322,17 +353,16 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
     stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),
                              metadata=metadata)
     sink = _GuardedSink(stream)
-    built.episode.chunk_sink = sink
-    built.episode.chunk_ticks = max(1, round(float(cfg.control_rate_hz)))
+    built.episode.chunk_sink = sink  # fed after every record.chunk_ticks ticks, one MCAP chunk per second
+    built.episode.sink_ticks = max(1, round(float(cfg.control_rate_hz)))
     return sink
 
 
-def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict, steps) -> None:
-    """Finish episode.mcap (the last ticks, the channels from ``steps``, events, summary); a recording
-    failure is noted in the summary."""
+def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict) -> None:
+    """Finish episode.mcap (the last ticks, events, summary); a recording failure is noted in the summary."""
     if not sink.error:
         try:
-            sink.stream.close(res.trace, events, summary, steps)
+            sink.stream.close(res.trace, events, summary)
         except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
             sink.error = traceback.format_exc().strip().splitlines()[-1]
             sink.stream.abandon()

@@ -17,8 +17,10 @@ def _patch(run_module) -> None:
     import signal
 
     from taslel_bench.record import run_files
+    from taslel_bench.record.steps_writer import StepsWriter
 
     original_run, original_write_parquet = run_module.run, run_files.write_parquet
+    original_append = StepsWriter.append
 
     def run_with_faults(cfg, out_dir, *args, **kwargs):
         if "kill" in _FAULTS and _FAULTS["kill"] in str(out_dir):
@@ -30,8 +32,14 @@ def _patch(run_module) -> None:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
         return original_write_parquet(path, frame)
 
+    def append_with_faults(self, frame):  # steps.parquet streams chunk by chunk (record.chunk_ticks)
+        if "enospc" in _FAULTS and _FAULTS["enospc"] in str(self.path):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.tmp))
+        return original_append(self, frame)
+
     run_module.run = run_with_faults
     run_files.write_parquet = write_parquet_with_faults
+    StepsWriter.append = append_with_faults
 
 
 class _PatchOnImport:
