@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.fastloop import run_nominal
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
 from estimators.randomisation import (
     PLANT_FACTORS,
@@ -51,6 +52,7 @@ from estimators.randomisation import (
 from taslel_bench import api
 from taslel_bench.interfaces import FrictionEstimate, Plane, Proprioception, Terrain
 
+LOOPS = ("fast", "core")  # how nominal episodes run (filtered ones always run Episode.run)
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
 
@@ -63,6 +65,7 @@ class EpisodeConfig:
     stride: int = 4  # [samples] between window starts
     fall_margin_s: float = 0.3  # [s] windows must end this long before a fall
     filter_overrides: tuple[str, ...] = ()  # Hydra overrides of the project config for the safety filter
+    loop: str = "fast"  # nominal episodes: "fast" (estimators.fastloop, bit-identical samples) or "core" (Episode.run)
 
 
 @dataclass
@@ -140,16 +143,25 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
         filter_mu = float(p.friction)
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
-    sampler = WindowSampler(round(WINDOW_DT_S / cfg.timestep_s), filter_mu if filtered else float(p.friction))
+    if cfg.loop not in LOOPS:
+        raise ValueError(f"EpisodeConfig.loop must be one of {LOOPS}, got {cfg.loop!r}")
+    every = round(WINDOW_DT_S / cfg.timestep_s)
+    sampler = WindowSampler(every, filter_mu if filtered else float(p.friction))
     episode = build_episode(p, cfg, sampler, filtered)
-    res = episode.run()
-    if res.status == "error":
-        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {res.message}")
-    fall_t = res.time_to_fall_s if res.fell else float("nan")
-    failures = int(res.trace.qp_fallback[: res.trace.n].sum())
-    return EpisodeResult(_cut_windows(np.stack(sampler.samples), fall_t, cfg), res.fell, fall_t,
-                         res.n_ticks * episode.physics_per_tick, p, filtered, failures, filter_mu,
-                         time.perf_counter() - wall0)
+    if not filtered and cfg.loop == "fast":
+        fast = run_nominal(episode, every)
+        status, message, fell, fall_time_s = fast.status, fast.message, fast.fell, fast.time_to_fall_s
+        samples, n_ticks, failures = fast.samples, fast.n_ticks, 0
+    else:
+        res = episode.run()
+        status, message, fell, fall_time_s = res.status, res.message, res.fell, res.time_to_fall_s
+        samples, n_ticks = np.stack(sampler.samples), res.n_ticks
+        failures = int(res.trace.qp_fallback[: res.trace.n].sum())
+    if status == "error":
+        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {message}")
+    fall_t = fall_time_s if fell else float("nan")
+    return EpisodeResult(_cut_windows(samples, fall_t, cfg), fell, fall_t, n_ticks * episode.physics_per_tick,
+                         p, filtered, failures, filter_mu, time.perf_counter() - wall0)
 
 
 def _cut_windows(samples: np.ndarray, fall_t: float, cfg: EpisodeConfig) -> np.ndarray:
@@ -470,6 +482,9 @@ def _parser() -> argparse.ArgumentParser:
                     f"(default all: {' '.join(PLANT_FACTORS)})")
     ap.add_argument("--friction-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="floor friction ~ U(LO, HI) in every split instead of the training range (evaluation sets)")
+    ap.add_argument("--loop", choices=LOOPS, default=EpisodeConfig.loop,
+                    help="nominal episodes: fast (estimators.fastloop: the core episode's parts without its "
+                         "per-tick trace; bit-identical samples) or core (Episode.run)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp")
     return ap
@@ -495,7 +510,8 @@ def _print_summary(man: dict[str, object], out: Path, workers: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     a = _parser().parse_args(argv)
-    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
+    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides),
+                        loop=a.loop)
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
     man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
                   filter_mu_scale=tuple(a.filter_mu_scale),

@@ -1,0 +1,53 @@
+"""The fast nominal loop (estimators.fastloop) against the core episode loop: bit-identical samples, the same
+fall tick and time, the same collected windows; filtered episodes are refused."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimators.collect import EpisodeConfig, WindowSampler, build_episode, run_episode
+from estimators.fastloop import run_nominal
+from estimators.randomisation import TRAIN_RANGES, draw
+
+EVERY = 30  # ticks between samples (WINDOW_DT_S at 1 kHz)
+
+
+def _core_and_fast(p, cfg: EpisodeConfig):
+    sampler = WindowSampler(EVERY, p.friction)
+    core = build_episode(p, cfg, sampler).run()
+    fast = run_nominal(build_episode(p, cfg, WindowSampler(EVERY, p.friction)), EVERY)
+    return core, np.stack(sampler.samples), fast
+
+
+@pytest.mark.parametrize("seed", [1, 7])
+def test_fast_loop_samples_are_the_core_loops_bit_for_bit(seed: int) -> None:
+    p = draw(np.random.default_rng(seed), TRAIN_RANGES, seed=seed)
+    core, core_samples, fast = _core_and_fast(p, EpisodeConfig(duration_s=1.6))
+    assert core.status == fast.status == "ok" and not core.fell and not fast.fell
+    assert fast.n_ticks == core.n_ticks == 1600
+    assert fast.samples.shape == core_samples.shape == (54, 36)
+    assert np.array_equal(fast.samples, core_samples)  # same physics, operation for operation
+
+
+def test_fast_loop_falls_on_the_same_tick() -> None:
+    p = dataclasses.replace(draw(np.random.default_rng(1), TRAIN_RANGES, seed=1), motor_strength_scale=0.4,
+                            trunk_mass_scale=1.5)  # weak motors, heavy trunk: falls within a second
+    core, core_samples, fast = _core_and_fast(p, EpisodeConfig(duration_s=2.0))
+    assert core.fell and fast.fell
+    assert fast.time_to_fall_s == core.time_to_fall_s and fast.n_ticks == core.n_ticks
+    assert np.array_equal(fast.samples, core_samples)
+
+
+def test_collect_loops_give_the_same_windows_and_filtered_runs_refuse_the_fast_loop() -> None:
+    p = draw(np.random.default_rng(3), TRAIN_RANGES, seed=3)
+    a = run_episode(p, EpisodeConfig(duration_s=1.6, stride=2, loop="fast"))
+    b = run_episode(p, EpisodeConfig(duration_s=1.6, stride=2, loop="core"))
+    assert a.windows.shape == (3, 40, 36) and np.array_equal(a.windows, b.windows) and a.steps == b.steps
+    with pytest.raises(ValueError, match="loop"):
+        run_episode(p, EpisodeConfig(duration_s=1.6, loop="gpu"))
+    ep = build_episode(p, EpisodeConfig(duration_s=0.6), WindowSampler(EVERY, p.friction), filtered=True)
+    with pytest.raises(ValueError, match="unfiltered"):
+        run_nominal(ep, EVERY)
