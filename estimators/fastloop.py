@@ -37,13 +37,28 @@ class FastResult:
     message: str = ""
 
 
+def _whole_ticks(x_s: float, dt_s: float) -> int:
+    """``x_s / dt_s`` if it is a whole number of ticks, else 0."""
+    n = x_s / dt_s
+    return round(n) if abs(n - round(n)) < 1e-9 else 0
+
+
 def references(controller, n_ticks: int, dt_s: float) -> np.ndarray:
     """(n_ticks, 2, 12) the controller's (q_des [rad], qd_des [rad/s]) of every tick, computed by
-    ``controller.update_references`` in tick order (the order, and so the reference cache, of the loop)."""
+    ``controller.update_references`` in tick order (the order, and so the reference cache, of the loop).
+    When the gait period P and the stand are whole numbers of ticks, the controller itself looks its
+    references up in a per-period table one tick past the first period (:class:`NominalController`): the
+    ticks after that are copies of the tick P earlier (the same values the table returns)."""
     out = np.empty((n_ticks, 2, 12))
-    for k in range(n_ticks):
+    period = _whole_ticks(controller.gait.p.period_s, dt_s)
+    stand = _whole_ticks(controller.stand_duration_s, dt_s)
+    tables = controller.use_tables and period and stand and controller.fd_dt_s == dt_s
+    direct = min(n_ticks, stand + period + 1) if tables else n_ticks
+    for k in range(direct):
         controller.update_references(k * dt_s)
         out[k, 0], out[k, 1] = controller.q_des, controller.qd_des
+    for k in range(direct, n_ticks):
+        out[k] = out[k - period]
     return out
 
 

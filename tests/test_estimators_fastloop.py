@@ -51,3 +51,17 @@ def test_collect_loops_give_the_same_windows_and_filtered_runs_refuse_the_fast_l
     ep = build_episode(p, EpisodeConfig(duration_s=0.6), WindowSampler(EVERY, p.friction), filtered=True)
     with pytest.raises(ValueError, match="unfiltered"):
         run_nominal(ep, EVERY)
+
+
+def test_references_equal_the_controllers_tick_by_tick() -> None:
+    """The per-period shortcut of fastloop.references gives what update_references gives on every tick."""
+    from estimators.fastloop import references
+    from taslel_bench import api
+
+    gait = api.GaitParams(period_s=0.437, speed_mps=0.5)
+    make = lambda: api.NominalController(gait, api.PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)  # noqa: E731
+    refs = references(make(), 3000, 1e-3)
+    ctl = make()
+    for k in range(3000):
+        ctl.update_references(k * 1e-3)
+        assert np.array_equal(refs[k, 0], ctl.q_des) and np.array_equal(refs[k, 1], ctl.qd_des), k
