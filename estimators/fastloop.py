@@ -30,6 +30,8 @@ class FastResult:
     """What :func:`run_nominal` returns: the samples and the fall, as the core loop's result reports them."""
 
     samples: np.ndarray  # (n_samples, 36) float32: q, qdot, tau of the previous tick
+    trunk_friction: np.ndarray  # (n_samples,) [-] friction under the trunk (the loop's Proprioception.true_friction)
+    sensordata: np.ndarray  # (n_samples, nsensordata) the sensors of each sample's state (the trace's rows)
     n_ticks: int  # control ticks run (the fall tick included)
     fell: bool
     time_to_fall_s: float  # [s] on the physics grid; nan without a fall
@@ -94,26 +96,33 @@ def run_nominal(episode, every_ticks: int) -> FastResult:
     act = np.asarray(br.actuator_ids)
     kp, kd, lim = float(ctl.gains.kp), float(ctl.gains.kd), float(ctl.torque_limit_nm)
     qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
-    samples = np.zeros((n // every_ticks + 1, N_FEATURES), np.float32)
+    n_max = n // every_ticks + 1
+    samples, mu_trunk = np.zeros((n_max, N_FEATURES), np.float32), np.zeros(n_max)
+    sensors, sensordata = np.zeros((n_max, m.nsensordata)), d.sensordata
     tau_prev, row = np.zeros(12), np.zeros(N_FEATURES)
-    term, scen, t0 = episode.terminations, episode.scenario, d.time
+    term, scen, t0, terrain, a = episode.terminations, episode.scenario, d.time, episode.terrain, br.free_qadr
     ns = 0
+
+    def done(ticks: int, fell: bool, t_fall: float, status: str, message: str = "") -> FastResult:
+        return FastResult(samples[:ns], mu_trunk[:ns], sensors[:ns], ticks, fell, t_fall, status, message)
+
     for k in range(n):
         t = k * dt
         take = k % every_ticks == 0
-        _tick(qpos, qvel, q_adr, v_adr, act, refs[k, 0], refs[k, 1], kp, kd, lim, tau_prev, row, take, ctrl)
         if take:
-            samples[ns] = row
-            ns += 1
+            mu_trunk[ns] = terrain.friction_at(qpos[a : a + 2])
+        _tick(qpos, qvel, q_adr, v_adr, act, refs[k, 0], refs[k, 1], kp, kd, lim, tau_prev, row, take, ctrl)
         scen.on_tick(m, d, t)
         t_before = d.time
         mujoco.mj_step(m, d)
+        if take:  # sensors of this tick's state (mj_step evaluates them before integrating)
+            samples[ns], sensors[ns] = row, sensordata
+            ns += 1
         if d.time <= t_before:
-            return FastResult(samples[:ns], k + 1, False, float("nan"), "error", f"MuJoCo reset the data at t={t:.3f}s")
+            return done(k + 1, False, float("nan"), "error", f"MuJoCo reset the data at t={t:.3f}s")
         fall = term.after_step(qpos, d, d.time - t0)
         if term.state_is_bad(qpos, qvel):
-            return FastResult(samples[:ns], k + 1, False, float("nan"), "error",
-                              f"non-finite or exploding plant state at t={t:.3f}s")
+            return done(k + 1, False, float("nan"), "error", f"non-finite or exploding plant state at t={t:.3f}s")
         if fall is not None:
-            return FastResult(samples[:ns], k + 1, True, term.on_grid(fall.t_s), "ok")
-    return FastResult(samples[:ns], n, False, float("nan"), "ok")
+            return done(k + 1, True, term.on_grid(fall.t_s), "ok")
+    return done(n, False, float("nan"), "ok")

@@ -59,9 +59,34 @@ def test_references_equal_the_controllers_tick_by_tick() -> None:
     from taslel_bench import api
 
     gait = api.GaitParams(period_s=0.437, speed_mps=0.5)
-    make = lambda: api.NominalController(gait, api.PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)  # noqa: E731
+    make = lambda: api.NominalController(gait, api.PDGains(), stand_duration_s=0.5, fd_dt_s=1e-3)
     refs = references(make(), 3000, 1e-3)
     ctl = make()
     for k in range(3000):
         ctl.update_references(k * 1e-3)
         assert np.array_equal(refs[k, 0], ctl.q_des) and np.array_equal(refs[k, 1], ctl.qd_des), k
+
+
+def test_patch_episode_labels_per_foot_in_both_loops() -> None:
+    """A drop patch across the path: the per-foot labels change foot by foot (front feet first), the trunk
+    label follows the trunk, the two loops give the same windows and labels; a flat floor labels every
+    window with its friction."""
+    from estimators.randomisation import SurfacePatch
+
+    p = dataclasses.replace(draw(np.random.default_rng(3), TRAIN_RANGES, seed=3), friction=0.9, speed_mps=0.5)
+    patch = SurfacePatch(start_m=0.45, length_m=3.0, friction=0.3)
+    cfg = EpisodeConfig(duration_s=4.0, stride=1)
+    a = run_episode(p, cfg, patch=patch)
+    b = run_episode(p, dataclasses.replace(cfg, loop="core"), patch=patch)
+    assert np.array_equal(a.windows, b.windows)
+    assert np.array_equal(a.y, b.y) and np.array_equal(a.y_foot, b.y_foot)
+    assert np.array_equal(a.foot_loaded, b.foot_loaded)
+    assert set(np.unique(a.y_foot)) == {np.float32(0.9), np.float32(0.3)}
+    mixed = a.y_foot.min(axis=1) != a.y_foot.max(axis=1)  # some feet on the patch, some not
+    assert mixed.any()
+    first_on = [int(np.argmax(a.y_foot[:, leg] < 0.5)) for leg in range(4)]  # FL, FR, RL, RR
+    assert max(first_on[:2]) < min(first_on[2:])  # the front feet reach the patch first
+    trunk_on = int(np.argmax(a.y < 0.5))
+    assert max(first_on[:2]) <= trunk_on <= min(first_on[2:])  # the trunk is between front and rear feet
+    flat = run_episode(p, EpisodeConfig(duration_s=1.6, stride=2))
+    assert np.all(flat.y == np.float32(0.9)) and np.all(flat.y_foot == np.float32(0.9))
