@@ -33,24 +33,31 @@ import multiprocessing as mp
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from estimators.fastloop import run_nominal
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
 from estimators.randomisation import (
+    PATCH_COLUMNS,
+    PATCH_RANGES,
     PLANT_FACTORS,
     TRAIN_RANGES,
     EpisodeParams,
+    PatchRanges,
     Ranges,
+    SurfacePatch,
     draw,
+    draw_patch,
     ranges_dict,
     shifted_ranges,
 )
 from taslel_bench import api
-from taslel_bench.interfaces import FrictionEstimate, Plane, Proprioception, Terrain
+from taslel_bench.interfaces import FrictionEstimate, FrictionStrips, Plane, Proprioception, Terrain, a1
 
+LOOPS = ("fast", "core")  # how nominal episodes run (filtered ones always run Episode.run)
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
 
@@ -63,6 +70,7 @@ class EpisodeConfig:
     stride: int = 4  # [samples] between window starts
     fall_margin_s: float = 0.3  # [s] windows must end this long before a fall
     filter_overrides: tuple[str, ...] = ()  # Hydra overrides of the project config for the safety filter
+    loop: str = "fast"  # nominal episodes: "fast" (estimators.fastloop, bit-identical samples) or "core" (Episode.run)
 
 
 @dataclass
@@ -76,6 +84,12 @@ class EpisodeResult:
     filter_failures: int = 0  # ticks on which the filter's QP failed (fallback torque used)
     filter_mu: float = float("nan")  # [-] friction the filter assumed (nan: no filter)
     wall_s: float = 0.0  # [s] wall time of the episode
+    # per window, at its last sample: friction under the trunk (the loop's true_friction) [-], under each foot
+    # (LEGS order) [-], and whether each foot touched the floor (its contact sensor found a contact)
+    y: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    y_foot: np.ndarray = field(default_factory=lambda: np.zeros((0, a1.N_LEGS), np.float32))
+    foot_loaded: np.ndarray = field(default_factory=lambda: np.zeros((0, a1.N_LEGS), bool))
+    patch: SurfacePatch | None = None  # the floor's patch (None: uniform floor)
 
 
 _WORKER: dict[str, object] = {}
@@ -102,21 +116,36 @@ class WindowSampler:
 
     def reset(self) -> None:
         self.samples: list[np.ndarray] = []
+        self.trunk_friction: list[float] = []  # [-] the loop's true_friction at each sample
+        self.ticks: list[int] = []  # control tick of each sample
         self._tick = 0
 
     def step(self, obs: Proprioception) -> FrictionEstimate:
         if self._tick % self.every == 0:
             self.samples.append(sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints))
+            self.trunk_friction.append(obs.true_friction)
+            self.ticks.append(self._tick)
         self._tick += 1
         return FrictionEstimate(self.mu)
 
 
-def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False):
-    """The core episode of one draw: the flat floor with the draw's friction and plant perturbation, the
+def episode_terrain(p: EpisodeParams, patch: SurfacePatch | None = None) -> Terrain:
+    """The flat floor of friction ``p.friction`` [-], with ``patch`` across the path if given (floor strips
+    along world x, as ``scenario=friction_patch`` builds them)."""
+    if patch is None:
+        return Terrain((Plane(p.friction),))
+    edges, mus = patch.edges_and_frictions(p.friction)
+    return Terrain((FrictionStrips(edges, mus, 50.0, 0.1),))
+
+
+def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False,
+                  patch: SurfacePatch | None = None):
+    """The core episode of one draw: the flat floor (:func:`episode_terrain`, with ``patch``) with the
+    draw's friction and plant perturbation, the
     draw's gait and gains, the benchmark's loop and fall rule (``api.episode_settings`` of the project config),
     no initial-state noise, ``estimator`` in the estimator slot, the project's safety filter if ``filtered``."""
     project = _worker_config(cfg.filter_overrides)
-    world = api.StaticWorld(Terrain((Plane(p.friction),)), perturbation=p.perturbation())
+    world = api.StaticWorld(episode_terrain(p, patch), perturbation=p.perturbation())
     plant = api.build_plant(world, api.PlantOptions(timestep_s=cfg.timestep_s), seed=p.seed)
     gait = api.GaitParams(period_s=p.period_s, swing_height_m=p.swing_height_m, speed_mps=p.speed_mps)
     controller = api.NominalController(gait, api.PDGains(kp=100.0 * p.kp_scale, kd=3.0 * p.kd_scale),
@@ -129,10 +158,10 @@ def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: boo
 
 
 def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
-                filter_mu: float | None = None) -> EpisodeResult:
+                filter_mu: float | None = None, patch: SurfacePatch | None = None) -> EpisodeResult:
     """Simulate one episode (:func:`build_episode`) and cut its windows (see the module docstring);
     ``filtered``: the safety filter between the nominal controller and the plant, assuming friction
-    ``filter_mu`` [-] (None: the true floor friction)."""
+    ``filter_mu`` [-] (None: the true floor friction); ``patch``: a strip of other friction across the path."""
     wall0 = time.perf_counter()
     if not filtered:
         filter_mu = float("nan")
@@ -140,30 +169,51 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
         filter_mu = float(p.friction)
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
-    sampler = WindowSampler(round(WINDOW_DT_S / cfg.timestep_s), filter_mu if filtered else float(p.friction))
-    episode = build_episode(p, cfg, sampler, filtered)
-    res = episode.run()
-    if res.status == "error":
-        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {res.message}")
-    fall_t = res.time_to_fall_s if res.fell else float("nan")
-    failures = int(res.trace.qp_fallback[: res.trace.n].sum())
-    return EpisodeResult(_cut_windows(np.stack(sampler.samples), fall_t, cfg), res.fell, fall_t,
-                         res.n_ticks * episode.physics_per_tick, p, filtered, failures, filter_mu,
-                         time.perf_counter() - wall0)
+    if cfg.loop not in LOOPS:
+        raise ValueError(f"EpisodeConfig.loop must be one of {LOOPS}, got {cfg.loop!r}")
+    every = round(WINDOW_DT_S / cfg.timestep_s)
+    sampler = WindowSampler(every, filter_mu if filtered else float(p.friction))
+    episode = build_episode(p, cfg, sampler, filtered, patch)
+    if not filtered and cfg.loop == "fast":
+        fast = run_nominal(episode, every)
+        status, message, fell, fall_time_s = fast.status, fast.message, fast.fell, fast.time_to_fall_s
+        samples, n_ticks, failures = fast.samples, fast.n_ticks, 0
+        mu_trunk, sensors = fast.trunk_friction, fast.sensordata
+    else:
+        res = episode.run()
+        status, message, fell, fall_time_s = res.status, res.message, res.fell, res.time_to_fall_s
+        samples, n_ticks = np.stack(sampler.samples), res.n_ticks
+        failures = int(res.trace.qp_fallback[: res.trace.n].sum())
+        mu_trunk, sensors = np.array(sampler.trunk_friction), res.trace.sensordata_mj[sampler.ticks]
+    if status == "error":
+        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {message}")
+    fall_t = fall_time_s if fell else float("nan")
+    starts = _window_starts(len(samples), fall_t, cfg)
+    ends = starts + WINDOW_STEPS - 1
+    feet = episode.contacts.from_sensor_log(sensors[ends])
+    return EpisodeResult(_cut_windows(samples, starts), fell, fall_t, n_ticks * episode.physics_per_tick, p,
+                         filtered, failures, filter_mu, time.perf_counter() - wall0,
+                         y=mu_trunk[ends].astype(np.float32),
+                         y_foot=episode.terrain.friction_under(feet["foot_pos_in_world"][..., :2]).astype(np.float32),
+                         foot_loaded=feet["in_contact"], patch=patch)
 
 
-def _cut_windows(samples: np.ndarray, fall_t: float, cfg: EpisodeConfig) -> np.ndarray:
-    """Windows of WINDOW_STEPS samples, one every ``cfg.stride`` samples from ``first_window_s`` on, each
+def _window_starts(n_samples: int, fall_t: float, cfg: EpisodeConfig) -> np.ndarray:
+    """First sample of each window: one every ``cfg.stride`` samples from ``first_window_s`` on, each window
     ending at least ``fall_margin_s`` before a fall (``fall_t`` [s], nan: none)."""
     first = int(np.ceil(cfg.first_window_s / WINDOW_DT_S))
-    last_end = len(samples) if np.isnan(fall_t) else int((fall_t - cfg.fall_margin_s) / WINDOW_DT_S)
-    starts = list(range(first, last_end - WINDOW_STEPS + 1, cfg.stride))
-    if not starts:
+    last_end = n_samples if np.isnan(fall_t) else int((fall_t - cfg.fall_margin_s) / WINDOW_DT_S)
+    return np.arange(first, last_end - WINDOW_STEPS + 1, cfg.stride, dtype=np.int64)
+
+
+def _cut_windows(samples: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(len(starts), WINDOW_STEPS, N_FEATURES) windows of ``samples`` from ``starts``."""
+    if len(starts) == 0:
         return np.zeros((0, WINDOW_STEPS, N_FEATURES), np.float32)
     return np.stack([samples[i : i + WINDOW_STEPS] for i in starts])
 
 
-def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float | None]) -> EpisodeResult:
+def _run(args: tuple[EpisodeParams, EpisodeConfig, bool, float | None, SurfacePatch | None]) -> EpisodeResult:
     return run_episode(*args)
 
 
@@ -235,6 +285,36 @@ class _FilterDraws:
                 "filter_mu_range": None if self.mu_range is None else list(self.mu_range)}
 
 
+@dataclass(frozen=True)
+class _PatchDraws:
+    """Which episodes cross a surface patch (probability ``fraction`` [-]) and the patch
+    (:func:`estimators.randomisation.draw_patch` from ``ranges``), from a stream of each episode separate
+    from the plant and filter draws (so those do not change with the patch settings)."""
+
+    fraction: float = 0.0
+    ranges: PatchRanges = PATCH_RANGES
+
+    @classmethod
+    def checked(cls, fraction: float, ranges: PatchRanges) -> _PatchDraws:
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"patch_fraction must be in [0, 1], got {fraction!r}")
+        _positive_range("patch_start_m", ranges.start_m)
+        _positive_range("patch_length_m", ranges.length_m)
+        _positive_range("patch_friction", ranges.friction)
+        return cls(fraction, ranges)
+
+    def draw(self, ep_seed: int, floor_mu: float) -> SurfacePatch | None:
+        if self.fraction <= 0.0:
+            return None
+        rng = np.random.default_rng(np.random.SeedSequence([ep_seed, 0xFA7C]))
+        if rng.random() >= self.fraction:
+            return None
+        return draw_patch(rng, floor_mu, self.ranges)
+
+    def manifest_fields(self) -> dict[str, object]:
+        return {"patch_fraction": self.fraction, "patch_ranges": asdict(self.ranges)}
+
+
 def _check_splits(counts: dict[str, int]) -> None:
     """ValueError if ``counts`` names a split other than train / val / test / shifted."""
     valid = set(_SPLITS)
@@ -256,12 +336,16 @@ def _split_ranges(shift_factors: tuple[str, ...], friction_range: tuple[float, f
     return train_r, shifted_r, friction_range
 
 
+Job = tuple[str, EpisodeParams, bool, float, "SurfacePatch | None"]  # split, plant, filtered, filter mu, patch
+
+
 def _draw_jobs(seed: int, counts: dict[str, int], train_r: Ranges, shifted_r: Ranges, plant_beta: float,
-               filters: _FilterDraws) -> list[tuple[str, EpisodeParams, bool, float]]:
-    """The episodes of every split, in split order: (split, plant draw, filtered, filter mu [-]). Each split
-    and episode has its own spawned seed stream, so a split's draws do not depend on the other counts."""
+               filters: _FilterDraws, patches: _PatchDraws = _PatchDraws()) -> list[Job]:
+    """The episodes of every split, in split order: (split, plant draw, filtered, filter mu [-], patch or
+    None). Each split and episode has its own spawned seed stream, so a split's draws do not depend on the
+    other counts."""
     root = np.random.SeedSequence(seed)
-    jobs: list[tuple[str, EpisodeParams, bool, float]] = []  # (split, plant, filtered, filter mu [-])
+    jobs: list[Job] = []
     for split_ss, split in zip(root.spawn(len(_SPLITS)), _SPLITS):
         n = counts.get(split, 0)
         for ep_ss in split_ss.spawn(n):
@@ -271,16 +355,16 @@ def _draw_jobs(seed: int, counts: dict[str, int], train_r: Ranges, shifted_r: Ra
             p = draw(rng, shifted_r if shifted else train_r, ep_seed, symmetric_com=not shifted,
                      plant_beta=1.0 if shifted else plant_beta)
             filtered, mu_f = filters.draw(ep_seed, p.friction)
-            jobs.append((split, p, filtered, mu_f))
+            jobs.append((split, p, filtered, mu_f, patches.draw(ep_seed, p.friction)))
     return jobs
 
 
-def _run_jobs(jobs: list[tuple[str, EpisodeParams, bool, float]], cfg: EpisodeConfig,
+def _run_jobs(jobs: list[Job], cfg: EpisodeConfig,
               workers: int) -> tuple[list[EpisodeResult], float]:
     """Run every job (in ``workers`` forked processes if > 1), printing the progress about every 5 % of the
     episodes; returns the results in job order and the wall time [s]."""
     t0 = time.perf_counter()
-    args = [(p, cfg, f, s) for _, p, f, s in jobs]
+    args = [(p, cfg, f, s, patch) for _, p, f, s, patch in jobs]
     results: list[EpisodeResult] = []
     every = max(1, len(args) // 20)
 
@@ -357,12 +441,18 @@ def _build_manifest(seed: int, workers: int, cfg: EpisodeConfig, ranges: tuple[R
     }
 
 
+def _patch_row(patch: SurfacePatch | None) -> list[float]:
+    return [math.nan] * 3 if patch is None else [patch.start_m, patch.length_m, patch.friction]
+
+
 def _write_split(out_dir: Path, split: str, rs: list[EpisodeResult]) -> int:
     """Write ``<split>.npz`` of the episodes ``rs`` (whole, then renamed into place); returns its window
-    count. Per window: X (n, WINDOW_STEPS, N_FEATURES) float32, y = floor friction [-], episode index,
-    window_filtered; per episode: params (``EpisodeParams.columns()``), fell, filtered, filter_mu [-]."""
+    count. Per window: X (n, WINDOW_STEPS, N_FEATURES) float32, y = friction under the trunk at the window's
+    last sample [-] (the floor's without a patch), y_foot (n, 4) under each foot [-], foot_loaded (n, 4),
+    episode index, window_filtered; per episode: params (``EpisodeParams.columns()``), fell, filtered,
+    filter_mu [-], patch (``PATCH_COLUMNS``, nan without one)."""
     X = np.concatenate([r.windows for r in rs]).astype(np.float32)
-    y = np.concatenate([np.full(len(r.windows), r.params.friction, np.float32) for r in rs])
+    y = np.concatenate([r.y for r in rs]).astype(np.float32)
     ep = np.concatenate([np.full(len(r.windows), i, np.int32) for i, r in enumerate(rs)])
     params = np.array([r.params.as_row() for r in rs], np.float64)
     tmp = out_dir / f"{split}.tmp.npz"  # written whole, then renamed: never a half-written split
@@ -371,6 +461,9 @@ def _write_split(out_dir: Path, split: str, rs: list[EpisodeResult]) -> int:
         param_columns=np.array(EpisodeParams.columns()), fell=np.array([r.fell for r in rs]),
         filtered=np.array([r.filtered for r in rs]), filter_mu=np.array([r.filter_mu for r in rs]),
         window_filtered=np.concatenate([np.full(len(r.windows), r.filtered) for r in rs]),
+        y_foot=np.concatenate([r.y_foot for r in rs]).astype(np.float32),
+        foot_loaded=np.concatenate([r.foot_loaded for r in rs]).astype(bool),
+        patch=np.array([_patch_row(r.patch) for r in rs], np.float64), patch_columns=np.array(PATCH_COLUMNS),
     )
     tmp.replace(out_dir / f"{split}.npz")
     return len(X)
@@ -388,6 +481,7 @@ def _split_summary(rs: list[EpisodeResult], n_windows: int) -> dict[str, object]
         "fallen_friction": sorted(round(r.params.friction, 3) for r in fell),
         "env_steps": sum(r.steps for r in rs),
         "episodes_filtered": sum(r.filtered for r in rs),
+        "episodes_with_patch": sum(r.patch is not None for r in rs),
         "windows_filtered": sum(len(r.windows) for r in rs if r.filtered),
         "episodes_fallen_filtered": sum(1 for r in fell if r.filtered),
         "filter_fallback_ticks": sum(r.filter_failures for r in rs),
@@ -413,6 +507,8 @@ def collect(
     plant_beta: float = 1.0,
     shift_factors: tuple[str, ...] = PLANT_FACTORS,
     friction_range: tuple[float, float] | None = None,
+    patch_fraction: float = 0.0,
+    patch_ranges: PatchRanges = PATCH_RANGES,
 ) -> dict[str, object]:
     """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
@@ -425,17 +521,21 @@ def collect(
     plant factors the shifted split moves outside the training ranges (default all,
     :func:`estimators.randomisation.shifted_ranges`); ``friction_range`` (lo, hi) [-]: draw the floor friction
     of every split from U(lo, hi) instead of the training range (e.g. low-friction evaluation sets; the same
-    random stream, so only the friction values change)."""
+    random stream, so only the friction values change); ``patch_fraction`` [-]: probability that an episode's
+    floor has a strip of other friction across the path (drawn from ``patch_ranges``, a stream of its own:
+    drops and rises; labels per window under the trunk and under each foot)."""
     filters = _FilterDraws.checked(filter_fraction, filter_mu_scale, filter_mu_range)
+    patches = _PatchDraws.checked(patch_fraction, patch_ranges)
     _check_splits(counts)
     train_r, shifted_r, friction_range = _split_ranges(shift_factors, friction_range)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = _draw_jobs(seed, counts, train_r, shifted_r, plant_beta, filters)
+    jobs = _draw_jobs(seed, counts, train_r, shifted_r, plant_beta, filters, patches)
     results, wall = _run_jobs(jobs, cfg, workers)
     manifest = _build_manifest(seed, workers, cfg, (train_r, shifted_r), shift_factors, results, wall,
                                filters, friction_range, plant_beta)
+    manifest.update(patches.manifest_fields())
     for split in _SPLITS:
-        rs = [r for (s, _, _, _), r in zip(jobs, results) if s == split]
+        rs = [r for job, r in zip(jobs, results) if job[0] == split]
         if not rs:
             continue
         n_windows = _write_split(out_dir, split, rs)
@@ -470,6 +570,17 @@ def _parser() -> argparse.ArgumentParser:
                     f"(default all: {' '.join(PLANT_FACTORS)})")
     ap.add_argument("--friction-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="floor friction ~ U(LO, HI) in every split instead of the training range (evaluation sets)")
+    ap.add_argument("--patch-fraction", type=float, default=0.0,
+                    help="fraction of episodes whose floor has a strip of other friction across the path")
+    ap.add_argument("--patch-start", type=float, nargs=2, default=list(PATCH_RANGES.start_m), metavar=("LO", "HI"),
+                    help="patch near edge ~ U(LO, HI) [m] (world x; the trunk starts at 0)")
+    ap.add_argument("--patch-length", type=float, nargs=2, default=list(PATCH_RANGES.length_m), metavar=("LO", "HI"),
+                    help="patch length log-uniform in [LO, HI] [m]")
+    ap.add_argument("--patch-friction", type=float, nargs=2, default=list(PATCH_RANGES.friction),
+                    metavar=("LO", "HI"), help="patch friction ~ U(LO, HI), at least 0.15 away from the floor's")
+    ap.add_argument("--loop", choices=LOOPS, default=EpisodeConfig.loop,
+                    help="nominal episodes: fast (estimators.fastloop: the core episode's parts without its "
+                         "per-tick trace; bit-identical samples) or core (Episode.run)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp")
     return ap
@@ -495,14 +606,17 @@ def _print_summary(man: dict[str, object], out: Path, workers: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     a = _parser().parse_args(argv)
-    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
+    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides),
+                        loop=a.loop)
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
     man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
                   filter_mu_scale=tuple(a.filter_mu_scale),
                   filter_mu_range=None if a.filter_mu_range is None else tuple(a.filter_mu_range),
                   plant_beta=a.plant_beta,
                   shift_factors=tuple(a.shift_factors),
-                  friction_range=None if a.friction_range is None else tuple(a.friction_range))
+                  friction_range=None if a.friction_range is None else tuple(a.friction_range),
+                  patch_fraction=a.patch_fraction,
+                  patch_ranges=PatchRanges(tuple(a.patch_start), tuple(a.patch_length), tuple(a.patch_friction)))
     _print_summary(man, a.out, a.workers)
 
 

@@ -125,6 +125,46 @@ class DropDetector:
         return m, s, m + self.k * s
 
 
+def _outputs(mean: torch.Tensor, log_var: torch.Tensor, lower: torch.Tensor | None) -> tuple[Any, Any, Any]:
+    """(mean, sigma, lower) [-] of a batch of one: floats, or (4,) arrays for a per-foot model (nan: no
+    lower-quantile head)."""
+    def out(t: torch.Tensor) -> Any:
+        v = t[0].numpy().astype(float)
+        return float(v) if v.ndim == 0 else v
+
+    lo = out(lower) if lower is not None else math.nan
+    return out(mean), out(torch.exp(0.5 * log_var)), lo
+
+
+def _scalar_min(v: Any) -> float:
+    return float(np.min(v))
+
+
+class SlipFloor:
+    """A foot slip seen in proprioception lets that foot's estimate go below the floor ``mu_min``.
+
+    On every sample, from leg kinematics (:func:`estimators.models.slip_features`): foot i *slips* when it
+    is a stance foot (height above the lowest foot < ``height_m`` [m], trunk axes) and its horizontal
+    speed relative to its trot partner exceeds ``speed_mps`` [m/s] (two holding stance feet move together
+    up to the trunk's rotation). For ``hold_s`` [s] after that the foot's estimate is at most the prior and
+    at least ``floor_mu`` [-] (down to 0.1: the worlds the benchmark runs)."""
+
+    def __init__(self, floor_mu: float = 0.1, speed_mps: float = 0.15, height_m: float = 0.02,
+                 hold_s: float = 0.3) -> None:
+        self.floor_mu = number("estimator.slip.floor_mu", floor_mu, 0.0, MAX_FRICTION, lo_open=True)
+        self.speed_mps = number("estimator.slip.speed_mps", speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
+        self.height_m = number("estimator.slip.height_m", height_m, 0.0, 0.2, lo_open=True, unit="m")
+        self.hold_s = number("estimator.slip.hold_s", hold_s, 0.0, 5.0, unit="s")
+
+    def detect(self, sample: np.ndarray) -> np.ndarray:
+        """(4,) bool: the feet slipping in one 36-feature sample (q, qdot, tau; core order)."""
+        from estimators.models import slip_features
+
+        with torch.no_grad():
+            f = slip_features(torch.from_numpy(np.asarray(sample, np.float32)).reshape(1, 1, -1))[0, 0].numpy()
+        return (f[4:] < self.height_m) & (f[:4] > self.speed_mps)
+
+
 class LearnedEstimator:
     """Estimator protocol around a shipped (or given) checkpoint."""
 
@@ -142,6 +182,7 @@ class LearnedEstimator:
         drop_detector: dict[str, Any] | None = None,
         inference: str = "inline",
         apply_delay_s: float = 0.02,
+        slip: dict[str, Any] | None = None,
     ) -> None:
         """``variant`` names the shipped checkpoint used when ``checkpoint`` is None; ``prior_mu`` [-] is
         returned until the window is full (and after a detected drop); ``conservative_k`` [-] sigmas are
@@ -151,7 +192,8 @@ class LearnedEstimator:
         (:class:`estimators.safety.BandMargin`; None: no margin); ``drop_detector``: ``{"checkpoint": ... or None,
         "k": ..., "delta": ..., "confirm": ..., "lookback": ...}`` (:class:`DropDetector`; None: none); ``inference``:
         ``"inline"``, ``"staged"`` or ``"thread"``; ``apply_delay_s`` [s]: with ``"staged"`` / ``"thread"``, the
-        latency after which a sample's result is applied."""
+        latency after which a sample's result is applied; ``slip``: ``{"floor_mu": ..., "speed_mps": ...,
+        "height_m": ..., "hold_s": ...}`` (:class:`SlipFloor`; None: no slip floor)."""
         prior_mu, conservative_k, mu_min = self._checked_settings(
             variant, prior_mu, conservative_k, mu_min, bound, hold_min_samples, inference, apply_delay_s)
         if threads is not None:
@@ -164,6 +206,8 @@ class LearnedEstimator:
         self.band_margin = BandMargin(**{k: tuple(v) for k, v in dict(band_margin).items()}) if band_margin else None
         self.detector = DropDetector(**dict(drop_detector)) if drop_detector else None
         self.inference, self.apply_delay_s = inference, float(apply_delay_s)
+        self.slip = SlipFloor(**dict(slip)) if slip else None
+        self.per_foot = bool(getattr(self.model.cfg, "per_foot", False))
         self._init_buffers(int(hold_min_samples))
         self.reset()
 
@@ -208,7 +252,8 @@ class LearnedEstimator:
     def _init_buffers(self, hold_min_samples: int) -> None:
         """The hold ring of the last ``hold_min_samples`` bounds [-], the sample window (WINDOW_STEPS x the
         model's raw features), and the (lazily started) worker thread with its lock."""
-        self._hold = np.full(hold_min_samples, np.inf)  # ring of the last bounds [-]
+        n_est = 4 if self.per_foot else 1
+        self._hold = np.full((hold_min_samples, n_est), np.inf)  # ring of the last bounds [-] (per foot)
         self.filter_mu_input = self.model.cfg.filter_mu_input
         n_raw = self.model.cfg.n_raw  # 36, or 38 with the filter features
         self._buf = np.zeros((WINDOW_STEPS, n_raw), np.float32)
@@ -224,6 +269,7 @@ class LearnedEstimator:
         self._fill = 0  # samples taken since the last (re)start: the model runs once it reaches WINDOW_STEPS
         self._n_out = 0  # model outputs since the last (re)start
         self._hold[:] = np.inf
+        self._bound = np.full(self._hold.shape[1], np.inf)  # [-] held bound per foot before the mu_min floor
         self._alarm = 0  # consecutive samples the drop detector fired
         self._recent: list[float] = []  # jump detector: the last raw means since the (re)start
         self._next_t = 0.0  # [s] next sample instant
@@ -232,8 +278,12 @@ class LearnedEstimator:
         self._stage_result: tuple[float, ...] | None = None
         self._last = FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
         self.mean, self.sigma, self.lower = float("nan"), float("nan"), float("nan")  # last raw model output
+        self.mean_per_foot = np.full(1, np.nan)  # [-] last raw mean per foot (one entry: a single-output model)
         self.short_mean, self.short_sigma = float("nan"), float("nan")  # last drop-detector output
         self.drops_detected = 0
+        self.slips_detected = 0  # samples on which a foot's slip was detected (SlipFloor)
+        self._slip_until = np.full(4, -np.inf)  # [s] per foot: the slip floor applies until then
+        self._t = 0.0  # [s] episode time of the last tick
         self.deadline_misses = 0  # thread: results not ready at their due tick (that tick waited)
         self.wait_s = 0.0  # [s] wall time ticks waited for the worker
 
@@ -257,6 +307,12 @@ class LearnedEstimator:
             return self._last
         row = self._buf[self._count % WINDOW_STEPS]
         row[:N_FEATURES] = sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints)
+        if self.slip is not None:
+            slipped = self.slip.detect(row[:N_FEATURES])
+            self.slips_detected += int(slipped.any())
+            self._slip_until[slipped] = obs.t_s + self.slip.hold_s
+            self._t = obs.t_s
+            self._last = self._with_slip(self._last)
         if self.filter_mu_input:  # what the filter assumed on the tick that produced tau_joints
             row[N_FEATURES:] = filter_channels(obs.filter_mu)
         self._count += 1
@@ -326,8 +382,7 @@ class LearnedEstimator:
             mean, log_var, lower = self.model.predict(torch.from_numpy(window).unsqueeze(0))
             short = self.detector.upper(window) if self.detector is not None and self.detector.model is not None \
                 else (math.nan,) * 3
-        lo = float(lower[0]) if lower is not None else math.nan
-        return float(mean[0]), float(torch.exp(0.5 * log_var[0])), lo, *short
+        return (*_outputs(mean, log_var, lower), *short)
 
     def _compute_stages(self, window: np.ndarray) -> Generator[None, None, tuple[float, ...]]:
         """:meth:`_compute` as a generator yielding between slices of the models (``inference="staged"``)."""
@@ -338,8 +393,7 @@ class LearnedEstimator:
         if self.detector is not None and self.detector.model is not None:
             yield
             short = yield from self.detector.upper_stages(window)
-        lo = float(lower[0]) if lower is not None else math.nan
-        return float(mean[0]), float(torch.exp(0.5 * log_var[0])), lo, *short
+        return (*_outputs(mean, log_var, lower), *short)
 
     def _estimate(self) -> FrictionEstimate:
         """Run the models on the current window and apply the result (inline; tests drive this directly)."""
@@ -347,20 +401,26 @@ class LearnedEstimator:
         self._last = self._apply(self._compute(self._window()), self._fill)
         return self._last
 
-    def _apply(self, raw: tuple[float, ...], fill: int) -> FrictionEstimate:
-        """Bound, band margin, hold and the drop detector on one model output (runs on the control thread)."""
-        self.mean, self.sigma, lower, self.short_mean, self.short_sigma, short_upper = raw
-        if not math.isnan(lower):
+    def _apply(self, raw: tuple[Any, ...], fill: int) -> FrictionEstimate:
+        """Bound, band margin, hold and the drop detector on one model output (runs on the control thread).
+        A per-foot model's outputs are (4,) arrays: each foot is bounded on its own, the reported ``mu`` is
+        the lowest foot's and ``mu_per_foot`` the four; the drop detector watches the lowest foot's mean."""
+        mean, sigma, lower, self.short_mean, self.short_sigma, short_upper = raw
+        self.mean, self.sigma = _scalar_min(mean), _scalar_min(sigma)
+        self.mean_per_foot = np.asarray(mean, float).reshape(-1)
+        if not np.all(np.isnan(lower)):
             self.lower = lower
         if fill < WINDOW_STEPS or self._fill < WINDOW_STEPS:  # a reset since: the window is not refilled yet
-            return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
-        base = self.lower if self.bound == "quantile" else self.mean
-        b = base - self.k * self.sigma
+            return self._with_slip(FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False))
+        base = np.asarray(self.lower if self.bound == "quantile" else mean, float).reshape(-1)
+        b = base - self.k * np.asarray(sigma, float).reshape(-1)
         if self.band_margin is not None:
-            b -= float(self.band_margin.margin(self.mean))
-        self._hold[self._n_out % len(self._hold)] = max(self.mu_min, b)
+            b = b - np.asarray(self.band_margin.margin(self.mean_per_foot), float)
+        self._hold[self._n_out % len(self._hold)] = b  # unclipped: a slipping foot may go below mu_min
         self._n_out += 1
-        mu = float(self._hold.min())
+        self._bound = self._hold.min(axis=0)
+        mu_feet = np.maximum(self.mu_min, self._bound)
+        mu = float(mu_feet.min())
         if (det := self.detector) is not None:
             if det.model is not None:
                 fired = short_upper < mu - det.delta
@@ -372,8 +432,25 @@ class LearnedEstimator:
                 self.drops_detected += 1
                 self._alarm, self._fill, self._n_out, self._recent = 0, 0, 0, []
                 self._hold[:] = np.inf
-                return FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False)
-        return FrictionEstimate(mu=mu, sigma=self.sigma, ready=True)
+                self._bound[:] = np.inf
+                return self._with_slip(FrictionEstimate(mu=self.prior_mu, sigma=0.0, ready=False))
+        per_foot = mu_feet.astype(float) if self.per_foot else None
+        return self._with_slip(FrictionEstimate(mu=mu, sigma=self.sigma, ready=True, mu_per_foot=per_foot))
+
+    def _with_slip(self, est: FrictionEstimate) -> FrictionEstimate:
+        """``est`` with the slip floor applied: a foot whose slip was detected within ``slip.hold_s`` gets
+        max(slip.floor_mu, min(the model's bound for it before the ``mu_min`` floor, prior_mu)) -- at most the
+        safe prior, possibly below ``mu_min``; ``mu`` becomes the lowest foot's. Unchanged without a slip
+        floor or a recent slip."""
+        if self.slip is None:
+            return est
+        slipping = self._slip_until >= self._t
+        if not slipping.any():
+            return est
+        feet = np.full(4, est.mu) if est.mu_per_foot is None else np.array(est.mu_per_foot, float)
+        bound = np.broadcast_to(self._bound if est.ready else np.inf, 4)
+        feet[slipping] = np.maximum(self.slip.floor_mu, np.minimum(bound[slipping], self.prior_mu))
+        return FrictionEstimate(mu=float(feet.min()), sigma=est.sigma, ready=est.ready, mu_per_foot=feet)
 
     def input_files(self) -> list[Path]:
         """The checkpoint files this estimator loaded (model and drop detector: weights and metadata), part of
@@ -383,5 +460,5 @@ class LearnedEstimator:
     def diagnostics(self) -> dict[str, float]:
         """Counters of this episode: drops detected, samples, and with ``inference="thread"`` the deadline
         misses and the wall time [s] ticks waited for the worker."""
-        return {"drops_detected": self.drops_detected, "samples": self._count,
+        return {"drops_detected": self.drops_detected, "slips_detected": self.slips_detected, "samples": self._count,
                 "deadline_misses": self.deadline_misses, "wait_s": self.wait_s}

@@ -16,6 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.randomisation import PATCH_COLUMNS
+
+PER_WINDOW = ("X", "y", "window_filtered", "y_foot", "foot_loaded")  # arrays with one row per window
+PER_EPISODE = ("params", "fell", "filtered", "filter_mu", "patch")  # arrays with one row per episode
+
 
 def _nominal_episodes(f: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The arrays of a training split restricted to its nominal-controller episodes, ids renumbered 0..n-1."""
@@ -23,11 +28,13 @@ def _nominal_episodes(f: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     new_id = np.cumsum(keep_ep) - 1
     keep_w = keep_ep[f["episode"]]
     out = {k: f[k] for k in f}
-    for k in ("X", "y", "window_filtered"):
-        out[k] = f[k][keep_w]
+    for k in PER_WINDOW:
+        if k in f:
+            out[k] = f[k][keep_w]
     out["episode"] = new_id[f["episode"][keep_w]].astype(f["episode"].dtype)
-    for k in ("params", "fell", "filtered", "filter_mu"):
-        out[k] = f[k][keep_ep]
+    for k in PER_EPISODE:
+        if k in f:
+            out[k] = f[k][keep_ep]
     return out
 
 
@@ -49,8 +56,9 @@ def _read_manifests(dirs: list[Path]) -> tuple[list[dict], list[int]]:
 
 
 def _shared_filter_keys(dirs: list[Path]) -> list[str]:
-    """The optional per-episode / per-window filter records that every folder's ``train.npz`` holds."""
-    optional = ("filtered", "window_filtered", "filter_mu")  # per-episode / per-window filter flags
+    """The optional per-episode / per-window records (filter flags, per-foot labels, patches) that every
+    folder's ``train.npz`` holds."""
+    optional = ("filtered", "window_filtered", "filter_mu", "y_foot", "foot_loaded", "patch")
     have = []
     for d in dirs:
         with np.load(d / "train.npz") as f:
@@ -100,7 +108,8 @@ def _concatenate_training(dirs: list[Path], drop: set[Path]
 def _write_training(out: Path, merged: dict[str, np.ndarray], cols: np.ndarray) -> None:
     """Write ``out/train.npz`` (whole, then renamed into place)."""
     tmp = out / "train.tmp.npz"  # written whole, then renamed: never a half-written train.npz
-    np.savez_compressed(tmp, **merged, param_columns=cols)
+    extra = {"patch_columns": np.array(PATCH_COLUMNS)} if "patch" in merged else {}
+    np.savez_compressed(tmp, **merged, param_columns=cols, **extra)
     tmp.replace(out / "train.npz")
 
 

@@ -34,7 +34,7 @@ from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOI
 from taslel_bench.interfaces import a1
 
 VARIANTS = ("mlp", "attention", "linformer")
-TOKENISATIONS = ("joint", "step")
+TOKENISATIONS = ("joint", "step", "foot")
 WINDOW_NORMS = ("none", "tau", "tau_q")
 POOLINGS = ("mean", "cls")
 LOG_VAR_RANGE = (-12.0, 4.0)  # clamp of the normalised log-variance
@@ -65,6 +65,12 @@ class ModelConfig:
     # True: the raw windows carry the 2 filter features per step (estimators.features.filter_channels: filter
     # in the loop, the filter's mu [-]) after the 36; step tokens and the mlp only
     filter_mu_input: bool = False
+    # True: each step also gets 8 slip features from leg kinematics (slip_features: per foot, the horizontal
+    # speed of the foot relative to its stance partner's, and its height above the lowest foot [m])
+    slip_features: bool = False
+    # True: one output per foot (B, 4), LEGS order, trained on the friction under each foot; tokens="foot"
+    # always (one token per foot per step, shared weights, a leg embedding), the mlp with a 4-foot head
+    per_foot: bool = False
 
     def validate(self) -> ModelConfig:
         for name, value, valid in (
@@ -83,14 +89,25 @@ class ModelConfig:
         if self.filter_mu_input and self.variant != "mlp" and self.tokens == "joint":
             raise ValueError("filter_mu_input needs tokens='step' (or the mlp): joint tokens carry (q, qdot, tau) "
                              "of one joint")
+        if self.tokens == "foot" and self.variant != "mlp":
+            self.per_foot = True
+        if self.per_foot and self.variant != "mlp" and self.tokens != "foot":
+            raise ValueError("per_foot needs tokens='foot' (or the mlp)")
+        if self.slip_features and self.variant != "mlp" and self.tokens == "joint":
+            raise ValueError("slip_features needs tokens='step' or 'foot' (or the mlp)")
         if self.variant != "mlp" and self.d_model % self.n_heads:
             raise ValueError(f"d_model={self.d_model} is not divisible by n_heads={self.n_heads}")
         return self
 
     @property
     def n_outputs(self) -> int:
-        """Head outputs: normalised mean, log-variance (and the lower-quantile offset)."""
+        """Head outputs per estimate: normalised mean, log-variance (and the lower-quantile offset)."""
         return 3 if self.lower_quantile > 0 else 2
+
+    @property
+    def n_estimates(self) -> int:
+        """Estimates per window: 4 (one per foot) with ``per_foot``, else 1."""
+        return a1.N_LEGS if self.per_foot else 1
 
     @property
     def n_raw(self) -> int:
@@ -101,12 +118,13 @@ class ModelConfig:
     def n_inputs(self) -> int:
         """Features per step the encoder sees (36, plus 24 foot features with ``kinematic_features``, plus 2
         filter features with ``filter_mu_input``)."""
-        return self.n_raw + (N_KIN_FEATURES if self.kinematic_features else 0)
+        return (self.n_raw + (N_KIN_FEATURES if self.kinematic_features else 0)
+                + (N_SLIP_FEATURES if self.slip_features else 0))
 
     @property
     def n_tokens(self) -> int:
         """Sequence length seen by attention (CLS included)."""
-        n = self.window_steps * (N_JOINTS if self.tokens == "joint" else 1)
+        n = self.window_steps * {"joint": N_JOINTS, "step": 1, "foot": a1.N_LEGS}[self.tokens]
         return n + (1 if self.pooling == "cls" else 0)
 
     def to_dict(self) -> dict[str, object]:
@@ -169,6 +187,48 @@ def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
     p = torch.stack([px, py, pz], -1) + _HIPS.to(x)
     v = torch.stack([vx, vy, vz], -1)
     return torch.cat([p.reshape(b, t, 12), v.reshape(b, t, 12)], dim=-1)
+
+
+N_SLIP_FEATURES = 8  # per foot: speed relative to the stance partner [m/s], height above the lowest foot [m]
+STANCE_PARTNER = (3, 2, 1, 0)  # trot pairs in LEGS order: FL-RR, FR-RL
+
+
+def slip_features(x: torch.Tensor) -> torch.Tensor:
+    """Raw windows (B, T, 36) -> (B, T, 8): a slip signal from leg kinematics alone (``[d (4) [m/s], h (4)
+    [m]]``, LEGS order). ``d_i`` = |v_i - v_j|, horizontal (trunk x, y), of foot i's velocity relative to the
+    trunk (:func:`foot_kinematics`) against its trot partner j's: two stance feet that hold both move at
+    -(v_trunk + omega x p), so d_i is the rotation term |omega x (p_i - p_j)| (small in a trot) plus the
+    slip of either foot. ``h_i`` = foot i's height above the lowest foot in trunk axes: near 0 for the stance
+    pair, so the model can tell the stance pair's d (a slip) from a swing foot's. The trunk's angular rate
+    (the IMU gyro) would remove the rotation term; the loop's Proprioception carries no IMU yet."""
+    b, t, _ = x.shape
+    kin = foot_kinematics(x)
+    p, v = kin[..., :12].reshape(b, t, 4, 3), kin[..., 12:].reshape(b, t, 4, 3)
+    dv = v[..., :2] - v[:, :, list(STANCE_PARTNER), :2]
+    d = dv.pow(2).sum(-1).add(1e-12).sqrt()
+    h = p[..., 2] - p[..., 2].min(dim=-1, keepdim=True).values
+    return torch.cat([d, h], dim=-1)
+
+
+def foot_token_index(cfg: ModelConfig) -> torch.Tensor:
+    """(4, n_leg) indices into the encoder's feature vector (:meth:`FrictionModel.features` layout) of each
+    foot's token: its 3 joints' q, qdot, tau, its foot position and velocity (``kinematic_features``), its
+    two slip features (``slip_features``) and the 2 filter features (``filter_mu_input``, shared)."""
+    rows = []
+    kin0 = N_FEATURES
+    slip0 = kin0 + (N_KIN_FEATURES if cfg.kinematic_features else 0)
+    filt0 = slip0 + (N_SLIP_FEATURES if cfg.slip_features else 0)
+    for leg in range(a1.N_LEGS):
+        j = [3 * leg + i for i in range(3)]
+        idx = j + [12 + i for i in j] + [24 + i for i in j]
+        if cfg.kinematic_features:
+            idx += [kin0 + i for i in j] + [kin0 + 12 + i for i in j]
+        if cfg.slip_features:
+            idx += [slip0 + leg, slip0 + 4 + leg]
+        if cfg.filter_mu_input:
+            idx += [filt0, filt0 + 1]
+        rows.append(idx)
+    return torch.tensor(rows)
 
 
 class Normaliser(nn.Module):
@@ -236,6 +296,8 @@ class FrictionModel(nn.Module):
         parts = [window_features(prop, self.cfg.window_norm)]
         if self.cfg.kinematic_features:
             parts.append(foot_kinematics(prop))
+        if self.cfg.slip_features:
+            parts.append(slip_features(prop))
         if self.cfg.filter_mu_input:
             parts.append(x[..., N_FEATURES:])
         return torch.cat(parts, dim=-1) if len(parts) > 1 else parts[0]
@@ -246,8 +308,8 @@ class FrictionModel(nn.Module):
         return mean, log_var
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """``x`` (B, T, n_raw) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,).
-        The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
+        """``x`` (B, T, n_raw) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,), or
+        (B, 4) per foot (``per_foot``, LEGS order). The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
         return run_stages(self.predict_stages(x))
 
     def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
@@ -269,12 +331,12 @@ class FrictionModel(nn.Module):
         z = (self.features(x) - self.norm.x_mean) / self.norm.x_std
         if not self.cfg.use_tau:
             z = torch.cat([z[..., :24], torch.zeros_like(z[..., 24:N_FEATURES]), z[..., N_FEATURES:]], dim=-1)
-        out = yield from self.encode_stages(z)
-        mean = out[:, 0] * self.norm.y_std + self.norm.y_mean
-        log_var = out[:, 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
+        out = yield from self.encode_stages(z)  # (B, n_outputs), or (B, 4, n_outputs) per foot
+        mean = out[..., 0] * self.norm.y_std + self.norm.y_mean
+        log_var = out[..., 1].clamp(*LOG_VAR_RANGE) + 2.0 * torch.log(self.norm.y_std) + self.norm.log_var_offset
         lower = None
-        if out.shape[1] > 2:
-            lower = mean.detach() - F.softplus(out[:, 2]) * self.norm.y_std
+        if out.shape[-1] > 2:
+            lower = mean.detach() - F.softplus(out[..., 2]) * self.norm.y_std
         return mean, log_var, lower
 
 
@@ -288,11 +350,14 @@ class MLPModel(FrictionModel):
         for h in cfg.mlp_hidden:
             layers += [nn.Linear(width, h), nn.GELU(), nn.Dropout(cfg.dropout)]
             width = h
-        layers.append(nn.Linear(width, cfg.n_outputs))
+        layers.append(nn.Linear(width, cfg.n_outputs * cfg.n_estimates))
         self.net = nn.Sequential(*layers)
 
+    def _shape(self, out: torch.Tensor) -> torch.Tensor:
+        return out.reshape(out.shape[0], a1.N_LEGS, -1) if self.cfg.per_foot else out
+
     def encode(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x.flatten(1))
+        return self._shape(self.net(x.flatten(1)))
 
     def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
         h = x.flatten(1)
@@ -300,7 +365,7 @@ class MLPModel(FrictionModel):
             if i and isinstance(layer, nn.Linear):
                 yield
             h = layer(h)
-        return h
+        return self._shape(h)
 
 
 class SelfAttention(nn.Module):
@@ -361,10 +426,13 @@ class TransformerModel(FrictionModel):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__(cfg)
         d, t = cfg.d_model, cfg.window_steps
-        in_dim = N_CHANNELS if cfg.tokens == "joint" else cfg.n_inputs
+        # (4, n_leg) feature indices of each foot's token (tokens="foot"; not saved: derived from the config)
+        self.register_buffer("foot_index", foot_token_index(cfg) if cfg.tokens == "foot" else None, persistent=False)
+        in_dim = {"joint": N_CHANNELS, "step": cfg.n_inputs, "foot": 0}[cfg.tokens]
+        in_dim = in_dim or int(self.foot_index.shape[1])  # type: ignore[union-attr]
         self.embed = nn.Linear(in_dim, d)
         self.pos_time = nn.Parameter(torch.randn(t, 1, d) * 0.02)  # (T, 1, d)
-        n_space = N_JOINTS if cfg.tokens == "joint" else 1
+        n_space = {"joint": N_JOINTS, "step": 1, "foot": a1.N_LEGS}[cfg.tokens]
         self.pos_space = nn.Parameter(torch.randn(1, n_space, d) * 0.02)  # (1, J, d)
         self.cls = nn.Parameter(torch.zeros(1, 1, d)) if cfg.pooling == "cls" else None
         self.blocks = nn.ModuleList(Block(cfg) for _ in range(cfg.n_layers))
@@ -376,6 +444,8 @@ class TransformerModel(FrictionModel):
         b, t, _ = x.shape
         if self.cfg.tokens == "joint":
             x = x.reshape(b, t, N_CHANNELS, N_JOINTS).transpose(2, 3)  # (B, T, 12, 3)
+        elif self.cfg.tokens == "foot":
+            x = x[..., self.foot_index]  # (B, T, 4, n_leg)
         else:
             x = x.unsqueeze(2)  # (B, T, 1, 36)
         h = self.embed(x) + self.pos_time + self.pos_space
@@ -391,7 +461,14 @@ class TransformerModel(FrictionModel):
         return self._head(h)
 
     def _head(self, h: torch.Tensor) -> torch.Tensor:
+        """(B, n_tokens, d) -> (B, n_outputs), or per foot (B, 4, n_outputs): each foot's tokens pooled over
+        time (its CLS output added, if any), one shared head."""
         h = self.ln(h)
+        if self.cfg.tokens == "foot":
+            cls = h[:, :1] if self.cls is not None else 0.0
+            body = h[:, 1:] if self.cls is not None else h
+            per_foot = body.reshape(h.shape[0], self.cfg.window_steps, a1.N_LEGS, -1).mean(1)  # (B, 4, d)
+            return self.head(per_foot + cls)
         pooled = h[:, 0] if self.cls is not None else h.mean(1)
         return self.head(pooled)
 

@@ -144,3 +144,51 @@ def draw(rng: np.random.Generator, ranges: Ranges, seed: int, symmetric_com: boo
 
 def ranges_dict(r: Ranges) -> dict[str, list[float]]:
     return {k: list(v) for k, v in asdict(r).items()}
+
+
+# ------------------------------------------------------------------------------------- surface patches
+
+
+@dataclass(frozen=True)
+class SurfacePatch:
+    """A strip of floor across the path with another friction: world x in [``start_m``, ``start_m`` +
+    ``length_m``) has friction ``friction`` [-], the rest of the floor the episode's. The trot starts with
+    the trunk at x = 0 (front feet ~0.18 m ahead) and walks along +x."""
+
+    start_m: float  # [m] world x of the near edge
+    length_m: float  # [m] along x; a patch longer than the walk is a single step change
+    friction: float  # [-]
+
+    def edges_and_frictions(self, floor_mu: float) -> tuple[tuple[float, float], tuple[float, float, float]]:
+        """(edges [m], frictions [-]) of the floor strips: floor, patch, floor."""
+        return (self.start_m, self.start_m + self.length_m), (floor_mu, self.friction, floor_mu)
+
+
+@dataclass(frozen=True)
+class PatchRanges:
+    """How patches are drawn: near edge ~ U(``start_m``), length log-uniform in ``length_m`` (short patches
+    cover one or two footfalls, long ones are a step change), friction ~ U(``friction``) resampled until it
+    differs from the floor's by at least ``min_change`` [-] (both drops and rises)."""
+
+    start_m: Range = (0.3, 1.3)  # [m]
+    length_m: Range = (0.1, 3.0)  # [m]
+    friction: Range = (0.1, 1.2)  # [-]
+    min_change: float = 0.15  # [-]
+
+
+PATCH_RANGES = PatchRanges()
+PATCH_COLUMNS = ("start_m", "length_m", "friction")  # a collection's per-episode ``patch`` rows (nan: no patch)
+
+
+def draw_patch(rng: np.random.Generator, floor_mu: float, r: PatchRanges = PATCH_RANGES) -> SurfacePatch:
+    """One patch for a floor of friction ``floor_mu`` [-] (see :class:`PatchRanges`)."""
+    lo, hi = r.friction
+    if max(hi - floor_mu, floor_mu - lo) < r.min_change:
+        raise ValueError(f"patch friction range {r.friction} has no value {r.min_change} away from the floor's "
+                         f"{floor_mu}")
+    start = float(rng.uniform(*r.start_m))
+    length = float(np.exp(rng.uniform(np.log(r.length_m[0]), np.log(r.length_m[1]))))
+    mu = float(rng.uniform(lo, hi))
+    while abs(mu - floor_mu) < r.min_change:
+        mu = float(rng.uniform(lo, hi))
+    return SurfacePatch(start, length, mu)

@@ -194,8 +194,9 @@ def train(cfg: DictConfig, datamodule: WindowDataModule | None = None) -> tuple[
     L.seed_everything(int(cfg.seed), workers=True)
     filter_mu = bool(cfg.model.get("filter_mu_input", False))
     steps = int(cfg.model.get("window_steps", WINDOW_STEPS))  # < 40: a short-window model on the last samples
+    per_foot = bool(cfg.model.get("per_foot", False)) or cfg.model.get("tokens") == "foot"
     dm = datamodule or WindowDataModule(cfg.data_dir, batch_size=int(cfg.batch_size), filter_mu=filter_mu,
-                                        crop_steps=steps if steps != WINDOW_STEPS else None)
+                                        crop_steps=steps if steps != WINDOW_STEPS else None, per_foot=per_foot)
     dm.setup("fit")
     task = FrictionTask(
         OmegaConf.to_container(cfg.model), cfg.lr, cfg.weight_decay, cfg.loss,  # type: ignore[arg-type]

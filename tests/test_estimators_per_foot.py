@@ -1,0 +1,142 @@
+"""Per-foot friction estimates (foot tokens, per-foot heads and labels), the kinematic slip signal and the
+slip floor of the in-loop estimator; tiny models and fast_dev_run training only."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS
+from estimators.models import ModelConfig, build_model, foot_kinematics, slip_features
+from taslel_bench.interfaces import Proprioception
+
+STAND_LEG = [0.0, 0.8, -1.6]  # [rad] hip, thigh, calf of a standing A1 leg
+
+
+def _stand_sample(qd: np.ndarray | None = None) -> np.ndarray:
+    s = np.zeros(N_FEATURES, np.float32)
+    s[:12] = STAND_LEG * 4
+    if qd is not None:
+        s[12:24] = qd
+    return s
+
+
+@pytest.mark.parametrize(("variant", "tokens"), [("attention", "foot"), ("linformer", "foot"), ("mlp", "step")])
+def test_per_foot_models_give_one_estimate_per_foot(variant: str, tokens: str) -> None:
+    cfg = ModelConfig(variant=variant, tokens=tokens, d_model=16, linformer_k=8, mlp_hidden=[8], per_foot=True,
+                      kinematic_features=True, slip_features=True, lower_quantile=0.1)
+    model = build_model(cfg)
+    mean, log_var, lower = model.predict(torch.randn(3, WINDOW_STEPS, N_FEATURES))
+    assert mean.shape == log_var.shape == lower.shape == (3, 4) and (lower <= mean).all()
+    assert model.cfg.n_estimates == 4 and model.cfg.per_foot
+
+
+def test_foot_tokens_see_their_own_leg() -> None:
+    """A change in one leg's joints moves the foot tokens of that leg only (before attention mixes them):
+    the foot tokenisation gathers each leg's own features."""
+    from estimators.models import foot_token_index
+
+    cfg = ModelConfig(variant="attention", tokens="foot", kinematic_features=True, slip_features=True,
+                      filter_mu_input=True).validate()
+    idx = foot_token_index(cfg)
+    assert idx.shape == (4, 9 + 6 + 2 + 2)
+    assert set(idx[0, :9].tolist()) == {0, 1, 2, 12, 13, 14, 24, 25, 26}  # FL: q, qdot, tau of its joints
+    assert idx[3, -1] == cfg.n_inputs - 1  # the filter features are shared by every foot
+    with pytest.raises(ValueError, match="per_foot needs"):
+        ModelConfig(variant="attention", tokens="step", per_foot=True).validate()
+
+
+def test_slip_signal_from_leg_kinematics() -> None:
+    """Standing still: no relative foot motion, every foot at the lowest height. FL's thigh swinging
+    while the others hold: FL and its trot partner RR see FL's speed relative to RR; FR / RL see none."""
+    still = slip_features(torch.from_numpy(_stand_sample()).reshape(1, 1, -1))[0, 0]
+    assert torch.allclose(still, torch.zeros(8), atol=1e-5)
+    qd = np.zeros(12, np.float32)
+    qd[1] = 2.0  # [rad/s] FL thigh
+    x = torch.from_numpy(_stand_sample(qd)).reshape(1, 1, -1)
+    f = slip_features(x)[0, 0]
+    v_fl = foot_kinematics(x)[0, 0, 12:15]
+    assert float(f[0]) == pytest.approx(float(v_fl[:2].norm()), rel=1e-5) and float(f[0]) > 0.3
+    assert float(f[3]) == pytest.approx(float(f[0]), rel=1e-6)  # RR: the same pair difference
+    assert float(f[1]) == pytest.approx(0.0, abs=1e-6) and float(f[2]) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_fast_dev_run_trains_on_per_foot_labels(tmp_path: Path) -> None:
+    pytest.importorskip("lightning")
+    from estimators.data import WindowDataModule
+    from estimators.train import make_config, train
+
+    rng = np.random.default_rng(0)
+    arrays = {}
+    for split in ("train", "val", "test"):
+        X = rng.normal(size=(32, WINDOW_STEPS, N_FEATURES)).astype(np.float32)
+        arrays[split] = (X, rng.uniform(0.1, 1.2, (32, 4)).astype(np.float32))
+    cfg = make_config(["estimator=attention", f"runs_dir={tmp_path}", "trainer.fast_dev_run=true", "threads=1",
+                       "model.tokens=foot", "model.d_model=16", "model.slip_features=true",
+                       "model.kinematic_features=true", "model.lower_quantile=0.1"])
+    task, record = train(cfg, datamodule=WindowDataModule(arrays=arrays, batch_size=16))
+    assert record["global_steps"] == 1 and task.model.cfg.per_foot
+
+
+def test_per_foot_labels_load_from_collections(tmp_path: Path) -> None:
+    """load_split(per_foot=True) reads y_foot; a collection without it (uniform floor) repeats y."""
+    from estimators.data import load_split
+
+    X = np.zeros((2, WINDOW_STEPS, N_FEATURES), np.float32)
+    np.savez(tmp_path / "train.npz", X=X, y=np.array([0.5, 0.7], np.float32), episode=np.zeros(2, np.int32),
+             y_foot=np.array([[0.5, 0.5, 0.2, 0.2], [0.7] * 4], np.float32))
+    assert load_split(tmp_path, "train", per_foot=True)[1][0].tolist() == pytest.approx([0.5, 0.5, 0.2, 0.2])
+    np.savez(tmp_path / "val.npz", X=X, y=np.array([0.3, 0.4], np.float32))
+    np.testing.assert_allclose(load_split(tmp_path, "val", per_foot=True)[1], [[0.3] * 4, [0.4] * 4], rtol=1e-6)
+
+
+def _obs(t: float, sample: np.ndarray) -> Proprioception:
+    return Proprioception(t, sample[:12].astype(float), sample[12:24].astype(float), sample[24:].astype(float), 0.5)
+
+
+def test_learned_estimator_per_foot_output_and_slip_floor(tmp_path: Path) -> None:
+    """A per-foot checkpoint reports mu_per_foot (4,) and mu = the lowest foot; a detected slip takes the
+    slipping pair to at most the prior and possibly below mu_min (down to the slip floor), for hold_s."""
+    from estimators.checkpoint import save_checkpoint
+    from estimators.learned import LearnedEstimator
+
+    model = build_model(ModelConfig(variant="attention", tokens="foot", d_model=16, slip_features=True)).eval()
+    with torch.no_grad():  # a model whose raw mean is 0.6 on every foot: its head's bias only
+        model.head.weight.zero_()
+        model.head.bias.copy_(torch.tensor([0.0, -6.0]))
+        model.norm.y_mean.fill_(0.6)
+    save_checkpoint(model, tmp_path / "pf")
+    kw = {"checkpoint": tmp_path / "pf", "prior_mu": 0.2, "conservative_k": 0.0, "mu_min": 0.2, "threads": None}
+    est = LearnedEstimator("attention", slip={"floor_mu": 0.1, "speed_mps": 0.15, "hold_s": 0.1}, **kw)
+    dt, still = 0.001, _stand_sample()
+    ticks_to_full = round((WINDOW_STEPS - 1) * WINDOW_DT_S / dt)
+    out = [est.step(_obs(k * dt, still)) for k in range(ticks_to_full + 1)][-1]
+    assert out.ready and out.mu_per_foot.shape == (4,)
+    assert out.mu_per_foot == pytest.approx([0.6] * 4, abs=1e-5) and out.mu == pytest.approx(0.6, abs=1e-5)
+    qd = np.zeros(12, np.float32)
+    qd[1] = 2.0  # FL's thigh moves while every foot is on the ground: FL-RR disagree
+    t_slip = (ticks_to_full + 30) * dt
+    out = est.step(_obs(t_slip, _stand_sample(qd)))
+    assert est.slips_detected == 1
+    assert out.mu_per_foot[[0, 3]] == pytest.approx([0.2, 0.2]) and out.mu_per_foot[[1, 2]] == pytest.approx([0.6] * 2)
+    assert out.mu == pytest.approx(0.2)
+    # hold_s later, without a new slip: back to the model's estimate
+    late = [est.step(_obs(t_slip + k * dt, still)) for k in range(1, 200)][-1]
+    assert late.mu_per_foot == pytest.approx([0.6] * 4, abs=1e-5)
+    # a model bound below mu_min stays at mu_min unless the foot slips; then down to floor_mu
+    with torch.no_grad():
+        model.norm.y_mean.fill_(0.05)
+    save_checkpoint(model, tmp_path / "pf_low")
+    kw["checkpoint"] = tmp_path / "pf_low"
+    est = LearnedEstimator("attention", slip={"floor_mu": 0.1, "hold_s": 0.1}, **kw)
+    out = [est.step(_obs(k * dt, still)) for k in range(ticks_to_full + 1)][-1]
+    assert out.mu_per_foot == pytest.approx([0.2] * 4)
+    out = est.step(_obs((ticks_to_full + 30) * dt, _stand_sample(qd)))  # the model's bound is 0.05
+    assert out.mu_per_foot[[0, 3]] == pytest.approx([0.1, 0.1]) and out.mu == pytest.approx(0.1)
+    assert out.mu_per_foot[[1, 2]] == pytest.approx([0.2, 0.2])
+    with pytest.raises(Exception, match="slip.floor_mu"):
+        LearnedEstimator("attention", slip={"floor_mu": -0.1}, **kw)
