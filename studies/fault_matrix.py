@@ -395,9 +395,11 @@ def _(tmp: Path):
 # --------------------------------------------------------------------------------------- sizing, messages
 
 
-@case("messages", "duration=3600 refused with a memory estimate")
+@case("messages", "duration=3600 accepted in chunks; with the whole trace in memory refused with an estimate")
 def _(tmp: Path):
-    return refused(["duration=3600"], tmp / "run", "GB")
+    chunked, said = refused(["duration=3600"], tmp / "run", "GB")
+    whole, why = refused(["duration=3600", "record.chunk_ticks=null"], tmp / "whole", "GB", "record.chunk_ticks")
+    return (not chunked and said.startswith("accepted") and whole), why
 
 
 @case("messages", "missing mesh: error names robot.plant_mjcf and the file")

@@ -35,7 +35,8 @@ FAULTS = [
     # top level and record.*
     (["seed=${oops}"], "seed", "${oops}"),
     (["duration=1e9"], "duration", "1000000000.0"),
-    (["duration=3600"], "duration", "3600"),
+    (["duration=3600", "record.chunk_ticks=null"], "duration", "3600"),  # the whole trace in memory
+    (["record.chunk_ticks=0"], "record.chunk_ticks", "0"),
     (["filter.start_time=3600", "duration=0.5"], "filter.start_time", "3600"),
     (["record.qps=true", "filter.enabled=false"], "record.qps", "True"),
     (["max_memory_gb=0"], "max_memory_gb", "0"),

@@ -420,9 +420,10 @@ def test_single_run_exit_codes(tmp_path):
 # ---------------------------------------------------------------------------------- (5) sizing, messages
 
 
-def test_an_hour_long_run_is_refused_with_a_memory_estimate(tmp_path, no_episode):
+def test_an_hour_long_run_with_the_whole_trace_in_memory_is_refused_with_a_memory_estimate(tmp_path, no_episode):
+    """record.chunk_ticks=null holds the whole trace (the default chunks accept the hour: tests/test_chunks.py)."""
     with pytest.raises(ConfigError) as err:
-        run(compose_cfg(["duration=3600", "progress=false"]), tmp_path / "run")
+        run(compose_cfg(["duration=3600", "progress=false", "record.chunk_ticks=null"]), tmp_path / "run")
     message = str(err.value)
     assert message.startswith("duration=3600") and "GB by estimate" in message and "max_memory_gb=8" in message
     needed = float(message.split("needs ~")[1].split(" GB")[0])

@@ -85,3 +85,44 @@ def test_ray_launcher_turns_a_dead_worker_into_an_error_row(tmp_path):
     assert sorted(rows) == [0, 1, 2]
     assert rows[0]["status"] == "ok" and rows[2]["status"] == "ok"
     assert rows[1]["status"] == "error" and "died twice" in rows[1]["message"]
+
+
+@pytest.mark.slow
+def test_workers_exit_when_the_sweep_process_is_killed(tmp_path):
+    """SIGKILL of the sweep's main process only: its loky workers stop within a second or two instead of
+    running their jobs on (a rerun would race them)."""
+    import json
+    import signal
+    import time
+
+    folder = tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "taslel_bench", "-m", "seed=0,1", "duration=120", "progress=false",
+           "record.mcap=false", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={folder}"]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline, pids = time.monotonic() + 300, []
+    while time.monotonic() < deadline and len(pids) < 2:
+        pids = []
+        for lock in folder.glob("*/run.lock"):
+            try:
+                pids.append(int(json.loads(lock.read_text())["pid"]))
+            except (OSError, ValueError, KeyError):
+                pass
+        time.sleep(0.5)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert len(pids) == 2 and proc.pid not in pids  # the jobs run in workers
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and any(_alive(p) for p in pids):
+        time.sleep(0.2)
+    alive = [p for p in pids if _alive(p)]
+    for p in alive:  # do not leave them behind if the test fails
+        os.kill(p, signal.SIGKILL)
+    assert alive == []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"  # a zombie has exited

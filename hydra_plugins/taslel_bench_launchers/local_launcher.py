@@ -8,13 +8,19 @@ hydra-joblib-launcher (same settings, same per-job function), with three differe
   job that had started is retried once alone, and if its worker dies again it becomes an error row
   naming the exit signal. The rest of the sweep runs on;
 * a job that raises outside the task function (e.g. its folder cannot be written) is an error row, not
-  the end of the sweep.
+  the end of the sweep;
+* a worker whose sweep process is gone (killed: SIGKILL leaves loky's workers running) exits within
+  :data:`ORPHAN_POLL_S` instead of running its job on, so a rerun of the sweep never races it (the job's
+  folder keeps its temporary files and a stale ``run.lock``, which the rerun takes over and puts aside).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import re
+import signal
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,6 +37,29 @@ from taslel_bench.sweep.jobs import begin_launch, error_return, settle
 
 log = logging.getLogger(__name__)
 MAX_RESUBMITS = 3  # rounds for jobs that had not started when a worker died
+ORPHAN_POLL_S = 0.5  # [s] how often a worker checks that the sweep process is alive
+_WATCHED: list[int] = []  # the sweep process this worker watches (set once per worker)
+
+
+def _exit_when_orphaned(sweep_pid: int) -> None:
+    """In a worker: a daemon thread that SIGKILLs this process once ``sweep_pid`` is no longer its parent
+    (the sweep process died and the worker was re-parented). Started once per worker."""
+    if _WATCHED or os.getpid() == sweep_pid:
+        return
+    _WATCHED.append(sweep_pid)
+
+    def watch() -> None:
+        while os.getppid() == sweep_pid:
+            time.sleep(ORPHAN_POLL_S)
+        os.kill(os.getpid(), signal.SIGKILL)  # no cleanup: the rerun handles what the job left
+
+    threading.Thread(target=watch, name="orphan-watch", daemon=True).start()
+
+
+def watched_job(sweep_pid: int, *args):
+    """``execute_job(*args)`` in a worker that exits when the sweep process dies."""
+    _exit_when_orphaned(sweep_pid)
+    return execute_job(*args)
 
 
 def death_reason(exc: BaseException) -> str:
@@ -79,8 +108,8 @@ class RobustJoblibLauncher(JoblibLauncher):
         assert self.config is not None and self.task_function is not None and self.hydra_context is not None
         executor = get_reusable_executor(max_workers=min(n_jobs, len(indices)))
         state = Singleton.get_state()
-        futures = {i: executor.submit(execute_job, first + i, job_overrides[i], self.hydra_context, self.config,
-                                      self.task_function, state) for i in indices}  # fmt: skip
+        futures = {i: executor.submit(watched_job, os.getpid(), first + i, job_overrides[i], self.hydra_context,
+                                      self.config, self.task_function, state) for i in indices}  # fmt: skip
         died: dict[int, str] = {}
         for i, future in futures.items():
             try:
