@@ -140,3 +140,19 @@ def test_learned_estimator_per_foot_output_and_slip_floor(tmp_path: Path) -> Non
     assert out.mu_per_foot[[1, 2]] == pytest.approx([0.2, 0.2])
     with pytest.raises(Exception, match="slip.floor_mu"):
         LearnedEstimator("attention", slip={"floor_mu": -0.1}, **kw)
+
+
+def test_per_foot_inloop_scores() -> None:
+    """foot_scores: over-estimation on loaded ticks only, time to safe from the first loaded tick on the
+    new surface, NaN for a foot that never changed surface."""
+    from studies.estimator_per_foot_inloop import foot_scores
+
+    mu_foot = np.full((10, 4), 0.8)
+    mu_foot[4:, 0] = 0.2  # FL steps onto 0.2 at tick 4
+    loaded = np.ones((10, 4), bool)
+    loaded[4, 0] = False  # ... and loads it at tick 5
+    mu_hat = np.full((10, 4), 0.7)
+    mu_hat[8:, 0] = 0.2  # safe again from tick 8
+    s = foot_scores(mu_hat, mu_foot, loaded, 0.01)
+    assert s["time_to_safe_s"][0] == pytest.approx(0.03) and np.isnan(s["time_to_safe_s"][1])
+    assert s["over_rate"][0] == pytest.approx(3 / 9) and s["over_rate"][1] == 0.0
