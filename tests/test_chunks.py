@@ -105,3 +105,35 @@ def test_an_hour_is_accepted_by_default_and_a_whole_trace_hour_is_refused():
         validate(compose_cfg(["duration=3600", "record.chunk_ticks=null"]))
     with pytest.raises(ConfigError, match="record.chunk_ticks"):
         validate(compose_cfg(["record.chunk_ticks=0"]))
+
+
+def test_percentiles_exact_up_to_the_cap_then_from_a_fixed_size_histogram(monkeypatch):
+    from taslel_bench.metrics import stream
+
+    monkeypatch.setattr(stream, "EXACT_QUANTILE_VALUES", 1000)
+    rng = np.random.default_rng(3)
+    worlds = {  # signs, zeros, a heavy tail, values spanning 1e-9 .. 1e6
+        "normal": rng.normal(0.02, 0.01, 20_000),
+        "mixed": np.concatenate([rng.normal(0.0, 1.0, 9000), np.zeros(2000), -rng.lognormal(0, 3, 9000)]),
+        "tail": rng.lognormal(3.0, 2.5, 20_000),
+    }
+    for name, x in worlds.items():
+        acc = stream.Reducer()
+        for part in np.array_split(x, 40):  # chunks of 500: exact for 2 chunks, then the histogram
+            acc.pct("p99", part, 99)
+            acc.median("p50", part)
+            if name == "normal":
+                sizes = [op.pos.nbytes + sum(p.nbytes for p in op.parts) if op.sketched else 0
+                         for op in acc.ops.values()]
+        got = acc.result()
+        assert acc.sketched_keys() == ["p99", "p50"], name
+        for key, exact in (("p99", np.percentile(x, 99)), ("p50", np.median(x))):
+            scale = max(abs(exact), np.abs(np.sort(x)[[int(0.99 * len(x)) if key == "p99" else len(x) // 2]]).max())
+            assert abs(got[key] - exact) <= stream.SKETCH_RELATIVE_ACCURACY * scale * 1.01, (name, key, got[key], exact)
+    assert len(set(sizes)) == 1  # the histogram's memory does not grow with the values fed
+    small = stream.Reducer()
+    small.pct("p95", worlds["tail"][:1000], 95)
+    assert small.result()["p95"] == np.percentile(worlds["tail"][:1000], 95) and small.sketched_keys() == []
+    nan = stream.Reducer()
+    nan.pct("p95", np.r_[worlds["normal"][:5000], np.nan], 95)
+    assert math.isnan(nan.result()["p95"])  # a NaN in the stream is a NaN percentile, exact or not

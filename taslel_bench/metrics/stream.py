@@ -6,8 +6,13 @@ A :class:`Reducer` holds one reduction per summary key, fed chunk by chunk and r
   Sums are exact (:class:`ExactSum`: the float values summed as integers) and rounded once at the end, so a
   mean is the same number whatever the chunks (it is the correctly rounded mean; numpy's pairwise sum over
   the whole series can differ from it in the last bit or two, ~1e-16 relative);
-* ``pct``/``median``: exact percentiles need every value: the selected values are kept as a 1-D float64
-  series (8 bytes per selected value; the summary states which keys do this, :data:`SERIES_KEYS`);
+* ``pct``/``median``: :class:`Quantiles`: exact (every value kept, 8 bytes each) up to
+  :data:`EXACT_QUANTILE_VALUES` values per key, then a log-bucketed histogram with relative accuracy
+  :data:`SKETCH_RELATIVE_ACCURACY` (the DDSketch idea: bucket i holds values in (gamma^(i-1), gamma^i],
+  gamma = (1 + a) / (1 - a), so any value read back is within a relative error a of a value of that rank);
+  its memory is fixed, whatever the episode's length. A 10 s run at 500 Hz stays exact; the keys that were
+  read from a histogram are listed by :meth:`Reducer.sketched_keys` (``percentiles_from_histogram`` in the
+  summary);
 * ``window``: the worst sliding-window rate (:mod:`taslel_bench.metrics.windows`) with the last window's
   per-tick counts carried across the chunk boundary (integer counts: exact).
 
@@ -99,17 +104,86 @@ class _Ratio:
         return float(self.num / self.den) if self.den else math.nan
 
 
-class _Series:
-    def __init__(self, reduce) -> None:
+EXACT_QUANTILE_VALUES = 1 << 17  # values kept exactly per percentile key (1 MB); beyond: the histogram
+SKETCH_RELATIVE_ACCURACY = 1e-3  # a: relative error of a percentile read from the histogram
+_SKETCH_MIN_ABS = 1e-12  # |x| below this counts as 0 (every summary quantity is in SI units: m, N, us, ...)
+_SKETCH_MAX_ABS = 1e12  # |x| above this is kept in the outermost bucket (and stated by the value it reads)
+_GAMMA = (1.0 + SKETCH_RELATIVE_ACCURACY) / (1.0 - SKETCH_RELATIVE_ACCURACY)
+_LOG_GAMMA = math.log(_GAMMA)
+_I_MIN = math.ceil(math.log(_SKETCH_MIN_ABS) / _LOG_GAMMA)
+_N_BUCKETS = math.ceil(math.log(_SKETCH_MAX_ABS) / _LOG_GAMMA) - _I_MIN + 1
+
+
+class Quantiles:
+    """Percentiles of a stream of values (``pct``/``median``): exact while at most
+    :data:`EXACT_QUANTILE_VALUES` values came (numpy's linear interpolation, as ``np.percentile``), then from a
+    fixed-size histogram of |x| in log buckets, one for x > 0 and one for x < 0, plus a count of zeros
+    (memory: 2 x ~27.6k int64 = 0.44 MB per key). NaNs are kept (exact) or counted (histogram): a percentile of
+    a stream with a NaN is NaN, as numpy's."""
+
+    def __init__(self, p: float) -> None:
+        self.p = float(p)
         self.parts: list[np.ndarray] = []
-        self.reduce = reduce
+        self.n_exact = 0
+        self.pos: np.ndarray | None = None  # bucket counts of x > 0 (None while exact)
+        self.neg: np.ndarray | None = None
+        self.zeros = self.nans = 0
+
+    @property
+    def sketched(self) -> bool:
+        return self.pos is not None
 
     def add(self, x: np.ndarray) -> None:
-        if x.size:
-            self.parts.append(np.array(x, copy=True).ravel())
+        x = np.asarray(x, dtype=np.float64).ravel()
+        if not x.size:
+            return
+        if self.pos is None:
+            self.parts.append(x.copy())
+            self.n_exact += x.size
+            if self.n_exact <= EXACT_QUANTILE_VALUES:
+                return
+            x, self.parts = np.concatenate(self.parts), []
+            self.pos, self.neg = np.zeros(_N_BUCKETS, np.int64), np.zeros(_N_BUCKETS, np.int64)
+        self._bucket(x)
+
+    def _bucket(self, x: np.ndarray) -> None:
+        nan = np.isnan(x)
+        self.nans += int(nan.sum())
+        mag = np.abs(x[~nan])
+        sign = x[~nan] > 0
+        small = mag < _SKETCH_MIN_ABS
+        self.zeros += int(small.sum())
+        big = np.minimum(mag[~small], _SKETCH_MAX_ABS)
+        idx = np.ceil(np.log(big) / _LOG_GAMMA).astype(np.int64) - _I_MIN
+        np.clip(idx, 0, _N_BUCKETS - 1, out=idx)
+        s = sign[~small]
+        self.pos += np.bincount(idx[s], minlength=_N_BUCKETS)
+        self.neg += np.bincount(idx[~s], minlength=_N_BUCKETS)
 
     def value(self) -> float:
-        return self.reduce(np.concatenate(self.parts)) if self.parts else math.nan
+        if self.pos is None:
+            if not self.parts:
+                return math.nan
+            v = np.concatenate(self.parts)
+            return float(np.median(v) if self.p == 50.0 else np.percentile(v, self.p))
+        if self.nans:
+            return math.nan
+        # the values in ascending order: negatives (largest magnitude first), zeros, positives
+        counts = np.concatenate([self.neg[::-1], [self.zeros], self.pos])
+        n = int(counts.sum())
+        rank = self.p / 100.0 * (n - 1)  # numpy's linear rule, between the values of ranks floor and ceil
+        cum = np.cumsum(counts)
+        lo, hi = (int(np.searchsorted(cum, r, side="right")) for r in (math.floor(rank), math.ceil(rank)))
+        a, b = self._bucket_value(lo), self._bucket_value(hi)
+        return float(a + (rank - math.floor(rank)) * (b - a))
+
+    def _bucket_value(self, j: int) -> float:
+        """The value that represents merged bucket ``j`` (within a relative error a of all its values)."""
+        if j == _N_BUCKETS:
+            return 0.0
+        i = (j - _N_BUCKETS - 1 if j > _N_BUCKETS else _N_BUCKETS - 1 - j) + _I_MIN
+        mag = 2.0 * _GAMMA**i / (_GAMMA + 1.0)  # the point of (gamma^(i-1), gamma^i] with relative error <= a
+        return mag if j > _N_BUCKETS else -mag
 
 
 class _Extreme:
@@ -179,10 +253,10 @@ class Reducer:
         self._op(key, _Rms).add(np.asarray(x))
 
     def pct(self, key: str, x: np.ndarray, p: float) -> None:
-        self._op(key, lambda: _Series(lambda v: float(np.percentile(v, p)))).add(np.asarray(x))
+        self._op(key, lambda: Quantiles(p)).add(np.asarray(x))
 
     def median(self, key: str, x: np.ndarray) -> None:
-        self._op(key, lambda: _Series(lambda v: float(np.median(v)))).add(np.asarray(x))
+        self._op(key, lambda: Quantiles(50.0)).add(np.asarray(x))
 
     def max(self, key: str, x: np.ndarray) -> None:
         self._op(key, lambda: _Extreme(np.max)).add(np.asarray(x))
@@ -214,6 +288,10 @@ class Reducer:
 
     def result(self) -> dict[str, object]:
         return {k: (op.value() if op is not None else self.fixed[k]) for k, op in self.ops.items()}
+
+    def sketched_keys(self) -> list[str]:
+        """The percentile keys read from the histogram (more than :data:`EXACT_QUANTILE_VALUES` values)."""
+        return [k for k, op in self.ops.items() if isinstance(op, Quantiles) and op.sketched]
 
     def __contains__(self, key: str) -> bool:
         return key in self.ops

@@ -63,6 +63,9 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
         "real_time_factor": float(n * control_dt_s / res.wall_time_s) if res.wall_time_s > 0 else math.nan,
     }
     out.update(stream.result())
+    sketched = stream.sketched_keys()
+    if sketched:  # a long episode: these percentiles are read from a histogram (metrics/stream.py, rel. error 1e-3)
+        out["percentiles_from_histogram"] = ",".join(sketched)
     out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
     if "residuals_error" in res.extras:
         out["residuals_error"] = str(res.extras["residuals_error"])
@@ -172,6 +175,12 @@ class SummaryStream:
         head = {k: out[k] for k in out if k.startswith("tick_")}
         return {**head, **loco, **filt, **self.walk_contacts.result(), **stand_part(self.stand_contacts.result()),
                 **self.clearance.result(), **self.residuals.result(), **self.estimator.result(self.n)}
+
+    def sketched_keys(self) -> list[str]:
+        """The percentile keys of this episode read from a histogram (:class:`taslel_bench.metrics.stream.Quantiles`)."""
+        parts = (self.acc, self.walk_contacts.acc, self.stand_contacts.acc, self.clearance.acc, self.residuals.acc,
+                 self.estimator.acc)
+        return [k for acc in parts for k in acc.sketched_keys()]
 
     def _locomotion_result(self, trunk_height: float) -> dict[str, float]:
         """See :func:`locomotion_metrics` (an episode that never walked: the last tick is its first walking one)."""
