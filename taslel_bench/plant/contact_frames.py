@@ -69,16 +69,25 @@ class ContactFrameReader:
         self._is_robot = np.append(self._is_robot, True)
         self._is_obstacle = np.append(obstacle_geom_mask(model), False)
         self._foot_bodies = model.geom_bodyid[feet]
-        self._elliptic = model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+        # elliptic cones and condim 3 everywhere (no explicit pairs): a contact's 3 efc rows are its
+        # contact-frame force, as mj_contactForce returns it; else mj_contactForce per contact
+        self._efc_rows_are_forces = bool(model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.npair == 0
+                                         and np.all(model.geom_condim == 3))
         self._force6 = np.zeros(6)
+        self._xyz = np.arange(3)
+        self._views: tuple | None = None  # (data, its cvel, its subtree_com): views made once per MjData
 
     # ---------------------------------------------------------------------------------------- in the loop
     def record(self, data: mujoco.MjData, log: ContactLog, k: int) -> None:
-        """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``."""
+        """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``. Each read of a
+        binding field makes a numpy view (~0.2 us): the fixed-size ones are made once per ``data``."""
+        if self._views is None or self._views[0] is not data:
+            self._views = (data, data.cvel, data.subtree_com)
+        _, cvel, subtree_com = self._views
         n = data.ncon
         log.count[k] = n
-        log.foot_cvel[k] = data.cvel[self._foot_bodies]
-        log.root_com[k] = data.subtree_com[self._root]
+        np.take(cvel, self._foot_bodies, axis=0, out=log.foot_cvel[k])
+        log.root_com[k] = subtree_com[self._root]
         if n == 0:
             return
         m = min(n, MAX_CONTACTS_LOGGED)
@@ -89,9 +98,9 @@ class ContactFrameReader:
         log.pos[k, :m] = con.pos[:m]
         log.friction[k, :m] = con.friction[:m, 0]
         log.dist[k, :m] = con.dist[:m]
-        adr, dim = con.efc_address[:m], con.dim[:m]
-        if self._elliptic and adr.min() >= 0 and dim.min() == 3 and dim.max() == 3:
-            log.force[k, :m] = data.efc_force[adr[:, None] + np.arange(3)]  # = mj_contactForce (elliptic)
+        adr = con.efc_address[:m]
+        if self._efc_rows_are_forces and adr.min() >= 0:
+            np.take(data.efc_force, adr[:, None] + self._xyz, out=log.force[k, :m])  # = mj_contactForce (elliptic)
         else:
             for i in range(m):
                 mujoco.mj_contactForce(self.model, data, i, self._force6)
