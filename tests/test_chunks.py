@@ -137,3 +137,22 @@ def test_percentiles_exact_up_to_the_cap_then_from_a_fixed_size_histogram(monkey
     nan = stream.Reducer()
     nan.pct("p95", np.r_[worlds["normal"][:5000], np.nan], 95)
     assert math.isnan(nan.result()["p95"])  # a NaN in the stream is a NaN percentile, exact or not
+
+
+def test_qp_failures_beyond_the_cap_are_counted_not_listed(tmp_path, monkeypatch):
+    """A filter that fails on every tick (a failure injected into SafetyFilter.filter: the nominal u passes)
+    lists the first failures as events and counts the rest, so an hour of failures does not grow the trace."""
+    from dataclasses import replace
+
+    import taslel_bench.record.trace as trace
+    from taslel_bench.filter.safety_filter import SafetyFilter
+
+    original = SafetyFilter.filter
+    monkeypatch.setattr(SafetyFilter, "filter", lambda self, inputs, u_nom: replace(
+        original(self, inputs, u_nom), u=np.array(u_nom, copy=True), used_fallback=True, status="injected"))
+    monkeypatch.setattr(trace, "MAX_QP_FAILURE_EVENTS", 5)
+    summary = run(compose_cfg(["duration=0.05", "record.mcap=false"]), tmp_path / "run")
+    events = json.loads((tmp_path / "run" / "events.json").read_text())
+    listed = [e for e in events if e["kind"] == "qp_failure"]
+    assert summary["qp_failed"] > 10
+    assert len(listed) == 6 and listed[-1]["message"].startswith(f"{summary['qp_failed'] - 5} more QP failures")

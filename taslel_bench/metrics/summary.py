@@ -79,7 +79,8 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
 class SummaryStream:
     """Every metric of :func:`summarize` fed chunk by chunk: :meth:`feed` after each chunk of the episode
     (its derived quantities and residuals computed), :meth:`result` at the end. Memory: a few numbers per
-    key, except the exact percentiles (:data:`taslel_bench.metrics.stream` series)."""
+    key; a percentile key keeps at most :data:`taslel_bench.metrics.stream.EXACT_QUANTILE_VALUES` values,
+    then a fixed-size histogram; the reference-checked ticks' u errors are kept whole (8 bytes per check)."""
 
     def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS) -> None:
         self.settings = (dt, stand_s, stance_s, limits)

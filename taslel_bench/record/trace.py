@@ -36,6 +36,7 @@ from taslel_bench.util.jit import kernel
 
 TICK_PARTS = ("controller", "model", "filter", "physics")
 QP_STATUS_CODES = {"off": -1, "solved": 0}  # any other status string -> 1 (failure), text kept in events
+MAX_QP_FAILURE_EVENTS = 1000  # QP failures listed as events (the rest counted: memory stays bounded)
 
 
 class BarrierLog:
@@ -110,6 +111,7 @@ class EpisodeTrace:
         # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
         self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
+        self.qp_failures_not_listed = 0  # QP failures after the first MAX_QP_FAILURE_EVENTS (summary: qp_failed)
         self._context: tuple | None = None  # (bridge, contact reader, profile, terrain, frames): see bind()
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
         self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
@@ -170,7 +172,10 @@ class EpisodeTrace:
             if fres.used_fallback:
                 self.qp_status[r] = 1
                 self.qp_fallback[r] = True
-                self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
+                if len(self.events) < MAX_QP_FAILURE_EVENTS:
+                    self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
+                else:
+                    self.qp_failures_not_listed += 1
             else:
                 self.qp_status[r] = 0
             self.qp_build_us[r] = fres.build_time_s * 1e6

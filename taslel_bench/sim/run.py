@@ -299,6 +299,10 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
     traceback goes to ``traceback.txt``."""
     dt = 1.0 / float(cfg.control_rate_hz)
     events = list(res.trace.events)
+    if res.trace.qp_failures_not_listed:
+        events.append({"t_s": res.trace.n * dt, "kind": "qp_failure",
+                       "message": f"{res.trace.qp_failures_not_listed} more QP failures not listed "
+                                  "(every one is counted in summary.json's qp_failed)"})  # fmt: skip
     events += res.extras["metrics"].alarm_events()
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
