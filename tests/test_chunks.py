@@ -144,8 +144,8 @@ def test_qp_failures_beyond_the_cap_are_counted_not_listed(tmp_path, monkeypatch
     lists the first failures as events and counts the rest, so an hour of failures does not grow the trace."""
     from dataclasses import replace
 
-    import taslel_bench.record.trace as trace
     from taslel_bench.filter.safety_filter import SafetyFilter
+    from taslel_bench.record import trace
 
     original = SafetyFilter.filter
     monkeypatch.setattr(SafetyFilter, "filter", lambda self, inputs, u_nom: replace(
