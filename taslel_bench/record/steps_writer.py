@@ -2,7 +2,11 @@
 temporary file in the run folder (``.steps.parquet.tmp-<pid>``, the name :func:`run_files.atomic_write`
 uses), renamed to ``steps.parquet`` when the episode's files are written. A killed run leaves only the
 temporary file, which the next run removes and names (:func:`taslel_bench.record.run_files.remove_stale`);
-a half-written table never carries the final name."""
+a half-written table never carries the final name.
+
+Column statistics (min/max per row group) are written for the time column ``t_s`` only: pyarrow keeps every
+row group's statistics in memory until the file is closed (measured: 125 MB after 720 row groups of 202
+columns, 251 MB at close; none without them), so with them memory would grow with the episode's length."""
 
 from __future__ import annotations
 
@@ -12,6 +16,9 @@ from pathlib import Path
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+
+STATISTICS_COLUMNS = ("t_s",)  # columns with per-row-group min/max (filters on time can skip row groups)
 
 
 class StepsWriter:
@@ -27,7 +34,8 @@ class StepsWriter:
     def append(self, frame: pd.DataFrame) -> None:
         table = pa.Table.from_pandas(frame, preserve_index=False)
         if self._writer is None:
-            self._writer = pq.ParquetWriter(self.tmp, table.schema)
+            stats = [c for c in STATISTICS_COLUMNS if c in table.schema.names]
+            self._writer = pq.ParquetWriter(self.tmp, table.schema, write_statistics=stats or False)
         self._writer.write_table(table)
         self.rows += len(frame)
 
