@@ -156,3 +156,10 @@ def test_per_foot_inloop_scores() -> None:
     s = foot_scores(mu_hat, mu_foot, loaded, 0.01)
     assert s["time_to_safe_s"][0] == pytest.approx(0.03) and np.isnan(s["time_to_safe_s"][1])
     assert s["over_rate"][0] == pytest.approx(3 / 9) and s["over_rate"][1] == 0.0
+    # useful: mu_hat >= min(mu, 0.5) - 0.1; FL is useful from tick 5 (0.7 >= 0.1), the others never changed
+    assert s["time_to_useful_s"][0] == pytest.approx(0.0) and np.isnan(s["time_to_useful_s"][1])
+    rise = foot_scores(np.where(np.arange(10)[:, None] >= 7, 0.45, 0.2) * np.ones((1, 4)), 1.0 - mu_foot,
+                       loaded, 0.01)  # FL: 0.2 -> 0.8 at tick 4, loaded from 5, useful (>= 0.4) from tick 7
+    assert rise["time_to_useful_s"][0] == pytest.approx(0.02) and rise["time_to_safe_s"][0] == 0.0
+    never = foot_scores(np.full((10, 4), 0.2), 1.0 - mu_foot, loaded, 0.01)
+    assert never["time_to_useful_s"][0] == float("inf")
