@@ -163,3 +163,20 @@ def test_per_foot_inloop_scores() -> None:
     assert rise["time_to_useful_s"][0] == pytest.approx(0.02) and rise["time_to_safe_s"][0] == 0.0
     never = foot_scores(np.full((10, 4), 0.2), 1.0 - mu_foot, loaded, 0.01)
     assert never["time_to_useful_s"][0] == float("inf")
+
+
+def test_per_foot_offline_scores() -> None:
+    """studies.estimator_per_foot_offline.score: MAE per foot and on loaded feet, over-estimation of the
+    mean and the lower head, the lowest foot against the trunk label; a single output serves all feet."""
+    from studies.estimator_per_foot_offline import per_foot, score
+
+    y_foot = np.array([[0.8, 0.8, 0.2, 0.2], [0.5, 0.5, 0.5, 0.5]])
+    mean = np.array([[0.8, 0.7, 0.4, 0.2], [0.5, 0.5, 0.5, 0.6]])
+    loaded = np.array([[True, False, True, False], [True, True, True, True]])
+    s = score(mean, mean - 0.1, y_foot, loaded, np.array([0.8, 0.5]))
+    assert s["mae_foot"] == pytest.approx(0.4 / 8)
+    assert s["mae_loaded"] == pytest.approx(0.3 / 6)
+    assert s["over_mean"] == pytest.approx(2 / 8) and s["over_lower"] == pytest.approx(1 / 8)
+    assert s["mae_lowest_vs_trunk"] == pytest.approx(0.6 / 2)  # |0.2 - 0.8| and |0.5 - 0.5|
+    assert per_foot(np.array([0.3, 0.4]), 2).tolist() == [[0.3] * 4, [0.4] * 4]
+    assert per_foot(None, 2) is None
