@@ -99,7 +99,7 @@ def _pooled(rows: list[dict], key: str) -> np.ndarray:
 
 def summarise(rows: list[dict]) -> dict[str, float]:
     t, tu, over = _pooled(rows, "time_to_safe_s"), _pooled(rows, "time_to_useful_s"), _pooled(rows, "over_rate")
-    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows),
+    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(t),
             "time_to_safe_p95_s": float(np.percentile(t, 95)) if len(t) else float("nan"),
             "time_to_safe_max_s": float(t.max()) if len(t) else float("nan"),
             "time_to_useful_p95_s": float(np.percentile(tu, 95)) if len(tu) else float("nan"),
