@@ -9,10 +9,12 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
 * over-estimation: share of the foot's loaded ticks with mu_hat > mu + 0.05;
 * time to safe [s]: after the foot's first loaded tick on a surface other than its starting one, until its
   first loaded tick that is not over-estimated (0 if none was); NaN if the foot never met another surface;
+* time to useful [s] (rises): from the same tick until its first loaded tick with
+  mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
 * falls and the plant's foot sliding (mean horizontal slip speed of loaded feet [m/s]).
 
-Prints one row per set: the p95 of the time to safe over feet x seeds, the pooled over-estimation rate,
-falls and sliding; ``--out`` writes the rows as JSON.
+Prints one row per set: the p95 of the time to safe and to useful over feet x seeds, the pooled
+over-estimation rate, falls and sliding; ``--out`` writes the rows as JSON.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.safety import useful
 from taslel_bench import api
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, FrictionEstimate, Proprioception
 
@@ -47,20 +50,28 @@ class Recorder:
 
 
 def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt: float) -> dict[str, list]:
-    """Per-foot over-estimation rate on loaded ticks and time to safe [s] (see the module doc)."""
+    """Per-foot over-estimation rate on loaded ticks, time to safe and time to useful [s] (see the module doc)."""
     over = mu_hat > mu_foot + OVERESTIMATE_MARGIN
-    rate, t_safe = [], []
+    good = useful(mu_foot, mu_hat)
+    rate, t_safe, t_useful = [], [], []
     for leg in range(4):
         ld = loaded[:, leg]
         rate.append(float(over[ld, leg].mean()) if ld.any() else float("nan"))
         changed = np.flatnonzero(ld & (np.abs(mu_foot[:, leg] - mu_foot[0, leg]) > 1e-9))
         if not len(changed):
             t_safe.append(float("nan"))
+            t_useful.append(float("nan"))
             continue
         k0 = changed[0]
-        ok = np.flatnonzero(ld[k0:] & ~over[k0:, leg])
-        t_safe.append(float(ok[0] * dt) if len(ok) else float("inf"))
-    return {"over_rate": rate, "time_to_safe_s": t_safe}
+        t_safe.append(_first(ld[k0:] & ~over[k0:, leg], dt))
+        t_useful.append(_first(ld[k0:] & good[k0:, leg], dt))
+    return {"over_rate": rate, "time_to_safe_s": t_safe, "time_to_useful_s": t_useful}
+
+
+def _first(ok: np.ndarray, dt: float) -> float:
+    """[s] time of the first True in ``ok`` (ticks of dt from its start); inf if none."""
+    k = np.flatnonzero(ok)
+    return float(k[0] * dt) if len(k) else float("inf")
 
 
 def run(overrides: list[str], seed: int) -> dict[str, object]:
@@ -82,12 +93,17 @@ def run(overrides: list[str], seed: int) -> dict[str, object]:
             "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan")}
 
 
+def _pooled(rows: list[dict], key: str) -> np.ndarray:
+    return np.array([x for r in rows for x in r[key] if not np.isnan(x)])
+
+
 def summarise(rows: list[dict]) -> dict[str, float]:
-    t = np.array([x for r in rows for x in r["time_to_safe_s"] if not np.isnan(x)])
-    over = np.array([x for r in rows for x in r["over_rate"] if not np.isnan(x)])
-    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows),
+    t, tu, over = _pooled(rows, "time_to_safe_s"), _pooled(rows, "time_to_useful_s"), _pooled(rows, "over_rate")
+    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(t),
             "time_to_safe_p95_s": float(np.percentile(t, 95)) if len(t) else float("nan"),
             "time_to_safe_max_s": float(t.max()) if len(t) else float("nan"),
+            "time_to_useful_p95_s": float(np.percentile(tu, 95)) if len(tu) else float("nan"),
+            "time_to_useful_max_s": float(tu.max()) if len(tu) else float("nan"),
             "over_rate_mean": float(over.mean()) if len(over) else float("nan"),
             "over_rate_max": float(over.max()) if len(over) else float("nan"),
             "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}

@@ -156,3 +156,27 @@ def test_per_foot_inloop_scores() -> None:
     s = foot_scores(mu_hat, mu_foot, loaded, 0.01)
     assert s["time_to_safe_s"][0] == pytest.approx(0.03) and np.isnan(s["time_to_safe_s"][1])
     assert s["over_rate"][0] == pytest.approx(3 / 9) and s["over_rate"][1] == 0.0
+    # useful: mu_hat >= min(mu, 0.5) - 0.1; FL is useful from tick 5 (0.7 >= 0.1), the others never changed
+    assert s["time_to_useful_s"][0] == pytest.approx(0.0) and np.isnan(s["time_to_useful_s"][1])
+    rise = foot_scores(np.where(np.arange(10)[:, None] >= 7, 0.45, 0.2) * np.ones((1, 4)), 1.0 - mu_foot,
+                       loaded, 0.01)  # FL: 0.2 -> 0.8 at tick 4, loaded from 5, useful (>= 0.4) from tick 7
+    assert rise["time_to_useful_s"][0] == pytest.approx(0.02) and rise["time_to_safe_s"][0] == 0.0
+    never = foot_scores(np.full((10, 4), 0.2), 1.0 - mu_foot, loaded, 0.01)
+    assert never["time_to_useful_s"][0] == float("inf")
+
+
+def test_per_foot_offline_scores() -> None:
+    """studies.estimator_per_foot_offline.score: MAE per foot and on loaded feet, over-estimation of the
+    mean and the lower head, the lowest foot against the trunk label; a single output serves all feet."""
+    from studies.estimator_per_foot_offline import per_foot, score
+
+    y_foot = np.array([[0.8, 0.8, 0.2, 0.2], [0.5, 0.5, 0.5, 0.5]])
+    mean = np.array([[0.8, 0.7, 0.4, 0.2], [0.5, 0.5, 0.5, 0.6]])
+    loaded = np.array([[True, False, True, False], [True, True, True, True]])
+    s = score(mean, mean - 0.1, y_foot, loaded, np.array([0.8, 0.5]))
+    assert s["mae_foot"] == pytest.approx(0.4 / 8)
+    assert s["mae_loaded"] == pytest.approx(0.3 / 6)
+    assert s["over_mean"] == pytest.approx(2 / 8) and s["over_lower"] == pytest.approx(1 / 8)
+    assert s["mae_lowest_vs_trunk"] == pytest.approx(0.6 / 2)  # |0.2 - 0.8| and |0.5 - 0.5|
+    assert per_foot(np.array([0.3, 0.4]), 2).tolist() == [[0.3] * 4, [0.4] * 4]
+    assert per_foot(None, 2) is None
