@@ -17,7 +17,6 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-
 STATISTICS_COLUMNS = ("t_s",)  # columns with per-row-group min/max (filters on time can skip row groups)
 
 
