@@ -149,16 +149,15 @@ class Quantiles:
     def _bucket(self, x: np.ndarray) -> None:
         nan = np.isnan(x)
         self.nans += int(nan.sum())
-        mag = np.abs(x[~nan])
-        sign = x[~nan] > 0
-        small = mag < _SKETCH_MIN_ABS
-        self.zeros += int(small.sum())
-        big = np.minimum(mag[~small], _SKETCH_MAX_ABS)
-        idx = np.ceil(np.log(big) / _LOG_GAMMA).astype(np.int64) - _I_MIN
+        x = x[~nan]
+        nonzero = np.abs(x) >= _SKETCH_MIN_ABS
+        self.zeros += int(x.size - nonzero.sum())
+        x = x[nonzero]
+        idx = np.ceil(np.log(np.minimum(np.abs(x), _SKETCH_MAX_ABS)) / _LOG_GAMMA).astype(np.int64) - _I_MIN
         np.clip(idx, 0, _N_BUCKETS - 1, out=idx)
-        s = sign[~small]
-        self.pos += np.bincount(idx[s], minlength=_N_BUCKETS)
-        self.neg += np.bincount(idx[~s], minlength=_N_BUCKETS)
+        positive = x > 0
+        self.pos += np.bincount(idx[positive], minlength=_N_BUCKETS)
+        self.neg += np.bincount(idx[~positive], minlength=_N_BUCKETS)
 
     def value(self) -> float:
         if self.pos is None:

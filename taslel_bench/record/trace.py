@@ -59,13 +59,27 @@ class EpisodeTrace:
 
     def __init__(self, capacity: int, filter_on: bool, nq: int = a1.NQ, nv: int = a1.NV,
                  nsensordata: int = 0, barrier_names: Sequence[str] = ()) -> None:  # fmt: skip
-        c, nl = capacity, a1.N_LEGS
+        c = capacity
         self.n = 0  # ticks recorded in the episode (global count)
         self.offset = 0  # global tick of row 0: the trace holds ticks offset .. n - 1 (see roll())
         self.capacity = capacity
         self.filter_on = filter_on
         self.finalized = False
-        # --- raw rows written in the loop
+        self._allocate_loop_rows(c, nq, nv, nsensordata, barrier_names)
+        self._allocate_contact_frames(c)
+        self._allocate_tick_timing(c)
+        self._allocate_derived()
+        self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
+        self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
+        for owner, name in ((self, "tick_parts_s"), (self, "mu_hat_ready"), (self, "qp_u_error_nm"),
+                            *((self.contact_log, n) for n in vars(self.contact_log))):  # fmt: skip
+            rows = TickRows(getattr(owner, name))
+            setattr(owner, name, rows)
+            self._by_tick.append(rows)
+
+    def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
+        """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts."""
+        nl = a1.N_LEGS
         self.t_s = np.zeros(c)
         self.qpos_mj = np.zeros((c, nq))  # MuJoCo qpos / qvel / sensordata after the tick
         self.qvel_mj = np.zeros((c, nv))
@@ -89,6 +103,10 @@ class EpisodeTrace:
         self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
         self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
+
+    def _allocate_contact_frames(self, c: int) -> None:
+        """Per-foot contact-frame arrays, filled from ``contact_log`` by finalize()."""
+        nl = a1.N_LEGS
         # derived from contact_log by finalize() (taslel_bench.plant.contact_frames; zero until then): every
         # foot-terrain contact in MuJoCo's contact frame, per tick, leg and slot (K slots, zero / False unused):
         # f_n [N], |f_t| [N], the contact's mu [-], the normal out of the terrain (world axes), the contact
@@ -103,6 +121,9 @@ class EpisodeTrace:
         self.contact_touching = np.zeros((c, nl, k), bool)
         self.contact_on_obstacle = np.zeros((c, nl, k), bool)
         self.leg_link_obstacle_contact = np.zeros((c, nl), bool)
+
+    def _allocate_tick_timing(self, c: int) -> None:
+        """Friction estimate rows, the tick's wall times and the event list."""
         self.mu_hat = np.zeros(c)
         self.mu_true = np.zeros(c)
         self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
@@ -113,6 +134,10 @@ class EpisodeTrace:
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
         self.qp_failures_not_listed = 0  # QP failures after the first MAX_QP_FAILURE_EVENTS (summary: qp_failed)
         self._context: tuple | None = None  # (bridge, contact reader, profile, terrain, frames): see bind()
+
+    def _allocate_derived(self) -> None:
+        """Empty arrays filled after the loop: model residuals and the quantities finalize() derives."""
+        nl = a1.N_LEGS
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
         self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
         self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
@@ -132,13 +157,6 @@ class EpisodeTrace:
         self.obstacle_contact = np.zeros((0, nl), bool)  # foot sphere touches a physical obstacle
         self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
         self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
-        self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
-        self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
-        for owner, name in ((self, "tick_parts_s"), (self, "mu_hat_ready"), (self, "qp_u_error_nm"),
-                            *((self.contact_log, n) for n in vars(self.contact_log))):  # fmt: skip
-            rows = TickRows(getattr(owner, name))
-            setattr(owner, name, rows)
-            self._by_tick.append(rows)
 
     def unwrap(self) -> None:
         """After the episode: the arrays the loop wrote through :class:`TickRows` as plain arrays again."""
