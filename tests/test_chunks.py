@@ -9,7 +9,9 @@ from fractions import Fraction
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
+from pandas.testing import assert_frame_equal
 
 from taslel_bench.config.validate import ConfigError, memory_estimate_gb, validate
 from taslel_bench.metrics.stream import ExactSum, Onsets, Reducer, Touchdowns
@@ -95,6 +97,21 @@ def test_steps_writer_never_leaves_a_half_written_table_under_its_name(tmp_path)
     writer.finish()
     assert pd.read_parquet(tmp_path / "steps.parquet")["t_s"].tolist() == [0.0, 0.001, 0.002]
     assert not writer.tmp.exists()
+
+
+def test_steps_writer_buffers_chunks_into_row_groups_of_the_set_size(tmp_path):
+    """Row groups of at least ``row_group_bytes`` (the writer's memory grows per row group, not per row);
+    the rows and their order are those appended, whatever the grouping."""
+    frames = [pd.DataFrame({"t_s": np.arange(k, k + 100) * 1e-3, "x": np.arange(k, k + 100, dtype=float)})
+              for k in range(0, 1000, 100)]  # 10 chunks of 1600 bytes
+    for row_group_bytes, groups in ((1, 10), (3000, 5), (10**9, 1)):
+        path = tmp_path / f"steps_{row_group_bytes}.parquet"
+        writer = StepsWriter(path, row_group_bytes=row_group_bytes)
+        for f in frames:
+            writer.append(f)
+        writer.finish()
+        assert pq.ParquetFile(path).metadata.num_row_groups == groups
+        assert_frame_equal(pd.read_parquet(path), pd.concat(frames, ignore_index=True))
 
 
 def test_an_hour_is_accepted_by_default_and_a_whole_trace_hour_is_refused():
