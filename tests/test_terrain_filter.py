@@ -17,6 +17,7 @@ from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
 from taslel_bench.filter.terrain_cone import TerrainFrictionCone, tangent_basis
 from taslel_bench.interfaces import Box, Log, Plane, QPSolution, Ramp, Terrain
 from taslel_bench.terrain.packed import PackedTerrain
+from tests.conftest import compose_cfg
 from tests.test_filter import TightReference, inputs_for, walking_states, world
 
 
@@ -198,3 +199,22 @@ def test_contact_estimate_late_touchdown_stays_swing_until_loaded_or_timeout():
     flags = [est.update(stance, np.zeros(4), free)[0] for _ in range(5)]
     assert flags == [False, False, False, True, True]  # stance anyway after 3 ticks
     assert est.late_touchdown_ticks == 4 * 1 + 4 * 3
+
+
+def test_ablation_study_switches_exactly_the_named_parts_of_the_terrain_filter():
+    from studies.terrain_filter_ablation import PARTS_OFF, overrides_for
+
+    every_off = [o for off in PARTS_OFF.values() for o in off]
+    assert overrides_for("all") == ["filter=terrain"]
+    assert overrides_for("none") == ["filter=terrain", *every_off]
+    kept = overrides_for("terrclear+estimate")
+    assert "filter.barriers.terrain_clearance=null" not in kept and "filter.stance_source=schedule" not in kept
+    assert "filter.friction_cone=pyramid" in kept and "filter.barriers.shin=null" in kept
+    swing = overrides_for("legsswing")
+    assert "filter.barriers.shin=null" not in swing and "filter.barriers.shin.swing_only=true" in swing
+    for bad in ("cone+wings", "legs+legsswing"):
+        with pytest.raises(ValueError, match="parts"):
+            overrides_for(bad)
+    composed = compose_cfg(overrides_for("terrclear+estimate+legsswing"))  # every override exists in the tree
+    assert composed.filter.barriers.shin.swing_only and composed.filter.barriers.knee.swing_only
+    assert composed.filter.friction_cone == "pyramid" and composed.filter.stance_source == "estimate"
