@@ -11,6 +11,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   first loaded tick that is not over-estimated (0 if none was); NaN if the foot never met another surface;
 * time to useful [s] (rises): from the same tick until its first loaded tick with
   mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
+* useful share: share of the foot's loaded ticks with mu_hat >= min(mu, 0.5) - 0.1 (an estimate pinned at
+  its floor is never over-estimated and scores 0 s to safe on a drop; this says whether it was any use);
 * falls and the plant's foot sliding (mean horizontal slip speed of loaded feet [m/s]).
 
 Prints one row per set: the p95 of the time to safe and to useful over feet x seeds, the pooled
@@ -53,10 +55,11 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
     """Per-foot over-estimation rate on loaded ticks, time to safe and time to useful [s] (see the module doc)."""
     over = mu_hat > mu_foot + OVERESTIMATE_MARGIN
     good = useful(mu_foot, mu_hat)
-    rate, t_safe, t_useful = [], [], []
+    rate, t_safe, t_useful, useful_share = [], [], [], []
     for leg in range(4):
         ld = loaded[:, leg]
         rate.append(float(over[ld, leg].mean()) if ld.any() else float("nan"))
+        useful_share.append(float(good[ld, leg].mean()) if ld.any() else float("nan"))
         changed = np.flatnonzero(ld & (np.abs(mu_foot[:, leg] - mu_foot[0, leg]) > 1e-9))
         if not len(changed):
             t_safe.append(float("nan"))
@@ -65,7 +68,7 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
         k0 = changed[0]
         t_safe.append(_first(ld[k0:] & ~over[k0:, leg], dt))
         t_useful.append(_first(ld[k0:] & good[k0:, leg], dt))
-    return {"over_rate": rate, "time_to_safe_s": t_safe, "time_to_useful_s": t_useful}
+    return {"over_rate": rate, "time_to_safe_s": t_safe, "time_to_useful_s": t_useful, "useful_share": useful_share}
 
 
 def _first(ok: np.ndarray, dt: float) -> float:
@@ -99,6 +102,7 @@ def _pooled(rows: list[dict], key: str) -> np.ndarray:
 
 def summarise(rows: list[dict]) -> dict[str, float]:
     t, tu, over = _pooled(rows, "time_to_safe_s"), _pooled(rows, "time_to_useful_s"), _pooled(rows, "over_rate")
+    use = _pooled(rows, "useful_share")
     return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(t),
             "time_to_safe_p95_s": float(np.percentile(t, 95)) if len(t) else float("nan"),
             "time_to_safe_max_s": float(t.max()) if len(t) else float("nan"),
@@ -106,6 +110,7 @@ def summarise(rows: list[dict]) -> dict[str, float]:
             "time_to_useful_max_s": float(tu.max()) if len(tu) else float("nan"),
             "over_rate_mean": float(over.mean()) if len(over) else float("nan"),
             "over_rate_max": float(over.max()) if len(over) else float("nan"),
+            "useful_share_mean": float(use.mean()) if len(use) else float("nan"),
             "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}
 
 

@@ -163,6 +163,11 @@ def test_per_foot_inloop_scores() -> None:
     assert rise["time_to_useful_s"][0] == pytest.approx(0.02) and rise["time_to_safe_s"][0] == 0.0
     never = foot_scores(np.full((10, 4), 0.2), 1.0 - mu_foot, loaded, 0.01)
     assert never["time_to_useful_s"][0] == float("inf")
+    # useful share over loaded ticks: FL 0.7 on 0.8 (ticks 0-3) and on 0.2 (5-9) -> all 9 useful; a floor of 0.2
+    # on 0.8 is never useful (0.2 < 0.4), on 0.2 always (0.2 >= 0.1)
+    assert s["useful_share"][0] == 1.0
+    floor = foot_scores(np.full((10, 4), 0.2), mu_foot, loaded, 0.01)
+    assert floor["useful_share"][0] == pytest.approx(5 / 9) and floor["useful_share"][1] == 0.0
 
 
 def test_per_foot_offline_scores() -> None:
