@@ -122,13 +122,14 @@ def test_trips_are_new_obstacle_contacts_in_swing_and_leg_link_contacts():
     tr.obstacle_clearance_m[:] = 0.05
     tr.in_stance[:, 1] = False
     clear_contact(tr, slice(None), 1)
-    set_contact(tr, [2, 3], 1, 5.0, obstacle=True)  # foot 1 hits a log in swing ...
-    set_contact(tr, [30], 1, 5.0, obstacle=True)  # ... and again later: two trips
+    set_contact(tr, [2, 3], 1, 5.0, obstacle=True, normal=(-1.0, 0.0, 0.5))  # foot 1 hits a log's flank in swing ...
+    set_contact(tr, [30], 1, 5.0, obstacle=True)  # ... and lands early on its top later: two trips
     set_contact(tr, slice(None), 3, 50.0, obstacle=True)  # foot 3 stands on a log: not a trip
     tr.obstacle_clearance_m[[2, 3, 30], 1] = -0.001
     tr.leg_link_obstacle_contact[[4, 5], 0] = True  # one knock of leg 0's calf
     m = clearance_metrics(tr, 0)
     assert (m["foot_trips"], m["shin_trips"], m["trips"]) == (2, 1, 3)
+    assert (m["foot_trips_flank"], m["foot_trips_top"]) == (1, 1)
     assert m["obstacle_touch_swing_rate"] == pytest.approx(3 / 40)
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 

@@ -12,6 +12,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FilterSettings
@@ -31,7 +32,9 @@ def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
     return OmegaConf.select(cfg, path, default=default, throw_on_missing=True)
 
 
-def build_controller(cfg: DictConfig) -> NominalController:
+def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> NominalController:
+    """The nominal trot of ``cfg.controller``; ``controller.terrain_following=true`` (needs ``terrain``) gives
+    :class:`~taslel_bench.control.terrain_following.TerrainFollowingController`."""
     c = cfg.controller
     gait = GaitParams(
         period_s=float(c.period),
@@ -40,13 +43,13 @@ def build_controller(cfg: DictConfig) -> NominalController:
         stand_height_m=float(c.stand_height),
         speed_mps=float(c.speed),
     )
-    return NominalController(
-        gait,
-        PDGains(kp=float(c.kp), kd=float(c.kd)),
-        stand_duration_s=float(c.stand_duration),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
-        fd_dt_s=1.0 / float(cfg.control_rate_hz),
-    )
+    kwargs = {"stand_duration_s": float(c.stand_duration), "torque_limit_nm": float(cfg.robot.torque_limit_nm),
+              "fd_dt_s": 1.0 / float(cfg.control_rate_hz)}
+    if bool(c.get("terrain_following", False)):
+        if terrain is None:
+            raise ValueError("controller.terrain_following=true needs the scenario's terrain: build_controller(cfg, terrain)")
+        return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain, **kwargs)
+    return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
 
 
 def filter_settings(cfg: DictConfig) -> FilterSettings:

@@ -256,6 +256,7 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
     number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
+    flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
     return stand
 
 

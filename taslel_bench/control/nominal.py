@@ -31,6 +31,8 @@ class NominalController:
     Looked-up values equal a fresh computation to float rounding (tested).
     """
 
+    uses_base_pose = False  # True: :meth:`compute` also takes the trunk pose (``base_pose=q[:7]``)
+
     def __init__(
         self,
         gait: GaitParams,
@@ -93,8 +95,10 @@ class NominalController:
     def _desired_list(self, t: float) -> list[float]:
         return legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
 
-    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray) -> np.ndarray:
-        """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]."""
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
+                base_pose: np.ndarray | None = None) -> np.ndarray:
+        """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]
+        (``base_pose``, the trunk's, is not used: the paper's references are open loop)."""
         self.update_references(t)
         u = np.empty(a1.N_JOINTS)
         _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
@@ -138,6 +142,9 @@ class NominalController:
         self.qd_des[:] = after
         self.qd_des -= before
         self.qd_des *= 1.0 / self.fd_dt_s
+
+    def reset(self) -> None:
+        """A new episode (the references are periodic tables: nothing to forget)."""
 
     def stand_configuration(self) -> np.ndarray:
         """Joint angles [rad] of the initial stand (nominal feet under the hips)."""

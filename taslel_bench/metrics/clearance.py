@@ -105,6 +105,11 @@ class ClearanceStream:
         touch = on_obstacle & swing
         acc.count("trips", (new & swing).sum() + link_new.sum())
         acc.count("foot_trips", (new & swing).sum())
+        # the same split by where the foot met the obstacle: on a flank (normal > 45 deg from vertical: a riser,
+        # a log's side) or on a top (a swing foot landing early on a step's top); they add up to foot_trips
+        on_flank = flank.any(axis=2)
+        acc.count("foot_trips_flank", (new & swing & on_flank).sum())
+        acc.count("foot_trips_top", (new & swing & ~on_flank).sum())
         acc.count("shin_trips", link_new.sum())  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one

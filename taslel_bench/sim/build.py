@@ -93,7 +93,7 @@ class Built:
         fs = filter_settings(cfg)
         self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
         self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
-        self.controller = build_controller(cfg)
+        self.controller = build_controller(cfg, self.scenario.terrain)
         self.filter = (
             SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()),
                          self.scenario.terrain)

@@ -166,11 +166,12 @@ class Episode:
             # contact flags (filter.stance_source=contact) writable: warm both
             for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
                 gs = self.controller.gait_state(t)
-                u_nom = self.controller.compute(t, q[7:], v[6:])
+                u_nom = self.controller.compute(t, q[7:], v[6:], q[:7])
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
                 self.filter.filter(inputs, u_nom)
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
+            self.controller.reset()  # and the controller from no memory of the warm-up ticks
         return time.perf_counter() - t0
 
     # -------------------------------------------------------------------------------------------- run
@@ -246,7 +247,7 @@ class Episode:
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
         est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet))  # fmt: skip
-        u_nom = self.controller.compute(t, q[7:], v[6:])
+        u_nom = self.controller.compute(t, q[7:], v[6:], q[:7])
         gs = self.controller.gait_state(t)
         if self.contact_estimate is not None:
             in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)

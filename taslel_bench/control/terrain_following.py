@@ -1,0 +1,118 @@
+"""A terrain-following variant of the nominal trot (beyond the paper; ``controller.terrain_following=true``).
+
+The paper's nominal (:class:`~taslel_bench.control.nominal.NominalController`) plans every foot at the same
+height in its hip frame, as if the ground were flat. This variant asks the :class:`~taslel_bench.terrain.
+terrain.Terrain` for the ground height [m, world z] under each foot and shifts each foot target along the
+trunk's z axis by that height relative to the mean of the four:
+
+* a **stance** foot keeps the ground height at which it touched down (latched at the swing -> stance switch);
+* a **swing** foot's ground reference goes from its lift-off height up to ``h_top`` (the highest ground
+  between the foot and its predicted touchdown point, a running maximum over the swing) in the first half of
+  the swing and from ``h_top`` to the touchdown height in the second half (cosine-eased); the paper's
+  half-sine lift (``swing_height``) rides on top of it. The touchdown point is predicted from the commanded
+  speed: hip position now + (L/2 + speed x remaining swing time) along the heading.
+* ``h_ref`` = mean of the four references; foot target z in the hip frame += reference - ``h_ref``, so the
+  trunk stays ``stand_height`` above the mean ground and level when the ground under its feet is not.
+
+What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real A1 would need a
+height map from vision or from its footholds). It ignores the trunk's roll and pitch (the shift is along the
+trunk's z, exact when the trunk is level). ``qd_des`` stays the flat gait's (the shift's rate is not fed
+forward). The gait schedule (stance/swing, swing phase) is the paper's.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from taslel_bench.control.nominal import NominalController, _pd
+from taslel_bench.robot import a1
+from taslel_bench.robot.kinematics import legs_ik_list
+from taslel_bench.terrain.terrain import Terrain
+
+PATH_SAMPLES = 8  # ground heights sampled between a swing foot and its predicted touchdown point
+
+
+def _ease(x: float) -> float:
+    """Cosine ease 0 -> 1 on x in [0, 1]."""
+    return 0.5 * (1.0 - math.cos(math.pi * min(max(x, 0.0), 1.0)))
+
+
+class TerrainFollowingController(NominalController):
+    """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
+
+    uses_base_pose = True
+
+    def __init__(self, *args, terrain: Terrain, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.terrain = terrain
+        self.ground_ref_m = np.zeros(4)  # [m, world z] each foot's ground reference this tick (last computed)
+        self._latched_m = np.full(4, math.nan)  # [m] stance feet: ground height at touchdown
+        self._lift_m = np.zeros(4)  # [m] swing feet: ground height at lift-off
+        self._top_m = np.zeros(4)  # [m] swing feet: highest ground on the path so far this swing
+        self._td_m = np.zeros(4)  # [m] swing feet: ground height at the predicted touchdown
+        self._was_stance = np.ones(4, bool)
+
+    def reset(self) -> None:
+        """Forget the latched ground heights (a new episode)."""
+        self._latched_m[:] = math.nan
+        self._was_stance[:] = True
+
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
+                base_pose: np.ndarray | None = None) -> np.ndarray:
+        """Nominal torques [N·m] at episode time ``t`` [s]; ``base_pose`` = Pinocchio's first 7 coordinates
+        (trunk position [m, world], quaternion x, y, z, w)."""
+        if base_pose is None:
+            raise ValueError("controller.terrain_following=true needs the trunk pose: compute(..., base_pose=q[:7])")
+        self.update_references(t)  # the flat gait's q_des, qd_des (qd_des kept)
+        rows = self.gait.foot_targets_list(self.gait_time(t))
+        ground = self._ground_references(t, base_pose, rows)
+        h_ref = float(np.mean(ground))
+        for i in range(a1.N_LEGS):
+            rows[i][2] += ground[i] - h_ref
+        self.q_des[:] = legs_ik_list(rows)
+        u = np.empty(a1.N_JOINTS)
+        _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
+        return u
+
+    def _ground_references(self, t: float, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
+        """(4,) ground reference [m, world z] of each foot this tick (module doc)."""
+        x, y = float(base_pose[0]), float(base_pose[1])
+        qx, qy, qz, qw = (float(c) for c in base_pose[3:7])
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        c, s = math.cos(yaw), math.sin(yaw)
+        gs = self.gait_state(t)
+        p = self.gait.p
+        t_swing = p.period_s * (1.0 - p.duty)
+        half = 0.5 * self.gait.step_length_m
+        ground = self.ground_ref_m
+        for i in range(a1.N_LEGS):
+            hx, hy = a1.HIP_POSITIONS_IN_TRUNK[i, 0], a1.HIP_POSITIONS_IN_TRUNK[i, 1]
+            fx, fy = hx + rows[i][0], hy + rows[i][1]  # foot target, trunk axes, from the trunk origin
+            foot_w = (x + c * fx - s * fy, y + s * fx + c * fy)
+            if math.isnan(self._latched_m[i]):  # first tick: the ground under the foot now
+                self._latched_m[i] = self.terrain.height_at(*foot_w)
+            if gs.in_stance[i]:
+                if not self._was_stance[i]:  # touchdown: latch the last prediction
+                    self._latched_m[i] = self._td_m[i]
+                ground[i] = self._latched_m[i]
+            else:
+                phase = float(gs.swing_phase[i])
+                ahead = half + p.speed_mps * (1.0 - phase) * t_swing  # [m] hip -> touchdown along x (trunk)
+                tx, ty = hx + ahead, fy
+                td_w = (x + c * tx - s * ty, y + s * tx + c * ty)
+                self._td_m[i] = self.terrain.height_at(*td_w)
+                if self._was_stance[i]:  # lift-off
+                    self._lift_m[i] = self._top_m[i] = self._latched_m[i]
+                path = max(self.terrain.height_at(foot_w[0] + (td_w[0] - foot_w[0]) * k / PATH_SAMPLES,
+                                                  foot_w[1] + (td_w[1] - foot_w[1]) * k / PATH_SAMPLES)
+                           for k in range(PATH_SAMPLES + 1))
+                self._top_m[i] = max(self._top_m[i], path, self._td_m[i])
+                if phase < 0.5:
+                    ground[i] = self._lift_m[i] + (self._top_m[i] - self._lift_m[i]) * _ease(2.0 * phase)
+                else:
+                    ground[i] = self._top_m[i] + (self._td_m[i] - self._top_m[i]) * _ease(2.0 * phase - 1.0)
+            self._was_stance[i] = bool(gs.in_stance[i])
+        return ground
+
