@@ -10,7 +10,7 @@ Parts (each an override of ``conf/filter/terrain.yaml``; a part not listed is sw
 ``none`` is the paper's rows plus the terrain preset's priority relaxation; ``all`` = ``filter=terrain``.
 
     python studies/terrain_filter_ablation.py OUT --worlds slope,steps,logs,rough --seeds 0,1,2 \\
-        --parts all,terrclear+estimate,terrclear+estimate+legsswing,none
+        --parts all,terrclear+estimate,terrclear+estimate+legsswing,none [--extra controller.terrain_following=true]
 
 Runs: 0.5 s stand + 10 s trot, URDF plant, default backend, no MCAP; run folders under OUT (complete runs are
 skipped on a rerun, as in a sweep). Falls and trips are the harness's (contacts of the plant).
@@ -53,6 +53,8 @@ def main() -> None:
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--parts", default="all,terrclear+estimate,terrclear+estimate+legsswing,none")
     ap.add_argument("--duration", type=float, default=10.0)
+    ap.add_argument("--extra", default="", help="overrides added to every run, comma-separated "
+                    "(e.g. controller.terrain_following=true)")
     a = ap.parse_args()
     specs = a.parts.split(",")
     for spec in specs:
@@ -66,7 +68,7 @@ def main() -> None:
         for seed in a.seeds.split(","):
             for spec in specs:
                 over = [f"scenario={world}", f"seed={seed}", f"duration={a.duration}", "record.mcap=false",
-                        "progress=false", *overrides_for(spec)]
+                        "progress=false", *overrides_for(spec), *filter(None, a.extra.split(","))]
                 s = run(compose(over), a.out / f"{world}_{spec}_s{seed}", {"scenario": world}, over)
                 falls.setdefault((world, spec), []).append(int(bool(s["fell"])))
                 print(f"{world:8s} seed {seed} {spec:32s} status {s['status']:8s} fell {s['fell']!s:5s} "
