@@ -31,8 +31,6 @@ class NominalController:
     Looked-up values equal a fresh computation to float rounding (tested).
     """
 
-    uses_base_pose = False  # True: :meth:`compute` also takes the trunk pose (``base_pose=q[:7]``)
-
     def __init__(
         self,
         gait: GaitParams,

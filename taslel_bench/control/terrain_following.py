@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from taslel_bench.control.nominal import NominalController, _pd
+from taslel_bench.control.nominal import NominalController
 from taslel_bench.robot import a1
 from taslel_bench.robot.kinematics import legs_ik_list
 from taslel_bench.terrain.terrain import Terrain
@@ -42,8 +42,6 @@ def _ease(x: float) -> float:
 class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
-    uses_base_pose = True
-
     def __init__(self, *args, terrain: Terrain, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.terrain = terrain
@@ -53,6 +51,8 @@ class TerrainFollowingController(NominalController):
         self._top_m = np.zeros(4)  # [m] swing feet: highest ground on the path so far this swing
         self._td_m = np.zeros(4)  # [m] swing feet: ground height at the predicted touchdown
         self._was_stance = np.ones(4, bool)
+        self._hips_xy = a1.HIP_POSITIONS_IN_TRUNK[:, :2].tolist()  # [m] trunk axes, plain floats for the tick
+        self._base_pose: np.ndarray | None = None
 
     def reset(self) -> None:
         """Forget the latched ground heights (a new episode)."""
@@ -65,16 +65,19 @@ class TerrainFollowingController(NominalController):
         (trunk position [m, world], quaternion x, y, z, w)."""
         if base_pose is None:
             raise ValueError("controller.terrain_following=true needs the trunk pose: compute(..., base_pose=q[:7])")
-        self.update_references(t)  # the flat gait's q_des, qd_des (qd_des kept)
+        self._base_pose = base_pose
+        return super().compute(t, q_joints, qd_joints)
+
+    def update_references(self, t: float) -> None:
+        """The flat gait's ``q_des`` / ``qd_des``, then ``q_des`` from the terrain-shifted foot targets
+        (``qd_des`` kept)."""
+        super().update_references(t)
         rows = self.gait.foot_targets_list(self.gait_time(t))
-        ground = self._ground_references(t, base_pose, rows)
+        ground = self._ground_references(t, self._base_pose, rows)
         h_ref = float(np.mean(ground))
         for i in range(a1.N_LEGS):
             rows[i][2] += ground[i] - h_ref
         self.q_des[:] = legs_ik_list(rows)
-        u = np.empty(a1.N_JOINTS)
-        _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
-        return u
 
     def _ground_references(self, t: float, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
         """(4,) ground reference [m, world z] of each foot this tick (module doc)."""
@@ -88,7 +91,7 @@ class TerrainFollowingController(NominalController):
         half = 0.5 * self.gait.step_length_m
         ground = self.ground_ref_m
         for i in range(a1.N_LEGS):
-            hx, hy = a1.HIP_POSITIONS_IN_TRUNK[i, 0], a1.HIP_POSITIONS_IN_TRUNK[i, 1]
+            hx, hy = self._hips_xy[i]
             fx, fy = hx + rows[i][0], hy + rows[i][1]  # foot target, trunk axes, from the trunk origin
             foot_w = (x + c * fx - s * fy, y + s * fx + c * fy)
             if math.isnan(self._latched_m[i]):  # first tick: the ground under the foot now

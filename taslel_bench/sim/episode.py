@@ -166,12 +166,12 @@ class Episode:
             # contact flags (filter.stance_source=contact) writable: warm both
             for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
                 gs = self.controller.gait_state(t)
-                u_nom = self.controller.compute(t, q[7:], v[6:], q[:7])
+                u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
                 self.filter.filter(inputs, u_nom)
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
-            self.controller.reset()  # and the controller from no memory of the warm-up ticks
+        self.controller.reset()  # the controller starts with no memory of the warm-up or an earlier episode
         return time.perf_counter() - t0
 
     # -------------------------------------------------------------------------------------------- run
@@ -218,6 +218,7 @@ class Episode:
         # views of the plant's arrays, made once (MjData makes a new numpy wrapper on every attribute read)
         self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
         self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
+        self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
         self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
@@ -247,7 +248,7 @@ class Episode:
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
         est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet))  # fmt: skip
-        u_nom = self.controller.compute(t, q[7:], v[6:], q[:7])
+        u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
         gs = self.controller.gait_state(t)
         if self.contact_estimate is not None:
             in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
