@@ -15,7 +15,7 @@ from taslel_bench.filter.barriers.terrain_clearance import TerrainClearance
 from taslel_bench.filter.layout import LAM, NV, TickInputs
 from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
 from taslel_bench.filter.terrain_cone import TerrainFrictionCone, tangent_basis
-from taslel_bench.interfaces import Box, Log, Plane, QPSolution, Ramp, Terrain
+from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, QPSolution, Ramp, Terrain
 from taslel_bench.terrain.packed import PackedTerrain
 from tests.conftest import compose_cfg
 from tests.test_filter import TightReference, inputs_for, walking_states, world
@@ -218,3 +218,24 @@ def test_ablation_study_switches_exactly_the_named_parts_of_the_terrain_filter()
     composed = compose_cfg(overrides_for("terrclear+estimate+legsswing"))  # every override exists in the tree
     assert composed.filter.barriers.shin.swing_only and composed.filter.barriers.knee.swing_only
     assert composed.filter.friction_cone == "pyramid" and composed.filter.stance_source == "estimate"
+
+
+def test_terrain_clearance_max_normal_z_keeps_rows_at_risers_only(states):
+    """``max_normal_z`` drops the rows of feet over a top (normal up) and keeps those beside a riser face."""
+    st, pm = states
+    q, v, gs, u = st[2]
+    pm.update(q, v)
+    swing = np.flatnonzero(~gs.in_stance)
+    assert swing.size
+    foot = pm.foot_pos_in_world[swing[0]]
+    over_top = Box(centre_m=(foot[0], foot[1], -0.5), half_size_m=(0.3, 0.3, 0.5), role=OBSTACLE)  # top z = 0
+    beside = Box(centre_m=(foot[0] + 0.25, foot[1], 0.0), half_size_m=(0.2, 0.3, 0.5), role=OBSTACLE)  # face ahead
+    for box, rows_left in ((over_top, False), (beside, True)):
+        w = world(terrain=Terrain((Plane(1.0), box)))
+        every, riser = TerrainClearance(w), TerrainClearance(w, max_normal_z=0.7)
+        f = SafetyFilter(FilterSettings(), TightReference(), [every, riser])
+        f.build(inputs_for(pm, st[2], 1.0), u)
+        assert np.isfinite(every.h[swing[0]])
+        assert np.isfinite(riser.h[swing[0]]) == rows_left
+    with pytest.raises(ValueError, match="max_normal_z"):
+        TerrainClearance(w, max_normal_z=1.5)
