@@ -8,6 +8,8 @@ Parts (each an override of ``conf/filter/terrain.yaml``; a part not listed is sw
   legsswing  shin and knee barriers on swing legs only
   terrclear  swing-foot clearance above the terrain (off: no ground-clearance row at all)
 ``none`` is the paper's rows plus the terrain preset's priority relaxation; ``all`` = ``filter=terrain``.
+Two references can stand beside them: ``paper`` (``filter=id_cbf_qp``, the paper's filter) and ``nominal`` (the
+filter off).
 
     python studies/terrain_filter_ablation.py OUT --worlds slope,steps,logs,rough --seeds 0,1,2 \\
         --parts all,terrclear+estimate,terrclear+estimate+legsswing,none [--extra controller.terrain_following=true]
@@ -29,14 +31,19 @@ PARTS_OFF = {  # the overrides that switch a part of filter=terrain off
 }
 SWING_ONLY_LEGS = ["filter.barriers.shin.swing_only=true", "+filter.barriers.knee.swing_only=true"]
 PARTS = (*PARTS_OFF, "legsswing")
+REFERENCES = {"paper": ["filter=id_cbf_qp"], "nominal": ["filter.enabled=false"]}
 
 
 def overrides_for(spec: str) -> list[str]:
-    """``filter=terrain`` overrides that leave only the parts named in ``spec`` ("a+b", "all" or "none") on."""
+    """``filter=terrain`` overrides that leave only the parts named in ``spec`` ("a+b", "all" or "none") on;
+    ``paper`` and ``nominal`` give the references' overrides."""
+    if spec in REFERENCES:
+        return list(REFERENCES[spec])
     on = set(PARTS_OFF) if spec == "all" else set() if spec == "none" else set(spec.split("+"))
     unknown = on - set(PARTS)
     if unknown:
-        raise ValueError(f"parts {spec!r}: unknown {sorted(unknown)}; valid: {', '.join(PARTS)}, all, none")
+        raise ValueError(f"parts {spec!r}: unknown {sorted(unknown)}; valid: {', '.join(PARTS)}, all, none, "
+                         f"or alone {', '.join(REFERENCES)}")
     if {"legs", "legsswing"} <= on:
         raise ValueError(f"parts {spec!r}: legs and legsswing exclude each other")
     out = ["filter=terrain"]
