@@ -74,3 +74,26 @@ def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
         assert frames["contact_fn_n"][0, leg, 0] > 0.0
         checked += 1
     assert checked >= 3
+
+
+def test_leg_link_contact_beside_its_foot_is_told_from_one_away_from_it():
+    """Two ticks of raw rows, each with the FL calf box touching log 0: 2.5 cm from the FL foot centre (the box
+    grazing the log the foot stands on) and 11 cm from it (a calf strike). Both are link contacts; only the second
+    is off the foot."""
+    built = Built(compose_cfg(["scenario=logs", "progress=false", "record.mcap=false"]))
+    m = built.mj_model
+    calf = next(g for g in range(m.ngeom) if m.body(m.geom_bodyid[g]).name == "FL_calf"
+                and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX)
+    log_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "obstacles_0")
+    reader, log = ContactFrameReader(m), ContactLog(2)
+    fl = a1.LEGS.index("FL")
+    for k, away_m in enumerate((0.025, 0.11)):
+        log.count[k] = 1
+        log.geom[k, 0] = (log_geom, calf)
+        log.dist[k, 0] = -0.002
+        log.foot_pos[k, fl] = (0.66, 0.1, 0.05)
+        log.pos[k, 0] = log.foot_pos[k, fl] + (-away_m, 0.0, 0.0)
+    frames = reader.frames(log, 0, 2)
+    assert frames["leg_link_obstacle_contact"][:, fl].tolist() == [True, True]
+    assert frames["leg_link_obstacle_contact_off_foot"][:, fl].tolist() == [False, True]
+    assert not frames["leg_link_obstacle_contact"][:, [i for i in range(a1.N_LEGS) if i != fl]].any()

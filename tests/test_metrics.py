@@ -131,6 +131,16 @@ def test_trips_are_new_obstacle_contacts_in_swing_and_leg_link_contacts():
     assert (m["foot_trips"], m["shin_trips"], m["trips"]) == (2, 1, 3)
     assert (m["foot_trips_flank"], m["foot_trips_top"]) == (1, 1)
     assert m["obstacle_touch_swing_rate"] == pytest.approx(3 / 40)
+    # the top landing was early in the swing, the calf knock beside its foot: both are strikes then, none is
+    tr.swing_phase[30, 1] = 0.3
+    tr.leg_link_obstacle_contact_off_foot[[4, 5], 0] = False
+    m = clearance_metrics(tr, 0)
+    assert (m["foot_trips_top_late_swing"], m["shin_trips_off_foot"], m["trips_strikes"]) == (0, 0, 2)
+    tr.swing_phase[30, 1] = 0.8  # a late-swing landing on the top: an early touchdown, not a strike
+    tr.leg_link_obstacle_contact_off_foot[[4, 5], 0] = True  # the calf knock 4 cm or more from its foot: a strike
+    m = clearance_metrics(tr, 0)
+    assert (m["foot_trips_top_late_swing"], m["shin_trips_off_foot"], m["trips_strikes"]) == (1, 1, 2)
+    assert m["trips"] == 3
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 
 

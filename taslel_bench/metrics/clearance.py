@@ -17,6 +17,14 @@ Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <
 * a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
   whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
   new obstacle contact in stance.
+
+``trips`` (the verdict's count) is ``foot_trips + shin_trips``. Two of its parts are events that on the floor
+are not trips at all, and are counted apart so a report can show them (``trips`` itself is unchanged):
+``foot_trips_top_late_swing`` (a swing foot landing on an obstacle's top in the second half of its swing: an
+early touchdown, as the floor's are) and the leg-link onsets within
+:data:`taslel_bench.plant.contact_frames.FOOT_NEIGHBOURHOOD_M` of the leg's own foot centre (the URDF calf
+box grazing the log the foot stands on). ``trips_strikes`` is what is left: flank hits, top hits in the first
+half of the swing and leg-link contacts away from the foot (``shin_trips_off_foot``).
 """
 
 from __future__ import annotations
@@ -64,6 +72,7 @@ class ClearanceStream:
         self.dt, self.acc = dt, Reducer()
         rearm = max(1, round(TRIP_REARM_S / dt))
         self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
+        self.link_off_foot = Onsets(rearm)
 
     def result(self) -> dict[str, float]:
         return self.acc.result()
@@ -111,6 +120,11 @@ class ClearanceStream:
         acc.count("foot_trips_flank", (new & swing & on_flank).sum())
         acc.count("foot_trips_top", (new & swing & ~on_flank).sum())
         acc.count("shin_trips", link_new.sum())  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
+        late_top = new & swing & ~on_flank & (tr.swing_phase[w] >= 0.5)
+        off_foot = self.link_off_foot(tr.leg_link_obstacle_contact_off_foot[w]).sum()
+        acc.count("foot_trips_top_late_swing", late_top.sum())
+        acc.count("shin_trips_off_foot", off_foot)
+        acc.count("trips_strikes", (new & swing).sum() - late_top.sum() + off_foot)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
         acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)

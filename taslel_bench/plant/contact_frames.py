@@ -14,7 +14,10 @@ steps, heightfields), vectorised over ticks:
 * the tangential speed [m/s] of the foot's material point at the contact position (the body's ``cvel`` moved
   to ``contact.pos``, as ``mj_objectVelocity`` reads it; the normal component removed) — the slip at the
   contact, not at the sphere's lowest point. Terrain geoms are static (world or mocap bodies: no velocity);
-* per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0.
+* per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0, and the
+  same for contact points farther than :data:`FOOT_NEIGHBOURHOOD_M` from that leg's foot-sphere centre (the
+  A1 URDF's calf box runs to the foot centre and leaves the 2 cm sphere 1.65 cm from it: where the foot stands on
+  a log's curve the box grazes the log beside the foot, as it grazes the floor on flat ground).
 
 After ``mj_step`` the contact list, the constraint forces and the body velocities are those of the step's
 *starting* state, the same instant the foot sensors (:mod:`taslel_bench.plant.contacts`) report.
@@ -29,6 +32,7 @@ from taslel_bench.plant.contacts import foot_geom_ids, obstacle_geom_mask
 from taslel_bench.robot import a1
 
 MAX_CONTACTS_PER_FOOT = 3  # a sphere meets a plane and a log's flank at once at most twice in practice
+FOOT_NEIGHBOURHOOD_M = 0.04  # [m] a leg-link contact point nearer than this to its foot's centre is beside the foot
 MAX_CONTACTS_LOGGED = 24  # contacts kept per tick (the robot on flat ground has 2-4; overflow is counted)
 
 
@@ -46,6 +50,7 @@ class ContactLog:
         self.force = np.zeros((c, m, 3))  # [N] in the contact frame (normal, tangent1, tangent2)
         self.foot_cvel = np.zeros((c, a1.N_LEGS, 6))  # (omega, v at the root's subtree com) of each foot's body
         self.root_com = np.zeros((c, 3))  # [m] subtree centre of mass of the robot's root body
+        self.foot_pos = np.zeros((c, a1.N_LEGS, 3))  # [m] foot-sphere centres, world
 
 
 class ContactFrameReader:
@@ -69,25 +74,27 @@ class ContactFrameReader:
         self._is_robot = np.append(self._is_robot, True)
         self._is_obstacle = np.append(obstacle_geom_mask(model), False)
         self._foot_bodies = model.geom_bodyid[feet]
+        self._feet = feet
         # elliptic cones and condim 3 everywhere (no explicit pairs): a contact's 3 efc rows are its
         # contact-frame force, as mj_contactForce returns it; else mj_contactForce per contact
         self._efc_rows_are_forces = bool(model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.npair == 0
                                          and np.all(model.geom_condim == 3))
         self._force6 = np.zeros(6)
         self._xyz = np.arange(3)
-        self._views: tuple | None = None  # (data, its cvel, its subtree_com): views made once per MjData
+        self._views: tuple | None = None  # (data, cvel, subtree_com, geom_xpos): views made once per MjData
 
     # ---------------------------------------------------------------------------------------- in the loop
     def record(self, data: mujoco.MjData, log: ContactLog, k: int) -> None:
         """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``. Each read of a
         binding field makes a numpy view (~0.2 us): the fixed-size ones are made once per ``data``."""
         if self._views is None or self._views[0] is not data:
-            self._views = (data, data.cvel, data.subtree_com)
-        _, cvel, subtree_com = self._views
+            self._views = (data, data.cvel, data.subtree_com, data.geom_xpos)
+        _, cvel, subtree_com, geom_xpos = self._views
         n = data.ncon
         log.count[k] = n
         np.take(cvel, self._foot_bodies, axis=0, out=log.foot_cvel[k])
         log.root_com[k] = subtree_com[self._root]
+        np.take(geom_xpos, self._feet, axis=0, out=log.foot_pos[k])
         if n == 0:
             return
         m = min(n, MAX_CONTACTS_LOGGED)
@@ -112,7 +119,9 @@ class ContactFrameReader:
         unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept):
         ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
         (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;
-        ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4)."""
+        ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4), and
+        ``leg_link_obstacle_contact_off_foot`` (n, 4) for contact points beyond :data:`FOOT_NEIGHBOURHOOD_M` of
+        the leg's foot centre."""
         t = slice(k0, k1)
         n, kk = k1 - k0, MAX_CONTACTS_PER_FOOT
         geom = log.geom[t]
@@ -120,12 +129,17 @@ class ContactFrameReader:
         used = geom[..., 0] >= 0
         terrain_pair = used & (robot[..., 0] != robot[..., 1])
         touching = log.dist[t] <= 0.0
-        out = {"leg_link_obstacle_contact": np.zeros((n, a1.N_LEGS), bool)}
+        out = {"leg_link_obstacle_contact": np.zeros((n, a1.N_LEGS), bool),
+               "leg_link_obstacle_contact_off_foot": np.zeros((n, a1.N_LEGS), bool)}
         link = self._link_leg[geom]
         for side in (0, 1):
             hit = terrain_pair & touching & (link[..., side] >= 0) & self._is_obstacle[geom[..., 1 - side]]
             tick, j = np.nonzero(hit)
-            out["leg_link_obstacle_contact"][tick, link[tick, j, side]] = True
+            leg = link[tick, j, side]
+            out["leg_link_obstacle_contact"][tick, leg] = True
+            from_foot = np.linalg.norm(log.pos[t][tick, j] - log.foot_pos[t][tick, leg], axis=1)
+            off = from_foot > FOOT_NEIGHBOURHOOD_M
+            out["leg_link_obstacle_contact_off_foot"][tick[off], leg[off]] = True
         foot_leg = self._foot_leg[geom]
         tick, j = np.nonzero(terrain_pair & ((foot_leg[..., 0] >= 0) | (foot_leg[..., 1] >= 0)))
         foot_is_geom2 = foot_leg[tick, j, 1] >= 0

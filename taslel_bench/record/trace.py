@@ -111,7 +111,7 @@ class EpisodeTrace:
         # foot-terrain contact in MuJoCo's contact frame, per tick, leg and slot (K slots, zero / False unused):
         # f_n [N], |f_t| [N], the contact's mu [-], the normal out of the terrain (world axes), the contact
         # point's tangential speed [m/s], touching (distance <= 0), on an obstacle geom; per leg: a non-foot
-        # link of the leg touching an obstacle
+        # link of the leg touching an obstacle, and the same farther than FOOT_NEIGHBOURHOOD_M from its foot
         k = MAX_CONTACTS_PER_FOOT
         self.contact_fn_n = np.zeros((c, nl, k))
         self.contact_ft_n = np.zeros((c, nl, k))
@@ -121,6 +121,7 @@ class EpisodeTrace:
         self.contact_touching = np.zeros((c, nl, k), bool)
         self.contact_on_obstacle = np.zeros((c, nl, k), bool)
         self.leg_link_obstacle_contact = np.zeros((c, nl), bool)
+        self.leg_link_obstacle_contact_off_foot = np.zeros((c, nl), bool)
 
     def _allocate_tick_timing(self, c: int) -> None:
         """Friction estimate rows, the tick's wall times and the event list."""
@@ -364,6 +365,7 @@ class EpisodeTrace:
         _put(cols, leg + "_contact_frame_normal_{}_w", "xyz", get("contact_normal_w")[:, 0])
         cols[f"{leg}_contact_frame_slip_mps"] = get("contact_slip_mps")[:, 0]
         cols[f"{leg}_leg_link_obstacle_contact"] = get("leg_link_obstacle_contact")
+        cols[f"{leg}_leg_link_obstacle_contact_off_foot"] = get("leg_link_obstacle_contact_off_foot")
 
     def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
         """The controller model's residuals and barrier conditions (nan until computed after the episode)."""

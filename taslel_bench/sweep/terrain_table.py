@@ -34,6 +34,7 @@ MAX_TICK_COST_RATIO = 2.0  # terrain filter / paper filter, tick median, same ba
 # table column -> summary column (means over finished runs)
 METRICS = {
     "trips/run": "trips",
+    "strikes/run": "trips_strikes",  # trips less late-swing top landings and calf grazes beside the foot
     "distance [m]": "distance_m",
     "GRF err z loaded [N]": "grf_mae_z_n",
     "sliding [m]": "sliding_distance_m",
@@ -130,7 +131,7 @@ def _rough_targets(frame: pd.DataFrame) -> list[str]:
                            for v in ("nominal", "paper"))  # fmt: skip
         out.append(f"**{world}** (target: 0 falls, <= {MAX_TRIPS_PER_RUN:g} trip per run, >= {need_m:.3g} m walked "
                    f"in {duration:.3g} s): {'met' if met else 'missed'}: falls {falls}/{len(on)}, trips {_fmt(trips)} "
-                   f"per run, {_fmt(dist)} m ({beside}).")
+                   f"per run (strikes {_fmt(_mean(on, 'trips_strikes'))}), {_fmt(dist)} m ({beside}).")
     return out
 
 
