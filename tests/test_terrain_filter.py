@@ -14,7 +14,7 @@ from taslel_bench.filter.barriers.leg_points import LegPoints
 from taslel_bench.filter.barriers.terrain_clearance import TerrainClearance
 from taslel_bench.filter.layout import LAM, NV, TickInputs
 from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
-from taslel_bench.filter.terrain_cone import TerrainFrictionCone, tangent_basis
+from taslel_bench.filter.terrain_cone import TerrainFrictionCone, downhill_edge_basis, tangent_basis
 from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, QPSolution, Ramp, Terrain
 from taslel_bench.terrain.packed import PackedTerrain
 from tests.conftest import compose_cfg
@@ -199,6 +199,42 @@ def test_contact_estimate_late_touchdown_stays_swing_until_loaded_or_timeout():
     flags = [est.update(stance, np.zeros(4), free)[0] for _ in range(5)]
     assert flags == [False, False, False, True, True]  # stance anyway after 3 ticks
     assert est.late_touchdown_ticks == 4 * 1 + 4 * 3
+
+
+def test_downhill_edge_pyramid_holds_a_vertical_force_on_a_40_deg_log_side_inside_the_true_cone():
+    """A surface tilted 40 deg along world x, mu = 1: the vertical force's tangential share is tan 40 = 0.84 of its
+    normal one, inside the true cone (1) but outside the world-x pyramid's mu/sqrt 2 = 0.71 along t1; the
+    pyramid turned so an edge lies down the slope holds it. Every force the turned rows admit lies inside the
+    true cone; on a level plane the turned basis is the paper's."""
+    tilt = math.radians(40.0)
+    n = np.array([-math.sin(tilt), 0.0, math.cos(tilt)])
+    mu_t = 1.0 / math.sqrt(2.0)
+
+    def admits(basis, f):
+        t1, t2 = basis(n)
+        return f @ n > 0 and abs(f @ t1) <= mu_t * (f @ n) + 1e-12 and abs(f @ t2) <= mu_t * (f @ n) + 1e-12
+
+    up = np.array([0.0, 0.0, 1.0])
+    assert not admits(tangent_basis, up) and admits(downhill_edge_basis, up)
+    t1, t2 = downhill_edge_basis(n)
+    assert abs(t1 @ n) < 1e-12 and abs(t2 @ n) < 1e-12 and abs(t1 @ t2) < 1e-12
+    rng = np.random.default_rng(0)
+    for f in rng.normal(size=(2000, 3)):
+        if admits(downhill_edge_basis, f):
+            f_n = f @ n
+            assert np.linalg.norm(f - f_n * n) <= 1.0 * f_n + 1e-9  # inside the true cone, mu = 1
+    for level in (np.array([0.0, 0.0, 1.0]),):
+        assert all(np.allclose(a, b) for a, b in zip(downhill_edge_basis(level), tangent_basis(level)))
+
+
+def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
+    f = SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=True), TightReference(),
+                     terrain=Terrain((Ramp(start_x_m=-1.0, run_m=3.0, angle_deg=10.0),)))
+    assert f.friction.basis is downhill_edge_basis
+    assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is False
+    with pytest.raises(Exception, match="cone_edge_downhill"):
+        from taslel_bench.config.validate import validate
+        validate(compose_cfg(["filter=terrain", "filter.cone_edge_downhill=maybe"]))
 
 
 def test_ablation_study_switches_exactly_the_named_parts_of_the_terrain_filter():

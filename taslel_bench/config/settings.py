@@ -70,6 +70,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         robust=robust_settings(f.get("robust")),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
         friction_cone=str(f.get("friction_cone", "pyramid")),
+        cone_edge_downhill=bool(f.get("cone_edge_downhill", False)),
         relaxation=str(f.get("relaxation", "none")),
     )
 

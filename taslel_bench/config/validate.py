@@ -296,6 +296,7 @@ def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
     choice(f"{f}.formulation", _get(cfg, f"{f}.formulation", "full"), FORMULATIONS)
     choice(f"{f}.stance_source", _get(cfg, f"{f}.stance_source"), STANCE_SOURCES)
     choice(f"{f}.friction_cone", _get(cfg, f"{f}.friction_cone", "pyramid"), FRICTION_CONES)
+    flag(f"{f}.cone_edge_downhill", _get(cfg, f"{f}.cone_edge_downhill", False))
     choice(f"{f}.relaxation", _get(cfg, f"{f}.relaxation", "none"), RELAXATIONS)
     for key, hi, unit in (("force_threshold_n", 1000.0, "N"), ("min_swing_phase", 1.0, "-"),
                           ("min_force_vertical_share", 1.0, "-"), ("late_touchdown_max_s", 1.0, "s")):

@@ -72,6 +72,7 @@ class FilterSettings:
     robust: RobustSettings = field(default_factory=RobustSettings)  # margins for a wrong model (off)
     control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
     friction_cone: str = "pyramid"  # "pyramid" (paper: world z, one mu) | "terrain" (per foot, terrain normal)
+    cone_edge_downhill: bool = False  # terrain cone: a pyramid edge down the slope (full mu there), not world x
     relaxation: str = "none"  # "none" (failure -> fallback) | "priority" (drop barrier families, last first)
 
 
@@ -120,7 +121,8 @@ class SafetyFilter:
         if settings.friction_cone == "terrain":
             if terrain is None:
                 raise ValueError("filter.friction_cone=terrain needs the world's terrain")
-            self.friction: FrictionCone = TerrainFrictionCone(settings.lambda_min_n, terrain)
+            self.friction: FrictionCone = TerrainFrictionCone(settings.lambda_min_n, terrain,
+                                                              edge_downhill=settings.cone_edge_downhill)
         else:
             self.friction = FrictionCone(settings.lambda_min_n)
         self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families

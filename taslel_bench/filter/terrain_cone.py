@@ -9,7 +9,12 @@ radial direction, on a slope or a heightfield triangle its face normal) with its
     -n_i . lambda_i <= -lambda_min,   |t_k . lambda_i| <= (mu_i / sqrt 2) n_i . lambda_i  (k = 1, 2),
 
 t_1 = world x projected on the tangent plane (normalised), t_2 = n_i x t_1; lambda_i on the robot, world
-axes [N]. On flat ground with one mu the rows are the paper's exactly (tests/test_filter.py). Same rows,
+axes [N]. The square pyramid meets the true cone only along its four edges (t_1 +- t_2): along t_1 its
+half-angle is atan(mu/sqrt 2), 35.3 deg at mu = 1, so a vertical force on a surface tilted more than that along
+world x (a log's side: 10 % of loaded stance ticks on `logs`) is outside it although the true cone (45 deg)
+holds it. ``edge_downhill`` (``filter.cone_edge_downhill``) turns the pyramid about n_i so that an edge lies
+along the slope's steepest direction d (t_1 = (d + n x d)/sqrt 2): full mu up and down the slope, the pyramid
+still inside the true cone; on flat ground (no slope) the basis stays the paper's. On flat ground with one mu the rows are the paper's exactly (tests/test_filter.py). Same rows,
 labels and pattern as the paper's pyramid, so a persistent backend sees one layout.
 """
 
@@ -48,12 +53,26 @@ def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t1, np.cross(normal, t1)
 
 
+def downhill_edge_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(t1, t2) with t1 - t2 along the steepest descent d of the plane normal to ``normal`` (a pyramid edge
+    there); :func:`tangent_basis` when the plane is level (|n_z| within 1e-6 of 1)."""
+    d = normal[2] * normal - np.array([0.0, 0.0, 1.0])  # -z projected on the tangent plane
+    size = np.linalg.norm(d)
+    if size < 1e-6:
+        return tangent_basis(normal)
+    d /= size
+    e = np.cross(normal, d)
+    t1 = (d + e) / np.sqrt(2.0)
+    return t1, np.cross(normal, t1)
+
+
 class TerrainFrictionCone(FrictionCone):
     """The square pyramid about each stance foot's terrain normal with its own mu (module doc)."""
 
-    def __init__(self, lambda_min_n: float, terrain: Terrain) -> None:
+    def __init__(self, lambda_min_n: float, terrain: Terrain, edge_downhill: bool = False) -> None:
         super().__init__(lambda_min_n)
         self.terrain = terrain
+        self.basis = downhill_edge_basis if edge_downhill else tangent_basis  # (t1, t2) of a normal
         self.flat = all(isinstance(p, (Plane, FrictionStrips)) for p in terrain.parts)  # normal: world z
         self.normals = np.tile([0.0, 0.0, 1.0], (a1.N_LEGS, 1))  # the last normals used (world)
         self.mu_used = np.full(a1.N_LEGS, np.nan)  # [-] the last per-foot coefficients used
@@ -74,7 +93,7 @@ class TerrainFrictionCone(FrictionCone):
 
     def _write_foot_about(self, qp: QPProblem, i: int, n: np.ndarray, mu: float) -> None:
         r, c = self.start + 5 * i, NV + NU + 3 * i
-        t1, t2 = tangent_basis(n)
+        t1, t2 = self.basis(n)
         mu_t = mu / np.sqrt(2.0)
         qp.G[r : r + 5, c : c + 3] = np.stack([-n, t1 - mu_t * n, -t1 - mu_t * n, t2 - mu_t * n, -t2 - mu_t * n])
         qp.h[r : r + 5] = (-self.lambda_min_n, 0.0, 0.0, 0.0, 0.0)
