@@ -7,7 +7,9 @@ Parts (each an override of ``conf/filter/terrain.yaml``; a part not listed is sw
   legs       shin and knee barriers on every leg (off: no whole-leg rows)
   legsswing  shin and knee barriers on swing legs only
   terrclear  swing-foot clearance above the terrain (off: no ground-clearance row at all)
-``none`` is the paper's rows plus the terrain preset's priority relaxation; ``all`` = ``filter=terrain``.
+``none`` is the terrain preset with every part off (EoM, stance contact, world-z pyramid, torque limits,
+priority relaxation: no barrier row, as the preset drops the paper's clearance and obstacle rows);
+``all`` = ``filter=terrain``.
 Two references can stand beside them: ``paper`` (``filter=id_cbf_qp``, the paper's filter) and ``nominal`` (the
 filter off).
 

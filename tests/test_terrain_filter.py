@@ -231,7 +231,10 @@ def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
     f = SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=True), TightReference(),
                      terrain=Terrain((Ramp(start_x_m=-1.0, run_m=3.0, angle_deg=10.0),)))
     assert f.friction.basis is downhill_edge_basis
-    assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is False
+    from taslel_bench.config.settings import filter_settings
+
+    assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is True  # the preset turns it
+    assert filter_settings(compose_cfg([])).cone_edge_downhill is False  # the paper's filter does not have it
     with pytest.raises(Exception, match="cone_edge_downhill"):
         from taslel_bench.config.validate import validate
         validate(compose_cfg(["filter=terrain", "filter.cone_edge_downhill=maybe"]))
