@@ -14,8 +14,9 @@ half-angle is atan(mu/sqrt 2), 35.3 deg at mu = 1, so a vertical force on a surf
 world x (a log's side: 10 % of loaded stance ticks on `logs`) is outside it although the true cone (45 deg)
 holds it. ``edge_downhill`` (``filter.cone_edge_downhill``) turns the pyramid about n_i so that an edge lies
 along the slope's steepest direction d (t_1 = (d + n x d)/sqrt 2): full mu up and down the slope, the pyramid
-still inside the true cone; on flat ground (no slope) the basis stays the paper's. On flat ground with one mu the rows are the paper's exactly (tests/test_filter.py). Same rows,
-labels and pattern as the paper's pyramid, so a persistent backend sees one layout.
+still inside the true cone; on a level surface the basis stays the paper's. On flat ground with one mu the
+rows are the paper's exactly (tests/test_filter.py). Same rows, labels and pattern as the paper's pyramid, so
+a persistent backend sees one layout.
 """
 
 from __future__ import annotations
