@@ -278,3 +278,25 @@ def test_terrain_clearance_max_normal_z_keeps_rows_at_risers_only(states):
         assert np.isfinite(riser.h[swing[0]]) == rows_left
     with pytest.raises(ValueError, match="max_normal_z"):
         TerrainClearance(w, max_normal_z=1.5)
+
+
+def test_scalar_cross_and_compiled_merge_give_numpys_bits():
+    """The tick's replacements of numpy calls give the same bits: cross3 = np.cross; _take_closer = the masks it
+    replaced (with and without the upward tolerance)."""
+    from taslel_bench.filter.terrain_cone import cross3
+    from taslel_bench.terrain.packed import _take_closer
+
+    rng = np.random.default_rng(11)
+    for a, b in rng.normal(size=(2000, 2, 3)):
+        assert np.array_equal(cross3(a, b), np.cross(a, b))
+    for tol in (0.0, 0.005):
+        d, dp = rng.uniform(0, 0.05, 24), rng.uniform(0, 0.05, 24)
+        normal, n_p = rng.normal(size=(24, 3)), rng.normal(size=(24, 3))
+        point, p_p = rng.normal(size=(24, 3)), rng.normal(size=(24, 3))
+        closer = (dp < d - tol) | ((dp < d + tol) & (n_p[:, 2] > normal[:, 2])) if tol else dp < d
+        want = [x.copy() for x in (d, normal, point)]
+        for w, o in zip(want, (dp, n_p, p_p)):
+            w[closer] = o[closer]
+        _take_closer(d, normal, point, dp, n_p, p_p, tol)
+        assert all(np.array_equal(w, g) for w, g in zip(want, (d, normal, point)))
+        assert 0 < closer.sum() < 24

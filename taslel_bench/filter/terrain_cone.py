@@ -45,13 +45,21 @@ def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray) -> np.ndarr
     return normal
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors, in the same float operations as ``np.cross`` (the same bits) at ~1/20 of its
+    cost on one pair (np.cross: ~29 us here)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(t1, t2): world x projected on the plane normal to ``normal`` (world y if x is parallel), then n x t1."""
     t1 = np.array([1.0, 0.0, 0.0]) - normal[0] * normal
     if np.linalg.norm(t1) < 1e-6:
         t1 = np.array([0.0, 1.0, 0.0]) - normal[1] * normal
     t1 /= np.linalg.norm(t1)
-    return t1, np.cross(normal, t1)
+    return t1, cross3(normal, t1)
 
 
 def downhill_edge_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,9 +70,9 @@ def downhill_edge_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if size < 1e-6:
         return tangent_basis(normal)
     d /= size
-    e = np.cross(normal, d)
+    e = cross3(normal, d)
     t1 = (d + e) / np.sqrt(2.0)
-    return t1, np.cross(normal, t1)
+    return t1, cross3(normal, t1)
 
 
 class TerrainFrictionCone(FrictionCone):

@@ -60,11 +60,24 @@ class PackedTerrain:
         _packed_distance(self.rows, c, radius, upward_tol_m, d, normal, point)
         for part in self.others:
             dp, n_p, p_p = part.sphere_distance(c, radius)
-            closer = (dp < d - upward_tol_m) | ((dp < d + upward_tol_m) & (n_p[:, 2] > normal[:, 2]))
-            if upward_tol_m == 0.0:
-                closer = dp < d
-            d[closer], normal[closer], point[closer] = dp[closer], n_p[closer], p_p[closer]
+            _take_closer(d, normal, point, dp, n_p, p_p, upward_tol_m)
         return d, normal, point
+
+
+@kernel
+def _take_closer(d, normal, point, dp, n_p, p_p, upward_tol):
+    """Where the other part is closer (with ``upward_tol`` > 0: closer by more than it, or within it and more
+    upward), take its distance, normal and point (in place; one loop instead of numpy masks on 4-24 rows)."""
+    for k in range(d.shape[0]):
+        if upward_tol == 0.0:
+            closer = dp[k] < d[k]
+        else:
+            closer = dp[k] < d[k] - upward_tol or (dp[k] < d[k] + upward_tol and n_p[k, 2] > normal[k, 2])
+        if closer:
+            d[k] = dp[k]
+            for a in range(3):
+                normal[k, a] = n_p[k, a]
+                point[k, a] = p_p[k, a]
 
 
 @kernel
