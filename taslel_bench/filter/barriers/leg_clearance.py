@@ -43,6 +43,7 @@ class LegClearance(Barrier):
         self._has_parts = any(role is None or part.role == role for part in world.terrain.parts)
         self.swing_only = bool(swing_only)  # rows for swing legs only (a stance leg's rows constrain the trunk)
         self._points: LegPoints | None = None
+        self._fractions = np.linspace(0.0, self.axis_fraction, SHIN_SAMPLES)[None, :, None]  # along knee -> foot
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m, r0 = x.model, self.start
@@ -54,8 +55,7 @@ class LegClearance(Barrier):
         if self.part == "knee":
             axis = knees[:, None, :]
         else:  # SHIN_SAMPLES points from the knee to axis_fraction of the way to the foot centre, per leg
-            s = np.linspace(0.0, self.axis_fraction, SHIN_SAMPLES)[None, :, None]
-            axis = knees[:, None, :] + s * (m.foot_pos_in_world - knees)[:, None, :]
+            axis = knees[:, None, :] + self._fractions * (m.foot_pos_in_world - knees)[:, None, :]
         points = np.ascontiguousarray(axis.reshape(-1, 3))
         dist, normal, _ = self.terrain.near_distance(points, self.radius_m, role=self.role)
         d = m.data
