@@ -39,8 +39,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=5.0)
     ap.add_argument("--repeats", type=int, default=2)
     a = ap.parse_args()
-    print(f"| world | paper tick p50 [us] | terrain tick p50 [us] | ratio | filter part paper -> terrain [us] |\n"
-          f"|---|---|---|---|---|")
+    print("| world | paper tick p50 [us] | terrain tick p50 [us] | ratio | filter part paper -> terrain [us] |\n"
+          "|---|---|---|---|---|")
     for world in a.worlds.split(","):
         runs: dict[str, list[tuple[float, float]]] = {name: [] for name in FILTERS}
         for _ in range(a.repeats):

@@ -55,7 +55,7 @@ def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
     mujoco.mj_forward(m, d)
     reader, log = ContactFrameReader(m), ContactLog(1)
     reader.record(d, log, 0)
-    frames = reader.frames(log, 0, 1)
+    frames = reader.frames(log, 0, 1, np.zeros((1, a1.N_LEGS, 3)))
     jacp = np.zeros((3, m.nv))
     checked = 0
     feet = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f): i for i, f in enumerate(a1.FOOT_FRAMES)}
@@ -87,13 +87,14 @@ def test_leg_link_contact_beside_its_foot_is_told_from_one_away_from_it():
     log_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "obstacles_0")
     reader, log = ContactFrameReader(m), ContactLog(2)
     fl = a1.LEGS.index("FL")
+    foot_pos = np.zeros((2, a1.N_LEGS, 3))
     for k, away_m in enumerate((0.025, 0.11)):
         log.count[k] = 1
         log.geom[k, 0] = (log_geom, calf)
         log.dist[k, 0] = -0.002
-        log.foot_pos[k, fl] = (0.66, 0.1, 0.05)
-        log.pos[k, 0] = log.foot_pos[k, fl] + (-away_m, 0.0, 0.0)
-    frames = reader.frames(log, 0, 2)
+        foot_pos[k, fl] = (0.66, 0.1, 0.05)
+        log.pos[k, 0] = foot_pos[k, fl] + (-away_m, 0.0, 0.0)
+    frames = reader.frames(log, 0, 2, foot_pos)
     assert frames["leg_link_obstacle_contact"][:, fl].tolist() == [True, True]
     assert frames["leg_link_obstacle_contact_off_foot"][:, fl].tolist() == [False, True]
     assert not frames["leg_link_obstacle_contact"][:, [i for i in range(a1.N_LEGS) if i != fl]].any()

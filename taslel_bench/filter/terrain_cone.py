@@ -105,7 +105,8 @@ class TerrainFrictionCone(FrictionCone):
         t1, t2 = self.basis(n)
         mu_t = mu / np.sqrt(2.0)
         block = qp.G[r : r + 5, c : c + 3]
-        block[0], block[1], block[2], block[3], block[4] = -n, t1 - mu_t * n, -t1 - mu_t * n, t2 - mu_t * n, -t2 - mu_t * n
+        block[0], block[1], block[2] = -n, t1 - mu_t * n, -t1 - mu_t * n
+        block[3], block[4] = t2 - mu_t * n, -t2 - mu_t * n
         qp.h[r : r + 5] = (-self.lambda_min_n, 0.0, 0.0, 0.0, 0.0)
         self._stance[i], self._mu[i] = True, mu
         self._written[i] = n

@@ -50,7 +50,6 @@ class ContactLog:
         self.force = np.zeros((c, m, 3))  # [N] in the contact frame (normal, tangent1, tangent2)
         self.foot_cvel = np.zeros((c, a1.N_LEGS, 6))  # (omega, v at the root's subtree com) of each foot's body
         self.root_com = np.zeros((c, 3))  # [m] subtree centre of mass of the robot's root body
-        self.foot_pos = np.zeros((c, a1.N_LEGS, 3))  # [m] foot-sphere centres, world
 
 
 class ContactFrameReader:
@@ -74,27 +73,25 @@ class ContactFrameReader:
         self._is_robot = np.append(self._is_robot, True)
         self._is_obstacle = np.append(obstacle_geom_mask(model), False)
         self._foot_bodies = model.geom_bodyid[feet]
-        self._feet = feet
         # elliptic cones and condim 3 everywhere (no explicit pairs): a contact's 3 efc rows are its
         # contact-frame force, as mj_contactForce returns it; else mj_contactForce per contact
         self._efc_rows_are_forces = bool(model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.npair == 0
                                          and np.all(model.geom_condim == 3))
         self._force6 = np.zeros(6)
         self._xyz = np.arange(3)
-        self._views: tuple | None = None  # (data, cvel, subtree_com, geom_xpos): views made once per MjData
+        self._views: tuple | None = None  # (data, its cvel, its subtree_com): views made once per MjData
 
     # ---------------------------------------------------------------------------------------- in the loop
     def record(self, data: mujoco.MjData, log: ContactLog, k: int) -> None:
         """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``. Each read of a
         binding field makes a numpy view (~0.2 us): the fixed-size ones are made once per ``data``."""
         if self._views is None or self._views[0] is not data:
-            self._views = (data, data.cvel, data.subtree_com, data.geom_xpos)
-        _, cvel, subtree_com, geom_xpos = self._views
+            self._views = (data, data.cvel, data.subtree_com)
+        _, cvel, subtree_com = self._views
         n = data.ncon
         log.count[k] = n
         np.take(cvel, self._foot_bodies, axis=0, out=log.foot_cvel[k])
         log.root_com[k] = subtree_com[self._root]
-        np.take(geom_xpos, self._feet, axis=0, out=log.foot_pos[k])
         if n == 0:
             return
         m = min(n, MAX_CONTACTS_LOGGED)
@@ -114,14 +111,15 @@ class ContactFrameReader:
                 log.force[k, i] = self._force6[:3]
 
     # -------------------------------------------------------------------------------------- after the loop
-    def frames(self, log: ContactLog, k0: int, k1: int) -> dict[str, np.ndarray]:
+    def frames(self, log: ContactLog, k0: int, k1: int, foot_pos_w: np.ndarray) -> dict[str, np.ndarray]:
         """Per-foot arrays of ticks ``k0:k1`` (shape (n, 4, K), K = MAX_CONTACTS_PER_FOOT, zero / False in
         unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept):
         ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
         (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;
         ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4), and
         ``leg_link_obstacle_contact_off_foot`` (n, 4) for contact points beyond :data:`FOOT_NEIGHBOURHOOD_M` of
-        the leg's foot centre."""
+        the leg's foot centre (``foot_pos_w`` (n, 4, 3) [m], the foot-sphere centres of those ticks: the foot
+        sensors', read once per tick already)."""
         t = slice(k0, k1)
         n, kk = k1 - k0, MAX_CONTACTS_PER_FOOT
         geom = log.geom[t]
@@ -137,7 +135,7 @@ class ContactFrameReader:
             tick, j = np.nonzero(hit)
             leg = link[tick, j, side]
             out["leg_link_obstacle_contact"][tick, leg] = True
-            from_foot = np.linalg.norm(log.pos[t][tick, j] - log.foot_pos[t][tick, leg], axis=1)
+            from_foot = np.linalg.norm(log.pos[t][tick, j] - foot_pos_w[tick, leg], axis=1)
             off = from_foot > FOOT_NEIGHBOURHOOD_M
             out["leg_link_obstacle_contact_off_foot"][tick[off], leg[off]] = True
         foot_leg = self._foot_leg[geom]

@@ -271,7 +271,7 @@ class EpisodeTrace:
             clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
         out["clearance_m"] = clearance
         if frames is not None:
-            out.update(frames.frames(_plain(self.contact_log), k0, k1))
+            out.update(frames.frames(_plain(self.contact_log), k0, k1, foot_pos))
         return out
 
     def finalize(self, rows: int | None = None) -> None:

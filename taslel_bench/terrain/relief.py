@@ -337,7 +337,8 @@ def _hfield_top(h, x0, y0, dx, dy, x, y):
 
 @kernel
 def _cell_corners(h, x0, y0, dx, dy, r, c, A, B, C, D):
-    """The four vertices [m, world] of cell (row r, column c): A (r, c), B (r, c + 1), C (r + 1, c), D (r + 1, c + 1)."""
+    """The four vertices [m, world] of cell (row r, column c): A (r, c), B (r, c + 1), C (r + 1, c),
+    D (r + 1, c + 1)."""
     A[0], A[1], A[2] = x0 + c * dx, y0 + r * dy, h[r, c]
     B[0], B[1], B[2] = x0 + (c + 1) * dx, y0 + r * dy, h[r, c + 1]
     C[0], C[1], C[2] = x0 + c * dx, y0 + (r + 1) * dy, h[r + 1, c]
@@ -361,7 +362,8 @@ def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_
         c0 = min(max(int(np.floor((p[0] - x0) / dx)), 0), ncol - 2)
         r0 = min(max(int(np.floor((p[1] - y0) / dy)), 0), nrow - 2)
         # the cell under the point bounds the minimum: a cell whose box (its x-y rectangle, its heights' range)
-        # is farther than that holds no closer point and is skipped (the same result: tests/test_terrain.py)
+        # is farther than that holds no closer point and is skipped (the same result: the numpy reference,
+        # tests/test_terrain_filter.py::test_packed_heightfield_distance_equals_the_part)
         _cell_corners(h, x0, y0, dx, dy, r0, c0, A, B, C, D)
         bound = min(_closest_on_triangle(p, A, B, D, q), _closest_on_triangle(p, A, C, D, q)) + 1e-9
         best = np.inf
