@@ -12,6 +12,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.control.footholds import FootholdPlanner
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.robust import RobustSettings
@@ -48,7 +49,10 @@ def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> Nominal
     if bool(c.get("terrain_following", False)):
         if terrain is None:
             raise ValueError("controller.terrain_following=true needs the scenario's terrain: build_controller(cfg, terrain)")
-        return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain, **kwargs)
+        search = float(c.get("foothold_search", 0.0))
+        footholds = FootholdPlanner(terrain, search) if search > 0.0 else None
+        return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain,
+                                          footholds=footholds, **kwargs)
     return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
 
 

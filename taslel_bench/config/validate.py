@@ -56,6 +56,7 @@ MAX_SWING_HEIGHT_M = 0.2  # [m]
 MAX_STAND_DURATION_S = 60.0  # [s]
 MAX_KP = 1000.0  # [N·m/rad] joint PD (the default is 100)
 MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
+MAX_FOOTHOLD_SEARCH_M = 0.08  # [m] half the 0.16 m between touchdowns of one foot at the default gait
 MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
 MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
@@ -256,7 +257,12 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
     number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
-    flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
+    following = flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
+    search = number(f"{c}.foothold_search", _get(cfg, f"{c}.foothold_search", 0.0), 0.0, MAX_FOOTHOLD_SEARCH_M,
+                    unit="m", why="touchdown offsets along the heading, within the stance stroke's reach")
+    if search > 0.0 and not following:
+        raise fail(f"{c}.foothold_search", search, "foothold choice is part of the terrain-following nominal: "
+                    "set controller.terrain_following=true, or foothold_search=0")
     return stand
 
 

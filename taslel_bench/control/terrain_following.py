@@ -14,6 +14,10 @@ trunk's z axis by that height relative to the mean of the four:
 * ``h_ref`` = mean of the four references; foot target z in the hip frame += reference - ``h_ref``, so the
   trunk stays ``stand_height`` above the mean ground and level when the ground under its feet is not.
 
+* optionally (``footholds``, :mod:`taslel_bench.control.footholds`) each touchdown moves along the heading by
+  an offset chosen at lift-off, away from edges and from footholds whose lower leg would rest on an edge; the
+  offset eases in over the swing (the gait's own x profile) and holds through the stance that follows.
+
 What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real A1 would need a
 height map from vision or from its footholds). It ignores the trunk's roll and pitch (the shift is along the
 trunk's z, exact when the trunk is level). ``qd_des`` stays the flat gait's (the shift's rate is not fed
@@ -26,6 +30,7 @@ import math
 
 import numpy as np
 
+from taslel_bench.control.footholds import FootholdPlanner, heading_of
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.robot import a1
 from taslel_bench.robot.kinematics import legs_ik_list
@@ -42,9 +47,13 @@ def _ease(x: float) -> float:
 class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
-    def __init__(self, *args, terrain: Terrain, **kwargs) -> None:
+    def __init__(self, *args, terrain: Terrain, footholds: FootholdPlanner | None = None, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.terrain = terrain
+        self.footholds = footholds
+        self.foothold_offset_m = np.zeros(4)  # [m, along the heading] each foot's touchdown offset this tick
+        self._offset_lift_m = np.zeros(4)  # [m] swing feet: offset at lift-off (the last stance's)
+        self._offset_plan_m = np.zeros(4)  # [m] swing feet: offset planned for the coming touchdown
         self.ground_ref_m = np.zeros(4)  # [m, world z] each foot's ground reference this tick (last computed)
         self._latched_m = np.full(4, math.nan)  # [m] stance feet: ground height at touchdown
         self._lift_m = np.zeros(4)  # [m] swing feet: ground height at lift-off
@@ -58,6 +67,7 @@ class TerrainFollowingController(NominalController):
         """Forget the latched ground heights (a new episode)."""
         self._latched_m[:] = math.nan
         self._was_stance[:] = True
+        self.foothold_offset_m[:] = self._offset_lift_m[:] = self._offset_plan_m[:] = 0.0
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
                 base_pose: np.ndarray | None = None) -> np.ndarray:
@@ -82,14 +92,14 @@ class TerrainFollowingController(NominalController):
     def _ground_references(self, t: float, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
         """(4,) ground reference [m, world z] of each foot this tick (module doc)."""
         x, y = float(base_pose[0]), float(base_pose[1])
-        qx, qy, qz, qw = (float(c) for c in base_pose[3:7])
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        c, s = math.cos(yaw), math.sin(yaw)
+        c, s = heading_of(base_pose)
         gs = self.gait_state(t)
         p = self.gait.p
         t_swing = p.period_s * (1.0 - p.duty)
         half = 0.5 * self.gait.step_length_m
         ground = self.ground_ref_m
+        if self.footholds is not None:
+            self._apply_foothold_offsets(t, gs, rows, (x, y), (c, s), half, t_swing)
         for i in range(a1.N_LEGS):
             hx, hy = self._hips_xy[i]
             fx, fy = hx + rows[i][0], hy + rows[i][1]  # foot target, trunk axes, from the trunk origin
@@ -103,6 +113,7 @@ class TerrainFollowingController(NominalController):
             else:
                 phase = float(gs.swing_phase[i])
                 ahead = half + p.speed_mps * (1.0 - phase) * t_swing  # [m] hip -> touchdown along x (trunk)
+                ahead += self._offset_plan_m[i]
                 tx, ty = hx + ahead, fy
                 td_w = (x + c * tx - s * ty, y + s * tx + c * ty)
                 self._td_m[i] = self.terrain.height_at(*td_w)
@@ -119,3 +130,27 @@ class TerrainFollowingController(NominalController):
             self._was_stance[i] = bool(gs.in_stance[i])
         return ground
 
+    def _apply_foothold_offsets(self, t: float, gs, rows: list[list[float]], trunk_xy: tuple[float, float],
+                                heading: tuple[float, float], half: float, t_swing: float) -> None:
+        """Plan each lifting foot's touchdown offset (:class:`FootholdPlanner`) and add this tick's offsets to
+        the foot targets' x (hip frame, along the heading): eased in over a swing, held through a stance."""
+        x, y = trunk_xy
+        c, s = heading
+        ground_ref = float(np.mean(self.ground_ref_m))
+        for i in range(a1.N_LEGS):
+            if gs.in_stance[i]:
+                if not self._was_stance[i]:  # touchdown: the planned offset holds through this stance
+                    self.foothold_offset_m[i] = self._offset_plan_m[i]
+            else:
+                phase = float(gs.swing_phase[i])
+                if self._was_stance[i]:  # lift-off: plan the coming touchdown
+                    self._offset_lift_m[i] = self.foothold_offset_m[i]
+                    hx, hy = self._hips_xy[i]
+                    ahead = half + self.gait.p.speed_mps * (1.0 - phase) * t_swing
+                    fy = hy + rows[i][1]
+                    td = (x + c * (hx + ahead) - s * fy, y + s * (hx + ahead) + c * fy)
+                    target_td = [half, rows[i][1], -self.gait.p.stand_height_m]
+                    self._offset_plan_m[i] = self.footholds.offset(i, td, heading, target_td, 2.0 * half, ground_ref)
+                lift, plan = self._offset_lift_m[i], self._offset_plan_m[i]
+                self.foothold_offset_m[i] = lift + (plan - lift) * _ease(phase)
+            rows[i][0] += self.foothold_offset_m[i]

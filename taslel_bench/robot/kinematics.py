@@ -44,6 +44,20 @@ def _leg_ik_scalar(x: float, y: float, z: float, side: float) -> tuple[float, fl
     return q1, q2, q3
 
 
+def leg_knee_and_foot(x: float, y: float, z: float, side: float) -> tuple[tuple[float, float, float],
+                                                                       tuple[float, float, float]]:
+    """(knee, foot centre) [m] in the hip frame for the foot target (x, y, z) [m] (through :func:`leg_ik`: the
+    foot is the target, or the workspace boundary's point nearest it). The knee is the calf joint."""
+    q1, q2, q3 = _leg_ik_scalar(x, y, z, side)
+    y0 = side * L1
+    c, s = math.cos(q1), math.sin(q1)
+    out = []
+    for xs, zp in ((-L2 * math.sin(q2), -L2 * math.cos(q2)),
+                   (-L2 * math.sin(q2) - L3 * math.sin(q2 + q3), -L2 * math.cos(q2) - L3 * math.cos(q2 + q3))):
+        out.append((xs, c * y0 - s * zp, s * y0 + c * zp))
+    return out[0], out[1]
+
+
 def legs_ik(feet_in_hip: np.ndarray | list[list[float]]) -> np.ndarray:
     """(12,) joint angles [rad] for (4, 3) foot targets [m] in :data:`a1.LEGS` order."""
     return np.array(legs_ik_list(feet_in_hip.tolist() if isinstance(feet_in_hip, np.ndarray) else feet_in_hip))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
-from taslel_bench.filter.barriers.leg_points import SHIN_RADIUS_M, LegPoints, _point_terms
+from taslel_bench.filter.barriers.leg_points import LegPoints, _point_terms
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
 from taslel_bench.robot import a1
@@ -31,7 +31,7 @@ class LegClearance(Barrier):
     hdot = n . v_p, hddot >= n . (J_p vdot + J̇_p v) (the distance's Hessian, positive semi-definite, dropped:
     conservative): -n'J_p vdot <= a2 h_e + a1 hdot + n . J̇_p v."""
 
-    def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = SHIN_RADIUS_M,
+    def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = a1.SHIN_RADIUS_M,
                  axis_fraction: float = 0.7, activation_m: float = 0.08, role: str | None = OBSTACLE,
                  swing_only: bool = False) -> None:  # fmt: skip
         super().__init__(world, name)

@@ -12,7 +12,6 @@ from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
 from taslel_bench.util.jit import kernel
 
-SHIN_RADIUS_M = 0.0115  # [m] the URDF calf collision is a 0.016 x 0.016 box: its half diagonal
 
 
 class LegPoints:

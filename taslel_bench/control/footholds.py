@@ -1,0 +1,108 @@
+"""Foothold choice for the terrain-following trot (beyond the paper; ``controller.foothold_search > 0``).
+
+The gait puts every touchdown at the same place relative to the hip, wherever the ground's edges are. On logs
+and steps that sets stance feet just past a log or a riser, where the lower leg rests against the edge behind
+the foot during stance, or on an edge itself, where the foot slides off. This planner moves each touchdown
+along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen once
+per swing at lift-off from the terrain object:
+
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to ``SHIN_AXIS_FRACTION`` of the
+  way to the foot centre, radius :data:`a1.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
+  planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
+  height: its distance to the terrain should be >= ``shin_clearance_m``;
+* **edges**: the ground within ``edge_radius_m`` of the candidate (ahead, behind, left, right) should be
+  within ``edge_rise_m`` of the candidate's height (a probe ``edge_rise_m`` above that height must be in free
+  space and one ``edge_rise_m`` below it inside the ground).
+
+Each violation counts by how much [m]; the candidate of least total violation wins, ties (e.g. every candidate
+clear) to the smallest ``|delta|`` (``delta = 0`` on flat ground and on a plane slope: the gait's own footholds).
+All positions are world axes [m]; the knee comes from the leg's analytic kinematics in its hip frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from taslel_bench.robot import a1
+from taslel_bench.robot.kinematics import leg_knee_and_foot
+from taslel_bench.terrain.terrain import Terrain
+
+SHIN_AXIS_FRACTION = 0.7  # [-] the shin barrier's capsule: knee -> this fraction of the way to the foot centre
+CAPSULE_POINTS = 7  # points along the shin capsule's axis per pose
+STANCE_POSES = (0.0, 0.5, 1.0)  # [-] stance progress at which the shin is checked (touchdown, mid, lift-off)
+SIZE_TIE = 1e-6  # [m of violation per m of |delta|] prefers the gait's own foothold among equally clear ones
+
+
+class FootholdPlanner:
+    """Touchdown offsets along the heading (module doc) for one terrain."""
+
+    def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.02,
+                 edge_radius_m: float = 0.03, edge_rise_m: float = 0.01) -> None:
+        self.terrain = terrain
+        n = int(round(search_m / step_m))
+        offsets = step_m * np.arange(-n, n + 1)
+        self.offsets_m = offsets[np.argsort(np.abs(offsets), kind="stable")]  # 0, -s, +s, -2s, ... (ties: nearest)
+        self.shin_clearance_m = shin_clearance_m
+        self.edge_radius_m = edge_radius_m
+        self.edge_rise_m = edge_rise_m
+        s = np.linspace(0.0, SHIN_AXIS_FRACTION, CAPSULE_POINTS)
+        self._axis_s = s[None, :, None]  # (1, points, 1) knee -> foot fractions
+
+    def offset(self, leg: int, touchdown_xy_w: tuple[float, float], heading: tuple[float, float],
+               foot_in_hip_td: list[float], stroke_m: float, ground_ref_m: float) -> float:
+        """``delta`` [m] along the heading for leg ``leg`` whose gait touchdown is ``touchdown_xy_w`` [m, world],
+        ``heading`` = (cos yaw, sin yaw), the gait's touchdown foot target ``foot_in_hip_td`` [m] (hip frame,
+        z at the stand height), ``stroke_m`` the stance stroke (foot travel back relative to the hip) and
+        ``ground_ref_m`` the trunk's ground reference (mean of the four) [m, world z]."""
+        return float(self.offsets_m[int(np.argmin(self.violations(leg, touchdown_xy_w, heading, foot_in_hip_td,
+                                                                       stroke_m, ground_ref_m)))])
+
+    def violations(self, leg: int, touchdown_xy_w: tuple[float, float], heading: tuple[float, float],
+                   foot_in_hip_td: list[float], stroke_m: float, ground_ref_m: float) -> np.ndarray:
+        """Total violation [m] of each candidate of :attr:`offsets_m` (plus the size tie-break)."""
+        c, s = heading
+        x0, y0 = touchdown_xy_w
+        px = x0 + c * self.offsets_m
+        py = y0 + s * self.offsets_m
+        h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py)])
+        feet_w = np.stack([px, py, h + a1.FOOT_RADIUS_M], axis=1)  # (n, 3) foot centres resting on the ground
+        return (self._shin_violation(leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m)
+                + self._edge_violation(feet_w, h, heading) + SIZE_TIE * np.abs(self.offsets_m))
+
+    def _shin_violation(self, leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m) -> np.ndarray:
+        c, s = heading
+        side = float(a1.LEG_SIDE[leg])
+        x_td, y_hip, z_stand = foot_in_hip_td
+        points = []
+        for k, delta in enumerate(self.offsets_m):
+            z = z_stand + float(h[k]) - ground_ref_m  # the terrain-following shift of this foothold
+            for progress in STANCE_POSES:
+                knee, foot = leg_knee_and_foot(x_td + float(delta) - progress * stroke_m, y_hip, z, side)
+                dx, dy, dz = knee[0] - foot[0], knee[1] - foot[1], knee[2] - foot[2]  # hip (= level trunk) axes
+                knee_w = feet_w[k] + (c * dx - s * dy, s * dx + c * dy, dz)
+                points.append(knee_w + self._axis_s[0] * (feet_w[k] - knee_w))
+        pts = np.concatenate(points).reshape(-1, 3)
+        d = self.terrain.near_distance(pts, a1.SHIN_RADIUS_M)[0].reshape(len(self.offsets_m), -1)
+        return np.maximum(0.0, self.shin_clearance_m - d.min(axis=1))
+
+    def _edge_violation(self, feet_w, h, heading) -> np.ndarray:
+        c, s = heading
+        r, e = self.edge_radius_m, self.edge_rise_m
+        around = np.array([(c * r, s * r), (-c * r, -s * r), (-s * r, c * r), (s * r, -c * r)])  # ahead, back, l, r
+        xy = feet_w[:, None, :2] + around[None]  # (n, 4, 2)
+        n = len(feet_w)
+        above = np.concatenate([xy, np.broadcast_to((h + e)[:, None, None], (n, 4, 1))], axis=2)
+        below = np.concatenate([xy, np.broadcast_to((h - e)[:, None, None], (n, 4, 1))], axis=2)
+        d = self.terrain.near_distance(np.concatenate([above, below]).reshape(-1, 3), 0.0)[0].reshape(2, n, 4)
+        rise = np.maximum(0.0, -d[0]).sum(axis=1)  # ground above h + e near the foot: a riser or a log's side
+        drop = np.maximum(0.0, d[1]).sum(axis=1)  # free space below h - e: an edge the foot would slide off
+        return rise + drop
+
+
+def heading_of(base_pose: np.ndarray) -> tuple[float, float]:
+    """(cos yaw, sin yaw) of Pinocchio's base pose (position, quaternion x, y, z, w)."""
+    qx, qy, qz, qw = (float(v) for v in base_pose[3:7])
+    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return math.cos(yaw), math.sin(yaw)

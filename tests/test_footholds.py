@@ -1,0 +1,144 @@
+"""Foothold choice of the terrain-following trot (``controller.foothold_search``): touchdowns moved along the
+heading away from edges and from footholds whose shin would rest on one; the gait's own footholds where the
+ground has no edge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from taslel_bench.control.footholds import SHIN_AXIS_FRACTION, STANCE_POSES, FootholdPlanner
+from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.nominal import PDGains
+from taslel_bench.control.terrain_following import TerrainFollowingController
+from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, Ramp, Terrain
+from taslel_bench.robot import a1
+from taslel_bench.robot.kinematics import leg_ik, leg_knee_and_foot
+from taslel_bench.robot.model import A1Model
+from tests.conftest import compose_cfg
+
+HEADING = (1.0, 0.0)
+STAND_M = GaitParams().stand_height_m
+HALF = 0.5 * GaitParams().speed_mps * GaitParams().period_s * GaitParams().duty  # half the stance stroke [m]
+LOG = Log(x_m=0.6, z_m=-0.04, radius_m=0.1, half_width_m=0.5, friction=1.0)  # the logs world's first log
+FL = a1.LEGS.index("FL")
+
+
+def _target(leg: int) -> list[float]:
+    return [HALF, float(a1.LEG_SIDE[leg]) * a1.HIP_OFFSET_Y_M, -STAND_M]
+
+
+def test_knee_and_foot_match_pinocchio():
+    """The planner's knee (calf joint) and foot in the hip frame against Pinocchio's joint placements."""
+    model = A1Model()
+    rng = np.random.default_rng(7)
+    knees = [model.model.getJointId(f"{leg}_calf_joint") for leg in a1.LEGS]
+    for _ in range(20):
+        targets = [np.array([rng.uniform(-0.1, 0.1), a1.LEG_SIDE[i] * a1.HIP_OFFSET_Y_M + rng.uniform(-0.03, 0.03),
+                             rng.uniform(-0.32, -0.2)]) for i in range(4)]
+        q = pin.neutral(model.model)
+        q[7:] = np.concatenate([leg_ik(t, a1.LEG_SIDE[i]) for i, t in enumerate(targets)])
+        model.update(q, np.zeros(a1.NV))
+        for i, t in enumerate(targets):
+            knee, foot = leg_knee_and_foot(*t, float(a1.LEG_SIDE[i]))
+            hip = a1.HIP_POSITIONS_IN_TRUNK[i]
+            np.testing.assert_allclose(np.array(knee) + hip, model.data.oMi[knees[i]].translation, atol=1e-9)
+            np.testing.assert_allclose(np.array(foot) + hip, model.foot_pos_in_world[i], atol=1e-9)
+            np.testing.assert_allclose(foot, t, atol=1e-9)
+
+
+def test_flat_ground_and_a_plane_slope_keep_the_gaits_footholds():
+    ramp = Ramp(start_x_m=-5.0, run_m=10.0, angle_deg=10.0, half_width_m=1.0, role=OBSTACLE)  # 10 deg, no edge
+    for terrain in (Terrain((Plane(),)), Terrain((Plane(), ramp))):
+        planner = FootholdPlanner(terrain, 0.05)
+        for x in np.linspace(-1.0, 1.0, 9):
+            ground = terrain.height_at(float(x), 0.13)
+            assert planner.offset(FL, (float(x), 0.13), HEADING, _target(FL), 2 * HALF, ground) == 0.0
+
+
+def _shin_clearance(terrain: Terrain, foot_xy: tuple[float, float], leg: int, delta: float) -> float:
+    """Smallest distance [m] of the shin capsule to the terrain over the planned stance, by the slow reference
+    query (Terrain.capsule_distance, every part in Python) -- an independent path from the planner's."""
+    h = terrain.height_at(*foot_xy)
+    foot_w = np.array([*foot_xy, h + a1.FOOT_RADIUS_M])
+    out = np.inf
+    for progress in STANCE_POSES:
+        knee, foot = leg_knee_and_foot(HALF + delta - progress * 2 * HALF, _target(leg)[1], -STAND_M + h, 1.0)
+        knee_w = foot_w + np.subtract(knee, foot)
+        end = knee_w + SHIN_AXIS_FRACTION * (foot_w - knee_w)
+        out = min(out, terrain.capsule_distance(knee_w, end, a1.SHIN_RADIUS_M)[0])
+    return out
+
+
+def test_a_touchdown_just_past_a_log_moves_off_it_and_the_shin_clears_it():
+    """Log 0 spans x = 0.51-0.69 m on the floor. A gait touchdown at x = 0.72 m leaves the shin 6 mm from the
+    log in stance (level trunk; falls traced before had stance feet at 0.74-0.77 m and the trunk pitched, the
+    shin barrier at -11 mm); the planned one keeps the planner's clearance."""
+    terrain = Terrain((Plane(), LOG))
+    planner = FootholdPlanner(terrain, 0.05)
+    td = (0.72, 0.13)
+    assert _shin_clearance(terrain, td, FL, 0.0) < 0.01  # the gait's foothold
+    delta = planner.offset(FL, td, HEADING, _target(FL), 2 * HALF, 0.0)
+    assert delta != 0.0
+    chosen = (td[0] + delta, td[1])
+    assert _shin_clearance(terrain, chosen, FL, 0.0) >= planner.shin_clearance_m - 0.003  # 9 vs 7 axis points
+    assert abs(terrain.height_at(*chosen) - terrain.height_at(chosen[0] - 0.03, td[1])) < planner.edge_rise_m
+
+
+@pytest.mark.parametrize("td_x", [0.785, 0.80, 0.815])
+def test_a_touchdown_at_a_step_edge_moves_to_where_the_ground_is_even(td_x):
+    """A 5 cm step whose riser is at x = 0.8 m: touchdowns within 2 cm of its edge move to where the ground is level
+    within the planner's probes (3 cm ahead, behind and to the sides)."""
+    box = Box(centre_m=(1.1, 0.0, 0.025), half_size_m=(0.3, 1.0, 0.025), friction=1.0, role=OBSTACLE)
+    terrain = Terrain((Plane(), box))
+    planner = FootholdPlanner(terrain, 0.05)
+    delta = planner.offset(FL, (td_x, 0.13), HEADING, _target(FL), 2 * HALF, 0.0)
+    x = td_x + delta
+    heights = [terrain.height_at(x + dx, 0.13) for dx in (-0.029, 0.0, 0.029)]  # within the probes
+    assert max(heights) - min(heights) < 1e-9, (delta, heights)
+    violations = planner.violations(FL, (td_x, 0.13), HEADING, _target(FL), 2 * HALF, 0.0)
+    assert violations[0] > violations.min()  # the gait's own foothold was worse
+
+
+def _q_des(ctl, times, pose):
+    out = []
+    for t in times:
+        ctl.compute(float(t), np.zeros(12), np.zeros(12), pose)
+        out.append(ctl.q_des.copy())
+    return np.array(out)
+
+
+def test_the_planner_changes_nothing_on_flat_ground_and_moves_a_touchdown_off_a_step_edge():
+    pose = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])
+    times = np.arange(0.0, 1.5, 1e-3)
+    flat = Terrain((Plane(),))
+    plain = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat)
+    planned = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat, footholds=FootholdPlanner(flat, 0.05))
+    np.testing.assert_array_equal(_q_des(planned, times, pose), _q_des(plain, times, pose))
+    # FR lifts off first, at the end of the stand (0.5 s), for a gait touchdown at x = 0.18 + 0.12 m: a step up
+    # whose riser is 5 mm behind that point (the feet standing at x = 0.18 m are on the floor)
+    riser_x = 0.295
+    step = Box(centre_m=(riser_x + 1.0, 0.0, 0.025), half_size_m=(1.0, 1.0, 0.025), friction=1.0, role=OBSTACLE)
+    terrain = Terrain((Plane(), step))
+    ctl = TerrainFollowingController(GaitParams(), PDGains(), terrain=terrain,
+                                     footholds=FootholdPlanner(terrain, 0.05))
+    _q_des(ctl, times[times < 0.51], pose)
+    fr = a1.LEGS.index("FR")
+    assert abs(ctl._offset_plan_m[fr]) >= 0.02  # off the edge: 3 cm probes
+    assert ctl._offset_plan_m[FL] == 0.0  # FL still stands
+
+
+def test_foothold_search_is_checked_and_needs_terrain_following():
+    from taslel_bench.config.settings import build_controller
+    from taslel_bench.config.validate import validate
+    from taslel_bench.util.fields import ConfigError
+
+    cfg = compose_cfg(["controller.terrain_following=true", "controller.foothold_search=0.05"])
+    ctl = build_controller(cfg, Terrain((Plane(),)))
+    assert isinstance(ctl.footholds, FootholdPlanner)
+    assert build_controller(compose_cfg(["controller.terrain_following=true"]), Terrain((Plane(),))).footholds is None
+    with pytest.raises(ConfigError, match="controller.foothold_search=0.05: foothold choice is part of"):
+        validate(compose_cfg(["controller.foothold_search=0.05"]))
+    with pytest.raises(ConfigError, match=r"controller.foothold_search=0.5.*\[0, 0.08\]"):
+        validate(compose_cfg(["controller.terrain_following=true", "controller.foothold_search=0.5"]))
