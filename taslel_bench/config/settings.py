@@ -10,9 +10,9 @@ from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
+from taslel_bench.control.footholds import FootholdPlanner
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
-from taslel_bench.control.footholds import FootholdPlanner
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.robust import RobustSettings

@@ -41,7 +41,7 @@ class FootholdPlanner:
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.02,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01) -> None:
         self.terrain = terrain
-        n = int(round(search_m / step_m))
+        n = round(search_m / step_m)
         offsets = step_m * np.arange(-n, n + 1)
         self.offsets_m = offsets[np.argsort(np.abs(offsets), kind="stable")]  # 0, -s, +s, -2s, ... (ties: nearest)
         self.shin_clearance_m = shin_clearance_m

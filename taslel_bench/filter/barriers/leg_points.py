@@ -13,7 +13,6 @@ from taslel_bench.robot.model import A1Model
 from taslel_bench.util.jit import kernel
 
 
-
 class LegPoints:
     """Per-episode lookup of the calf joints and the leg columns of one :class:`A1Model`."""
 
