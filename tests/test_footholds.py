@@ -142,3 +142,4 @@ def test_foothold_search_is_checked_and_needs_terrain_following():
         validate(compose_cfg(["controller.foothold_search=0.05"]))
     with pytest.raises(ConfigError, match=r"controller.foothold_search=0.5.*\[0, 0.08\]"):
         validate(compose_cfg(["controller.terrain_following=true", "controller.foothold_search=0.5"]))
+

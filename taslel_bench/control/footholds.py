@@ -9,7 +9,9 @@ per swing at lift-off from the terrain object:
 * **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to ``SHIN_AXIS_FRACTION`` of the
   way to the foot centre, radius :data:`a1.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
-  height: its distance to the terrain should be >= ``shin_clearance_m``;
+  height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far
+  ahead left the calf nearly level and the shin still met the log in stance: 1.1 against 0.8 strikes per run on
+  logs, 10 seeds);
 * **edges**: the ground within ``edge_radius_m`` of the candidate (ahead, behind, left, right) should be
   within ``edge_rise_m`` of the candidate's height (a probe ``edge_rise_m`` above that height must be in free
   space and one ``edge_rise_m`` below it inside the ground).
@@ -38,7 +40,7 @@ SIZE_TIE = 1e-6  # [m of violation per m of |delta|] prefers the gait's own foot
 class FootholdPlanner:
     """Touchdown offsets along the heading (module doc) for one terrain."""
 
-    def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.02,
+    def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01) -> None:
         self.terrain = terrain
         n = round(search_m / step_m)

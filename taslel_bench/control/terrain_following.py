@@ -146,6 +146,8 @@ class TerrainFollowingController(NominalController):
                 if self._was_stance[i]:  # lift-off: plan the coming touchdown
                     self._offset_lift_m[i] = self.foothold_offset_m[i]
                     hx, hy = self._hips_xy[i]
+                    # at the commanded speed: the trunk's measured speed over the last period (it walks at 75-85 %
+                    # of it) gave more shin strikes on logs, 2.4 against 1.1 per run (10 seeds)
                     ahead = half + self.gait.p.speed_mps * (1.0 - phase) * t_swing
                     fy = hy + rows[i][1]
                     td = (x + c * (hx + ahead) - s * fy, y + s * (hx + ahead) + c * fy)
