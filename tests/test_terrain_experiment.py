@@ -129,6 +129,14 @@ def test_target_sentences_say_missed_when_a_number_misses():
     assert "2.50x" in sentences[6]
 
 
+def test_trip_target_sentences_give_both_readings_every_trip_and_strikes_only():
+    sentences = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=0.5))
+    assert sentences[0].startswith("**logs**") and ": missed: falls 0/1, trips 20 per run" in sentences[0]
+    assert "(strikes 0.5: counting strikes, met)" in sentences[0], sentences[0]
+    sentences = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=1.5))
+    assert "(strikes 1.5: counting strikes, missed)" in sentences[0], sentences[0]
+
+
 def test_urdf_plant_runs_keep_the_paper_claims_on_one_plant():
     frame = _sweep()
     kept = terrain_table.urdf_plant_runs(frame)

@@ -123,15 +123,18 @@ def _rough_targets(frame: pd.DataFrame) -> list[str]:
         if on.empty:
             continue
         falls = int(on["fell"].fillna(False).astype(bool).sum())
-        trips, dist = _mean(on, "trips"), _mean(on, "distance_m")
+        trips, dist, strikes = _mean(on, "trips"), _mean(on, "distance_m"), _mean(on, "trips_strikes")
         met = falls == 0 and trips <= MAX_TRIPS_PER_RUN and dist >= need_m
+        # the owner's open question: whether the trip target counts every trip or strikes only; both readings shown
+        met_on_strikes = falls == 0 and strikes <= MAX_TRIPS_PER_RUN and dist >= need_m
         beside = "; ".join(f"{v}: falls {_falls(_finished(cell(frame, world, v, 'none')))}, trips "
                            f"{_fmt(_mean(_finished(cell(frame, world, v, 'none')), 'trips'))}, "
                            f"{_fmt(_mean(_finished(cell(frame, world, v, 'none')), 'distance_m'))} m"
                            for v in ("nominal", "paper"))  # fmt: skip
         out.append(f"**{world}** (target: 0 falls, <= {MAX_TRIPS_PER_RUN:g} trip per run, >= {need_m:.3g} m walked "
                    f"in {duration:.3g} s): {'met' if met else 'missed'}: falls {falls}/{len(on)}, trips {_fmt(trips)} "
-                   f"per run (strikes {_fmt(_mean(on, 'trips_strikes'))}), {_fmt(dist)} m ({beside}).")
+                   f"per run (strikes {_fmt(strikes)}: counting strikes, "
+                   f"{'met' if met_on_strikes else 'missed'}), {_fmt(dist)} m ({beside}).")
     return out
 
 
