@@ -136,7 +136,6 @@ class TerrainFollowingController(NominalController):
         the foot targets' x (hip frame, along the heading): eased in over a swing, held through a stance."""
         x, y = trunk_xy
         c, s = heading
-        ground_ref = float(np.mean(self.ground_ref_m))
         for i in range(a1.N_LEGS):
             if gs.in_stance[i]:
                 if not self._was_stance[i]:  # touchdown: the planned offset holds through this stance
@@ -152,6 +151,7 @@ class TerrainFollowingController(NominalController):
                     fy = hy + rows[i][1]
                     td = (x + c * (hx + ahead) - s * fy, y + s * (hx + ahead) + c * fy)
                     target_td = [half, rows[i][1], -self.gait.p.stand_height_m]
+                    ground_ref = float(np.mean(self.ground_ref_m))  # the trunk's, last tick
                     self._offset_plan_m[i] = self.footholds.offset(i, td, heading, target_td, 2.0 * half, ground_ref)
                 lift, plan = self._offset_lift_m[i], self._offset_plan_m[i]
                 self.foothold_offset_m[i] = lift + (plan - lift) * _ease(phase)
