@@ -254,6 +254,22 @@ def test_friction_pyramid_binds_on_low_mu(states):
     assert binding > 0 and np.mean(du) > 1.0
 
 
+def test_friction_margin_alone_plans_inside_the_narrower_pyramid(states):
+    """robust.friction_margin = 0.1 with the ECBF margins off (robust.enabled false): the same as planning with
+    0.9 mu, and different from mu where the pyramid binds."""
+    from taslel_bench.filter.robust import RobustSettings
+
+    st, pm = states
+    narrow = SafetyFilter(FilterSettings(robust=RobustSettings(enabled=False, friction_margin=0.1)), TightReference())
+    plain = SafetyFilter(FilterSettings(), TightReference())
+    moved = 0
+    for s in st:
+        a, b = narrow.filter(inputs_for(pm, s, 0.05), s[3]), plain.filter(inputs_for(pm, s, 0.045), s[3])
+        np.testing.assert_allclose(a.u, b.u, atol=1e-6)
+        moved += int(np.linalg.norm(a.u - plain.filter(inputs_for(pm, s, 0.05), s[3]).u) > 1e-3)
+    assert moved > 0
+
+
 def test_backend_exception_falls_back_and_is_recorded(states):
     st, pm = states
     f = SafetyFilter(FilterSettings(fallback="nominal"), Broken())

@@ -292,8 +292,8 @@ class SafetyFilter:
             margin = self.robust.ecbf_margin_mps2
             for barrier in self.barriers:
                 barrier.margin_mps2 = margin
-            if self.settings.robust.friction_margin > 0.0:
-                inputs = replace(inputs, mu=inputs.mu * (1.0 - self.settings.robust.friction_margin))
+        if self.settings.robust.friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
+            inputs = replace(inputs, mu=inputs.mu * (1.0 - self.settings.robust.friction_margin))
         qp = self.build(inputs, u_nom)
         if robust:
             self.robust.observe(self.barriers)
