@@ -97,8 +97,11 @@ def test_killed_run_leaves_a_partial_mcap_that_a_rerun_puts_aside(tmp_path):
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     partial = run_dir / PARTIAL_NAME
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:  # wait for two streamed seconds of simulated time
-        if partial.is_file() and sum(t == "/tick" for t, _, _ in read_messages(partial)) >= 200:  # 100 Hz
+    # wait for two streamed seconds of simulated time and for the steps table's temporary file, which opens at
+    # the first chunk (record.chunk_ticks): on a loaded machine the MCAP can show 2 s before that
+    while time.monotonic() < deadline:
+        streamed = partial.is_file() and sum(t == "/tick" for t, _, _ in read_messages(partial)) >= 200  # 100 Hz
+        if streamed and list(run_dir.glob(".steps.parquet.tmp-*")):
             break
         time.sleep(0.5)
     os.kill(proc.pid, signal.SIGKILL)
