@@ -4,7 +4,8 @@ measured in one process with the two filters interleaved (machine noise hits bot
     python studies/terrain_filter_cost.py --worlds steps,rough,logs,slope [--terrain-following false] \
         [--foothold-search 0]
 
-The nominal is that of ``+experiment=terrain`` by default (terrain following, foothold search 0.05 m). Per world: seed 0, 0.5 s stand + ``--duration`` s trot, DAQP, the URDF plant, no files written; each filter run
+The nominal is that of ``+experiment=terrain`` by default (terrain following, foothold search 0.05 m). Per
+world: seed 0, 0.5 s stand + ``--duration`` s trot, DAQP, the URDF plant, no files written; each filter run
 ``--repeats`` times in the order paper, terrain, paper, terrain, ...; medians over the walking ticks (the wall
 time of the whole tick, ``tick_us``, and of its filter part: QP build + solve), averaged over the repeats.
 """

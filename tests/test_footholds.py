@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from taslel_bench.control.footholds import SHIN_AXIS_FRACTION, STANCE_POSES, FootholdPlanner
+from taslel_bench.control.footholds import STANCE_POSES, FootholdPlanner
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
@@ -66,7 +66,7 @@ def _shin_clearance(terrain: Terrain, foot_xy: tuple[float, float], leg: int, de
     for progress in STANCE_POSES:
         knee, foot = leg_knee_and_foot(HALF + delta - progress * 2 * HALF, _target(leg)[1], -STAND_M + h, 1.0)
         knee_w = foot_w + np.subtract(knee, foot)
-        end = knee_w + SHIN_AXIS_FRACTION * (foot_w - knee_w)
+        end = knee_w + a1.SHIN_AXIS_FRACTION * (foot_w - knee_w)
         out = min(out, terrain.capsule_distance(knee_w, end, a1.SHIN_RADIUS_M)[0])
     return out
 

@@ -6,7 +6,7 @@ the foot during stance, or on an edge itself, where the foot slides off. This pl
 along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen once
 per swing at lift-off from the terrain object:
 
-* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to ``SHIN_AXIS_FRACTION`` of the
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to :data:`a1.SHIN_AXIS_FRACTION` of the
   way to the foot centre, radius :data:`a1.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
   height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far
@@ -31,7 +31,6 @@ from taslel_bench.robot import a1
 from taslel_bench.robot.kinematics import leg_knee_and_foot
 from taslel_bench.terrain.terrain import Terrain
 
-SHIN_AXIS_FRACTION = 0.7  # [-] the shin barrier's capsule: knee -> this fraction of the way to the foot centre
 CAPSULE_POINTS = 7  # points along the shin capsule's axis per pose
 STANCE_POSES = (0.0, 0.5, 1.0)  # [-] stance progress at which the shin is checked (touchdown, mid, lift-off)
 SIZE_TIE = 1e-6  # [m of violation per m of |delta|] prefers the gait's own foothold among equally clear ones
@@ -49,7 +48,7 @@ class FootholdPlanner:
         self.shin_clearance_m = shin_clearance_m
         self.edge_radius_m = edge_radius_m
         self.edge_rise_m = edge_rise_m
-        s = np.linspace(0.0, SHIN_AXIS_FRACTION, CAPSULE_POINTS)
+        s = np.linspace(0.0, a1.SHIN_AXIS_FRACTION, CAPSULE_POINTS)
         self._axis_s = s[None, :, None]  # (1, points, 1) knee -> foot fractions
 
     def offset(self, leg: int, touchdown_xy_w: tuple[float, float], heading: tuple[float, float],

@@ -99,7 +99,7 @@ class TerrainFollowingController(NominalController):
         half = 0.5 * self.gait.step_length_m
         ground = self.ground_ref_m
         if self.footholds is not None:
-            self._apply_foothold_offsets(t, gs, rows, (x, y), (c, s), half, t_swing)
+            self._apply_foothold_offsets(gs, rows, (x, y), (c, s), half, t_swing)
         for i in range(a1.N_LEGS):
             hx, hy = self._hips_xy[i]
             fx, fy = hx + rows[i][0], hy + rows[i][1]  # foot target, trunk axes, from the trunk origin
@@ -112,10 +112,7 @@ class TerrainFollowingController(NominalController):
                 ground[i] = self._latched_m[i]
             else:
                 phase = float(gs.swing_phase[i])
-                ahead = half + p.speed_mps * (1.0 - phase) * t_swing  # [m] hip -> touchdown along x (trunk)
-                ahead += self._offset_plan_m[i]
-                tx, ty = hx + ahead, fy
-                td_w = (x + c * tx - s * ty, y + s * tx + c * ty)
+                td_w = self._touchdown_w(i, phase, fy, (x, y), (c, s), half, t_swing, self._offset_plan_m[i])
                 self._td_m[i] = self.terrain.height_at(*td_w)
                 if self._was_stance[i]:  # lift-off
                     self._lift_m[i] = self._top_m[i] = self._latched_m[i]
@@ -130,12 +127,20 @@ class TerrainFollowingController(NominalController):
             self._was_stance[i] = bool(gs.in_stance[i])
         return ground
 
-    def _apply_foothold_offsets(self, t: float, gs, rows: list[list[float]], trunk_xy: tuple[float, float],
+    def _touchdown_w(self, leg: int, phase: float, foot_y: float, trunk_xy: tuple[float, float],
+                     heading: tuple[float, float], half: float, t_swing: float, offset: float) -> tuple[float, float]:
+        """World (x, y) [m] where swing leg ``leg`` at swing ``phase`` is predicted to touch down: its hip moved on
+        at the commanded speed for the rest of the swing, + half the stroke + ``offset`` along the trunk's x;
+        ``foot_y`` [m] the foot target's y from the trunk origin (trunk axes)."""
+        ahead = half + self.gait.p.speed_mps * (1.0 - phase) * t_swing + offset  # [m] hip -> touchdown, trunk x
+        tx = self._hips_xy[leg][0] + ahead
+        (x, y), (c, s) = trunk_xy, heading
+        return x + c * tx - s * foot_y, y + s * tx + c * foot_y
+
+    def _apply_foothold_offsets(self, gs, rows: list[list[float]], trunk_xy: tuple[float, float],
                                 heading: tuple[float, float], half: float, t_swing: float) -> None:
         """Plan each lifting foot's touchdown offset (:class:`FootholdPlanner`) and add this tick's offsets to
         the foot targets' x (hip frame, along the heading): eased in over a swing, held through a stance."""
-        x, y = trunk_xy
-        c, s = heading
         for i in range(a1.N_LEGS):
             if gs.in_stance[i]:
                 if not self._was_stance[i]:  # touchdown: the planned offset holds through this stance
@@ -144,12 +149,10 @@ class TerrainFollowingController(NominalController):
                 phase = float(gs.swing_phase[i])
                 if self._was_stance[i]:  # lift-off: plan the coming touchdown
                     self._offset_lift_m[i] = self.foothold_offset_m[i]
-                    hx, hy = self._hips_xy[i]
                     # at the commanded speed: the trunk's measured speed over the last period (it walks at 75-85 %
                     # of it) gave more shin strikes on logs, 2.4 against 1.1 per run (10 seeds)
-                    ahead = half + self.gait.p.speed_mps * (1.0 - phase) * t_swing
-                    fy = hy + rows[i][1]
-                    td = (x + c * (hx + ahead) - s * fy, y + s * (hx + ahead) + c * fy)
+                    td = self._touchdown_w(i, phase, self._hips_xy[i][1] + rows[i][1], trunk_xy, heading, half,
+                                           t_swing, 0.0)
                     target_td = [half, rows[i][1], -self.gait.p.stand_height_m]
                     ground_ref = float(np.mean(self.ground_ref_m))  # the trunk's, last tick
                     self._offset_plan_m[i] = self.footholds.offset(i, td, heading, target_td, 2.0 * half, ground_ref)

@@ -29,6 +29,7 @@ NQ = 19
 TORQUE_LIMIT_NM = 33.5  # [N·m] URDF effort limit of every A1 joint
 FOOT_RADIUS_M = 0.02  # [m] radius of the URDF foot collision sphere
 SHIN_RADIUS_M = 0.0115  # [m] the URDF calf collision is a 0.016 x 0.016 box: its half diagonal
+SHIN_AXIS_FRACTION = 0.7  # [-] the shin the barriers guard: knee -> this fraction of the way to the foot centre
 THIGH_LENGTH_M = 0.2  # [m] thigh joint -> calf joint, along -z of the thigh
 CALF_LENGTH_M = 0.2  # [m] calf joint -> foot centre
 HIP_OFFSET_Y_M = 0.0838  # [m] lateral offset hip joint -> thigh joint (sign: +left, -right)

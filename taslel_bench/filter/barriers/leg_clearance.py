@@ -32,7 +32,7 @@ class LegClearance(Barrier):
     conservative): -n'J_p vdot <= a2 h_e + a1 hdot + n . J̇_p v."""
 
     def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = a1.SHIN_RADIUS_M,
-                 axis_fraction: float = 0.7, activation_m: float = 0.08, role: str | None = OBSTACLE,
+                 axis_fraction: float = a1.SHIN_AXIS_FRACTION, activation_m: float = 0.08, role: str | None = OBSTACLE,
                  swing_only: bool = False) -> None:  # fmt: skip
         super().__init__(world, name)
         if part not in PARTS:
