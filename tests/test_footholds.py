@@ -101,6 +101,21 @@ def test_a_touchdown_at_a_step_edge_moves_to_where_the_ground_is_even(td_x):
     assert violations[0] > violations.min()  # the gait's own foothold was worse
 
 
+@pytest.mark.parametrize("td_x", [0.76, 0.765])
+def test_a_touchdown_just_before_a_riser_moves_away_from_its_face(td_x):
+    """A foot centre 3.5-4 cm before a 5 cm riser would start its next swing against the riser's face: the
+    chosen touchdown has no ground more than 1 cm above it within the face probes' reach (4.5 cm)."""
+    box = Box(centre_m=(1.1, 0.0, 0.025), half_size_m=(0.3, 1.0, 0.025), friction=1.0, role=OBSTACLE)
+    terrain = Terrain((Plane(), box))
+    planner = FootholdPlanner(terrain, 0.05)
+    x = td_x + planner.offset(FL, (td_x, 0.13), HEADING, _target(FL), 2 * HALF, 0.0)
+    h = terrain.height_at(x, 0.13)
+    ahead = [terrain.height_at(x + dx, 0.13) for dx in np.linspace(0.0, planner.riser_ahead_m, 13)]
+    assert max(ahead) - h <= planner.edge_rise_m, (x, h, ahead)
+    assert FootholdPlanner(terrain, 0.05, riser_ahead_m=0.03).offset(FL, (td_x, 0.13), HEADING, _target(FL),
+                                                                      2 * HALF, 0.0) == 0.0  # 3 cm probes only
+
+
 def _q_des(ctl, times, pose):
     out = []
     for t in times:
@@ -143,3 +158,41 @@ def test_foothold_search_is_checked_and_needs_terrain_following():
     with pytest.raises(ConfigError, match=r"controller.foothold_search=0.5.*\[0, 0.08\]"):
         validate(compose_cfg(["controller.terrain_following=true", "controller.foothold_search=0.5"]))
 
+
+
+def test_a_replan_at_mid_swing_plans_from_the_hip_then_and_the_offset_stays_continuous():
+    """FR lifts off at 0.5 s with the trunk held still (slower than commanded): the lift-off plan predicts the
+    touchdown at x = 0.30 m (level step top: offset 0), the plan at swing phase 0.5 from the hip then at
+    x = 0.26 m, 5 mm before a riser at 0.265 m, and moves it off the edge. The offset eases from its value at the
+    re-plan to the new plan without a jump (< 1 mm per 1 ms tick) and reaches it at touchdown."""
+    pose = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])
+    step = Box(centre_m=(1.265, 0.0, 0.025), half_size_m=(1.0, 1.0, 0.025), friction=1.0, role=OBSTACLE)
+    terrain = Terrain((Plane(), step))
+    fr = a1.LEGS.index("FR")
+    ctl = TerrainFollowingController(GaitParams(), PDGains(), terrain=terrain,
+                                     footholds=FootholdPlanner(terrain, 0.05), replan_phase=0.5)
+    offsets, plans = [], []
+    for t in np.arange(0.0, 0.7, 1e-3):
+        ctl.compute(float(t), np.zeros(12), np.zeros(12), pose)
+        offsets.append(ctl.foothold_offset_m[fr])
+        plans.append(ctl._offset_plan_m[fr])
+    assert plans[550] == 0.0  # lift-off plan (touchdown predicted on the step's level top)
+    assert abs(plans[650]) >= 0.02  # re-planned off the riser
+    assert np.abs(np.diff(offsets)).max() < 1e-3
+    assert abs(offsets[-1] - plans[650]) < 1e-3  # FR is back in stance at 0.7 s, on the re-planned offset
+    without = TerrainFollowingController(GaitParams(), PDGains(), terrain=terrain,
+                                         footholds=FootholdPlanner(terrain, 0.05))
+    _q_des(without, np.arange(0.0, 0.7, 1e-3), pose)
+    assert without._offset_plan_m[fr] == 0.0  # without the re-plan the lift-off plan stands
+
+
+def test_replan_phase_is_checked_and_needs_foothold_choice():
+    from taslel_bench.config.validate import validate
+    from taslel_bench.util.fields import ConfigError
+
+    on = ["controller.terrain_following=true", "controller.foothold_search=0.05"]
+    validate(compose_cfg([*on, "controller.foothold_replan_phase=0.5"]))
+    with pytest.raises(ConfigError, match=r"controller.foothold_replan_phase=1.0.*\[0, 1\)"):
+        validate(compose_cfg([*on, "controller.foothold_replan_phase=1.0"]))
+    with pytest.raises(ConfigError, match="controller.foothold_replan_phase=0.5: re-planning needs foothold choice"):
+        validate(compose_cfg(["controller.terrain_following=true", "controller.foothold_replan_phase=0.5"]))

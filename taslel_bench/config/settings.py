@@ -52,7 +52,8 @@ def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> Nominal
         search = float(c.get("foothold_search", 0.0))
         footholds = FootholdPlanner(terrain, search) if search > 0.0 else None
         return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain,
-                                          footholds=footholds, **kwargs)
+                                          footholds=footholds, replan_phase=float(c.get("foothold_replan_phase", 0.0)),
+                                          **kwargs)
     return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
 
 

@@ -263,6 +263,11 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     if search > 0.0 and not following:
         raise fail(f"{c}.foothold_search", search, "foothold choice is part of the terrain-following nominal: "
                     "set controller.terrain_following=true, or foothold_search=0")
+    replan = number(f"{c}.foothold_replan_phase", _get(cfg, f"{c}.foothold_replan_phase", 0.0), 0.0, 1.0,
+                    hi_open=True, why="0 plans each touchdown at lift-off only; a swing phase in (0, 1) plans it again there")
+    if replan > 0.0 and search == 0.0:
+        raise fail(f"{c}.foothold_replan_phase", replan, "re-planning needs foothold choice: set "
+                    "controller.foothold_search > 0, or foothold_replan_phase=0")
     return stand
 
 

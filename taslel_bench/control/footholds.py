@@ -14,7 +14,13 @@ per swing at lift-off from the terrain object:
   logs, 10 seeds);
 * **edges**: the ground within ``edge_radius_m`` of the candidate (ahead, behind, left, right) should be
   within ``edge_rise_m`` of the candidate's height (a probe ``edge_rise_m`` above that height must be in free
-  space and one ``edge_rise_m`` below it inside the ground).
+  space and one ``edge_rise_m`` below it inside the ground);
+* **a face ahead**: the ground up to ``riser_ahead_m`` ahead of the candidate (probes between ``edge_radius_m``
+  and ``riser_ahead_m``) should stay below ``riser_rise_m`` above it: a stance foot set just before a riser
+  starts its next swing against the riser's face. On the lossy plant a front foot set with its centre 3.7 cm
+  before a 5 cm riser (its surface 2 cm from it) met the face in the next swing, the swing stalled and the trot
+  walked backwards into a fall (steps, seed 5, 6.8 s). The probes sit 3 cm up, not 1 cm: a log's sloped side
+  that low is no face (with 1 cm probes, URDF logs fell 1/10 and strikes rose, 10 seeds);
 
 Each violation counts by how much [m]; the candidate of least total violation wins, ties (e.g. every candidate
 clear) to the smallest ``|delta|`` (``delta = 0`` on flat ground and on a plane slope: the gait's own footholds).
@@ -40,7 +46,8 @@ class FootholdPlanner:
     """Touchdown offsets along the heading (module doc) for one terrain."""
 
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
-                 edge_radius_m: float = 0.03, edge_rise_m: float = 0.01) -> None:
+                 edge_radius_m: float = 0.03, edge_rise_m: float = 0.01, riser_ahead_m: float = 0.045,
+                 riser_rise_m: float = 0.03) -> None:
         self.terrain = terrain
         n = round(search_m / step_m)
         offsets = step_m * np.arange(-n, n + 1)
@@ -48,6 +55,8 @@ class FootholdPlanner:
         self.shin_clearance_m = shin_clearance_m
         self.edge_radius_m = edge_radius_m
         self.edge_rise_m = edge_rise_m
+        self.riser_ahead_m = riser_ahead_m
+        self.riser_rise_m = riser_rise_m
         s = np.linspace(0.0, a1.SHIN_AXIS_FRACTION, CAPSULE_POINTS)
         self._axis_s = s[None, :, None]  # (1, points, 1) knee -> foot fractions
 
@@ -92,14 +101,17 @@ class FootholdPlanner:
         c, s = heading
         r, e = self.edge_radius_m, self.edge_rise_m
         around = np.array([(c * r, s * r), (-c * r, -s * r), (-s * r, c * r), (s * r, -c * r)])  # ahead, back, l, r
-        xy = feet_w[:, None, :2] + around[None]  # (n, 4, 2)
-        n = len(feet_w)
-        above = np.concatenate([xy, np.broadcast_to((h + e)[:, None, None], (n, 4, 1))], axis=2)
-        below = np.concatenate([xy, np.broadcast_to((h - e)[:, None, None], (n, 4, 1))], axis=2)
-        d = self.terrain.near_distance(np.concatenate([above, below]).reshape(-1, 3), 0.0)[0].reshape(2, n, 4)
-        rise = np.maximum(0.0, -d[0]).sum(axis=1)  # ground above h + e near the foot: a riser or a log's side
-        drop = np.maximum(0.0, d[1]).sum(axis=1)  # free space below h - e: an edge the foot would slide off
-        return rise + drop
+        ahead = np.array([(c * a, s * a) for a in np.linspace(r, self.riser_ahead_m, 3)[1:]])  # riser probes
+        probes = [(around, h + e), (around, h - e), (ahead, h + self.riser_rise_m)]  # (xy offsets, probe z)
+        pts = [np.concatenate([feet_w[:, None, :2] + xy[None], np.broadcast_to(z[:, None, None], (len(h), len(xy), 1))],
+                              axis=2).reshape(-1, 3) for xy, z in probes]
+        d = self.terrain.near_distance(np.concatenate(pts), 0.0)[0]
+        above, below, riser = np.split(d, np.cumsum([len(p) for p in pts])[:-1])
+        n = len(h)
+        rise = np.maximum(0.0, -above).reshape(n, -1).sum(axis=1)  # ground above h + e nearby: a riser, a log's side
+        drop = np.maximum(0.0, below).reshape(n, -1).sum(axis=1)  # free space below h - e: an edge to slide off
+        face = np.maximum(0.0, -riser).reshape(n, -1).sum(axis=1)  # a face ahead the next swing starts against
+        return rise + drop + face
 
 
 def heading_of(base_pose: np.ndarray) -> tuple[float, float]:

@@ -16,7 +16,10 @@ trunk's z axis by that height relative to the mean of the four:
 
 * optionally (``footholds``, :mod:`taslel_bench.control.footholds`) each touchdown moves along the heading by
   an offset chosen at lift-off, away from edges and from footholds whose lower leg would rest on an edge; the
-  offset eases in over the swing (the gait's own x profile) and holds through the stance that follows.
+  offset eases in over the swing (the gait's own x profile) and holds through the stance that follows. With
+  ``replan_phase`` in (0, 1) the offset is chosen again once the swing passes that phase, from the hip's
+  position then (the prediction's error from a trunk slower than commanded shrinks with the time left); the
+  offset eases from its value at that tick to the new plan over the rest of the swing (continuous).
 
 What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real A1 would need a
 height map from vision or from its footholds). It ignores the trunk's roll and pitch (the shift is along the
@@ -47,13 +50,19 @@ def _ease(x: float) -> float:
 class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
-    def __init__(self, *args, terrain: Terrain, footholds: FootholdPlanner | None = None, **kwargs) -> None:
+    def __init__(self, *args, terrain: Terrain, footholds: FootholdPlanner | None = None,
+                 replan_phase: float = 0.0, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        if not 0.0 <= replan_phase < 1.0:
+            raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, 1)")
         self.terrain = terrain
         self.footholds = footholds
+        self.replan_phase = replan_phase
         self.foothold_offset_m = np.zeros(4)  # [m, along the heading] each foot's touchdown offset this tick
-        self._offset_lift_m = np.zeros(4)  # [m] swing feet: offset at lift-off (the last stance's)
+        self._offset_from_m = np.zeros(4)  # [m] swing feet: offset when the current plan was made
+        self._ease_from = np.zeros(4)  # [-] swing feet: the x ease's value when the current plan was made
         self._offset_plan_m = np.zeros(4)  # [m] swing feet: offset planned for the coming touchdown
+        self._replanned = np.zeros(4, bool)  # swing feet: the plan at replan_phase is made
         self.ground_ref_m = np.zeros(4)  # [m, world z] each foot's ground reference this tick (last computed)
         self._latched_m = np.full(4, math.nan)  # [m] stance feet: ground height at touchdown
         self._lift_m = np.zeros(4)  # [m] swing feet: ground height at lift-off
@@ -67,7 +76,8 @@ class TerrainFollowingController(NominalController):
         """Forget the latched ground heights (a new episode)."""
         self._latched_m[:] = math.nan
         self._was_stance[:] = True
-        self.foothold_offset_m[:] = self._offset_lift_m[:] = self._offset_plan_m[:] = 0.0
+        self.foothold_offset_m[:] = self._offset_from_m[:] = self._offset_plan_m[:] = self._ease_from[:] = 0.0
+        self._replanned[:] = False
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
                 base_pose: np.ndarray | None = None) -> np.ndarray:
@@ -139,23 +149,34 @@ class TerrainFollowingController(NominalController):
 
     def _apply_foothold_offsets(self, gs, rows: list[list[float]], trunk_xy: tuple[float, float],
                                 heading: tuple[float, float], half: float, t_swing: float) -> None:
-        """Plan each lifting foot's touchdown offset (:class:`FootholdPlanner`) and add this tick's offsets to
-        the foot targets' x (hip frame, along the heading): eased in over a swing, held through a stance."""
+        """Plan each lifting foot's touchdown offset (:class:`FootholdPlanner`; again at ``replan_phase``) and add
+        this tick's offsets to the foot targets' x (hip frame, along the heading): eased in over a swing, held
+        through a stance."""
         for i in range(a1.N_LEGS):
             if gs.in_stance[i]:
                 if not self._was_stance[i]:  # touchdown: the planned offset holds through this stance
                     self.foothold_offset_m[i] = self._offset_plan_m[i]
             else:
                 phase = float(gs.swing_phase[i])
-                if self._was_stance[i]:  # lift-off: plan the coming touchdown
-                    self._offset_lift_m[i] = self.foothold_offset_m[i]
-                    # at the commanded speed: the trunk's measured speed over the last period (it walks at 75-85 %
-                    # of it) gave more shin strikes on logs, 2.4 against 1.1 per run (10 seeds)
-                    td = self._touchdown_w(i, phase, self._hips_xy[i][1] + rows[i][1], trunk_xy, heading, half,
-                                           t_swing, 0.0)
-                    target_td = [half, rows[i][1], -self.gait.p.stand_height_m]
-                    ground_ref = float(np.mean(self.ground_ref_m))  # the trunk's, last tick
-                    self._offset_plan_m[i] = self.footholds.offset(i, td, heading, target_td, 2.0 * half, ground_ref)
-                lift, plan = self._offset_lift_m[i], self._offset_plan_m[i]
-                self.foothold_offset_m[i] = lift + (plan - lift) * _ease(phase)
+                lift_off = bool(self._was_stance[i])
+                replan = self.replan_phase > 0.0 and not self._replanned[i] and phase >= self.replan_phase
+                if lift_off or replan:  # plan the coming touchdown from the hip's position now
+                    self._replanned[i] = replan
+                    self._offset_from_m[i] = self.foothold_offset_m[i]
+                    self._ease_from[i] = 0.0 if lift_off else _ease(phase)
+                    self._offset_plan_m[i] = self._plan_offset(i, phase, rows[i][1], trunk_xy, heading, half, t_swing)
+                e0 = self._ease_from[i]
+                done = (_ease(phase) - e0) / (1.0 - e0) if e0 < 1.0 else 1.0
+                self.foothold_offset_m[i] = self._offset_from_m[i] + (self._offset_plan_m[i] - self._offset_from_m[i]) * done
             rows[i][0] += self.foothold_offset_m[i]
+
+    def _plan_offset(self, leg: int, phase: float, target_y: float, trunk_xy: tuple[float, float],
+                     heading: tuple[float, float], half: float, t_swing: float) -> float:
+        """The planner's touchdown offset [m] for swing leg ``leg`` at swing ``phase``; ``target_y`` [m] its foot
+        target's y in the hip frame."""
+        # at the commanded speed: the trunk's measured speed over the last period (it walks at 75-85 % of it) gave
+        # more shin strikes on logs at lift-off planning, 2.4 against 1.1 per run (10 seeds)
+        td = self._touchdown_w(leg, phase, self._hips_xy[leg][1] + target_y, trunk_xy, heading, half, t_swing, 0.0)
+        target_td = [half, target_y, -self.gait.p.stand_height_m]
+        ground_ref = float(np.mean(self.ground_ref_m))  # the trunk's, last tick
+        return self.footholds.offset(leg, td, heading, target_td, 2.0 * half, ground_ref)
