@@ -196,3 +196,39 @@ def test_replan_phase_is_checked_and_needs_foothold_choice():
         validate(compose_cfg([*on, "controller.foothold_replan_phase=1.0"]))
     with pytest.raises(ConfigError, match="controller.foothold_replan_phase=0.5: re-planning needs foothold choice"):
         validate(compose_cfg(["controller.terrain_following=true", "controller.foothold_replan_phase=0.5"]))
+
+
+def test_swing_heights_from_measured_hips_lift_a_sagging_trunks_swing_feet_by_the_sag():
+    """A trunk at the gait's height (hip = foot radius + stand height above the ground) gives the gait's q_des;
+    one held 2 cm lower gives a sag estimate of 2 cm (low-passed) and swing feet aimed that much higher in the
+    hip frame once the correction has eased in (they land at swing phase 1, not where the gait's half-sine lift
+    is 2 cm: phase ~0.9), stance feet unchanged."""
+    flat = Terrain((Plane(),))
+    at_height = np.array([0.0, 0.0, a1.FOOT_RADIUS_M + STAND_M, 0.0, 0.0, 0.0, 1.0])
+    times = np.arange(0.0, 1.0, 1e-3)
+    plain = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat)
+    measured = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat, swing_from_measured_hips=True)
+    np.testing.assert_allclose(_q_des(measured, times, at_height), _q_des(plain, times, at_height), atol=1e-12)
+    low = at_height.copy()
+    low[2] -= 0.02
+    fresh = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat, swing_from_measured_hips=True)
+    _q_des(fresh, np.arange(0.0, 0.6, 1e-3), low)  # 0.6 s at 2 cm low: 6 time constants of the low-pass
+    t = 0.6  # FR and RL mid-swing (swing phase 0.5), FL and RR in stance
+    fresh.compute(t, np.zeros(12), np.zeros(12), low)
+    assert abs(fresh.sag_m - 0.02) < 1e-4
+    gs = fresh.gait_state(t)
+    rows = fresh.gait.foot_targets_list(fresh.gait_time(t))
+    for i in range(4):
+        lifted = rows[i][2] + (0.0 if gs.in_stance[i] else fresh.sag_m)
+        expected = leg_ik([rows[i][0], rows[i][1], lifted], a1.LEG_SIDE[i])
+        np.testing.assert_allclose(fresh.q_des[3 * i:3 * i + 3], expected, atol=1e-9)
+    assert not gs.in_stance[a1.LEGS.index("FR")] and gs.in_stance[FL]
+
+
+def test_swing_from_measured_hips_needs_terrain_following():
+    from taslel_bench.config.validate import validate
+    from taslel_bench.util.fields import ConfigError
+
+    validate(compose_cfg(["controller.terrain_following=true", "controller.swing_from_measured_hips=true"]))
+    with pytest.raises(ConfigError, match="controller.swing_from_measured_hips=True: swing heights"):
+        validate(compose_cfg(["controller.swing_from_measured_hips=true"]))

@@ -53,6 +53,7 @@ def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> Nominal
         footholds = FootholdPlanner(terrain, search) if search > 0.0 else None
         return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain,
                                           footholds=footholds, replan_phase=float(c.get("foothold_replan_phase", 0.0)),
+                                          swing_from_measured_hips=bool(c.get("swing_from_measured_hips", False)),
                                           **kwargs)
     return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
 

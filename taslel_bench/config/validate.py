@@ -268,6 +268,9 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     if replan > 0.0 and search == 0.0:
         raise fail(f"{c}.foothold_replan_phase", replan, "re-planning needs foothold choice: set "
                     "controller.foothold_search > 0, or foothold_replan_phase=0")
+    if flag(f"{c}.swing_from_measured_hips", _get(cfg, f"{c}.swing_from_measured_hips", False)) and not following:
+        raise fail(f"{c}.swing_from_measured_hips", True, "swing heights from the measured hips are part of the "
+                   "terrain-following nominal: set controller.terrain_following=true, or leave it false")
     return stand
 
 

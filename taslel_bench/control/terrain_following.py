@@ -21,6 +21,16 @@ trunk's z axis by that height relative to the mean of the four:
   position then (the prediction's error from a trunk slower than commanded shrinks with the time left); the
   offset eases from its value at that tick to the new plan over the rest of the swing (continuous).
 
+* optionally (``swing_from_measured_hips``) swing feet are aimed from the measured hip heights rather than the
+  gait's: the target z in the hip frame gains the stance legs' sag, ``stand_height`` - the mean of the stance
+  legs' hip height [m, world z] above their ground + foot radius, low-passed. One value for every swing foot:
+  a per-hip correction (each hip's own height) fed the trunk's pitch back into the swing feet (a nose-down
+  trunk aims its front swing feet higher, so they catch it later) and the A1 fell on logs 7/10. Without it the
+  trunk rides ~2 cm low under its own weight (PD stance legs), so a swing foot aimed ``stand_height`` below
+  its hip lands at swing phase ~0.9 instead of 1 (URDF slope and steps: median 0.93, 10th percentile 0.83-0.87,
+  every touchdown on a top counted a trip). The correction eases in over the first
+  :data:`SWING_SAG_RAMP` of the swing (no step in the target at lift-off) and holds to touchdown.
+
 What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real A1 would need a
 height map from vision or from its footholds). It ignores the trunk's roll and pitch (the shift is along the
 trunk's z, exact when the trunk is level). ``qd_des`` stays the flat gait's (the shift's rate is not fed
@@ -40,6 +50,9 @@ from taslel_bench.robot.kinematics import legs_ik_list
 from taslel_bench.terrain.terrain import Terrain
 
 PATH_SAMPLES = 8  # ground heights sampled between a swing foot and its predicted touchdown point
+SWING_SAG_RAMP = 0.2  # [-] swing-phase span over which the measured-hip correction eases in
+SAG_TIME_CONSTANT_S = 0.1  # [s] low-pass of the stance legs' measured sag
+MAX_SAG_M = 0.04  # [m] the sag estimate is clamped to +-this
 
 
 def _ease(x: float) -> float:
@@ -51,13 +64,15 @@ class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
     def __init__(self, *args, terrain: Terrain, footholds: FootholdPlanner | None = None,
-                 replan_phase: float = 0.0, **kwargs) -> None:
+                 replan_phase: float = 0.0, swing_from_measured_hips: bool = False, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         if not 0.0 <= replan_phase < 1.0:
             raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, 1)")
         self.terrain = terrain
         self.footholds = footholds
         self.replan_phase = replan_phase
+        self.swing_from_measured_hips = swing_from_measured_hips
+        self.sag_m = 0.0  # [m] stance legs' sag, low-passed (swing_from_measured_hips)
         self.foothold_offset_m = np.zeros(4)  # [m, along the heading] each foot's touchdown offset this tick
         self._offset_from_m = np.zeros(4)  # [m] swing feet: offset when the current plan was made
         self._ease_from = np.zeros(4)  # [-] swing feet: the x ease's value when the current plan was made
@@ -78,6 +93,7 @@ class TerrainFollowingController(NominalController):
         self._was_stance[:] = True
         self.foothold_offset_m[:] = self._offset_from_m[:] = self._offset_plan_m[:] = self._ease_from[:] = 0.0
         self._replanned[:] = False
+        self.sag_m = 0.0
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
                 base_pose: np.ndarray | None = None) -> np.ndarray:
@@ -97,7 +113,26 @@ class TerrainFollowingController(NominalController):
         h_ref = float(np.mean(ground))
         for i in range(a1.N_LEGS):
             rows[i][2] += ground[i] - h_ref
+        if self.swing_from_measured_hips:
+            self._lift_from_measured_hips(t, rows, ground)
         self.q_des[:] = legs_ik_list(rows)
+
+    def _lift_from_measured_hips(self, t: float, rows: list[list[float]], ground: np.ndarray) -> None:
+        """Swing feet's target z (hip frame) += the stance legs' sag (module doc): stand height - the mean of the
+        stance legs' measured hip height [m, world z] above their ground + foot radius, low-passed
+        (:data:`SAG_TIME_CONSTANT_S`) and eased in over the swing's start."""
+        gs = self.gait_state(t)
+        pose = self._base_pose
+        qx, qy, qz, qw = (float(v) for v in pose[3:7])
+        r20, r21 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx)  # trunk x, y axes' world z components
+        heights = [float(pose[2]) + r20 * hx + r21 * hy - float(ground[i]) - a1.FOOT_RADIUS_M
+                   for i, (hx, hy) in enumerate(self._hips_xy) if gs.in_stance[i]]
+        if heights:
+            sag = self.gait.p.stand_height_m - sum(heights) / len(heights)
+            self.sag_m += (min(max(sag, -MAX_SAG_M), MAX_SAG_M) - self.sag_m) * min(1.0, self.fd_dt_s / SAG_TIME_CONSTANT_S)
+        for i in range(a1.N_LEGS):
+            if not gs.in_stance[i]:
+                rows[i][2] += self.sag_m * _ease(float(gs.swing_phase[i]) / SWING_SAG_RAMP)
 
     def _ground_references(self, t: float, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
         """(4,) ground reference [m, world z] of each foot this tick (module doc)."""
