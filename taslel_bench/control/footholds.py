@@ -3,8 +3,8 @@
 The gait puts every touchdown at the same place relative to the hip, wherever the ground's edges are. On logs
 and steps that sets stance feet just past a log or a riser, where the lower leg rests against the edge behind
 the foot during stance, or on an edge itself, where the foot slides off. This planner moves each touchdown
-along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen once
-per swing at lift-off from the terrain object:
+along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen at
+lift-off (and again at mid-swing with the controller's ``replan_phase``) from the terrain object:
 
 * **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to :data:`a1.SHIN_AXIS_FRACTION` of the
   way to the foot centre, radius :data:`a1.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the

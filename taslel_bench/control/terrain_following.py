@@ -110,19 +110,19 @@ class TerrainFollowingController(NominalController):
         (``qd_des`` kept)."""
         super().update_references(t)
         rows = self.gait.foot_targets_list(self.gait_time(t))
-        ground = self._ground_references(t, self._base_pose, rows)
+        gs = self.gait_state(t)
+        ground = self._ground_references(gs, self._base_pose, rows)
         h_ref = float(np.mean(ground))
         for i in range(a1.N_LEGS):
             rows[i][2] += ground[i] - h_ref
         if self.swing_from_measured_hips:
-            self._lift_from_measured_hips(t, rows, ground)
+            self._lift_from_measured_hips(gs, rows, ground)
         self.q_des[:] = legs_ik_list(rows)
 
-    def _lift_from_measured_hips(self, t: float, rows: list[list[float]], ground: np.ndarray) -> None:
+    def _lift_from_measured_hips(self, gs, rows: list[list[float]], ground: np.ndarray) -> None:
         """Swing feet's target z (hip frame) += the stance legs' sag (module doc): stand height - the mean of the
         stance legs' measured hip height [m, world z] above their ground + foot radius, low-passed
-        (:data:`SAG_TIME_CONSTANT_S`) and eased in over the swing's start."""
-        gs = self.gait_state(t)
+        (:data:`SAG_TIME_CONSTANT_S`) and eased in over the swing's start; ``gs`` this tick's gait state."""
         pose = self._base_pose
         qx, qy, qz, qw = (float(v) for v in pose[3:7])
         r20, r21 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx)  # trunk x, y axes' world z components
@@ -135,11 +135,10 @@ class TerrainFollowingController(NominalController):
             if not gs.in_stance[i]:
                 rows[i][2] += self.sag_m * _ease(float(gs.swing_phase[i]) / SWING_SAG_RAMP)
 
-    def _ground_references(self, t: float, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
+    def _ground_references(self, gs, base_pose: np.ndarray, rows: list[list[float]]) -> np.ndarray:
         """(4,) ground reference [m, world z] of each foot this tick (module doc)."""
         x, y = float(base_pose[0]), float(base_pose[1])
         c, s = heading_of(base_pose)
-        gs = self.gait_state(t)
         p = self.gait.p
         t_swing = p.period_s * (1.0 - p.duty)
         half = 0.5 * self.gait.step_length_m
