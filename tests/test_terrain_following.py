@@ -80,3 +80,47 @@ def test_terrain_following_is_a_config_switch_refused_unless_boolean():
     assert type(build_controller(compose_cfg([]))) is NominalController
     with pytest.raises(ConfigError, match="controller.terrain_following"):
         validate(compose_cfg(["controller.terrain_following=maybe"]))
+
+
+def test_touchdown_aim_ends_the_swing_above_the_ground_and_descends_early_in_the_stance():
+    """``touchdown_height_m``: a leg's foot target (hip frame) is that much above the plain terrain-following
+    target at the swing's end, back on it :data:`TOUCHDOWN_DESCENT_S` into the stance, unchanged in the first
+    half of the swing, in the stance the walk starts in, and moves by no more than the eased descent's steepest step per tick (continuous)."""
+    from taslel_bench.control.terrain_following import TOUCHDOWN_DESCENT_S
+
+    aim = 0.02  # [m]
+    plain = TerrainFollowingController(GaitParams(), PDGains(), terrain=Terrain((Plane(),)))
+    aimed = TerrainFollowingController(GaitParams(), PDGains(), terrain=Terrain((Plane(),)), touchdown_height_m=aim)
+    p = GaitParams()
+    stand = plain.stand_duration_s
+    times = np.arange(0.0, stand + 2 * p.period_s, 1e-3)
+    dz = np.array([_feet_z(q) for q in _q_des_over(aimed, times, LEVEL_POSE)]) - np.array(
+        [_feet_z(q) for q in _q_des_over(plain, times, LEVEL_POSE)])  # (ticks, 4) [m]
+    assert np.abs(dz[times < stand]).max() < 1e-12  # standing: no aim
+    steepest = 0.5 * np.pi * aim / TOUCHDOWN_DESCENT_S * 1e-3  # [m per tick] the eased descent's largest step
+    assert np.abs(np.diff(dz, axis=0)).max() < 1.01 * steepest
+    fl = a1.LEGS.index("FL")  # offset 0: stance first, swing from phase duty
+    swing_start = stand + p.duty * p.period_s
+    touchdown = stand + p.period_s
+    first_stance = times < swing_start - 1e-6
+    assert np.abs(dz[first_stance, fl]).max() < 1e-12  # the stance the walk starts in follows no swing
+    early_swing = (times > swing_start) & (times < swing_start + 0.5 * (touchdown - swing_start) - 1e-6)
+    assert np.abs(dz[early_swing, fl]).max() < 1e-12
+    k_td = int(np.argmin(np.abs(times - touchdown)))
+    assert dz[k_td - 1, fl] == pytest.approx(aim, abs=5e-4)  # the swing ends ~aim above the ground
+    after = (times > touchdown + TOUCHDOWN_DESCENT_S + 1e-6) & (times < touchdown + 0.1)
+    assert np.abs(dz[after, fl]).max() < 1e-12  # back on the ground once the descent is over
+
+
+@pytest.mark.parametrize("overrides, match", [
+    (["controller.touchdown_height=0.01"], "controller.touchdown_height.*terrain_following=true"),
+    (["controller.terrain_following=true", "controller.touchdown_height=0.05"], r"controller.touchdown_height=0.05"),
+    (["controller.terrain_following=true", "controller.touchdown_height=-0.01"], r"controller.touchdown_height=-0.01"),
+])
+def test_touchdown_aim_is_refused_without_terrain_following_or_out_of_range(overrides, match):
+    from taslel_bench.config.validate import validate
+    from taslel_bench.util.fields import ConfigError
+
+    with pytest.raises(ConfigError, match=match):
+        validate(compose_cfg(overrides))
+    validate(compose_cfg(["controller.terrain_following=true", "controller.touchdown_height=0.02"]))

@@ -54,6 +54,7 @@ def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> Nominal
         return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain,
                                           footholds=footholds, replan_phase=float(c.get("foothold_replan_phase", 0.0)),
                                           swing_from_measured_hips=bool(c.get("swing_from_measured_hips", False)),
+                                          touchdown_height_m=float(c.get("touchdown_height", 0.0)),
                                           **kwargs)
     return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
 

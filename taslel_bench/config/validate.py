@@ -57,6 +57,7 @@ MAX_STAND_DURATION_S = 60.0  # [s]
 MAX_KP = 1000.0  # [N·m/rad] joint PD (the default is 100)
 MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
 MAX_FOOTHOLD_SEARCH_M = 0.08  # [m] half the 0.16 m between touchdowns of one foot at the default gait
+MAX_TOUCHDOWN_HEIGHT_M = 0.03  # [m] a swing that ends this far above the expected ground still lands within the stance's first 30 ms at ~0.9 m/s
 MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
 MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
@@ -271,6 +272,11 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
     if flag(f"{c}.swing_from_measured_hips", _get(cfg, f"{c}.swing_from_measured_hips", False)) and not following:
         raise fail(f"{c}.swing_from_measured_hips", True, "swing heights from the measured hips are part of the "
                    "terrain-following nominal: set controller.terrain_following=true, or leave it false")
+    aim = number(f"{c}.touchdown_height", _get(cfg, f"{c}.touchdown_height", 0.0), 0.0, MAX_TOUCHDOWN_HEIGHT_M,
+                 unit="m", why="the swing's end above the expected ground, below the swing apex")
+    if aim > 0.0 and not following:
+        raise fail(f"{c}.touchdown_height", aim, "the touchdown aim is part of the terrain-following nominal: set "
+                   "controller.terrain_following=true, or touchdown_height=0")
     return stand
 
 

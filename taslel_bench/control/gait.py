@@ -16,7 +16,7 @@ import numpy as np
 from taslel_bench.robot import a1
 
 TROT_OFFSETS = np.array([0.0, 0.5, 0.5, 0.0])  # LEGS order: FL, FR, RL, RR
-_TROT_OFFSETS = TROT_OFFSETS.tolist()
+TROT_OFFSETS_LIST = TROT_OFFSETS.tolist()  # plain floats for the control tick
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class TrotGait:
             return GaitState(0.0, 0.0, np.ones(4, bool), np.zeros(4), 0.0)
         phi = (t % p.period_s) / p.period_s
         stance, swing = [], []
-        for offset in _TROT_OFFSETS:  # scalar loop: cheaper than numpy on 4 legs, once per control tick
+        for offset in TROT_OFFSETS_LIST:  # scalar loop: cheaper than numpy on 4 legs, once per control tick
             lp = (phi + offset) % 1.0  # [0, duty) stance, [duty, 1) swing
             stance.append(lp < p.duty)
             swing.append(0.0 if lp < p.duty else (lp - p.duty) / (1.0 - p.duty))
@@ -79,7 +79,7 @@ class TrotGait:
             return out
         phi = (t % p.period_s) / p.period_s
         half = 0.5 * self.step_length_m
-        for i, offset in enumerate(_TROT_OFFSETS):
+        for i, offset in enumerate(TROT_OFFSETS_LIST):
             lp = (phi + offset) % 1.0
             if lp < p.duty:  # stance: move back from +L/2 to -L/2 at constant speed
                 out[i][0] = half - 2.0 * half * (lp / p.duty)

@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from taslel_bench.control.footholds import FootholdPlanner, heading_of
+from taslel_bench.control.gait import TROT_OFFSETS_LIST
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.robot import a1
 from taslel_bench.robot.kinematics import legs_ik_list
@@ -54,6 +55,7 @@ PATH_SAMPLES = 8  # ground heights sampled between a swing foot and its predicte
 SWING_SAG_RAMP = 0.2  # [-] swing-phase span over which the measured-hip correction eases in
 SAG_TIME_CONSTANT_S = 0.1  # [s] low-pass of the stance legs' measured sag
 MAX_SAG_M = 0.04  # [m] the sag estimate is clamped to +-this
+TOUCHDOWN_DESCENT_S = 0.03  # [s] a touchdown aim above the ground is taken back over this much of the stance
 
 
 def _ease(x: float) -> float:
@@ -65,7 +67,8 @@ class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
     def __init__(self, *args, terrain: Terrain, footholds: FootholdPlanner | None = None,
-                 replan_phase: float = 0.0, swing_from_measured_hips: bool = False, **kwargs) -> None:
+                 replan_phase: float = 0.0, swing_from_measured_hips: bool = False, touchdown_height_m: float = 0.0,
+                 **kwargs) -> None:
         super().__init__(*args, **kwargs)
         if not 0.0 <= replan_phase < 1.0:
             raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, 1)")
@@ -73,6 +76,7 @@ class TerrainFollowingController(NominalController):
         self.footholds = footholds
         self.replan_phase = replan_phase
         self.swing_from_measured_hips = swing_from_measured_hips
+        self.touchdown_height_m = touchdown_height_m
         self.sag_m = 0.0  # [m] stance legs' sag, low-passed (swing_from_measured_hips)
         self.foothold_offset_m = np.zeros(4)  # [m, along the heading] each foot's touchdown offset this tick
         self._offset_from_m = np.zeros(4)  # [m] swing feet: offset when the current plan was made
@@ -85,6 +89,7 @@ class TerrainFollowingController(NominalController):
         self._top_m = np.zeros(4)  # [m] swing feet: highest ground on the path so far this swing
         self._td_m = np.zeros(4)  # [m] swing feet: ground height at the predicted touchdown
         self._was_stance = np.ones(4, bool)
+        self._has_swung = np.zeros(4, bool)  # touchdown_height_m: the leg has swung since the walk began
         self._hips_xy = a1.HIP_POSITIONS_IN_TRUNK[:, :2].tolist()  # [m] trunk axes, plain floats for the tick
         self._base_pose: np.ndarray | None = None
 
@@ -92,6 +97,7 @@ class TerrainFollowingController(NominalController):
         """Forget the latched ground heights (a new episode)."""
         self._latched_m[:] = math.nan
         self._was_stance[:] = True
+        self._has_swung[:] = False
         self.foothold_offset_m[:] = self._offset_from_m[:] = self._offset_plan_m[:] = self._ease_from[:] = 0.0
         self._replanned[:] = False
         self.sag_m = 0.0
@@ -117,7 +123,26 @@ class TerrainFollowingController(NominalController):
             rows[i][2] += ground[i] - h_ref
         if self.swing_from_measured_hips:
             self._lift_from_measured_hips(gs, rows, ground)
+        if self.touchdown_height_m > 0.0 and self.gait_time(t) >= 0.0:
+            self._aim_above_touchdown(gs, rows)
         self.q_des[:] = legs_ik_list(rows)
+
+    def _aim_above_touchdown(self, gs, rows: list[list[float]]) -> None:
+        """Foot target z (hip frame) += ``touchdown_height_m`` x a bump that eases in over the swing's second half
+        and back out over the first :data:`TOUCHDOWN_DESCENT_S` of the stance (continuous): the swing ends that far
+        above the expected ground and the foot meets it early in the stance, still descending, instead of
+        before the schedule's touchdown (module doc); ``gs`` this tick's gait state."""
+        p = self.gait.p
+        for i, offset in enumerate(TROT_OFFSETS_LIST):
+            if gs.in_stance[i]:
+                if not self._has_swung[i]:  # the stance the walk starts in follows no swing
+                    continue
+                t_stance = ((gs.phi + offset) % 1.0) * p.period_s  # [s] since the scheduled touchdown
+                bump = 1.0 - _ease(t_stance / TOUCHDOWN_DESCENT_S)
+            else:
+                self._has_swung[i] = True
+                bump = _ease(2.0 * float(gs.swing_phase[i]) - 1.0)
+            rows[i][2] += self.touchdown_height_m * bump
 
     def _lift_from_measured_hips(self, gs, rows: list[list[float]], ground: np.ndarray) -> None:
         """Swing feet's target z (hip frame) += the stance legs' sag (module doc): stand height - the mean of the
