@@ -144,6 +144,24 @@ def test_trips_are_new_obstacle_contacts_in_swing_and_leg_link_contacts():
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 
 
+def test_a_late_touchdown_on_an_obstacle_top_is_a_landing_not_a_trip():
+    """The contact estimate holds a foot whose scheduled stance has begun as swing until it is loaded (a late
+    touchdown): its contact onset is where the gait means it to land, a stance contact; the same onset in the
+    scheduled swing is a trip (an early touchdown)."""
+    tr = synthetic_trace(n=40)
+    tr.obstacle_clearance_m[:] = 0.05
+    tr.in_stance[:, 1] = False  # outside the filter's stance set throughout
+    tr.swing_phase[:, 1] = 0.9
+    clear_contact(tr, slice(None), 1)
+    set_contact(tr, [30, 31], 1, 40.0, obstacle=True)
+    tr.scheduled_stance[28:, 1] = True  # the schedule's stance began two ticks before the onset
+    m = clearance_metrics(tr, 0)
+    assert (m["trips"], m["foot_trips"], m["stance_obstacle_contacts"]) == (0, 0, 1)
+    tr.scheduled_stance[:, 1] = False  # the same onset in the scheduled swing
+    m = clearance_metrics(tr, 0)
+    assert (m["trips"], m["foot_trips_top_late_swing"], m["stance_obstacle_contacts"]) == (1, 1, 0)
+
+
 def test_negative_barrier_while_solved_degrades_the_run():
     tr = synthetic_trace()
     tr.in_stance[:, 0] = False

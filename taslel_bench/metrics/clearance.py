@@ -10,9 +10,13 @@ for the rest: they are in the headline, not removed from it.
 Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <= 0,
 :mod:`taslel_bench.plant.contact_frames`):
 
-* a **foot trip** is the onset of a swing foot's contact with an obstacle, unless the foot was touching an
-  obstacle within the last :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the
-  same contact flickering, is not new);
+* a **foot trip** is the onset of a foot's contact with an obstacle while the foot is in the air by both the
+  gait schedule and the filter's stance set, unless the foot was touching an obstacle within the last
+  :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the same contact flickering, is
+  not new). A foot whose scheduled stance has begun but that the contact estimate still holds as swing (a
+  late touchdown, ``filter.contact_estimate.late_touchdown_max_s``) is landing where the gait means it to:
+  its onset is a stance contact (``stance_obstacle_contacts``), not a trip. Without late touchdowns the
+  filter's stance set contains the schedule's, and this is the onset of a foot outside the filter's set;
 * a **leg-link trip** is the onset of a non-foot link of a leg (calf, thigh, hip) touching an obstacle;
 * a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
   whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
@@ -94,12 +98,13 @@ class ClearanceStream:
         acc.mean("clearance_loaded_swing_rate", loaded[judged])
         acc.window("clearance_violation_rate_worst_window", violated, judged, window_ticks(dt))
         _depths(acc, -c[violated], "clearance_violation_depth")
-        self._obstacles(tr, w, swing)
+        self._obstacles(tr, w, swing & ~tr.scheduled_stance[w])  # in the air by the filter and by the schedule
         _barrier_metrics(acc, tr, w, swing, dt)
 
     def _obstacles(self, tr: EpisodeTrace, w: slice, swing: np.ndarray) -> None:
         """Trips and stance strikes from contact onsets (see the module doc), the geometric clearance of swing
-        feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall)."""
+        feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall); ``swing`` (ticks, 4): the feet
+        in the air by the schedule and the filter's stance set."""
         acc = self.acc
         acc.mean("shin_floor_contact_rate", tr.shin_floor_contact[w])
         flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)

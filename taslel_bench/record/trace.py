@@ -4,7 +4,8 @@ Timing of the column groups within the row of tick k (control period dt, physics
 
 * ``t_s`` = k dt: the tick's start; the controller and filter read the plant state at ``t_s``;
 * commands (``u_nom_*``, ``u_*``), the filter's answer (``*_grf_filter_*``, ``qp_*``, ``*_barrier_*``), the
-  gait schedule (``gait_phase``, ``*_stance``, ``*_swing_phase``) and ``mu_hat``/``mu_true``: computed at
+  gait schedule (``gait_phase``, ``*_scheduled_stance``, ``*_swing_phase``), the filter's stance set
+  (``*_stance``: the schedule's, or the contact estimate's) and ``mu_hat``/``mu_true``: computed at
   ``t_s`` from that state; ``u`` is held over [t_s, t_s + dt);
 * the plant state (``base_*``, ``q_*``, ``qd_*``): the state at the end of the tick, t_s + dt (the state
   the next tick reads). ``base_*`` position and quaternion (wxyz), linear velocity in world axes, angular
@@ -88,6 +89,7 @@ class EpisodeTrace:
         self.u = np.zeros((c, 12))  # [N·m] applied
         self.gait_phase = np.zeros(c)
         self.in_stance = np.zeros((c, nl), bool)  # stance set used by the filter
+        self.scheduled_stance = np.zeros((c, nl), bool)  # the gait schedule's stance (the filter's set may differ)
         self.swing_phase = np.zeros((c, nl))
         self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
         self._grf_filter_flat = self.grf_filter_w.reshape(c, 3 * nl)
@@ -184,8 +186,9 @@ class EpisodeTrace:
         outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
         r = k - self.offset
         _copy_rows(r, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
-                   gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
-                   self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_true, self.tick_us)  # fmt: skip
+                   gs.in_stance, gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom,
+                   self.u, self.gait_phase, self.in_stance, self.scheduled_stance, self.swing_phase, self.mu_hat,
+                   self.mu_true, self.tick_us)  # fmt: skip
         if fres is not None:
             self._grf_filter_flat[r] = fres.lam
             if fres.used_fallback:
@@ -337,6 +340,7 @@ class EpisodeTrace:
         h_min = self.barrier_h_min(t)
         for i, leg in enumerate(a1.LEGS):
             cols[f"{leg}_stance"] = self.in_stance[t, i]
+            cols[f"{leg}_scheduled_stance"] = self.scheduled_stance[t, i]
             cols[f"{leg}_contact"] = d["in_contact"][:, i]
             cols[f"{leg}_swing_phase"] = self.swing_phase[t, i]
             _put(cols, leg + "_foot_{}_w_m", "xyz", d["foot_pos_w"][:, i])
@@ -440,9 +444,9 @@ def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
 
 
 @kernel
-def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_nom, u, in_stance, swing_phase,
-               T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_swing, T_mu_hat, T_mu_true,
-               T_tick):  # pragma: no cover - compiled  # fmt: skip
+def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_nom, u, in_stance, scheduled,
+               swing_phase, T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_scheduled, T_swing,
+               T_mu_hat, T_mu_true, T_tick):  # pragma: no cover - compiled  # fmt: skip
     """Row ``k`` of the raw per-tick arrays (one compiled call instead of a dozen numpy assignments)."""
     T_t[k], T_phase[k], T_mu_hat[k], T_mu_true[k], T_tick[k] = t, phi, mu_hat, mu_true, tick_us
     T_qpos[k, :] = qpos
@@ -451,6 +455,7 @@ def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_no
     T_u_nom[k, :] = u_nom
     T_u[k, :] = u
     T_stance[k, :] = in_stance
+    T_scheduled[k, :] = scheduled
     T_swing[k, :] = swing_phase
 
 
