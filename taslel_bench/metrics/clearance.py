@@ -15,8 +15,10 @@ Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <
   :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the same contact flickering, is
   not new). A foot whose scheduled stance has begun but that the contact estimate still holds as swing (a
   late touchdown, ``filter.contact_estimate.late_touchdown_max_s``) is landing where the gait means it to:
-  its onset is a stance contact (``stance_obstacle_contacts``), not a trip. Without late touchdowns the
-  filter's stance set contains the schedule's, and this is the onset of a foot outside the filter's set;
+  its onset is a stance contact (``stance_obstacle_contacts``), not a trip. With the schedule or the contact
+  estimate without late touchdowns the filter's stance set contains the schedule's, and this is the onset of
+  a foot outside the filter's set (``filter.stance_source=contact``, the plant's contact flags, is the one
+  source whose set can miss a scheduled stance foot: its onsets there are landings too);
 * a **leg-link trip** is the onset of a non-foot link of a leg (calf, thigh, hip) touching an obstacle;
 * a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
   whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
