@@ -70,9 +70,16 @@ class EpisodeTrace:
         self._allocate_tick_timing(c)
         self._allocate_derived()
         self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
+        # what record() writes in one compiled call (tuples: the same array objects for the whole episode)
+        self._loop_arrays = (self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
+                             self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_hat_ready,
+                             self.mu_true, self.tick_us, self.tick_parts_s, self.nonfoot_obstacle_contact,
+                             self.shin_floor_contact)  # fmt: skip
+        self._filter_arrays = (self._grf_filter_flat, self.qp_status, self.qp_fallback, self.qp_build_us,
+                               self.qp_solve_us, self.qp_iterations, self.vdot_filter, self.ecbf_margin_mps2)
+        self._no_filter = (np.full(3 * a1.N_LEGS, np.nan), np.full(a1.NV, np.nan))  # (lambda, vdot) stand-ins
         self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
-        for owner, name in ((self, "tick_parts_s"), (self, "mu_hat_ready"), (self, "qp_u_error_nm"),
-                            *((self.contact_log, n) for n in vars(self.contact_log))):  # fmt: skip
+        for owner, name in ((self, "qp_u_error_nm"), *((self.contact_log, n) for n in vars(self.contact_log))):
             rows = TickRows(getattr(owner, name))
             setattr(owner, name, rows)
             self._by_tick.append(rows)
@@ -178,40 +185,41 @@ class EpisodeTrace:
             rows.offset = self.offset
         self.finalized = False
 
-    def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
-               barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
-        """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
-        outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
+    def record(self, k: int, t: float, plant: tuple[np.ndarray, np.ndarray, np.ndarray], gs, in_stance: np.ndarray,
+               u_nom: np.ndarray, u: np.ndarray, fres, mu_hat: float, mu_hat_ready: bool, mu_true: float,
+               clock_s: tuple[float, float, float, float, float], barriers, nonfoot_obstacle_contact: bool,
+               shin_floor_contact: bool) -> None:  # fmt: skip
+        """Copy tick ``k``'s raw rows: ``plant`` = MuJoCo (qpos, qvel, sensordata) after the tick; the gait
+        state ``gs``, the stance set, u_nom and u [N·m], the filter's result ``fres`` (None: no filter on this
+        tick), the friction estimate and truth; ``clock_s`` = the perf_counter times [s] at the tick's start
+        and at the end of each of its :data:`TICK_PARTS`; ``barriers``: the filter's barrier families (their
+        h, h_e and planned condition now). One compiled call for the fixed-size rows."""
         r = k - self.offset
-        _copy_rows(r, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
-                   gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
-                   self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_true, self.tick_us)  # fmt: skip
-        if fres is not None:
-            self._grf_filter_flat[r] = fres.lam
-            if fres.used_fallback:
-                self.qp_status[r] = 1
-                self.qp_fallback[r] = True
+        qpos, qvel, sensordata = plant
+        filtered = fres is not None
+        if filtered:
+            sol = fres.solve
+            lam, vdot, build_us, margin = fres.lam, fres.vdot, fres.build_time_s * 1e6, fres.ecbf_margin_mps2
+            solve_us = sol.solve_time_s * 1e6 if sol is not None else np.nan
+            iterations = sol.iterations if sol is not None and sol.iterations is not None else -1
+            fallback = fres.used_fallback
+        else:
+            (lam, vdot), build_us, margin, solve_us, iterations, fallback = self._no_filter, np.nan, 0.0, np.nan, -1, \
+                False  # fmt: skip
+        _copy_rows(r, t, gs.phi, mu_hat, mu_hat_ready, mu_true, *clock_s, nonfoot_obstacle_contact, shin_floor_contact,
+                   filtered, fallback, build_us, solve_us, iterations, margin, qpos, qvel, sensordata, u_nom, u,
+                   in_stance, gs.swing_phase, lam, vdot, self._loop_arrays, self._filter_arrays)  # fmt: skip
+        if filtered:
+            if fallback:
                 if len(self.events) < MAX_QP_FAILURE_EVENTS:
                     self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
                 else:
                     self.qp_failures_not_listed += 1
-            else:
-                self.qp_status[r] = 0
-            self.qp_build_us[r] = fres.build_time_s * 1e6
-            sol = fres.solve
-            if sol is not None:
-                self.qp_solve_us[r] = sol.solve_time_s * 1e6
-                if sol.iterations is not None:
-                    self.qp_iterations[r] = sol.iterations
-            self.vdot_filter[r] = fres.vdot
-            self.ecbf_margin_mps2[r] = fres.ecbf_margin_mps2
             for barrier in barriers:
                 log = self.barriers[barrier.name]
                 log.h_m[r] = barrier.h
                 log.he_mps[r] = barrier.h_e
-                log.psi_planned_mps2[r] = barrier.psi_planned if not fres.used_fallback else np.nan
-        self.nonfoot_obstacle_contact[r] = nonfoot_obstacle_contact
-        self.shin_floor_contact[r] = shin_floor_contact
+                log.psi_planned_mps2[r] = barrier.psi_planned if not fallback else np.nan
         self.n = k + 1
 
     def main_contact(self, ticks: slice = slice(None)) -> np.ndarray:
@@ -440,11 +448,20 @@ def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
 
 
 @kernel
-def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_nom, u, in_stance, swing_phase,
-               T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_swing, T_mu_hat, T_mu_true,
-               T_tick):  # pragma: no cover - compiled  # fmt: skip
-    """Row ``k`` of the raw per-tick arrays (one compiled call instead of a dozen numpy assignments)."""
-    T_t[k], T_phase[k], T_mu_hat[k], T_mu_true[k], T_tick[k] = t, phi, mu_hat, mu_true, tick_us
+def _copy_rows(k, t, phi, mu_hat, mu_hat_ready, mu_true, clock0, clock1, clock2, clock3, clock4, nonfoot, shin,
+               filtered, fallback, build_us, solve_us, iterations, margin, qpos, qvel, sensordata, u_nom, u,
+               in_stance, swing_phase, lam, vdot, loop_arrays, filter_arrays):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of the raw per-tick arrays (one compiled call instead of a few dozen numpy assignments):
+    ``loop_arrays`` / ``filter_arrays`` are the trace's ``_loop_arrays`` / ``_filter_arrays``; the tick's wall time and its parts from the perf_counter times
+    ``clock0`` .. ``clock4`` [s]; the filter's rows only when ``filtered`` (else they keep their initial
+    values: nan, status -1)."""
+    (T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_swing, T_mu_hat, T_ready, T_mu_true,
+     T_tick, T_parts, T_nonfoot, T_shin) = loop_arrays
+    T_t[k], T_phase[k], T_mu_hat[k], T_ready[k], T_mu_true[k] = t, phi, mu_hat, mu_hat_ready, mu_true
+    T_tick[k] = (clock4 - clock0) * 1e6
+    T_parts[k, 0], T_parts[k, 1] = clock1 - clock0, clock2 - clock1
+    T_parts[k, 2], T_parts[k, 3] = clock3 - clock2, clock4 - clock3
+    T_nonfoot[k], T_shin[k] = nonfoot, shin
     T_qpos[k, :] = qpos
     T_qvel[k, :] = qvel
     T_sensordata[k, :] = sensordata
@@ -452,6 +469,18 @@ def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_no
     T_u[k, :] = u
     T_stance[k, :] = in_stance
     T_swing[k, :] = swing_phase
+    if not filtered:
+        return
+    T_grf, T_status, T_fallback, T_build, T_solve, T_iterations, T_vdot, T_margin = filter_arrays
+    T_grf[k, :] = lam
+    T_vdot[k, :] = vdot
+    T_status[k] = 1 if fallback else 0
+    T_fallback[k] = fallback
+    T_build[k], T_margin[k] = build_us, margin
+    if not np.isnan(solve_us):
+        T_solve[k] = solve_us
+    if iterations >= 0:
+        T_iterations[k] = iterations
 
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:
