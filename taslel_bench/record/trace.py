@@ -78,11 +78,6 @@ class EpisodeTrace:
         self._filter_arrays = (self._grf_filter_flat, self.qp_status, self.qp_fallback, self.qp_build_us,
                                self.qp_solve_us, self.qp_iterations, self.vdot_filter, self.ecbf_margin_mps2)
         self._no_filter = (np.full(3 * a1.N_LEGS, np.nan), np.full(a1.NV, np.nan))  # (lambda, vdot) stand-ins
-        self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
-        for owner, name in ((self, "qp_u_error_nm"), *((self.contact_log, n) for n in vars(self.contact_log))):
-            rows = TickRows(getattr(owner, name))
-            setattr(owner, name, rows)
-            self._by_tick.append(rows)
 
     def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
         """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts."""
@@ -166,13 +161,6 @@ class EpisodeTrace:
         self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
         self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
 
-    def unwrap(self) -> None:
-        """After the episode: the arrays the loop wrote through :class:`TickRows` as plain arrays again."""
-        for owner in (self, self.contact_log):
-            for name, value in list(vars(owner).items()):
-                if isinstance(value, TickRows):
-                    setattr(owner, name, value.a)
-
     def roll(self, m: int) -> None:
         """Drop the first ``m`` rows (a processed chunk): the rows after them move to the front, the rest
         are reset to their initial values, and ``offset`` advances by ``m``."""
@@ -181,8 +169,6 @@ class EpisodeTrace:
             a[:keep] = a[m : m + keep]
             a[keep:] = fill
         self.offset += m
-        for rows in self._by_tick:
-            rows.offset = self.offset
         self.finalized = False
 
     def record(self, k: int, t: float, plant: tuple[np.ndarray, np.ndarray, np.ndarray], gs, in_stance: np.ndarray,
@@ -279,7 +265,7 @@ class EpisodeTrace:
             clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
         out["clearance_m"] = clearance
         if frames is not None:
-            out.update(frames.frames(_plain(self.contact_log), k0, k1, foot_pos))
+            out.update(frames.frames(self.contact_log, k0, k1, foot_pos))
         return out
 
     def finalize(self, rows: int | None = None) -> None:
@@ -399,41 +385,6 @@ class EpisodeTrace:
                      "mu_hat", "mu_true", "mu_hat_ready", "tick_us"):
             cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
-
-
-class TickRows:
-    """An array of the trace's current chunk written by episode tick (``rows[k] = ...``, ``rows[k, :m] =
-    ...``): row ``k - offset``. The loop writes a few arrays by its tick index; the trace keeps a chunk."""
-
-    __slots__ = ("a", "offset")
-
-    def __init__(self, a: np.ndarray) -> None:
-        self.a, self.offset = a, 0
-
-    def _row(self, key):
-        if isinstance(key, tuple):
-            return (key[0] - self.offset, *key[1:])
-        return key - self.offset if not isinstance(key, slice) else key
-
-    def __setitem__(self, key, value) -> None:
-        self.a[self._row(key)] = value
-
-    def __getitem__(self, key):
-        return self.a[self._row(key)]
-
-    def __array__(self, dtype=None, copy=None):
-        return self.a if dtype is None else self.a.astype(dtype)
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return self.a.shape
-
-
-def _plain(obj):
-    """A namespace with ``obj``'s attributes, :class:`TickRows` replaced by their arrays."""
-    from types import SimpleNamespace
-
-    return SimpleNamespace(**{k: (v.a if isinstance(v, TickRows) else v) for k, v in vars(obj).items()})
 
 
 def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:

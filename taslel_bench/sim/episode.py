@@ -104,8 +104,9 @@ class Episode:
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
-        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck):
-        # on_tick(k, backend problem, solution) -> |u - u_ref| after the tick, off the clock (extras["reference_s"])
+        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck): keep(k,
+        # backend problem, solution) after the tick, flush() -> [(k, |u - u_ref|)] between ticks and at each
+        # chunk's end, off the clock (extras["reference_s"])
         self.reference_check = None
         # --- the trace in chunks (record.chunk_ticks): None keeps the whole episode in memory (one chunk,
         # processed after the episode; result.trace holds every tick); a number processes every chunk_ticks
@@ -213,7 +214,6 @@ class Episode:
         res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s - self._residuals_s
         res.n_ticks = trace.n
         self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
-        trace.unwrap()
         res.extras["recording_s"] = self._recording_s
         res.extras["reference_s"] = self._reference_s
         res.extras["residuals_s"] = self._residuals_s
@@ -285,11 +285,12 @@ class Episode:
         trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est.mu, est.ready, true_mu,
                      (tick0, tick1, tick2, tick3, tick4), self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         frames0 = time.perf_counter()
-        self.contact_frames.record(self.d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
+        row = k - trace.offset  # the tick's row in the trace's current chunk
+        self.contact_frames.record(self.d, trace.contact_log, row)  # the raw contacts of the tick's last physics step
         self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
-        if self.reference_check is not None and fres is not None:
+        if self.reference_check is not None and fres is not None:  # copied now, solved between ticks
             ref0 = time.perf_counter()
-            trace.qp_u_error_nm[k] = self.reference_check.on_tick(k, self.filter.backend_problem, fres.solve)
+            self.reference_check.keep(k, self.filter.backend_problem, fres.solve)
             self._reference_s += time.perf_counter() - ref0
         return self._ended(t, fall, unstable, res)
 
@@ -354,6 +355,8 @@ class Episode:
         the next one), then dropped from the trace."""
         if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
             progress(k * self.s.control_dt_s)
+        if self.reference_check is not None and self.reference_check.due:
+            self._check_references(trace)
         if self.chunk_ticks and trace.n - trace.offset == int(self.chunk_ticks) + 1:
             self._process_chunk(trace, None, int(self.chunk_ticks))
             trace.roll(int(self.chunk_ticks))
@@ -365,6 +368,7 @@ class Episode:
         """The first ``rows`` rows of the trace: derived quantities, model residuals (``analyse``), then the
         MCAP sink, the steps sink and the metrics (their time is recording_s)."""
         rec0 = time.perf_counter()
+        self._recording_s -= self._check_references(trace)  # the chunk's qp_u_error_nm (reported as reference_s)
         if self.s.analyse:
             trace.finalize(rows)
             self._residuals(trace, rows)
@@ -384,6 +388,19 @@ class Episode:
         if self._residuals_error and res is not None:
             res.extras["residuals_error"] = self._residuals_error
         self._recording_s += time.perf_counter() - rec0
+
+    def _check_references(self, trace: EpisodeTrace) -> float:
+        """Solve the reference checks kept so far (record.reference_every) and write their torque errors into
+        the trace (their ticks are in its current chunk). Returns the time it took [s], added to
+        reference_s (off the ticks' timers, not in wall_time_s)."""
+        if self.reference_check is None:
+            return 0.0
+        t0 = time.perf_counter()
+        for k, error in self.reference_check.flush():
+            trace.qp_u_error_nm[k - trace.offset] = error
+        dt = time.perf_counter() - t0
+        self._reference_s += dt
+        return dt
 
     def _residuals(self, trace: EpisodeTrace, rows: int) -> None:
         """The controller model's residuals against the recorded plant motion of the chunk's rows (after
