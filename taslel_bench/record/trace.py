@@ -69,41 +69,57 @@ class EpisodeTrace:
         self._allocate_contact_frames(c)
         self._allocate_tick_timing(c)
         self._allocate_derived()
-        self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
-        # what record() writes in one compiled call (tuples: the same array objects for the whole episode)
-        self._loop_arrays = (self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
-                             self.gait_phase, self.in_stance, self.swing_phase, self.mu_hat, self.mu_hat_ready,
-                             self.mu_true, self.tick_us, self.tick_parts_s, self.nonfoot_obstacle_contact,
-                             self.shin_floor_contact)  # fmt: skip
-        self._filter_arrays = (self._grf_filter_flat, self.qp_status, self.qp_fallback, self.qp_build_us,
-                               self.qp_solve_us, self.qp_iterations, self.vdot_filter, self.ecbf_margin_mps2)
+        block_fills = {id(block): init for block, init in self._blocks}  # a block's rows reset to their init row
+        self._raw = [(a, block_fills.get(id(a), fill))
+                     for a, fill in _raw_arrays([self, self.contact_log, *self.barriers.values()], c)]
         self._no_filter = (np.full(3 * a1.N_LEGS, np.nan), np.full(a1.NV, np.nan))  # (lambda, vdot) stand-ins
 
     def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
-        """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts."""
-        nl = a1.N_LEGS
-        self.t_s = np.zeros(c)
-        self.qpos_mj = np.zeros((c, nq))  # MuJoCo qpos / qvel / sensordata after the tick
-        self.qvel_mj = np.zeros((c, nv))
-        self.sensordata_mj = np.zeros((c, nsensordata))
-        self.u_nom = np.zeros((c, 12))  # [N·m]
-        self.u = np.zeros((c, 12))  # [N·m] applied
-        self.gait_phase = np.zeros(c)
-        self.in_stance = np.zeros((c, nl), bool)  # stance set used by the filter
-        self.swing_phase = np.zeros((c, nl))
-        self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
-        self._grf_filter_flat = self.grf_filter_w.reshape(c, 3 * nl)
+        """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts, the
+        friction estimate and the tick's wall times. The float and the bool ones are column views of two
+        blocks (``_FLOAT_ROW`` / ``_FLAG_ROW`` order: :meth:`record` copies one row of each in one compiled
+        call, whose cost grows with the number of arrays it is handed)."""
+        nl, nan = a1.N_LEGS, np.nan
+        floats = _column_block(c, np.float64, (
+            ((), 0.0),  # t_s [s]
+            ((), 0.0),  # gait_phase
+            ((), 0.0),  # mu_hat
+            ((), 0.0),  # mu_true
+            ((), 0.0),  # tick_us
+            ((len(TICK_PARTS),), 0.0),  # tick_parts_s: wall time of the tick's parts [s] (see _allocate_tick_timing)
+            ((), nan),  # qp_build_us
+            ((), nan),  # qp_solve_us
+            ((), 0.0),  # ecbf_margin_mps2
+            ((nq,), 0.0),  # qpos_mj
+            ((nv,), 0.0),  # qvel_mj
+            ((nsensordata,), 0.0),  # sensordata_mj
+            ((12,), 0.0),  # u_nom
+            ((12,), 0.0),  # u
+            ((nl,), 0.0),  # swing_phase
+            ((nl, 3), nan),  # grf_filter_w
+            ((a1.NV,), nan),  # vdot_filter
+        ))  # fmt: skip
+        (self.t_s, self.gait_phase, self.mu_hat, self.mu_true, self.tick_us, self.tick_parts_s, self.qp_build_us,
+         self.qp_solve_us, self.ecbf_margin_mps2, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
+         self.swing_phase, self.grf_filter_w, self.vdot_filter) = floats.views  # fmt: skip
+        # t_s [s] = k dt; qpos/qvel/sensordata_mj: MuJoCo's after the tick; u_nom, u [N·m] (u applied);
+        # grf_filter_w [N] the filter's lambda; vdot_filter the filter's predicted acceleration (Pinocchio);
+        # ecbf_margin_mps2 [m/s²] the robust margin of the ECBF rows (filter.robust)
+        flags = _column_block(c, np.bool_, (
+            ((nl,), False),  # in_stance: stance set used by the filter
+            ((), True),  # mu_hat_ready: the estimator's FrictionEstimate.ready (False: its prior)
+            ((), False),  # nonfoot_obstacle_contact: a lower leg touched a physical obstacle (trip)
+            ((), False),  # shin_floor_contact: a lower leg (not its foot) touched the floor
+            ((), False),  # qp_fallback
+        ))  # fmt: skip
+        self.in_stance, self.mu_hat_ready, self.nonfoot_obstacle_contact, self.shin_floor_contact, \
+            self.qp_fallback = flags.views  # fmt: skip
+        self._floats, self._flags = floats.block, flags.block
+        self._blocks = ((floats.block, floats.init), (flags.block, flags.init))
         self.qp_status = np.full(c, -1, np.int8)
-        self.qp_fallback = np.zeros(c, bool)
-        self.qp_build_us = np.full(c, np.nan)
-        self.qp_solve_us = np.full(c, np.nan)
         self.qp_iterations = np.full(c, -1, np.int32)
         self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
         self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
-        self.vdot_filter = np.full((c, a1.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
-        self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
-        self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
-        self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
 
     def _allocate_contact_frames(self, c: int) -> None:
@@ -126,14 +142,9 @@ class EpisodeTrace:
         self.leg_link_obstacle_contact_off_foot = np.zeros((c, nl), bool)
 
     def _allocate_tick_timing(self, c: int) -> None:
-        """Friction estimate rows, the tick's wall times and the event list."""
-        self.mu_hat = np.zeros(c)
-        self.mu_true = np.zeros(c)
-        self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
-        self.tick_us = np.zeros(c)
-        # wall time of the tick's parts [s]: state read + estimator + controller, controller model (bridge +
-        # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
-        self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
+        """The event list (the friction estimate and the tick's wall times are loop rows: ``tick_parts_s`` [s] =
+        state read + estimator + controller, controller model (bridge + Pinocchio), filter (QP build + solve +
+        fallback), physics (+ fall and contact checks))."""
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
         self.qp_failures_not_listed = 0  # QP failures after the first MAX_QP_FAILURE_EVENTS (summary: qp_failed)
         self._context: tuple | None = None  # (bridge, contact reader, profile, terrain, frames): see bind()
@@ -192,9 +203,10 @@ class EpisodeTrace:
         else:
             (lam, vdot), build_us, margin, solve_us, iterations, fallback = self._no_filter, np.nan, 0.0, np.nan, -1, \
                 False  # fmt: skip
-        _copy_rows(r, t, gs.phi, mu_hat, mu_hat_ready, mu_true, *clock_s, nonfoot_obstacle_contact, shin_floor_contact,
-                   filtered, fallback, build_us, solve_us, iterations, margin, qpos, qvel, sensordata, u_nom, u,
-                   in_stance, gs.swing_phase, lam, vdot, self._loop_arrays, self._filter_arrays)  # fmt: skip
+        _copy_rows(r, t, gs.phi, mu_hat, mu_true, *clock_s, build_us, solve_us, margin, mu_hat_ready,
+                   nonfoot_obstacle_contact, shin_floor_contact, filtered, fallback, iterations, qpos, qvel, sensordata,
+                   u_nom, u, gs.swing_phase, lam, vdot, in_stance, self._floats, self._flags, self.qp_status,
+                   self.qp_iterations)  # fmt: skip
         if filtered:
             if fallback:
                 if len(self.events) < MAX_QP_FAILURE_EVENTS:
@@ -398,40 +410,70 @@ def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
     return out
 
 
+class _Block:
+    """Columns of one (capacity, width) array: ``views`` (one per column group, first axis the tick), ``init``
+    (the initial row)."""
+
+    def __init__(self, block: np.ndarray, init: np.ndarray, views: list[np.ndarray]) -> None:
+        self.block, self.init, self.views = block, init, views
+
+
+def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...], object]]) -> _Block:
+    """One array holding ``columns`` side by side, each (shape of one tick's value, initial value), and a view
+    of shape (capacity, *shape) per column group (no copies: rows are written through the block)."""
+    widths = [int(np.prod(shape)) for shape, _ in columns]
+    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns)])
+    block = np.empty((capacity, init.shape[0]), dtype)
+    block[:] = init
+    views, start = [], 0
+    for w, (shape, _) in zip(widths, columns):
+        view = block[:, start : start + w]
+        view = view[:, 0] if shape == () else view.reshape(capacity, *shape)
+        assert np.shares_memory(view, block) or capacity * w == 0  # a view, never a copy
+        views.append(view)
+        start += w
+    return _Block(block, init, views)
+
+
 @kernel
-def _copy_rows(k, t, phi, mu_hat, mu_hat_ready, mu_true, clock0, clock1, clock2, clock3, clock4, nonfoot, shin,
-               filtered, fallback, build_us, solve_us, iterations, margin, qpos, qvel, sensordata, u_nom, u,
-               in_stance, swing_phase, lam, vdot, loop_arrays, filter_arrays):  # pragma: no cover - compiled  # fmt: skip
-    """Row ``k`` of the raw per-tick arrays (one compiled call instead of a few dozen numpy assignments):
-    ``loop_arrays`` / ``filter_arrays`` are the trace's ``_loop_arrays`` / ``_filter_arrays``; the tick's wall time and its parts from the perf_counter times
-    ``clock0`` .. ``clock4`` [s]; the filter's rows only when ``filtered`` (else they keep their initial
+def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock4, build_us, solve_us, margin,
+               mu_hat_ready, nonfoot, shin, filtered, fallback, iterations, qpos, qvel, sensordata, u_nom, u,
+               swing_phase, lam, vdot, in_stance, F, B, qp_status, qp_iterations):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order: :meth:`EpisodeTrace._allocate_loop_rows`)
+    and of ``qp_status``, ``qp_iterations``: the tick's wall time and its parts from the perf_counter times
+    ``clock0`` .. ``clock4`` [s]; the filter's columns only when ``filtered`` (else they keep their initial
     values: nan, status -1)."""
-    (T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_swing, T_mu_hat, T_ready, T_mu_true,
-     T_tick, T_parts, T_nonfoot, T_shin) = loop_arrays
-    T_t[k], T_phase[k], T_mu_hat[k], T_ready[k], T_mu_true[k] = t, phi, mu_hat, mu_hat_ready, mu_true
-    T_tick[k] = (clock4 - clock0) * 1e6
-    T_parts[k, 0], T_parts[k, 1] = clock1 - clock0, clock2 - clock1
-    T_parts[k, 2], T_parts[k, 3] = clock3 - clock2, clock4 - clock3
-    T_nonfoot[k], T_shin[k] = nonfoot, shin
-    T_qpos[k, :] = qpos
-    T_qvel[k, :] = qvel
-    T_sensordata[k, :] = sensordata
-    T_u_nom[k, :] = u_nom
-    T_u[k, :] = u
-    T_stance[k, :] = in_stance
-    T_swing[k, :] = swing_phase
+    F[k, 0], F[k, 1], F[k, 2], F[k, 3] = t, phi, mu_hat, mu_true
+    F[k, 4] = (clock4 - clock0) * 1e6
+    F[k, 5], F[k, 6], F[k, 7], F[k, 8] = clock1 - clock0, clock2 - clock1, clock3 - clock2, clock4 - clock3
+    c = _put_row(F, k, 12, qpos)
+    c = _put_row(F, k, c, qvel)
+    c = _put_row(F, k, c, sensordata)
+    c = _put_row(F, k, c, u_nom)
+    c = _put_row(F, k, c, u)
+    c = _put_row(F, k, c, swing_phase)
+    for i in range(in_stance.shape[0]):
+        B[k, i] = in_stance[i]
+    n = in_stance.shape[0]
+    B[k, n], B[k, n + 1], B[k, n + 2] = mu_hat_ready, nonfoot, shin
     if not filtered:
         return
-    T_grf, T_status, T_fallback, T_build, T_solve, T_iterations, T_vdot, T_margin = filter_arrays
-    T_grf[k, :] = lam
-    T_vdot[k, :] = vdot
-    T_status[k] = 1 if fallback else 0
-    T_fallback[k] = fallback
-    T_build[k], T_margin[k] = build_us, margin
+    B[k, n + 3] = fallback
+    qp_status[k] = 1 if fallback else 0
+    F[k, 9], F[k, 11] = build_us, margin
     if not np.isnan(solve_us):
-        T_solve[k] = solve_us
+        F[k, 10] = solve_us
     if iterations >= 0:
-        T_iterations[k] = iterations
+        qp_iterations[k] = iterations
+    _put_row(F, k, _put_row(F, k, c, lam), vdot)
+
+
+@kernel
+def _put_row(F, k, c, src):  # pragma: no cover - compiled
+    """F[k, c : c + len(src)] = src; returns the next column."""
+    for i in range(src.shape[0]):
+        F[k, c + i] = src[i]
+    return c + src.shape[0]
 
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:
