@@ -6,8 +6,8 @@
 
 One valgrind run of this module in ``--child`` mode: a 1 s episode loads every kernel, then a second run is counted
 over walking ticks 600..1099 (``record.reference_every=0``: the reference check's batches are outside the tick
-anyway), then each part alone at that run's final state, ``N`` calls each (mj_step on the loop's own states,
-replayed; the QP solve over the episode's QPs replayed in order), then the contact-frame recording and the trace's
+anyway), then each part alone at that run's final state, ``N`` calls each (mj_step and the QP solve: the loop's
+own plant states and QPs of 100 ticks replayed in order, the median), then the contact-frame recording and the trace's
 row copy, whose time the wall time does not count or counts outside the tick. Collection is switched by
 callgrind's client requests from a small C helper compiled on the fly (``valgrind/callgrind.h``).
 """
@@ -23,6 +23,7 @@ import tempfile
 from pathlib import Path
 
 N = 300  # calls of each part
+REPLAYED = 100  # ticks whose plant states and QPs are replayed (one dump per mj_step / solve: the median counts)
 LOOP_TICKS = (600, 1100)  # walking ticks counted in the loop (the stand ends at tick 500)
 HELPER = r"""
 #include <valgrind/callgrind.h>
@@ -35,8 +36,9 @@ PARTS = ("mj_step (loop states)", "controller", "contact_check", "pinocchio_upda
 
 
 def _child(helper: str, overrides: list[str]) -> None:
-    """Under valgrind: dump 1 = the loop's ticks, then one dump per part (PARTS order; the QP solve: one dump per
-    replayed QP), then an empty loop."""
+    """Under valgrind: dump 1 = the loop's ticks, one dump per replayed mj_step, one per part timed in a loop
+    (controller, contact check, Pinocchio update, QP build), one per replayed QP solve, then the contact-frame
+    recording, the trace row copy and an empty loop."""
     from dataclasses import replace
 
     import mujoco
@@ -66,7 +68,7 @@ def _child(helper: str, overrides: list[str]) -> None:
         return out
 
     episode_module.Episode._tick = counted_tick
-    e.qp_recorder = seq = QPSequence(LOOP_TICKS[0], 100)
+    e.qp_recorder = seq = QPSequence(LOOP_TICKS[0], REPLAYED)
     trace = e.run().trace
     e.qp_recorder, episode_module.Episode._tick = None, tick
     m, d, br = e.m, e.d, e.bridge
@@ -78,23 +80,22 @@ def _child(helper: str, overrides: list[str]) -> None:
     fres = b.filter.filter(inputs, u)
     scratch = EpisodeTrace(8, True, m.nq, m.nv, m.nsensordata, [x.name for x in b.filter.barriers])
     dm = mujoco.MjData(m)
-    states = [(trace.qpos_mj[k - 1].copy(), trace.qvel_mj[k - 1].copy(), trace.u[k].copy()) for k in range(600, 600 + N)]
-    it = iter(states)
-
-    def replayed_step():
-        qpos, qvel, ctrl = next(it)
-        dm.qpos[:], dm.qvel[:] = qpos, qvel
-        dm.ctrl[br.actuator_ids] = ctrl
+    for k in range(LOOP_TICKS[0], LOOP_TICKS[0] + REPLAYED):  # one dump per step: the state setting not counted
+        dm.qpos[:], dm.qvel[:] = trace.qpos_mj[k - 1], trace.qvel_mj[k - 1]
+        dm.ctrl[br.actuator_ids] = trace.u[k]
+        if k > LOOP_TICKS[0]:
+            cg.cg_begin()
         mujoco.mj_step(m, dm)
+        if k > LOOP_TICKS[0]:
+            cg.cg_end()
 
     def empty():
         pass
 
-    parts = [replayed_step, lambda: e.controller.compute(t, qj, qdj), lambda: e.contacts.check_non_foot_contact(d),
+    parts = [lambda: e.controller.compute(t, qj, qdj), lambda: e.contacts.check_non_foot_contact(d),
              lambda: e.model.update(q, v), lambda: b.filter.build(inputs, u)]  # fmt: skip
     for fn in parts:
-        if fn is not replayed_step:
-            fn()
+        fn()
         cg.cg_begin()
         for _ in range(N):
             fn()
@@ -137,8 +138,10 @@ def report(counts: list[int]) -> str:
 
     loop = counts[0] / (LOOP_TICKS[1] - LOOP_TICKS[0])
     empty = counts[-1] / N
-    per = {name: counts[1 + i] / N - empty for i, name in enumerate(PARTS[:5])}
-    per["qp_solve"] = float(np.median(counts[6:-3]))
+    steps, rest = counts[1:REPLAYED], counts[REPLAYED:]
+    per = {PARTS[0]: float(np.median(steps))}
+    per.update({name: rest[i] / N - empty for i, name in enumerate(PARTS[1:5])})
+    per["qp_solve"] = float(np.median(rest[4:-3]))
     per["contact-frame recording"] = counts[-3] / N - empty
     per["trace row copy"] = counts[-2] / N - empty
     limit_parts = sum(per[p] for p in PARTS[:6])
