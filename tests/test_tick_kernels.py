@@ -169,3 +169,61 @@ def test_controller_references_are_rows_of_one_array():
     np.testing.assert_allclose(ctl.qd_des, fresh.qd_des, atol=1e-8)
     assert ctl.q_des.base is ctl._references and ctl.qd_des.base is ctl._references
     assert a1.N_JOINTS == ctl.q_des.shape[0]
+
+
+def _record_numpy(reader, data: mujoco.MjData, log, k: int) -> None:
+    """The numpy code ContactFrameReader.record replaced (issue 25), kept here as the reference."""
+    from taslel_bench.plant.contact_frames import MAX_CONTACTS_LOGGED
+
+    n = data.ncon
+    log.count[k] = n
+    np.take(data.cvel, reader._foot_bodies, axis=0, out=log.foot_cvel[k])
+    log.root_com[k] = data.subtree_com[reader._root]
+    if n == 0:
+        return
+    m = min(n, MAX_CONTACTS_LOGGED)
+    con = data.contact
+    log.geom[k, :m] = con.geom[:m]
+    log.geom[k, m:] = -1
+    log.normal[k, :m] = con.frame[:m, :3]
+    log.pos[k, :m] = con.pos[:m]
+    log.friction[k, :m] = con.friction[:m, 0]
+    log.dist[k, :m] = con.dist[:m]
+    adr = con.efc_address[:m]
+    if reader._efc_rows_are_forces and adr.min() >= 0:
+        np.take(data.efc_force, adr[:, None] + np.arange(3), out=log.force[k, :m])
+    else:
+        force6 = np.zeros(6)
+        for i in range(m):
+            mujoco.mj_contactForce(reader.model, data, i, force6)
+            log.force[k, i] = force6[:3]
+
+
+@pytest.mark.parametrize("efc_rows_are_forces", [True, False])
+def test_contact_rows_copied_as_the_numpy_code_did(efc_rows_are_forces):
+    """On logs (feet on logs and floor, up to several contacts per tick) and in the air (no contact), both paths
+    of the force read: every ContactLog array row equal to the numpy code's, bit for bit."""
+    from taslel_bench.plant.contact_frames import ContactLog
+
+    built = Built(compose_cfg(["duration=1", "scenario=logs", "progress=false", "record.mcap=false"]))
+    e = built.episode
+    e.initial_state()
+    reader = e.contact_frames
+    reader._efc_rows_are_forces = reader._efc_rows_are_forces and efc_rows_are_forces
+    ticks = 400
+    got, want = ContactLog(ticks + 1), ContactLog(ticks + 1)
+    counts = []
+    for k in range(ticks):
+        e.d.ctrl[:] = 0.0
+        mujoco.mj_step(e.m, e.d)
+        reader.record(e.d, got, k)
+        _record_numpy(reader, e.d, want, k)
+        counts.append(e.d.ncon)
+    e.d.qpos[2] += 1.0  # lifted 1 m: no contact
+    mujoco.mj_forward(e.m, e.d)
+    assert e.d.ncon == 0
+    reader.record(e.d, got, ticks)
+    _record_numpy(reader, e.d, want, ticks)
+    for name in vars(want):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    assert max(counts) >= 4 and min(counts) >= 1  # several contacts at once on some ticks

@@ -179,11 +179,12 @@ class Episode:
         return time.perf_counter() - t0
 
     def _warm_up_after_filter(self, results: list[FilterResult | None]) -> None:
-        """The kernels of the tick's second half (fall terms, state guard, the trace's row copy) on the initial
+        """The kernels of the tick's second half (fall terms, state guard, contact rows, the trace's row copy) on the initial
         state, the row copy into a scratch trace with and without a filter result, read-only (gait table)
         and writable (contact flags, an off-grid gait state) stance and phase arrays."""
         self.terminations.after_step(self._qpos, self.d, 0.0)  # a check only: nothing of the episode changes
         self.terminations.state_is_bad(self._qpos, self._qvel)
+        self.contact_frames.warm_up(self.d)
         scratch = EpisodeTrace(1, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
                                nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
         gs = self.controller.gait_state(self.controller.stand_duration_s)
