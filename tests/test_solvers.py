@@ -447,3 +447,29 @@ def test_report_has_the_verdict_and_draws_no_empty_fall_figure(tmp_path):
     frame.loc[0, "fell"] = True  # one run fell: the figure is drawn
     write_report(tmp_path, frame)
     assert (tmp_path / "fall_rates.png").is_file()
+
+
+def test_reference_checks_kept_and_flushed_equal_checks_solved_at_once(qps):
+    """The episode's amortised path (keep on the tick, flush in a batch) gives every tick the same error and the
+    same failure count as solving each check on its tick (on_tick)."""
+    from taslel_bench.qp.reference_check import ReferenceCheck
+
+    backend = ShiftedU(1e-3)
+    answers = [backend.solve(p) for p in qps.problems]
+    at_once = ReferenceCheck(make_backend("reference"), every=3, tol_nm=1e-3)
+    expected = {k: at_once.on_tick(k, p, sol) for k, (p, sol) in enumerate(zip(qps.problems, answers))}
+    kept = ReferenceCheck(make_backend("reference"), every=3, tol_nm=1e-3, batch=10)
+    problem = qps.problems[0].copy()  # one problem overwritten tick after tick, as the filter's
+    flushed: dict[int, float] = {}
+    for k, (p, sol) in enumerate(zip(qps.problems, answers)):
+        for name in ("P", "q", "A", "b", "G", "h", "lb", "ub"):
+            np.copyto(getattr(problem, name), getattr(p, name))
+        kept.keep(k, problem, sol)
+        if kept.due:
+            flushed.update(kept.flush())
+    flushed.update(kept.flush())
+    checked = {k: e for k, e in expected.items() if k % 3 == 0}
+    assert sorted(flushed) == sorted(checked) and len(checked) == math.ceil(len(qps.problems) / 3)
+    assert all(flushed[k] == checked[k] for k in checked)  # bit for bit
+    assert max(flushed.values()) == pytest.approx(1e-3, abs=1e-9) and kept.failed == at_once.failed == 0
+    assert all(math.isnan(e) for k, e in expected.items() if k % 3)

@@ -41,11 +41,14 @@ class NominalController:
     ) -> None:
         self.gait = TrotGait(gait)
         self.gains = gains
+        self._kp, self._kd = float(gains.kp), float(gains.kd)  # [N·m/rad], [N·m·s/rad] read every tick
         self.stand_duration_s = stand_duration_s
         self.torque_limit_nm = torque_limit_nm
         self.fd_dt_s = fd_dt_s
-        self.q_des = np.zeros(a1.N_JOINTS)
-        self.qd_des = np.zeros(a1.N_JOINTS)
+        # (q_des [rad], qd_des [rad/s]) in one array: a table row is copied in one operation; the two are its
+        # rows (views: write them in place, never rebind them)
+        self._references = np.zeros((2, a1.N_JOINTS))
+        self.q_des, self.qd_des = self._references
         self._cache_t: float = float("nan")
         self._cache_list: list[float] = []
         # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
@@ -99,7 +102,7 @@ class NominalController:
         (``base_pose``, the trunk's, is not used: the paper's references are open loop)."""
         self.update_references(t)
         u = np.empty(a1.N_JOINTS)
-        _pd(self.q_des, self.qd_des, q_joints, qd_joints, self.gains.kp, self.gains.kd, self.torque_limit_nm, u)
+        _pd(self._references, q_joints, qd_joints, self._kp, self._kd, self.torque_limit_nm, u)
         return u
 
     def update_references(self, t: float) -> None:
@@ -121,10 +124,10 @@ class NominalController:
             if j >= 1 and abs(x - j) < 1e-6:
                 row = j % self._period_ticks
                 if self._table_filled[row]:
-                    self.q_des[:], self.qd_des[:] = self._table[row]
+                    self._references[:] = self._table[row]  # (q_des, qd_des)
                     return
                 self._compute_references(t)
-                self._table[row, 0], self._table[row, 1] = self.q_des, self.qd_des
+                self._table[row] = self._references
                 self._table_filled[row] = True
                 return
         self._compute_references(t)
@@ -150,7 +153,7 @@ class NominalController:
 
 
 @kernel
-def _pd(q_des, qd_des, q, qd, kp, kd, limit, u):
-    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m]."""
+def _pd(references, q, qd, kp, kd, limit, u):
+    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m] with (q_des, qd_des) = ``references``."""
     for j in range(u.shape[0]):
-        u[j] = min(max(kp * (q_des[j] - q[j]) + kd * (qd_des[j] - qd[j]), -limit), limit)
+        u[j] = min(max(kp * (references[0, j] - q[j]) + kd * (references[1, j] - qd[j]), -limit), limit)

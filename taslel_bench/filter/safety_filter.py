@@ -117,6 +117,9 @@ class SafetyFilter:
             raise ValueError(f"filter.relaxation={settings.relaxation!r}; valid: {', '.join(RELAXATIONS)}")
         self.settings = settings
         self.backend = backend
+        # settings read on every tick, looked up once (the settings are frozen)
+        self._robust = settings.robust.enabled
+        self._friction_margin = settings.robust.friction_margin  # [-]
         self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
         if settings.friction_cone == "terrain":
             if terrain is None:
@@ -128,6 +131,7 @@ class SafetyFilter:
         self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families
         self.relaxed_by_family: dict[str, int] = {}  # family name -> ticks it was dropped
         self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
+        self._relax_by_priority = settings.relaxation == "priority" and bool(self.barriers)
         self.robust = RobustMargin(settings.robust, settings.ecbf_alpha2, settings.control_dt_s)
         tau = settings.robust.observer_time_constant_s if settings.robust.enabled else 0.0
         self.observer = DisturbanceObserver(tau, settings.control_dt_s, NV) if tau > 0.0 else None
@@ -285,24 +289,26 @@ class SafetyFilter:
     def filter(self, inputs: TickInputs, u_nom: np.ndarray) -> FilterResult:
         """Build, solve, and apply the failure policy. Never raises for solver failures."""
         t0 = time.perf_counter()
-        robust = self.settings.robust.enabled
+        robust = self._robust
         if self.observer is not None:
             self.observer.update(inputs.v, inputs.in_stance)
         if robust:  # margins sized from the running shortfall of the realised barrier condition
             margin = self.robust.ecbf_margin_mps2
             for barrier in self.barriers:
                 barrier.margin_mps2 = margin
-        if self.settings.robust.friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
-            inputs = replace(inputs, mu=inputs.mu * (1.0 - self.settings.robust.friction_margin))
+        if self._friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
+            inputs = replace(inputs, mu=inputs.mu * (1.0 - self._friction_margin))
         qp = self.build(inputs, u_nom)
         if robust:
             self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
         sol = self._solve(qp)
         relaxed: tuple[str, ...] = ()
-        if not sol.ok and self.settings.relaxation == "priority" and self.barriers:
+        ok = sol.ok
+        if not ok and self._relax_by_priority:
             sol, relaxed = self._relax(qp, u_nom, sol)
-        if sol.ok:
+            ok = sol.ok
+        if ok:
             u, lam, vdot = np.empty(a1.N_JOINTS), np.empty(NL), np.empty(NV)
             # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
             # hold to solver tolerance)

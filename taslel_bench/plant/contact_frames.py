@@ -30,6 +30,7 @@ import numpy as np
 
 from taslel_bench.plant.contacts import foot_geom_ids, obstacle_geom_mask
 from taslel_bench.robot import a1
+from taslel_bench.util.jit import kernel
 
 MAX_CONTACTS_PER_FOOT = 3  # a sphere meets a plane and a log's flank at once at most twice in practice
 FOOT_NEIGHBOURHOOD_M = 0.04  # [m] a leg-link contact point nearer than this to its foot's centre is beside the foot
@@ -78,37 +79,45 @@ class ContactFrameReader:
         self._efc_rows_are_forces = bool(model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.npair == 0
                                          and np.all(model.geom_condim == 3))
         self._force6 = np.zeros(6)
-        self._xyz = np.arange(3)
+        # empty contact fields for a tick without contacts (the compiled copy's argument types)
+        self._no_geom, self._no_rows = np.zeros((0, 2), np.int32), np.zeros((0, 9))
+        self._no_dist, self._no_adr = np.zeros(0), np.zeros(0, np.int32)
         self._views: tuple | None = None  # (data, its cvel, its subtree_com): views made once per MjData
 
     # ---------------------------------------------------------------------------------------- in the loop
     def record(self, data: mujoco.MjData, log: ContactLog, k: int) -> None:
-        """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log``. Each read of a
-        binding field makes a numpy view (~0.2 us): the fixed-size ones are made once per ``data``."""
+        """Copy tick ``k``'s contact rows (after ``mj_step`` or ``mj_forward``) into ``log`` (row ``k``): one
+        compiled call (:func:`_copy_contacts`) with the contact list's fields, which are numpy views made on
+        every read (~0.2 us each); the fixed-size ones are made once per ``data``."""
         if self._views is None or self._views[0] is not data:
             self._views = (data, data.cvel, data.subtree_com)
         _, cvel, subtree_com = self._views
         n = data.ncon
-        log.count[k] = n
-        np.take(cvel, self._foot_bodies, axis=0, out=log.foot_cvel[k])
-        log.root_com[k] = subtree_com[self._root]
         if n == 0:
+            self._record_no_contact(log, k, cvel, subtree_com)
             return
-        m = min(n, MAX_CONTACTS_LOGGED)
         con = data.contact
-        log.geom[k, :m] = con.geom[:m]
-        log.geom[k, m:] = -1
-        log.normal[k, :m] = con.frame[:m, :3]
-        log.pos[k, :m] = con.pos[:m]
-        log.friction[k, :m] = con.friction[:m, 0]
-        log.dist[k, :m] = con.dist[:m]
-        adr = con.efc_address[:m]
-        if self._efc_rows_are_forces and adr.min() >= 0:
-            np.take(data.efc_force, adr[:, None] + self._xyz, out=log.force[k, :m])  # = mj_contactForce (elliptic)
-        else:
-            for i in range(m):
-                mujoco.mj_contactForce(self.model, data, i, self._force6)
-                log.force[k, i] = self._force6[:3]
+        efc_force = data.efc_force if self._efc_rows_are_forces else self._no_dist
+        if _copy_contacts(k, n, con.geom, con.frame, con.pos, con.friction, con.dist, con.efc_address, efc_force,
+                          self._efc_rows_are_forces, cvel, subtree_com, self._foot_bodies, self._root, log.count,
+                          log.geom, log.normal, log.pos, log.friction, log.dist, log.force, log.foot_cvel,
+                          log.root_com):  # fmt: skip
+            return
+        for i in range(min(n, MAX_CONTACTS_LOGGED)):  # forces not in the efc rows (see __init__)
+            mujoco.mj_contactForce(self.model, data, i, self._force6)
+            log.force[k, i] = self._force6[:3]
+
+    def _record_no_contact(self, log: ContactLog, k: int, cvel: np.ndarray, subtree_com: np.ndarray) -> None:
+        """Row ``k`` of a tick without contacts: the count, the foot bodies' cvel and the root's subtree com."""
+        _copy_contacts(k, 0, self._no_geom, self._no_rows, self._no_rows, self._no_rows, self._no_dist, self._no_adr,
+                       self._no_dist, False, cvel, subtree_com, self._foot_bodies, self._root, log.count, log.geom,
+                       log.normal, log.pos, log.friction, log.dist, log.force, log.foot_cvel, log.root_com)  # fmt: skip
+
+    def warm_up(self, data: mujoco.MjData) -> None:
+        """Load the compiled copy for ``data``'s contact list and for a tick without contacts (into a scratch log)."""
+        scratch = ContactLog(1)
+        self.record(data, scratch, 0)
+        self._record_no_contact(scratch, 0, data.cvel, data.subtree_com)
 
     # -------------------------------------------------------------------------------------- after the loop
     def frames(self, log: ContactLog, k0: int, k1: int, foot_pos_w: np.ndarray) -> dict[str, np.ndarray]:
@@ -171,3 +180,42 @@ class ContactFrameReader:
         arrays["contact_on_obstacle"][ti, li, s] = touch & self._is_obstacle[ground[o]]
         out.update(arrays)
         return out
+
+
+@kernel
+def _copy_contacts(k, n, geom, frame, pos, friction, dist, efc_address, efc_force, efc_rows_are_forces, cvel,
+                   subtree_com, foot_bodies, root, L_count, L_geom, L_normal, L_pos, L_friction, L_dist, L_force,
+                   L_foot_cvel, L_root_com):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of a :class:`ContactLog` from MuJoCo's contact list of ``n`` contacts (its fields ``geom``,
+    ``frame``, ``pos``, ``friction``, ``dist``, ``efc_address``), the bodies' ``cvel`` and ``subtree_com``: the
+    first MAX_CONTACTS_LOGGED contacts (unused geom slots -1), each foot body's cvel, the root's subtree centre of
+    mass. The contact-frame forces are ``efc_force``'s three rows at each contact's efc address when
+    ``efc_rows_are_forces`` and every address is >= 0 (elliptic cones, condim 3: what mj_contactForce returns);
+    returns False when they are not written (the caller asks mj_contactForce)."""
+    L_count[k] = n
+    for i in range(foot_bodies.shape[0]):
+        for j in range(6):
+            L_foot_cvel[k, i, j] = cvel[foot_bodies[i], j]
+    for j in range(3):
+        L_root_com[k, j] = subtree_com[root, j]
+    if n == 0:
+        return True
+    m = min(n, L_geom.shape[1])
+    for i in range(m):
+        L_geom[k, i, 0], L_geom[k, i, 1] = geom[i, 0], geom[i, 1]
+        for j in range(3):
+            L_normal[k, i, j] = frame[i, j]
+            L_pos[k, i, j] = pos[i, j]
+        L_friction[k, i] = friction[i, 0]
+        L_dist[k, i] = dist[i]
+    for i in range(m, L_geom.shape[1]):
+        L_geom[k, i, 0], L_geom[k, i, 1] = -1, -1
+    if not efc_rows_are_forces:
+        return False
+    for i in range(m):
+        if efc_address[i] < 0:
+            return False
+    for i in range(m):
+        for j in range(3):
+            L_force[k, i, j] = efc_force[efc_address[i] + j]
+    return True

@@ -12,6 +12,7 @@ import numpy as np
 
 from taslel_bench.robot import a1
 from taslel_bench.terrain.geoms import OBSTACLE_BODY, OBSTACLE_SENSOR_SUFFIX
+from taslel_bench.util.jit import kernel
 
 
 def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
@@ -73,7 +74,6 @@ class FootContactReader:
 
         adr = sensor_adr("contact")
         self._found_rows = adr.copy()  # number of contacts per foot
-        self._found_rows_list = [int(r) for r in adr]
         self._force_rows = adr[:, None] + np.arange(1, 4)  # fx, fy, fz (by the foot), world axes
         self._torque_rows = adr[:, None] + np.arange(4, 7)  # net torque about the contact point, world axes
         self._point_rows = adr[:, None] + np.arange(7, 10)  # force-weighted centroid of the contact points
@@ -114,15 +114,26 @@ class FootContactReader:
     def check_non_foot_contact(self, data: mujoco.MjData) -> bool:
         """Only ``body_contact``, ``shin_contact`` and ``non_foot_obstacle_contact`` (cheap unless there are
         more contacts than foot contacts). Returns ``body_contact`` (a fall)."""
-        if data is not self._data:  # keep the sensordata view of this data (a new wrapper per attribute read)
-            self._data, self._sensordata = data, data.sensordata
-        sd, (r0, r1, r2, r3) = self._sensordata, self._found_rows_list
-        n_found = sd[r0] + sd[r1] + sd[r2] + sd[r3]  # 4 scalar reads: cheaper than a fancy index + sum
-        if data.ncon > n_found:
-            self._classify_other_contacts(data)
+        if more_contacts_than_feet(self.sensordata_of(data), self._found_rows, data.ncon):
+            self.classify_other_contacts(data)
         else:
-            self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
+            self.clear_non_foot_contacts()
         return self.body_contact
+
+    def sensordata_of(self, data: mujoco.MjData) -> np.ndarray:
+        """``data.sensordata`` (the view is made once per ``data``: MjData makes a new wrapper on every read)."""
+        if data is not self._data:
+            self._data, self._sensordata = data, data.sensordata
+        return self._sensordata
+
+    @property
+    def found_rows(self) -> np.ndarray:
+        """sensordata index of each foot's contact count (LEGS order)."""
+        return self._found_rows
+
+    def clear_non_foot_contacts(self) -> None:
+        """No robot geom other than the feet touches the terrain (the contact list holds only foot contacts)."""
+        self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
 
     def from_sensor_log(self, sensors: np.ndarray) -> dict[str, np.ndarray]:
         """(n, nsensordata) rows -> ``forces_in_world`` (n, 4, 3), ``in_contact`` (n, 4),
@@ -139,8 +150,9 @@ class FootContactReader:
                                  else np.zeros((n, a1.N_LEGS), bool)),
         }
 
-    def _classify_other_contacts(self, data: mujoco.MjData) -> None:
-        """Non-foot robot geoms touching terrain at distance <= 0 (see the class doc)."""
+    def classify_other_contacts(self, data: mujoco.MjData) -> None:
+        """Non-foot robot geoms touching terrain at distance <= 0 (see the class doc): sets ``body_contact``,
+        ``shin_contact``, ``non_foot_obstacle_contact`` and ``non_foot_contact_name``."""
         con = data.contact
         geom = con.geom
         robot_side = self._is_robot_geom[geom]
@@ -157,3 +169,13 @@ class FootContactReader:
         self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = bool(body.any()), bool(shin.any()), bool(trip.any())
         first = robot_geom[np.argmax(body)] if self.body_contact else robot_geom[0]
         self.non_foot_contact_name = self.model.body(self.model.geom_bodyid[first]).name
+
+
+@kernel
+def more_contacts_than_feet(sensordata, found_rows, ncon):  # pragma: no cover - compiled
+    """True if MuJoCo's contact list (``ncon`` contacts) holds more than the feet's contacts: the sum of the
+    foot sensors' contact counts ``sensordata[found_rows]``. Only then can another robot geom touch something."""
+    n_found = 0.0
+    for r in found_rows:
+        n_found += sensordata[r]
+    return ncon > n_found

@@ -37,7 +37,7 @@ from rich.table import Table
 from taslel_bench.api import compose
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.record.run_files import atomic_write
-from taslel_bench.record.trace import TICK_PARTS
+from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
 from taslel_bench.sim.build import Built
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.tables import markdown_table
@@ -97,12 +97,34 @@ def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
     return float(np.median(times[1:]) * 1e6) if len(times) > 1 else float("nan")  # [0]: the setup
 
 
-def part_costs(built: Built) -> dict[str, float]:
-    """Median µs of each tick part at the episode's final state (the QP solve: over a replayed sequence of
-    the episode's QPs, :func:`replayed_solve_us`). Only the parts the loop runs: no Pinocchio update and
-    no QP without a filter."""
+def replayed_mj_step_us(built: Built, trace: EpisodeTrace, n: int = REPLAY_TICKS) -> float:
+    """Median µs of ``mj_step`` replaying ``n`` consecutive walking ticks of the episode's ``trace`` in order
+    (a fresh MjData set to the state after tick k - 1 with tick k's torques, timed alone; MuJoCo's solver
+    warm start carries over from the previous replayed step as in the loop). Stepping one copy of the final
+    state over and over drifts away from the loop's states: with no torques the robot collapses onto its
+    trunk (7 contacts instead of 2-4 and a dearer step)."""
     e = built.episode
-    m, d, br = e.m, e.d, e.bridge
+    m, act = e.m, e.bridge.actuator_ids
+    d = mujoco.MjData(m)
+    k0 = max(round(e.controller.stand_duration_s / e.s.control_dt_s) + 1 - trace.offset, 1)
+    rows = range(k0, min(k0 + n, trace.n - trace.offset))
+    times = np.empty(len(rows))
+    for i, k in enumerate(rows):
+        d.qpos[:], d.qvel[:] = trace.qpos_mj[k - 1], trace.qvel_mj[k - 1]
+        d.ctrl[act] = trace.u[k]
+        t0 = time.perf_counter()
+        mujoco.mj_step(m, d)
+        times[i] = time.perf_counter() - t0
+    return float(np.median(times[1:])) * 1e6 if len(times) > 1 else float("nan")  # [0]: no warm start yet
+
+
+def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, float]:
+    """Median µs of each tick part at the episode's final state (mj_step over the states of the episode's
+    ``trace`` replayed in order, :func:`replayed_mj_step_us`, None: run the episode once more for it; the QP
+    solve over a replayed sequence of the episode's QPs, :func:`replayed_solve_us`). Only the parts the loop
+    runs: no Pinocchio update and no QP without a filter."""
+    e = built.episode
+    d, br = e.d, e.bridge
     qj, qdj = d.qpos[br.joint_qadr].copy(), d.qvel[br.joint_dadr].copy()
     q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
     t = [e.controller.stand_duration_s + 1.0]
@@ -111,10 +133,10 @@ def part_costs(built: Built) -> dict[str, float]:
         t[0] += 1e-3
         e.controller.compute(t[0], qj, qdj)
 
-    d_copy = mujoco.MjData(m)
-    d_copy.qpos[:], d_copy.qvel[:] = d.qpos, d.qvel
+    if trace is None:
+        trace = e.run().trace
     costs = {
-        "mj_step": _median_us(lambda: mujoco.mj_step(m, d_copy)),
+        "mj_step": replayed_mj_step_us(built, trace),
         "controller": _median_us(ctrl),
         "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
     }
@@ -139,9 +161,11 @@ _NOTES = (
     "(`tick_<part>_us` in steps.parquet): controller = state read + estimator + controller + gait "
     "schedule; model = MuJoCo->Pinocchio state + Pinocchio terms; filter = QP build + backend + "
     "fallback policy; physics = mj_step + contact check. Isolated = the same code timed alone in a "
-    "tight loop on the final state (2000 calls), the QP solve over the QPs of 1000 consecutive walking "
-    "ticks replayed in order (warm-started tick to tick as in the loop; re-solving one QP would start from "
-    "its own answer); the difference is what interleaving costs (caches). The nominal-only loop's parts "
+    "tight loop on the final state (2000 calls), mj_step over the plant states and torques of 1000 "
+    "consecutive walking ticks replayed in order, the QP solve over the QPs of those ticks replayed in order "
+    "(warm-started tick to tick as in the loop; re-solving one QP would start from its own answer, stepping "
+    "one state again and again drifts away from the loop's states); the difference is what interleaving "
+    "costs (caches). The nominal-only loop's parts "
     "are those it runs (no Pinocchio update, no QP). "
     "Sum-of-parts limit = control period / (the isolated parts summed, mj_step once per physics step): the "
     "real-time factor of a loop that costs nothing but its parts; share of limit = real-time factor / limit. "
@@ -310,7 +334,7 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     parts_mean = {part: float(np.mean(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)
                   if part in in_loop}  # fmt: skip
     wall_us, tick_mean_us = res.wall_time_s / n * 1e6, float(np.mean(tr.tick_us[:n]))
-    isolated = part_costs(built)
+    isolated = part_costs(built, tr)
     ppt = built.episode.physics_per_tick
     limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), ppt)
     accounting = wall_accounting(wall_us, tick_mean_us, parts_mean, isolated, ppt)

@@ -70,40 +70,58 @@ class EpisodeTrace:
         self._allocate_contact_frames(c)
         self._allocate_tick_timing(c)
         self._allocate_derived()
-        self._raw = _raw_arrays([self, self.contact_log, *self.barriers.values()], c)
-        self._by_tick: list[TickRows] = []  # written by the loop with the episode's tick index (see TickRows)
-        for owner, name in ((self, "tick_parts_s"), (self, "mu_hat_ready"), (self, "qp_u_error_nm"),
-                            *((self.contact_log, n) for n in vars(self.contact_log))):  # fmt: skip
-            rows = TickRows(getattr(owner, name))
-            setattr(owner, name, rows)
-            self._by_tick.append(rows)
+        block_fills = {id(block): init for block, init in self._blocks}  # a block's rows reset to their init row
+        self._raw = [(a, block_fills.get(id(a), fill))
+                     for a, fill in _raw_arrays([self, self.contact_log, *self.barriers.values()], c)]
+        self._no_filter = (np.full(3 * a1.N_LEGS, np.nan), np.full(a1.NV, np.nan))  # (lambda, vdot) stand-ins
 
     def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
-        """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts."""
-        nl = a1.N_LEGS
-        self.t_s = np.zeros(c)
-        self.qpos_mj = np.zeros((c, nq))  # MuJoCo qpos / qvel / sensordata after the tick
-        self.qvel_mj = np.zeros((c, nv))
-        self.sensordata_mj = np.zeros((c, nsensordata))
-        self.u_nom = np.zeros((c, 12))  # [N·m]
-        self.u = np.zeros((c, 12))  # [N·m] applied
-        self.gait_phase = np.zeros(c)
-        self.in_stance = np.zeros((c, nl), bool)  # stance set used by the filter
-        self.scheduled_stance = np.zeros((c, nl), bool)  # the gait schedule's stance (the filter's set may differ)
-        self.swing_phase = np.zeros((c, nl))
-        self.grf_filter_w = np.full((c, nl, 3), np.nan)  # [N] filter's lambda
-        self._grf_filter_flat = self.grf_filter_w.reshape(c, 3 * nl)
+        """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts, the
+        friction estimate and the tick's wall times. The float and the bool ones are column views of two
+        blocks (``_FLOAT_ROW`` / ``_FLAG_ROW`` order: :meth:`record` copies one row of each in one compiled
+        call, whose cost grows with the number of arrays it is handed)."""
+        nl, nan = a1.N_LEGS, np.nan
+        floats = _column_block(c, np.float64, (
+            ((), 0.0),  # t_s [s]
+            ((), 0.0),  # gait_phase
+            ((), 0.0),  # mu_hat
+            ((), 0.0),  # mu_true
+            ((), 0.0),  # tick_us
+            ((len(TICK_PARTS),), 0.0),  # tick_parts_s: wall time of the tick's parts [s] (see _allocate_tick_timing)
+            ((), nan),  # qp_build_us
+            ((), nan),  # qp_solve_us
+            ((), 0.0),  # ecbf_margin_mps2
+            ((nq,), 0.0),  # qpos_mj
+            ((nv,), 0.0),  # qvel_mj
+            ((nsensordata,), 0.0),  # sensordata_mj
+            ((12,), 0.0),  # u_nom
+            ((12,), 0.0),  # u
+            ((nl,), 0.0),  # swing_phase
+            ((nl, 3), nan),  # grf_filter_w
+            ((a1.NV,), nan),  # vdot_filter
+        ))  # fmt: skip
+        (self.t_s, self.gait_phase, self.mu_hat, self.mu_true, self.tick_us, self.tick_parts_s, self.qp_build_us,
+         self.qp_solve_us, self.ecbf_margin_mps2, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
+         self.swing_phase, self.grf_filter_w, self.vdot_filter) = floats.views  # fmt: skip
+        # t_s [s] = k dt; qpos/qvel/sensordata_mj: MuJoCo's after the tick; u_nom, u [N·m] (u applied);
+        # grf_filter_w [N] the filter's lambda; vdot_filter the filter's predicted acceleration (Pinocchio);
+        # ecbf_margin_mps2 [m/s²] the robust margin of the ECBF rows (filter.robust)
+        flags = _column_block(c, np.bool_, (
+            ((nl,), False),  # in_stance: stance set used by the filter
+            ((nl,), False),  # scheduled_stance: the gait schedule's stance (the filter's set may differ)
+            ((), True),  # mu_hat_ready: the estimator's FrictionEstimate.ready (False: its prior)
+            ((), False),  # nonfoot_obstacle_contact: a lower leg touched a physical obstacle (trip)
+            ((), False),  # shin_floor_contact: a lower leg (not its foot) touched the floor
+            ((), False),  # qp_fallback
+        ))  # fmt: skip
+        self.in_stance, self.scheduled_stance, self.mu_hat_ready, self.nonfoot_obstacle_contact, \
+            self.shin_floor_contact, self.qp_fallback = flags.views  # fmt: skip
+        self._floats, self._flags = floats.block, flags.block
+        self._blocks = ((floats.block, floats.init), (flags.block, flags.init))
         self.qp_status = np.full(c, -1, np.int8)
-        self.qp_fallback = np.zeros(c, bool)
-        self.qp_build_us = np.full(c, np.nan)
-        self.qp_solve_us = np.full(c, np.nan)
         self.qp_iterations = np.full(c, -1, np.int32)
         self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
         self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
-        self.vdot_filter = np.full((c, a1.NV), np.nan)  # the filter's predicted acceleration (Pinocchio)
-        self.ecbf_margin_mps2 = np.zeros(c)  # [m/s²] the robust margin of the ECBF rows (filter.robust)
-        self.nonfoot_obstacle_contact = np.zeros(c, bool)  # a lower leg touched a physical obstacle (trip)
-        self.shin_floor_contact = np.zeros(c, bool)  # a lower leg (not its foot) touched the floor
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
 
     def _allocate_contact_frames(self, c: int) -> None:
@@ -126,14 +144,9 @@ class EpisodeTrace:
         self.leg_link_obstacle_contact_off_foot = np.zeros((c, nl), bool)
 
     def _allocate_tick_timing(self, c: int) -> None:
-        """Friction estimate rows, the tick's wall times and the event list."""
-        self.mu_hat = np.zeros(c)
-        self.mu_true = np.zeros(c)
-        self.mu_hat_ready = np.ones(c, bool)  # the estimator's FrictionEstimate.ready (False: its prior)
-        self.tick_us = np.zeros(c)
-        # wall time of the tick's parts [s]: state read + estimator + controller, controller model (bridge +
-        # Pinocchio), filter (QP build + solve + fallback), physics (+ fall and contact checks)
-        self.tick_parts_s = np.zeros((c, len(TICK_PARTS)))
+        """The event list (the friction estimate and the tick's wall times are loop rows: ``tick_parts_s`` [s] =
+        state read + estimator + controller, controller model (bridge + Pinocchio), filter (QP build + solve +
+        fallback), physics (+ fall and contact checks))."""
         self.events: list[dict[str, object]] = []  # QP failures, falls, errors (t_s, kind, message)
         self.qp_failures_not_listed = 0  # QP failures after the first MAX_QP_FAILURE_EVENTS (summary: qp_failed)
         self._context: tuple | None = None  # (bridge, contact reader, profile, terrain, frames): see bind()
@@ -161,13 +174,6 @@ class EpisodeTrace:
         self.obstacle_clearance_m = np.zeros((0, nl))  # [m] foot sphere to nearest obstacle (nan: none)
         self.mu_foot = np.zeros((0, nl))  # [-] true friction of the terrain under each foot
 
-    def unwrap(self) -> None:
-        """After the episode: the arrays the loop wrote through :class:`TickRows` as plain arrays again."""
-        for owner in (self, self.contact_log):
-            for name, value in list(vars(owner).items()):
-                if isinstance(value, TickRows):
-                    setattr(owner, name, value.a)
-
     def roll(self, m: int) -> None:
         """Drop the first ``m`` rows (a processed chunk): the rows after them move to the front, the rest
         are reset to their initial values, and ``offset`` advances by ``m``."""
@@ -176,45 +182,44 @@ class EpisodeTrace:
             a[:keep] = a[m : m + keep]
             a[keep:] = fill
         self.offset += m
-        for rows in self._by_tick:
-            rows.offset = self.offset
         self.finalized = False
 
-    def record(self, k, t, qpos, qvel, sensordata, gs, in_stance, u_nom, u, fres, mu_hat, mu_true, tick_s,
-               barriers, nonfoot_obstacle_contact, shin_floor_contact) -> None:  # fmt: skip
-        """Copy tick ``k``'s raw rows (MuJoCo qpos, qvel, sensordata after the tick; controller and filter
-        outputs). ``barriers``: the filter's barrier families (their h, h_e and planned condition now)."""
+    def record(self, k: int, t: float, plant: tuple[np.ndarray, np.ndarray, np.ndarray], gs, in_stance: np.ndarray,
+               u_nom: np.ndarray, u: np.ndarray, fres, mu_hat: float, mu_hat_ready: bool, mu_true: float,
+               clock_s: tuple[float, float, float, float, float], barriers, nonfoot_obstacle_contact: bool,
+               shin_floor_contact: bool) -> None:  # fmt: skip
+        """Copy tick ``k``'s raw rows: ``plant`` = MuJoCo (qpos, qvel, sensordata) after the tick; the gait
+        state ``gs``, the stance set, u_nom and u [N·m], the filter's result ``fres`` (None: no filter on this
+        tick), the friction estimate and truth; ``clock_s`` = the perf_counter times [s] at the tick's start
+        and at the end of each of its :data:`TICK_PARTS`; ``barriers``: the filter's barrier families (their
+        h, h_e and planned condition now). One compiled call for the fixed-size rows."""
         r = k - self.offset
-        _copy_rows(r, t, gs.phi, mu_hat, mu_true, tick_s * 1e6, qpos, qvel, sensordata, u_nom, u, in_stance,
-                   gs.in_stance, gs.swing_phase, self.t_s, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom,
-                   self.u, self.gait_phase, self.in_stance, self.scheduled_stance, self.swing_phase, self.mu_hat,
-                   self.mu_true, self.tick_us)  # fmt: skip
-        if fres is not None:
-            self._grf_filter_flat[r] = fres.lam
-            if fres.used_fallback:
-                self.qp_status[r] = 1
-                self.qp_fallback[r] = True
+        qpos, qvel, sensordata = plant
+        filtered = fres is not None
+        if filtered:
+            sol = fres.solve
+            lam, vdot, build_us, margin = fres.lam, fres.vdot, fres.build_time_s * 1e6, fres.ecbf_margin_mps2
+            solve_us = sol.solve_time_s * 1e6 if sol is not None else np.nan
+            iterations = sol.iterations if sol is not None and sol.iterations is not None else -1
+            fallback = fres.used_fallback
+        else:
+            (lam, vdot), build_us, margin, solve_us, iterations, fallback = self._no_filter, np.nan, 0.0, np.nan, -1, \
+                False  # fmt: skip
+        _copy_rows(r, t, gs.phi, mu_hat, mu_true, *clock_s, build_us, solve_us, margin, mu_hat_ready,
+                   nonfoot_obstacle_contact, shin_floor_contact, filtered, fallback, iterations, qpos, qvel, sensordata,
+                   u_nom, u, gs.swing_phase, lam, vdot, in_stance, gs.in_stance, self._floats, self._flags,
+                   self.qp_status, self.qp_iterations)  # fmt: skip
+        if filtered:
+            if fallback:
                 if len(self.events) < MAX_QP_FAILURE_EVENTS:
                     self.events.append({"t_s": t, "kind": "qp_failure", "message": fres.status})
                 else:
                     self.qp_failures_not_listed += 1
-            else:
-                self.qp_status[r] = 0
-            self.qp_build_us[r] = fres.build_time_s * 1e6
-            sol = fres.solve
-            if sol is not None:
-                self.qp_solve_us[r] = sol.solve_time_s * 1e6
-                if sol.iterations is not None:
-                    self.qp_iterations[r] = sol.iterations
-            self.vdot_filter[r] = fres.vdot
-            self.ecbf_margin_mps2[r] = fres.ecbf_margin_mps2
             for barrier in barriers:
                 log = self.barriers[barrier.name]
                 log.h_m[r] = barrier.h
                 log.he_mps[r] = barrier.h_e
-                log.psi_planned_mps2[r] = barrier.psi_planned if not fres.used_fallback else np.nan
-        self.nonfoot_obstacle_contact[r] = nonfoot_obstacle_contact
-        self.shin_floor_contact[r] = shin_floor_contact
+                log.psi_planned_mps2[r] = barrier.psi_planned if not fallback else np.nan
         self.n = k + 1
 
     def main_contact(self, ticks: slice = slice(None)) -> np.ndarray:
@@ -274,7 +279,7 @@ class EpisodeTrace:
             clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
         out["clearance_m"] = clearance
         if frames is not None:
-            out.update(frames.frames(_plain(self.contact_log), k0, k1, foot_pos))
+            out.update(frames.frames(self.contact_log, k0, k1, foot_pos))
         return out
 
     def finalize(self, rows: int | None = None) -> None:
@@ -397,41 +402,6 @@ class EpisodeTrace:
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])
 
 
-class TickRows:
-    """An array of the trace's current chunk written by episode tick (``rows[k] = ...``, ``rows[k, :m] =
-    ...``): row ``k - offset``. The loop writes a few arrays by its tick index; the trace keeps a chunk."""
-
-    __slots__ = ("a", "offset")
-
-    def __init__(self, a: np.ndarray) -> None:
-        self.a, self.offset = a, 0
-
-    def _row(self, key):
-        if isinstance(key, tuple):
-            return (key[0] - self.offset, *key[1:])
-        return key - self.offset if not isinstance(key, slice) else key
-
-    def __setitem__(self, key, value) -> None:
-        self.a[self._row(key)] = value
-
-    def __getitem__(self, key):
-        return self.a[self._row(key)]
-
-    def __array__(self, dtype=None, copy=None):
-        return self.a if dtype is None else self.a.astype(dtype)
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return self.a.shape
-
-
-def _plain(obj):
-    """A namespace with ``obj``'s attributes, :class:`TickRows` replaced by their arrays."""
-    from types import SimpleNamespace
-
-    return SimpleNamespace(**{k: (v.a if isinstance(v, TickRows) else v) for k, v in vars(obj).items()})
-
-
 def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
     """(array, initial value) of every per-tick array (first axis ``capacity``) of ``owners`` that owns its
     data: the rows :meth:`EpisodeTrace.roll` moves and resets."""
@@ -443,20 +413,71 @@ def _raw_arrays(owners: list, capacity: int) -> list[tuple[np.ndarray, object]]:
     return out
 
 
+class _Block:
+    """Columns of one (capacity, width) array: ``views`` (one per column group, first axis the tick), ``init``
+    (the initial row)."""
+
+    def __init__(self, block: np.ndarray, init: np.ndarray, views: list[np.ndarray]) -> None:
+        self.block, self.init, self.views = block, init, views
+
+
+def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...], object]]) -> _Block:
+    """One array holding ``columns`` side by side, each (shape of one tick's value, initial value), and a view
+    of shape (capacity, *shape) per column group (no copies: rows are written through the block)."""
+    widths = [int(np.prod(shape)) for shape, _ in columns]
+    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns)])
+    block = np.empty((capacity, init.shape[0]), dtype)
+    block[:] = init
+    views, start = [], 0
+    for w, (shape, _) in zip(widths, columns):
+        view = block[:, start : start + w]
+        view = view[:, 0] if shape == () else view.reshape(capacity, *shape)
+        assert np.shares_memory(view, block) or capacity * w == 0  # a view, never a copy
+        views.append(view)
+        start += w
+    return _Block(block, init, views)
+
+
 @kernel
-def _copy_rows(k, t, phi, mu_hat, mu_true, tick_us, qpos, qvel, sensordata, u_nom, u, in_stance, scheduled,
-               swing_phase, T_t, T_qpos, T_qvel, T_sensordata, T_u_nom, T_u, T_phase, T_stance, T_scheduled, T_swing,
-               T_mu_hat, T_mu_true, T_tick):  # pragma: no cover - compiled  # fmt: skip
-    """Row ``k`` of the raw per-tick arrays (one compiled call instead of a dozen numpy assignments)."""
-    T_t[k], T_phase[k], T_mu_hat[k], T_mu_true[k], T_tick[k] = t, phi, mu_hat, mu_true, tick_us
-    T_qpos[k, :] = qpos
-    T_qvel[k, :] = qvel
-    T_sensordata[k, :] = sensordata
-    T_u_nom[k, :] = u_nom
-    T_u[k, :] = u
-    T_stance[k, :] = in_stance
-    T_scheduled[k, :] = scheduled
-    T_swing[k, :] = swing_phase
+def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock4, build_us, solve_us, margin,
+               mu_hat_ready, nonfoot, shin, filtered, fallback, iterations, qpos, qvel, sensordata, u_nom, u,
+               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status, qp_iterations):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order: :meth:`EpisodeTrace._allocate_loop_rows`)
+    and of ``qp_status``, ``qp_iterations``: the tick's wall time and its parts from the perf_counter times
+    ``clock0`` .. ``clock4`` [s]; the filter's columns only when ``filtered`` (else they keep their initial
+    values: nan, status -1)."""
+    F[k, 0], F[k, 1], F[k, 2], F[k, 3] = t, phi, mu_hat, mu_true
+    F[k, 4] = (clock4 - clock0) * 1e6
+    F[k, 5], F[k, 6], F[k, 7], F[k, 8] = clock1 - clock0, clock2 - clock1, clock3 - clock2, clock4 - clock3
+    c = _put_row(F, k, 12, qpos)
+    c = _put_row(F, k, c, qvel)
+    c = _put_row(F, k, c, sensordata)
+    c = _put_row(F, k, c, u_nom)
+    c = _put_row(F, k, c, u)
+    c = _put_row(F, k, c, swing_phase)
+    n = in_stance.shape[0]
+    for i in range(n):
+        B[k, i] = in_stance[i]
+        B[k, n + i] = scheduled[i]
+    B[k, 2 * n], B[k, 2 * n + 1], B[k, 2 * n + 2] = mu_hat_ready, nonfoot, shin
+    if not filtered:
+        return
+    B[k, 2 * n + 3] = fallback
+    qp_status[k] = 1 if fallback else 0
+    F[k, 9], F[k, 11] = build_us, margin
+    if not np.isnan(solve_us):
+        F[k, 10] = solve_us
+    if iterations >= 0:
+        qp_iterations[k] = iterations
+    _put_row(F, k, _put_row(F, k, c, lam), vdot)
+
+
+@kernel
+def _put_row(F, k, c, src):  # pragma: no cover - compiled
+    """F[k, c : c + len(src)] = src; returns the next column."""
+    for i in range(src.shape[0]):
+        F[k, c + i] = src[i]
+    return c + src.shape[0]
 
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:

@@ -22,6 +22,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import mujoco
 import numpy as np
@@ -103,8 +104,9 @@ class Episode:
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
         self.qp_recorder = None
-        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck):
-        # on_tick(k, backend problem, solution) -> |u - u_ref| after the tick, off the clock (extras["reference_s"])
+        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck): keep(k,
+        # backend problem, solution) after the tick, flush() -> [(k, |u - u_ref|)] between ticks and at each
+        # chunk's end, off the clock (extras["reference_s"])
         self.reference_check = None
         # --- the trace in chunks (record.chunk_ticks): None keeps the whole episode in memory (one chunk,
         # processed after the episode; result.trace holds every tick); a number processes every chunk_ticks
@@ -160,6 +162,7 @@ class Episode:
         self._scenario_step = None if does_nothing(hook) else hook  # most scenarios do nothing per step
         q, v = self._q, self._v
         self.bridge.state_pin(self.d.qpos, self.d.qvel, q, v)
+        results: list[FilterResult | None] = [None]
         if self.filter is not None:
             self.model.update(q, v)
             # the gait's state arrays are read-only (a type of their own for the compiler), the plant's
@@ -169,10 +172,27 @@ class Episode:
                 u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
-                self.filter.filter(inputs, u_nom)
+                results.append(self.filter.filter(inputs, u_nom))
             self.filter.reset()  # the episode starts from a fresh solver (its setup is part of tick 0)
         self.controller.reset()  # the controller starts with no memory of the warm-up or an earlier episode
+        self._warm_up_after_filter(results)
         return time.perf_counter() - t0
+
+    def _warm_up_after_filter(self, results: list[FilterResult | None]) -> None:
+        """The kernels of the tick's second half (fall terms, state guard, contact rows, the trace's row copy) on the initial
+        state, the row copy into a scratch trace with and without a filter result, read-only (gait table)
+        and writable (contact flags, an off-grid gait state) stance and phase arrays."""
+        self.terminations.after_step(self._qpos, self.d, 0.0)  # a check only: nothing of the episode changes
+        self.terminations.state_is_bad(self._qpos, self._qvel)
+        self.contact_frames.warm_up(self.d)
+        scratch = EpisodeTrace(1, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
+                               nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
+        gs = self.controller.gait_state(self.controller.stand_duration_s)
+        writable = SimpleNamespace(phi=gs.phi, swing_phase=gs.swing_phase.copy(), in_stance=gs.in_stance.copy())
+        for fres in results:
+            for state, stance in ((gs, gs.in_stance), (writable, gs.in_stance.copy())):
+                scratch.record(0, 0.0, self._plant_rows, state, stance, self._tau_prev, self._tau_prev, fres, 1.0,
+                               True, 1.0, (0.0,) * 5, self._barriers, False, False)  # fmt: skip
 
     # -------------------------------------------------------------------------------------------- run
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
@@ -195,7 +215,6 @@ class Episode:
         res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s - self._residuals_s
         res.n_ticks = trace.n
         self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
-        trace.unwrap()
         res.extras["recording_s"] = self._recording_s
         res.extras["reference_s"] = self._reference_s
         res.extras["residuals_s"] = self._residuals_s
@@ -220,6 +239,11 @@ class Episode:
         self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
         self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
         self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
+        self._q_joints, self._qd_joints = self._q[7:], self._v[6:]  # [rad], [rad/s] core order (views, made once)
+        self._plant_rows = (self._qpos, self._qvel, self._sensordata)  # what the trace copies after each tick
+        a = self.bridge.free_qadr
+        self._trunk_xy = slice(a, a + 2)  # the trunk's (x, y) in qpos: where the terrain's friction is read
+        self._true_mu = self.terrain.uniform_friction  # [-] one coefficient everywhere (None: read it each tick)
         self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._t0_plant = self.d.time
@@ -238,17 +262,17 @@ class Episode:
         episode ends here (a fall or a non-finite state)."""
         tick0 = time.perf_counter()
         t = k * self.s.control_dt_s
-        qpos, qvel, q, v = self._qpos, self._qvel, self._q, self._v
-        self.bridge.state_pin(qpos, qvel, q, v)
-        true_mu = self.terrain.friction_at(qpos[self.bridge.free_qadr : self.bridge.free_qadr + 2])
+        qpos, q_joints, qd_joints = self._qpos, self._q_joints, self._qd_joints
+        self.bridge.state_pin(qpos, self._qvel, self._q, self._v)
+        true_mu = self._true_mu if self._true_mu is not None else self.terrain.friction_at(qpos[self._trunk_xy])
         mu_feet = None
         if self._read_feet:
             self.contacts.read(self.d)
             if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
-        est = self.estimator.step(Proprioception(t, q[7:], v[6:], self._tau_prev, true_mu, self._mu_filter_prev,
+        est = self.estimator.step(Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet))  # fmt: skip
-        u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
+        u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.gait_state(t)
         if self.contact_estimate is not None:
             in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
@@ -259,16 +283,15 @@ class Episode:
         fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
         self._tau_prev[:] = u
         tick4 = time.perf_counter()
-        trace.tick_parts_s[k] = (tick1 - tick0, tick2 - tick1, tick3 - tick2, tick4 - tick3)
-        trace.record(k, t, qpos, qvel, self._sensordata, gs, in_stance, u_nom, u, fres, est.mu, true_mu,
-                     tick4 - tick0, self._barriers, obstacle_touch, shin_touch)  # fmt: skip
+        trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est.mu, est.ready, true_mu,
+                     (tick0, tick1, tick2, tick3, tick4), self._barriers, obstacle_touch, shin_touch)  # fmt: skip
         frames0 = time.perf_counter()
-        self.contact_frames.record(self.d, trace.contact_log, k)  # the raw contacts of the tick's last physics step
+        row = k - trace.offset  # the tick's row in the trace's current chunk
+        self.contact_frames.record(self.d, trace.contact_log, row)  # the raw contacts of the tick's last physics step
         self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
-        trace.mu_hat_ready[k] = est.ready
-        if self.reference_check is not None and fres is not None:
+        if self.reference_check is not None and fres is not None:  # copied now, solved between ticks
             ref0 = time.perf_counter()
-            trace.qp_u_error_nm[k] = self.reference_check.on_tick(k, self.filter.backend_problem, fres.solve)
+            self.reference_check.keep(k, self.filter.backend_problem, fres.solve)
             self._reference_s += time.perf_counter() - ref0
         return self._ended(t, fall, unstable, res)
 
@@ -333,6 +356,8 @@ class Episode:
         the next one), then dropped from the trace."""
         if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
             progress(k * self.s.control_dt_s)
+        if self.reference_check is not None and self.reference_check.due:
+            self._check_references(trace)
         if self.chunk_ticks and trace.n - trace.offset == int(self.chunk_ticks) + 1:
             self._process_chunk(trace, None, int(self.chunk_ticks))
             trace.roll(int(self.chunk_ticks))
@@ -344,6 +369,7 @@ class Episode:
         """The first ``rows`` rows of the trace: derived quantities, model residuals (``analyse``), then the
         MCAP sink, the steps sink and the metrics (their time is recording_s)."""
         rec0 = time.perf_counter()
+        self._recording_s -= self._check_references(trace)  # the chunk's qp_u_error_nm (reported as reference_s)
         if self.s.analyse:
             trace.finalize(rows)
             self._residuals(trace, rows)
@@ -363,6 +389,19 @@ class Episode:
         if self._residuals_error and res is not None:
             res.extras["residuals_error"] = self._residuals_error
         self._recording_s += time.perf_counter() - rec0
+
+    def _check_references(self, trace: EpisodeTrace) -> float:
+        """Solve the reference checks kept so far (record.reference_every) and write their torque errors into
+        the trace (their ticks are in its current chunk). Returns the time it took [s], added to
+        reference_s (off the ticks' timers, not in wall_time_s)."""
+        if self.reference_check is None:
+            return 0.0
+        t0 = time.perf_counter()
+        for k, error in self.reference_check.flush():
+            trace.qp_u_error_nm[k - trace.offset] = error
+        dt = time.perf_counter() - t0
+        self._reference_s += dt
+        return dt
 
     def _residuals(self, trace: EpisodeTrace, rows: int) -> None:
         """The controller model's residuals against the recorded plant motion of the chunk's rows (after

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from taslel_bench.plant.contacts import FootContactReader
+from taslel_bench.plant.contacts import FootContactReader, more_contacts_than_feet
 from taslel_bench.util.jit import kernel
 
 TERMS = ("trunk_height", "trunk_tilt", "body_contact")
@@ -49,20 +49,29 @@ class Terminations:
 
     def __init__(self, rule: FallRule, qpos_adr: int, contacts: FootContactReader, physics_dt_s: float) -> None:
         self.rule, self.a, self.contacts, self.dt = rule, qpos_adr, contacts, physics_dt_s
+        self._height_m = float(rule.height_m)  # [m]
         self._cos_tilt_min = math.cos(math.radians(rule.tilt_deg))
         self._vmax_sq = rule.max_speed**2
+        self._found_rows = contacts.found_rows
 
     def after_step(self, qpos: np.ndarray, data: mujoco.MjData, t_s: float) -> Fall | None:
-        """The first fall term crossed by the state ``qpos`` a physics step produced at episode time ``t_s``."""
-        term = _trunk_term(qpos, self.a, self.rule.height_m, self._cos_tilt_min)  # one compiled call
+        """The first fall term crossed by the state ``qpos`` a physics step produced at episode time ``t_s``.
+        Also updates the contact reader's non-foot contact flags (unless the trunk term ended the episode)."""
+        contacts = self.contacts
+        term = _step_term(qpos, self.a, self._height_m, self._cos_tilt_min, contacts.sensordata_of(data),
+                          self._found_rows, data.ncon)  # one compiled call  # fmt: skip
+        if term == _NONE:
+            contacts.clear_non_foot_contacts()
+            return None
         if term == _HEIGHT:
             z = qpos[self.a + 2]
             return Fall("trunk_height", f"trunk height {z:.3f} m < {self.rule.height_m} m", t_s)
         if term == _TILT:
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, _cos_tilt(qpos, self.a)))))
             return Fall("trunk_tilt", f"trunk tilt {tilt:.0f} deg", t_s)
-        if self.contacts.check_non_foot_contact(data):  # contacts of the step's starting state
-            name = self.contacts.non_foot_contact_name
+        contacts.classify_other_contacts(data)  # term == _OTHER_CONTACTS: of the step's starting state
+        if contacts.body_contact:
+            name = contacts.non_foot_contact_name
             return Fall("body_contact", f"{name} (above the knee) touched the terrain", t_s - self.dt)
         return None
 
@@ -75,7 +84,7 @@ class Terminations:
         return round(t_s / self.dt) * self.dt
 
 
-_NONE, _HEIGHT, _TILT = 0, 1, 2  # what _trunk_term found
+_NONE, _HEIGHT, _TILT, _OTHER_CONTACTS = 0, 1, 2, 3  # what _trunk_term / _step_term found
 
 
 @kernel
@@ -93,6 +102,16 @@ def _trunk_term(qpos, a, height_m, cos_tilt_min):  # pragma: no cover - compiled
     if _cos_tilt(qpos, a) < cos_tilt_min:
         return _TILT
     return _NONE
+
+
+@kernel
+def _step_term(qpos, a, height_m, cos_tilt_min, sensordata, found_rows, ncon):  # pragma: no cover - compiled
+    """:func:`_trunk_term`; then, if neither trunk term is crossed, _OTHER_CONTACTS when the contact list
+    holds more than the feet's contacts (only then can the body touch the terrain), else _NONE."""
+    term = _trunk_term(qpos, a, height_m, cos_tilt_min)
+    if term == _NONE and more_contacts_than_feet(sensordata, found_rows, ncon):
+        return _OTHER_CONTACTS
+    return term
 
 
 @kernel
