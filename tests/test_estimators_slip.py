@@ -1,0 +1,131 @@
+"""Slip detection from proprioception (leg kinematics, torques, trunk IMU) and the per-foot slip caps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.legs import feet_and_jacobians, foot_forces_from_torques
+from estimators.simple import FixedEstimator
+from estimators.slip import SlipDetector, SlipSettings
+from estimators.slip_bound import SlipBoundEstimator
+from taslel_bench.interfaces import ImuSample, Proprioception
+from taslel_bench.robot.model import A1Model
+
+STAND = np.array([0.0, 0.8, -1.6] * 4)  # [rad] standing A1
+
+
+def test_leg_kinematics_match_pinocchio() -> None:
+    """Foot positions (trunk frame) and leg Jacobians equal Pinocchio's at a random pose, trunk at identity."""
+    rng = np.random.default_rng(0)
+    q = np.zeros(19)
+    q[6] = 1.0
+    q[7:] = STAND + rng.normal(0, 0.3, 12)
+    model = A1Model()
+    model.update(q, np.zeros(18))
+    p, jac = feet_and_jacobians(q[7:])
+    assert np.allclose(p, model.foot_pos_in_world, atol=1e-9)
+    for leg in range(4):
+        assert np.allclose(jac[leg], model.foot_jac_in_world[leg][:, 6 + 3 * leg : 9 + 3 * leg], atol=1e-9)
+
+
+def test_torques_give_back_the_foot_force() -> None:
+    """tau = -J' f for a known force on each foot: the force comes back."""
+    _, jac = feet_and_jacobians(STAND)
+    f = np.array([[5.0, -2.0, 40.0], [0.0, 3.0, 30.0], [-8.0, 1.0, 50.0], [1.0, 1.0, 20.0]])  # [N]
+    tau = -np.einsum("lji,lj->li", jac, f).reshape(12)
+    assert np.allclose(foot_forces_from_torques(jac, tau), f)
+
+
+def _obs(t: float, qd: np.ndarray, tau: np.ndarray, accel_b=(0.0, 0.0, 9.81)) -> Proprioception:
+    imu = ImuSample(np.array([1.0, 0, 0, 0]), np.zeros(3), np.asarray(accel_b, float))
+    return Proprioception(t, STAND.copy(), qd, tau, 0.5, imu=imu)
+
+
+def _standing_torques(fz: float = 30.0, fx_front_left: float = 0.0) -> np.ndarray:
+    """Joint torques holding fz [N] on every foot (and a forward push on FL)."""
+    _, jac = feet_and_jacobians(STAND)
+    f = np.tile([0.0, 0.0, fz], (4, 1))
+    f[0, 0] = fx_front_left
+    return -np.einsum("lji,lj->li", jac, f).reshape(12)
+
+
+def test_detector_sees_the_foot_that_slides() -> None:
+    """Four loaded feet, the trunk still (IMU at rest): FL's leg moves its foot backwards at 0.5 m/s while the
+    others hold -> FL slips after touchdown_s + confirm_ticks, the others never; its force ratio is the
+    one its torques imply."""
+    s = SlipSettings(touchdown_s=0.01, confirm_ticks=3, speed_mps=0.25)
+    det = SlipDetector(s)
+    _, jac = feet_and_jacobians(STAND)
+    qd = np.zeros(12)
+    qd[0:3] = np.linalg.solve(jac[0], [-0.5, 0.0, 0.0])  # [rad/s] FL foot at -0.5 m/s relative to the trunk
+    tau = _standing_torques(30.0, fx_front_left=6.0)
+    first = None
+    for k in range(40):
+        st = det.step(_obs(k * 1e-3, np.zeros(12) if k < 5 else qd, tau))
+        assert st.loaded.all() and not st.slipping[1:].any()
+        if st.slipping[0] and first is None:
+            first = k
+    assert first is not None and 5 + 2 <= first <= 5 + 12  # judged after touchdown_s, 3 ticks to confirm
+    assert st.ratio[0] == pytest.approx(0.2, abs=1e-6)
+    assert abs(det.velocity.v_w[0]) < 0.05  # the trunk velocity follows the three holding feet, not FL
+
+
+def test_slip_caps_the_foot_and_the_feet_that_reach_its_place() -> None:
+    """A slip of FL caps FL at the floor at once; RL (behind) is not capped while it is behind the slip."""
+    est = SlipBoundEstimator(FixedEstimator(0.8), floor_mu=0.1, rise_per_s=0.0, ratio_scale=0.0,
+                             detector={"touchdown_s": 0.0, "confirm_ticks": 1})
+    est.reset()
+    _, jac = feet_and_jacobians(STAND)
+    qd = np.zeros(12)
+    qd[0:3] = np.linalg.solve(jac[0], [-0.5, 0.0, 0.0])
+    tau = _standing_torques(30.0)
+    out = [est.step(_obs(k * 1e-3, np.zeros(12) if k < 3 else qd, tau)) for k in range(10)]
+    assert out[0].mu_per_foot.tolist() == [0.8] * 4
+    feet = out[-1].mu_per_foot
+    assert feet[0] == pytest.approx(0.1)
+    assert feet[1] == pytest.approx(0.1)  # FR stands beside the slip: it has reached it
+    assert feet[2] == pytest.approx(0.8) and feet[3] == pytest.approx(0.8)  # hind feet: 0.36 m behind
+    assert est.diagnostics()["foot_slips"] == 1
+
+
+class _ImuRecorder:
+    name = "imu_recorder"
+
+    def __init__(self) -> None:
+        self.imu: list[ImuSample] = []
+
+    def reset(self) -> None:
+        self.imu.clear()
+
+    def step(self, obs: Proprioception):
+        from taslel_bench.interfaces import FrictionEstimate
+
+        self.imu.append(obs.imu)
+        return FrictionEstimate(mu=0.5)
+
+
+def test_episode_passes_the_trunk_imu() -> None:
+    """Proprioception.imu at tick k reads the state the tick starts from (the trace's row k - 1): attitude,
+    gyro in trunk axes, and the accelerometer's specific force = R' (velocity change over the tick / dt - g)
+    (+9.81 m/s² up when the trunk does not accelerate)."""
+    from taslel_bench.sim.build import Built
+    from tests.conftest import compose_cfg
+
+    built = Built(compose_cfg(["duration=0.05", "progress=false", "record.mcap=false", "filter.enabled=false"]))
+    rec = _ImuRecorder()
+    built.episode.estimator = rec
+    res = built.episode.run()
+    tr = res.trace
+    tr.finalize()
+    dt = float(tr.t_s[1] - tr.t_s[0])
+    for k in (2, 10, 40):
+        imu = rec.imu[k]
+        assert np.allclose(imu.quat_wxyz, tr.base_quat_wxyz[k - 1], atol=1e-12)
+        assert np.allclose(imu.gyro_in_base, tr.base_angvel_b[k - 1], atol=1e-12)
+        w, x, y, z = tr.base_quat_wxyz[k - 1]
+        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        acc_w = (tr.base_linvel_w[k - 1] - tr.base_linvel_w[k - 2]) / dt + np.array([0.0, 0.0, 9.81])
+        assert np.allclose(imu.accel_in_base, rot.T @ acc_w, atol=1e-9)
