@@ -52,13 +52,14 @@ class SlipBoundEstimator:
     """Per-foot caps from slips on top of a base estimator (module doc)."""
 
     def __init__(self, base: Estimator, floor_mu: float = 0.1, rise_per_s: float = 0.1, ratio_scale: float = 0.8,
-                 ratio_ticks: int = 20, behind_m: float = 0.05, propagate: bool = True,
+                 ratio_ticks: int = 20, behind_m: float = 0.05, ahead_m: float = 0.3, propagate: bool = True,
                  detector: dict[str, Any] | None = None, name: str | None = None) -> None:
         """``base``: the estimator whose per-foot values are capped; ``floor_mu`` [-]: cap at a slip's
         onset (the lowest friction the deployment may meet); ``rise_per_s`` [1/s]: relaxation of a cap;
         ``ratio_scale`` [-]: factor on the median slipping force ratio (0: caps stay at the floor until they
         relax); ``ratio_ticks``: slipping ticks after which the ratio cap is applied even if the slip goes on;
-        ``behind_m`` [m]: a slip caps the feet from this far behind it along the path (``propagate``);
+        ``behind_m`` / ``ahead_m`` [m]: a slip caps the feet from this far behind its place to this far
+        ahead of it along the path (``propagate``; the foot that slipped too, once it is further on);
         ``detector``: :class:`estimators.slip.SlipSettings` fields."""
         self.base = base
         self.floor_mu = number("estimator.floor_mu", floor_mu, 0.0, MAX_FRICTION, lo_open=True)
@@ -66,6 +67,7 @@ class SlipBoundEstimator:
         self.ratio_scale = number("estimator.ratio_scale", ratio_scale, 0.0, 1.0)
         self.ratio_ticks = integer("estimator.ratio_ticks", ratio_ticks, 1)
         self.behind_m = number("estimator.behind_m", behind_m, 0.0, 5.0, unit="m")
+        self.ahead_m = number("estimator.ahead_m", ahead_m, 0.0, 100.0, lo_open=True, unit="m")
         self.propagate = bool(propagate)
         self.detector = SlipDetector(SlipSettings(**dict(detector or {})))
         self.name = name if name is not None else f"slip_{getattr(base, 'name', 'base')}"
@@ -122,14 +124,16 @@ class SlipBoundEstimator:
             ev.cap = max(self.floor_mu, self.ratio_scale * float(np.median(ev.ratios)))
 
     def _caps(self, t_s: float, feet: FootState) -> np.ndarray:
-        """(4,) [-] each foot's cap now: its own events, and (``propagate``) every event the foot has reached
-        (it is less than ``behind_m`` behind the event along the direction of travel)."""
+        """(4,) [-] each foot's cap now: the events (its own only, without ``propagate``) the foot has
+        reached and not left behind (from ``behind_m`` behind to ``ahead_m`` ahead of their place along the
+        direction of travel)."""
         caps = np.full(4, np.inf)
         for ev in self.events:
             c = ev.cap + self.rise_per_s * max(0.0, t_s - ev.t_s)
             ahead = (feet.feet_w[:, :2] - ev.xy_w) @ feet.heading_w  # [m] along the direction of travel
-            hit = ahead >= -self.behind_m if self.propagate else np.zeros(4, bool)
-            hit[ev.foot] = True
+            hit = (ahead >= -self.behind_m) & (ahead <= self.ahead_m)
+            if not self.propagate:
+                hit &= np.arange(4) == ev.foot
             caps[hit] = np.minimum(caps[hit], c)
         return caps
 

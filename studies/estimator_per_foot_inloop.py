@@ -13,6 +13,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
 * useful share: share of the foot's loaded ticks with mu_hat >= min(mu, 0.5) - 0.1 (an estimate pinned at
   its floor is never over-estimated and scores 0 s to safe on a drop; this says whether it was any use);
+  ``useful_ready``: the same from the estimator's first ready tick on (round 7's in-loop usefulness: after
+  the startup window, whose prior is the safe floor);
 * over-estimation on the new surface: the same share over the foot's loaded ticks from that first loaded
   tick on (the drop target's "<= 5 % of that foot's ticks");
 * falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)
@@ -43,12 +45,13 @@ RUN = ["duration=6", "filter=terrain", "record.mcap=false", "progress=false"]
 DEFAULT_WORLD = DROP_SCENARIO + RUN
 
 
-def world_overrides(world: str) -> list[str]:
-    """The run's overrides for a world's: the drop 0.8 -> 0.2 with ``world`` added, or, if ``world`` names
-    a scenario (``scenario=...``), that scenario instead of the drop."""
-    ov = world.split()
-    own = any(o.startswith("scenario=") for o in ov)
-    return (RUN if own else DEFAULT_WORLD) + ov
+def world_overrides(world: str, extra: str = "") -> list[str]:
+    """The run's overrides for a world and an estimator set: the drop 0.8 -> 0.2 with ``world`` and
+    ``extra`` added. A top-level key they set (``scenario=...``, ``filter=...``, ``duration=...``)
+    replaces the default's, with the default's values under it (``scenario.friction`` ...)."""
+    ov = world.split() + extra.split()
+    top = {o.split("=", 1)[0] for o in ov if "=" in o and "." not in o.split("=", 1)[0]}
+    return [o for o in DEFAULT_WORLD if o.split("=", 1)[0].split(".")[0] not in top] + ov
 
 
 class Recorder:
@@ -68,19 +71,21 @@ class Recorder:
 
 
 def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt: float,
-                slip_mps: np.ndarray | None = None) -> dict[str, list]:
+                slip_mps: np.ndarray | None = None, ready_from: int = 0) -> dict[str, list]:
     """Per-foot over-estimation rate on loaded ticks (all, and on the new surface), time to safe and time to
-    useful [s], useful share and (with ``slip_mps`` (n, 4) [m/s]) the slide on the new surface [m] (see the
-    module doc)."""
+    useful [s], useful share (all loaded ticks, and from tick ``ready_from`` on) and (with ``slip_mps`` (n, 4)
+    [m/s]) the slide on the new surface [m] (see the module doc)."""
     over = mu_hat > mu_foot + OVERESTIMATE_MARGIN
     good = useful(mu_foot, mu_hat)
     nan = float("nan")
     out: dict[str, list] = {k: [] for k in ("over_rate", "over_rate_new", "time_to_safe_s", "time_to_useful_s",
-                                            "useful_share", "slide_new_m")}
+                                            "useful_share", "useful_ready", "slide_new_m")}
     for leg in range(4):
         ld = loaded[:, leg]
         out["over_rate"].append(float(over[ld, leg].mean()) if ld.any() else nan)
         out["useful_share"].append(float(good[ld, leg].mean()) if ld.any() else nan)
+        lr = ld[ready_from:]
+        out["useful_ready"].append(float(good[ready_from:, leg][lr].mean()) if lr.any() else nan)
         changed = np.flatnonzero(ld & (np.abs(mu_foot[:, leg] - mu_foot[0, leg]) > 1e-9))
         if not len(changed):
             for k in ("over_rate_new", "time_to_safe_s", "time_to_useful_s", "slide_new_m"):
@@ -114,7 +119,8 @@ def run(overrides: list[str], seed: int) -> dict[str, object]:
     mu_hat, loaded = np.array(rec.rows[:n]), tr.in_contact[:n]
     dt = float(tr.t_s[1] - tr.t_s[0]) if n > 1 else 1e-3
     slip = np.linalg.norm(tr.slip_w[:n], axis=-1)
-    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip)
+    ready = np.flatnonzero(tr.mu_hat_ready[:n])
+    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip, int(ready[0]) if len(ready) else n)
     return {"seed": seed, "fell": bool(res.fell), "status": res.status, **scores,
             "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan")}
 
@@ -135,7 +141,7 @@ def _stat(a: np.ndarray, how: str) -> float:
 def summarise(rows: list[dict]) -> dict[str, float]:
     """The row of one world and set over its seeds (feet x seeds pooled)."""
     p = {k: _pooled(rows, k) for k in ("time_to_safe_s", "time_to_useful_s", "over_rate", "over_rate_new",
-                                       "useful_share", "slide_new_m")}
+                                       "useful_share", "useful_ready", "slide_new_m")}
     return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(p["time_to_safe_s"]),
             "time_to_safe_p95_s": _stat(p["time_to_safe_s"], "p95"),
             "time_to_safe_max_s": _stat(p["time_to_safe_s"], "max"),
@@ -145,6 +151,7 @@ def summarise(rows: list[dict]) -> dict[str, float]:
             "over_rate_new_mean": _stat(p["over_rate_new"], "mean"),
             "over_rate_new_max": _stat(p["over_rate_new"], "max"),
             "useful_share_mean": _stat(p["useful_share"], "mean"),
+            "useful_ready_mean": _stat(p["useful_ready"], "mean"),
             "slide_new_m_mean": _stat(p["slide_new_m"], "mean"),
             "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}
 
@@ -153,7 +160,7 @@ COLUMNS = (("falls", "falls", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
            ("time_to_safe_p95_s", "safe p95 [s]", "{:.3f}"), ("time_to_safe_max_s", "safe max [s]", "{:.3f}"),
            ("over_rate_new_mean", "over new", "{:.3f}"), ("over_rate_new_max", "over new max", "{:.3f}"),
            ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),
-           ("useful_share_mean", "useful", "{:.3f}"), ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
+           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"), ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
            ("sliding_mps", "sliding [m/s]", "{:.4f}"))
 
 
@@ -184,7 +191,7 @@ def main(argv: list[str] | None = None) -> None:
     table = {}
     for world, wov in worlds.items():
         for name, ov in sets.items():
-            rows = [run(world_overrides(wov) + ov.split(), seed) for seed in a.seeds]
+            rows = [run(world_overrides(wov, ov), seed) for seed in a.seeds]
             key = f"{world}/{name}"
             table[key] = {"world": wov, "overrides": ov, "summary": summarise(rows), "runs": rows}
             print(key, json.dumps(table[key]["summary"]), flush=True)
