@@ -9,10 +9,12 @@ plant contact flag, no true velocity. Every control tick:
    world-z component exceeds ``contact_force_n``.
 2. **Trunk velocity** (:class:`TrunkVelocityObserver`, world axes): the accelerometer integrated
    (``v += dt (R a + g)``), pulled towards the leg odometry of the loaded feet that hold
-   (``-R (omega x p_i + J_i qd_i)``, averaged) with time constant ``velocity_tau_s``.
+   (``-R (omega x p_i + J_i qd_i)``, their median) with time constant ``velocity_tau_s``; a foot whose
+   velocity this tick is more than 4 x ``speed_mps`` off the prediction is left out.
 3. **Foot velocity in the world**: ``v_i = v_trunk + R (omega x p_i + J_i qd_i)``. A loaded foot whose
-   horizontal speed exceeds ``speed_mps`` for ``confirm_ticks`` consecutive ticks, after the first
-   ``touchdown_s`` of its stance (the landing transient, which slides on any floor), *slips*.
+   horizontal speed, averaged over its last ``average_ticks`` ticks, exceeds ``speed_mps`` for
+   ``confirm_ticks`` consecutive ticks, after the first ``touchdown_s`` of its stance (the landing
+   transient, which slides on any floor), *slips*. The average starts with the judged part of the stance.
 
 The slipping feet's torque-implied force ratio ``|f_xy| / f_z`` during the slip is kept (``ratio``): while a
 foot slides, the ground's force ratio equals the friction coefficient, so it measures mu (the quasi-static
@@ -46,15 +48,17 @@ class SlipSettings:
     """Thresholds of :class:`SlipDetector` (chosen on validation worlds: ``studies/notes/estimators/round8.md``)."""
 
     contact_force_n: float = 20.0  # [N] torque-implied normal force of a loaded foot
-    touchdown_s: float = 0.01  # [s] start of a stance not judged (landing transient)
-    speed_mps: float = 0.25  # [m/s] horizontal foot speed of a slip (world)
-    confirm_ticks: int = 3  # consecutive ticks above the speed
+    touchdown_s: float = 0.03  # [s] start of a stance not judged (landing transient)
+    speed_mps: float = 0.065  # [m/s] mean horizontal foot speed of a slip (world)
+    average_ticks: int = 10  # ticks of the mean (a full window of judged ticks is needed)
+    confirm_ticks: int = 1  # consecutive ticks above the speed
     velocity_tau_s: float = 0.1  # [s] leg-odometry correction time constant of the trunk velocity
 
     def __post_init__(self) -> None:
         number("estimator.slip.contact_force_n", self.contact_force_n, 0.0, 500.0, lo_open=True, unit="N")
         number("estimator.slip.touchdown_s", self.touchdown_s, 0.0, 0.5, unit="s")
         number("estimator.slip.speed_mps", self.speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
+        integer("estimator.slip.average_ticks", self.average_ticks, 1)
         integer("estimator.slip.confirm_ticks", self.confirm_ticks, 1)
         number("estimator.slip.velocity_tau_s", self.velocity_tau_s, 0.0, 10.0, lo_open=True, unit="s")
 
@@ -78,11 +82,12 @@ class TrunkVelocityObserver:
             self.p_w += dt * self.v_w
 
     def correct(self, odometry_w: np.ndarray, holding: np.ndarray, dt: float) -> None:
-        """Pull the velocity towards the mean odometry (4, 3) [m/s] of the ``holding`` feet (none: no pull);
-        the first call with holding feet sets it."""
+        """Pull the velocity towards the odometry (4, 3) [m/s] of the ``holding`` feet (their median: one
+        slipping foot among three or four is outvoted; none: no pull); the first call with holding feet sets
+        it."""
         if not holding.any():
             return
-        v_odo = odometry_w[holding].mean(axis=0)
+        v_odo = np.median(odometry_w[holding], axis=0)
         if not self.started:
             self.v_w[:], self.started = v_odo, True
             return
@@ -95,7 +100,7 @@ class FootState:
 
     loaded: np.ndarray  # (4,) bool: torque-implied normal force above the threshold
     slipping: np.ndarray  # (4,) bool: confirmed slip this tick
-    speed_mps: np.ndarray  # (4,) [m/s] horizontal foot speed in the world
+    speed_mps: np.ndarray  # (4,) [m/s] horizontal foot speed in the world (this tick)
     ratio: np.ndarray  # (4,) [-] torque-implied |f_xy| / f_z (nan unloaded)
     feet_w: np.ndarray  # (4, 3) [m] foot positions, world axes, dead-reckoned (origin: the episode start)
     heading_w: np.ndarray  # (2,) unit horizontal direction of travel (world), (1, 0) at rest
@@ -114,6 +119,8 @@ class SlipDetector:
         self._t_prev: float | None = None
         self._loaded_since = np.full(4, np.inf)  # [s] start of each foot's current stance (inf: unloaded)
         self._above = np.zeros(4, int)  # consecutive ticks above the slip speed
+        self._speeds = np.zeros((self.s.average_ticks, 4))  # [m/s] ring of the judged ticks' speeds
+        self._judged = np.zeros(4, int)  # judged ticks of each foot's current stance
         self._slipping = np.zeros(4, bool)
         self._heading = np.array([1.0, 0.0])
 
@@ -135,10 +142,15 @@ class SlipDetector:
         speed = np.hypot(*(self.velocity.v_w[:2] + vrel_w[:, :2]).T) if self.velocity.started else np.zeros(4)
         self._loaded_since = np.where(loaded, np.minimum(self._loaded_since, obs.t_s), np.inf)
         judged = loaded & (obs.t_s - self._loaded_since >= self.s.touchdown_s - 1e-9)
-        fast = judged & (speed > self.s.speed_mps)
+        self._judged = np.where(judged, self._judged + 1, 0)
+        idx = np.flatnonzero(judged)
+        self._speeds[(self._judged[idx] - 1) % self.s.average_ticks, idx] = speed[idx]
+        mean = self._speeds.mean(axis=0)
+        fast = (self._judged >= self.s.average_ticks) & (mean > self.s.speed_mps)
         self._above = np.where(fast, self._above + 1, 0)
         self._slipping = self._above >= self.s.confirm_ticks
-        self.velocity.correct(-vrel_w, loaded & ~fast, dt)
+        # odometry from the feet that hold: judged (past the landing), no slip, not fast this tick
+        self.velocity.correct(-vrel_w, judged & ~fast & (speed < 4 * self.s.speed_mps), dt)
         v_xy = self.velocity.v_w[:2]
         if np.hypot(*v_xy) > 0.05:  # [m/s] below that the heading keeps its last value
             self._heading = v_xy / np.hypot(*v_xy)

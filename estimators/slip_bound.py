@@ -58,8 +58,8 @@ class SlipBoundEstimator:
         onset (the lowest friction the deployment may meet); ``rise_per_s`` [1/s]: relaxation of a cap;
         ``ratio_scale`` [-]: factor on the median slipping force ratio (0: caps stay at the floor until they
         relax); ``ratio_ticks``: slipping ticks after which the ratio cap is applied even if the slip goes on;
-        ``behind_m`` / ``ahead_m`` [m]: a slip caps the feet from this far behind its place to this far
-        ahead of it along the path (``propagate``; the foot that slipped too, once it is further on);
+        ``behind_m`` / ``ahead_m`` [m]: a slip caps the other feet from this far behind its place to this far
+        ahead of it along the path (``propagate``);
         ``detector``: :class:`estimators.slip.SlipSettings` fields."""
         self.base = base
         self.floor_mu = number("estimator.floor_mu", floor_mu, 0.0, MAX_FRICTION, lo_open=True)
@@ -124,16 +124,15 @@ class SlipBoundEstimator:
             ev.cap = max(self.floor_mu, self.ratio_scale * float(np.median(ev.ratios)))
 
     def _caps(self, t_s: float, feet: FootState) -> np.ndarray:
-        """(4,) [-] each foot's cap now: the events (its own only, without ``propagate``) the foot has
+        """(4,) [-] each foot's cap now: its own events, and (``propagate``) the other feet's events it has
         reached and not left behind (from ``behind_m`` behind to ``ahead_m`` ahead of their place along the
         direction of travel)."""
         caps = np.full(4, np.inf)
         for ev in self.events:
             c = ev.cap + self.rise_per_s * max(0.0, t_s - ev.t_s)
             ahead = (feet.feet_w[:, :2] - ev.xy_w) @ feet.heading_w  # [m] along the direction of travel
-            hit = (ahead >= -self.behind_m) & (ahead <= self.ahead_m)
-            if not self.propagate:
-                hit &= np.arange(4) == ev.foot
+            hit = (ahead >= -self.behind_m) & (ahead <= self.ahead_m) if self.propagate else np.zeros(4, bool)
+            hit[ev.foot] = True  # the foot that slipped: until the cap has relaxed, wherever it walks
             caps[hit] = np.minimum(caps[hit], c)
         return caps
 
