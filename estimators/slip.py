@@ -11,10 +11,14 @@ plant contact flag, no true velocity. Every control tick:
    (``v += dt (R a + g)``), pulled towards the leg odometry of the loaded feet that hold
    (``-R (omega x p_i + J_i qd_i)``, their median) with time constant ``velocity_tau_s``; a foot whose
    velocity this tick is more than 4 x ``speed_mps`` off the prediction is left out.
-3. **Foot velocity in the world**: ``v_i = v_trunk + R (omega x p_i + J_i qd_i)``. A loaded foot whose
-   horizontal speed, averaged over its last ``average_ticks`` ticks, exceeds ``speed_mps`` for
-   ``confirm_ticks`` consecutive ticks, after the first ``touchdown_s`` of its stance (the landing
-   transient, which slides on any floor), *slips*. The average starts with the judged part of the stance.
+3. **Foot velocity in the world**: ``v_i = v_trunk + R (omega x p_i + J_i qd_i)``. A loaded foot *slips*
+   when either rule fires:
+
+   * slow (mild, sustained slips; ``slow``): its horizontal speed averaged over its last ``average_ticks`` ticks
+     exceeds ``speed_mps`` for ``confirm_ticks`` consecutive ticks, after the first ``touchdown_s`` of its
+     stance (the landing transient, which slides on any floor; the average starts after it);
+   * fast (a foot sliding away as it lands): its speed exceeds ``fast_speed_mps`` on ``fast_confirm_ticks``
+     consecutive ticks after the first ``fast_touchdown_s`` of its stance.
 
 The slipping feet's torque-implied force ratio ``|f_xy| / f_z`` during the slip is kept (``ratio``): while a
 foot slides, the ground's force ratio equals the friction coefficient, so it measures mu (the quasi-static
@@ -48,10 +52,14 @@ class SlipSettings:
     """Thresholds of :class:`SlipDetector` (chosen on validation worlds: ``studies/notes/estimators/round8.md``)."""
 
     contact_force_n: float = 20.0  # [N] torque-implied normal force of a loaded foot
+    slow: bool = True  # the slow rule on (off: the fast rule only)
     touchdown_s: float = 0.03  # [s] start of a stance not judged (landing transient)
     speed_mps: float = 0.065  # [m/s] mean horizontal foot speed of a slip (world)
     average_ticks: int = 10  # ticks of the mean (a full window of judged ticks is needed)
     confirm_ticks: int = 1  # consecutive ticks above the speed
+    fast_touchdown_s: float = 0.01  # [s] fast rule: start of a stance not judged
+    fast_speed_mps: float = 0.25  # [m/s] fast rule: horizontal foot speed of a slip (world)
+    fast_confirm_ticks: int = 3  # fast rule: consecutive ticks above it
     velocity_tau_s: float = 0.1  # [s] leg-odometry correction time constant of the trunk velocity
 
     def __post_init__(self) -> None:
@@ -60,6 +68,9 @@ class SlipSettings:
         number("estimator.slip.speed_mps", self.speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
         integer("estimator.slip.average_ticks", self.average_ticks, 1)
         integer("estimator.slip.confirm_ticks", self.confirm_ticks, 1)
+        number("estimator.slip.fast_touchdown_s", self.fast_touchdown_s, 0.0, 0.5, unit="s")
+        number("estimator.slip.fast_speed_mps", self.fast_speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
+        integer("estimator.slip.fast_confirm_ticks", self.fast_confirm_ticks, 1)
         number("estimator.slip.velocity_tau_s", self.velocity_tau_s, 0.0, 10.0, lo_open=True, unit="s")
 
 
@@ -118,7 +129,8 @@ class SlipDetector:
         self.velocity.reset()
         self._t_prev: float | None = None
         self._loaded_since = np.full(4, np.inf)  # [s] start of each foot's current stance (inf: unloaded)
-        self._above = np.zeros(4, int)  # consecutive ticks above the slip speed
+        self._above = np.zeros(4, int)  # consecutive ticks the mean speed was above the slip speed
+        self._above_fast = np.zeros(4, int)  # consecutive ticks above the fast rule's speed
         self._speeds = np.zeros((self.s.average_ticks, 4))  # [m/s] ring of the judged ticks' speeds
         self._judged = np.zeros(4, int)  # judged ticks of each foot's current stance
         self._slipping = np.zeros(4, bool)
@@ -146,9 +158,12 @@ class SlipDetector:
         idx = np.flatnonzero(judged)
         self._speeds[(self._judged[idx] - 1) % self.s.average_ticks, idx] = speed[idx]
         mean = self._speeds.mean(axis=0)
-        fast = (self._judged >= self.s.average_ticks) & (mean > self.s.speed_mps)
+        fast = (self._judged >= self.s.average_ticks) & (mean > self.s.speed_mps) & bool(self.s.slow)
         self._above = np.where(fast, self._above + 1, 0)
-        self._slipping = self._above >= self.s.confirm_ticks
+        quick = loaded & (obs.t_s - self._loaded_since >= self.s.fast_touchdown_s - 1e-9) & \
+            (speed > self.s.fast_speed_mps)
+        self._above_fast = np.where(quick, self._above_fast + 1, 0)
+        self._slipping = (self._above >= self.s.confirm_ticks) | (self._above_fast >= self.s.fast_confirm_ticks)
         # odometry from the feet that hold: judged (past the landing), no slip, not fast this tick
         self.velocity.correct(-vrel_w, judged & ~fast & (speed < 4 * self.s.speed_mps), dt)
         v_xy = self.velocity.v_w[:2]

@@ -50,12 +50,16 @@ def _standing_torques(fz: float = 30.0, fx_front_left: float = 0.0) -> np.ndarra
     return -np.einsum("lji,lj->li", jac, f).reshape(12)
 
 
-def test_detector_sees_the_foot_that_slides() -> None:
+@pytest.mark.parametrize(("fast_speed", "first_tick"), [(10.0, 21), (0.4, 13)])
+def test_detector_sees_the_foot_that_slides(fast_speed: float, first_tick: int) -> None:
     """Four loaded feet from tick 0, the trunk still (IMU at rest): from tick 5 FL's leg moves its foot
-    backwards at 0.5 m/s while the others hold -> FL slips once its stance is judged (touchdown_s: tick 10),
-    its mean over average_ticks is full (tick 19) and confirm_ticks have passed (tick 21); the others never;
-    its force ratio is the one its torques imply."""
-    s = SlipSettings(touchdown_s=0.01, average_ticks=10, confirm_ticks=3, speed_mps=0.1)
+    backwards at 0.5 m/s while the others hold. Slow rule (fast rule out of reach): FL slips once its stance is
+    judged (touchdown_s: tick 10), its mean over average_ticks is full (tick 19) and confirm_ticks have passed
+    (tick 21). Fast rule (0.5 > 0.4 m/s): the trunk velocity is known from the first judged tick (10), so
+    speeds count from tick 11, and fast_confirm_ticks = 3 fire at tick 13.
+    The others never slip; FL's force ratio is the one its torques imply."""
+    s = SlipSettings(touchdown_s=0.01, average_ticks=10, confirm_ticks=3, speed_mps=0.1, fast_touchdown_s=0.01,
+                     fast_speed_mps=fast_speed, fast_confirm_ticks=3)
     det = SlipDetector(s)
     _, jac = feet_and_jacobians(STAND)
     qd = np.zeros(12)
@@ -67,7 +71,7 @@ def test_detector_sees_the_foot_that_slides() -> None:
         assert st.loaded.all() and not st.slipping[1:].any()
         if st.slipping[0] and first is None:
             first = k
-    assert first == 21
+    assert first == first_tick
     assert st.ratio[0] == pytest.approx(0.2, abs=1e-6)
     # the trunk velocity follows the three holding feet: FL (0.5 m/s > 4 x speed_mps) is left out of the odometry
     assert abs(det.velocity.v_w[0]) < 1e-9
