@@ -135,3 +135,20 @@ def test_episode_passes_the_trunk_imu() -> None:
                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
         acc_w = (tr.base_linvel_w[k - 1] - tr.base_linvel_w[k - 2]) / dt + np.array([0.0, 0.0, 9.81])
         assert np.allclose(imu.accel_in_base, rot.T @ acc_w, atol=1e-9)
+
+
+def test_stance_detection_counts_stances_with_a_slip() -> None:
+    """studies.estimator_slip_observability.stance_detection: stances of >= min_ticks after after_s, the share
+    with a slip (up to 3 ticks past the stance) and the median tick of the stance the slip was first seen."""
+    from studies.estimator_slip_observability import stance_detection
+
+    t = np.arange(400) * 1e-3
+    loaded = np.zeros((400, 2), bool)
+    loaded[50:200, 0] = loaded[250:390, 0] = True  # two long stances of foot 0
+    loaded[100:120, 1] = True  # a short one of foot 1: not counted
+    slipping = np.zeros((400, 2), bool)
+    slipping[290, 0] = True  # 40 ticks into the second stance
+    slipping[110, 1] = True
+    n, share, first = stance_detection(loaded, slipping, t, min_ticks=80, after_s=0.0)
+    assert (n, share, first) == (2, 0.5, 40.0)
+    assert stance_detection(loaded, slipping, t, min_ticks=80, after_s=0.1)[:2] == (1, 1.0)
