@@ -31,6 +31,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -186,6 +190,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=None, help="JSON of every run")
     ap.add_argument("--md", type=Path, default=None, help="markdown table of the summaries")
     a = ap.parse_args(argv)
+    load0 = os.getloadavg()
     sets = dict(s.split("=", 1) for s in a.set) or {"oracle": "estimator=oracle"}
     worlds = dict(w.split("=", 1) for w in a.world) or {"drop_0.8_0.2": ""}
     table = {}
@@ -200,7 +205,19 @@ def main(argv: list[str] | None = None) -> None:
                 a.out.write_text(json.dumps(table, indent=2))
     if a.md is not None:
         a.md.parent.mkdir(parents=True, exist_ok=True)
-        a.md.write_text(markdown(table))
+        a.md.write_text(header(sys.argv[1:] if argv is None else argv, load0, a.seeds) + markdown(table))
+
+
+def header(argv: list[str], load0: tuple[float, ...], seeds: list[int]) -> str:
+    """The command, the commit, seeds and the machine's load at start and end (1-min load average)."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = "unknown"
+    cmd = "python -m studies.estimator_per_foot_inloop " + " ".join(shlex.quote(x) for x in argv)
+    return (f"`{cmd}`\n\ncommit {commit}; seeds {seeds}; load average {load0[0]:.1f} at the start, "
+            f"{os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} cores); one process, torch 1 thread.\n\n")
 
 
 if __name__ == "__main__":
