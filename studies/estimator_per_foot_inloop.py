@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=None, help="JSON of every run")
     ap.add_argument("--md", type=Path, default=None, help="markdown table of the summaries")
     a = ap.parse_args(argv)
-    load0 = os.getloadavg()
+    load0, commit = os.getloadavg(), git_commit()
     sets = dict(s.split("=", 1) for s in a.set) or {"oracle": "estimator=oracle"}
     worlds = dict(w.split("=", 1) for w in a.world) or {"drop_0.8_0.2": ""}
     table = {}
@@ -205,16 +205,21 @@ def main(argv: list[str] | None = None) -> None:
                 a.out.write_text(json.dumps(table, indent=2))
     if a.md is not None:
         a.md.parent.mkdir(parents=True, exist_ok=True)
-        a.md.write_text(header(sys.argv[1:] if argv is None else argv, load0, a.seeds) + markdown(table))
+        a.md.write_text(header(sys.argv[1:] if argv is None else argv, load0, a.seeds, commit) + markdown(table))
 
 
-def header(argv: list[str], load0: tuple[float, ...], seeds: list[int]) -> str:
-    """The command, the commit, seeds and the machine's load at start and end (1-min load average)."""
+def git_commit() -> str:
+    """The checkout's commit (short hash; ``+`` if the tree has changes), ``unknown`` outside git."""
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                check=True).stdout.strip()
+        run_ = lambda *c: subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
+        return run_("rev-parse", "--short", "HEAD") + ("+" if run_("status", "--porcelain", "-uno") else "")
     except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+        return "unknown"
+
+
+def header(argv: list[str], load0: tuple[float, ...], seeds: list[int], commit: str) -> str:
+    """The command, the commit the study started at, seeds and the machine's load at start and end (1-min
+    load average)."""
     cmd = "python -m studies.estimator_per_foot_inloop " + " ".join(shlex.quote(x) for x in argv)
     return (f"`{cmd}`\n\ncommit {commit}; seeds {seeds}; load average {load0[0]:.1f} at the start, "
             f"{os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} cores); one process, torch 1 thread.\n\n")
