@@ -33,18 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.legs import feet_and_jacobians, foot_forces_from_torques
+from estimators import slip_kernel
 from taslel_bench.interfaces import ImuSample, Proprioception, integer, number
-
-GRAVITY_W = np.array([0.0, 0.0, -9.81])  # [m/s²] world axes
-
-
-def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
-    """World <- trunk rotation (3, 3) of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 @dataclass
@@ -75,34 +65,17 @@ class SlipSettings:
 
 
 class TrunkVelocityObserver:
-    """Trunk velocity [m/s] and position [m] in world axes from the IMU and the holding feet's odometry."""
+    """State of the trunk velocity observer (module doc, step 2; updated by :func:`estimators.slip_kernel.tick`):
+    velocity [m/s] and dead-reckoned position [m] in world axes (origin: where it started)."""
 
     def __init__(self, tau_s: float) -> None:
-        self.tau_s = float(tau_s)
+        self.tau_s = float(tau_s)  # [s] leg-odometry correction time constant
         self.reset()
 
     def reset(self) -> None:
         self.v_w = np.zeros(3)  # [m/s]
-        self.p_w = np.zeros(3)  # [m] dead reckoning from the start of the episode (origin: the start)
-        self.started = False
-
-    def predict(self, rot_w_b: np.ndarray, accel_b: np.ndarray, dt: float) -> None:
-        """Integrate the accelerometer's specific force [m/s²] over ``dt`` [s]."""
-        if self.started:
-            self.v_w += dt * (rot_w_b @ accel_b + GRAVITY_W)
-            self.p_w += dt * self.v_w
-
-    def correct(self, odometry_w: np.ndarray, holding: np.ndarray, dt: float) -> None:
-        """Pull the velocity towards the odometry (4, 3) [m/s] of the ``holding`` feet (their median: one
-        slipping foot among three or four is outvoted; none: no pull); the first call with holding feet sets
-        it."""
-        if not holding.any():
-            return
-        v_odo = np.median(odometry_w[holding], axis=0)
-        if not self.started:
-            self.v_w[:], self.started = v_odo, True
-            return
-        self.v_w += min(1.0, dt / self.tau_s) * (v_odo - self.v_w)
+        self.p_w = np.zeros(3)  # [m]
+        self.started = False  # set by the first tick with holding feet
 
 
 @dataclass
@@ -118,22 +91,29 @@ class FootState:
 
 
 class SlipDetector:
-    """Per-foot slip from proprioception (module doc). Call :meth:`step` every control tick."""
+    """Per-foot slip from proprioception (module doc). Call :meth:`step` every control tick; the arithmetic
+    runs in :func:`estimators.slip_kernel.tick`."""
 
     def __init__(self, settings: SlipSettings | None = None) -> None:
         self.s = settings if settings is not None else SlipSettings()
         self.velocity = TrunkVelocityObserver(self.s.velocity_tau_s)
+        s = self.s
+        self._prm = np.zeros(slip_kernel.N_PARAMS)
+        self._prm[[slip_kernel.P_CONTACT, slip_kernel.P_TOUCHDOWN, slip_kernel.P_SPEED, slip_kernel.P_AVERAGE,
+                   slip_kernel.P_CONFIRM, slip_kernel.P_FAST_TOUCHDOWN, slip_kernel.P_FAST_SPEED,
+                   slip_kernel.P_FAST_CONFIRM, slip_kernel.P_TAU, slip_kernel.P_SLOW]] = (
+            s.contact_force_n, s.touchdown_s, s.speed_mps, s.average_ticks, s.confirm_ticks, s.fast_touchdown_s,
+            s.fast_speed_mps, s.fast_confirm_ticks, s.velocity_tau_s, float(bool(s.slow)))
         self.reset()
 
     def reset(self) -> None:
         self.velocity.reset()
         self._t_prev: float | None = None
         self._loaded_since = np.full(4, np.inf)  # [s] start of each foot's current stance (inf: unloaded)
-        self._above = np.zeros(4, int)  # consecutive ticks the mean speed was above the slip speed
-        self._above_fast = np.zeros(4, int)  # consecutive ticks above the fast rule's speed
+        self._above = np.zeros(4, np.int64)  # consecutive ticks the mean speed was above the slip speed
+        self._above_fast = np.zeros(4, np.int64)  # consecutive ticks above the fast rule's speed
         self._speeds = np.zeros((self.s.average_ticks, 4))  # [m/s] ring of the judged ticks' speeds
-        self._judged = np.zeros(4, int)  # judged ticks of each foot's current stance
-        self._slipping = np.zeros(4, bool)
+        self._judged = np.zeros(4, np.int64)  # judged ticks of each foot's current stance
         self._heading = np.array([1.0, 0.0])
 
     def step(self, obs: Proprioception) -> FootState:
@@ -143,31 +123,14 @@ class SlipDetector:
             raise ValueError("SlipDetector needs the trunk IMU (Proprioception.imu)")
         dt = 0.0 if self._t_prev is None else obs.t_s - self._t_prev
         self._t_prev = obs.t_s
-        rot = quat_wxyz_to_matrix(np.asarray(imu.quat_wxyz, float))
-        p_b, jac = feet_and_jacobians(obs.q_joints)
-        vrel_b = np.cross(imu.gyro_in_base, p_b) + np.einsum("lij,lj->li", jac, np.reshape(obs.qd_joints, (4, 3)))
-        f_w = foot_forces_from_torques(jac, obs.tau_joints) @ rot.T
-        loaded = f_w[:, 2] > self.s.contact_force_n
-        ratio = np.where(loaded, np.hypot(f_w[:, 0], f_w[:, 1]) / np.maximum(f_w[:, 2], 1e-9), np.nan)
-        self.velocity.predict(rot, np.asarray(imu.accel_in_base, float), dt)
-        vrel_w = vrel_b @ rot.T
-        speed = np.hypot(*(self.velocity.v_w[:2] + vrel_w[:, :2]).T) if self.velocity.started else np.zeros(4)
-        self._loaded_since = np.where(loaded, np.minimum(self._loaded_since, obs.t_s), np.inf)
-        judged = loaded & (obs.t_s - self._loaded_since >= self.s.touchdown_s - 1e-9)
-        self._judged = np.where(judged, self._judged + 1, 0)
-        idx = np.flatnonzero(judged)
-        self._speeds[(self._judged[idx] - 1) % self.s.average_ticks, idx] = speed[idx]
-        mean = self._speeds.mean(axis=0)
-        fast = (self._judged >= self.s.average_ticks) & (mean > self.s.speed_mps) & bool(self.s.slow)
-        self._above = np.where(fast, self._above + 1, 0)
-        quick = loaded & (obs.t_s - self._loaded_since >= self.s.fast_touchdown_s - 1e-9) & \
-            (speed > self.s.fast_speed_mps)
-        self._above_fast = np.where(quick, self._above_fast + 1, 0)
-        self._slipping = (self._above >= self.s.confirm_ticks) | (self._above_fast >= self.s.fast_confirm_ticks)
-        # odometry from the feet that hold: judged (past the landing), no slip, not fast this tick
-        self.velocity.correct(-vrel_w, judged & ~fast & (speed < 4 * self.s.speed_mps), dt)
-        v_xy = self.velocity.v_w[:2]
-        if np.hypot(*v_xy) > 0.05:  # [m/s] below that the heading keeps its last value
-            self._heading = v_xy / np.hypot(*v_xy)
-        feet_w = self.velocity.p_w + p_b @ rot.T
-        return FootState(loaded, self._slipping.copy(), speed, ratio, feet_w, self._heading.copy())
+        out = FootState(np.zeros(4, bool), np.zeros(4, bool), np.zeros(4), np.zeros(4), np.zeros((4, 3)),
+                        self._heading)
+        v = self.velocity
+        v.started = slip_kernel.tick(
+            np.asarray(obs.q_joints, float), np.asarray(obs.qd_joints, float), np.asarray(obs.tau_joints, float),
+            np.asarray(imu.quat_wxyz, float), np.asarray(imu.gyro_in_base, float),
+            np.asarray(imu.accel_in_base, float), float(obs.t_s), float(dt), self._prm, v.started, v.v_w, v.p_w,
+            self._heading, self._loaded_since, self._judged, self._speeds, self._above, self._above_fast,
+            out.loaded, out.slipping, out.speed_mps, out.ratio, out.feet_w)
+        out.heading_w = self._heading.copy()
+        return out

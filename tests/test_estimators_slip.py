@@ -152,3 +152,19 @@ def test_stance_detection_counts_stances_with_a_slip() -> None:
     n, share, first = stance_detection(loaded, slipping, t, min_ticks=80, after_s=0.0)
     assert (n, share, first) == (2, 0.5, 40.0)
     assert stance_detection(loaded, slipping, t, min_ticks=80, after_s=0.1)[:2] == (1, 1.0)
+
+
+def test_slip_kernel_matches_the_numpy_legs() -> None:
+    """The compiled kernel's leg kinematics and torque-implied forces equal estimators.legs' (numpy)."""
+    from estimators.slip_kernel import _leg, _solve_transposed
+
+    rng = np.random.default_rng(3)
+    q = STAND + rng.normal(0, 0.3, 12)
+    tau = rng.normal(0, 5, 12)
+    p_ref, jac_ref = feet_and_jacobians(q)
+    f_ref = foot_forces_from_torques(jac_ref, tau)
+    p, jac, f = np.empty(3), np.empty((3, 3)), np.empty(3)
+    for i in range(4):
+        _leg(q, i, p, jac)
+        _solve_transposed(jac, tau[3 * i : 3 * i + 3].copy(), f)
+        assert np.allclose(p, p_ref[i]) and np.allclose(jac, jac_ref[i]) and np.allclose(f, f_ref[i])
