@@ -168,3 +168,38 @@ def test_slip_kernel_matches_the_numpy_legs() -> None:
         _leg(q, i, p, jac)
         _solve_transposed(jac, tau[3 * i : 3 * i + 3].copy(), f)
         assert np.allclose(p, p_ref[i]) and np.allclose(jac, jac_ref[i]) and np.allclose(f, f_ref[i])
+
+
+def _feet(xy: list[list[float]]) -> object:
+    from estimators.slip import FootState
+
+    w = np.zeros((4, 3))
+    w[:, :2] = xy
+    return FootState(np.ones(4, bool), np.zeros(4, bool), np.zeros(4), np.full(4, np.nan), w, np.array([1.0, 0.0]))
+
+
+def test_caps_relax_from_each_feet_arrival() -> None:
+    """An event of FL at x = 0.2 m, t = 0 (rise 1/s, floor 0.1): FL is capped at once and relaxes from t = 0;
+    RL (0.36 m behind) is not capped until it reaches x = 0.15 (behind_m 0.05), then starts at the floor;
+    a foot more than ahead_m past the place is free again; own_ahead_m frees FL past 0.5 m."""
+    est = SlipBoundEstimator(FixedEstimator(0.8), floor_mu=0.1, rise_per_s=1.0, behind_m=0.05, ahead_m=0.3,
+                             own_ahead_m=0.3)
+    est._add(0, np.array([0.2, 0.05]), 0.0)
+    caps = est._caps(0.0, _feet([[0.2, 0.05], [0.2, -0.05], [-0.16, 0.05], [-0.16, -0.05]]))
+    assert caps == pytest.approx([0.1, 0.1, np.inf, np.inf])  # FR stands beside the slip
+    caps = est._caps(0.5, _feet([[0.3, 0.05], [0.3, -0.05], [0.16, 0.05], [-0.06, -0.05]]))
+    assert caps == pytest.approx([0.6, 0.6, 0.1, np.inf])  # RL arrived at 0.5 s: from the floor
+    caps = est._caps(0.8, _feet([[0.55, 0.05], [0.45, -0.05], [0.2, 0.05], [0.0, -0.05]]))
+    assert caps == pytest.approx([np.inf, 0.9, 0.4, np.inf])  # FL 0.35 m past (own reach 0.3), FR 0.25 m
+
+
+def test_events_are_capped_in_number_and_open_rows_follow() -> None:
+    """Beyond MAX_EVENTS the oldest event falls off; a foot's ongoing event keeps pointing at its own row."""
+    from estimators.slip_bound import MAX_EVENTS
+
+    est = SlipBoundEstimator(FixedEstimator(0.8))
+    est._add(1, np.zeros(2), 0.0)
+    for k in range(MAX_EVENTS):
+        est._add(0, np.array([float(k), 0.0]), 0.01 * k)
+    assert len(est._t) == MAX_EVENTS and est._open[1] == -1  # FR's event fell off
+    assert est._xy[est._open[0], 0] == MAX_EVENTS - 1
