@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from estimators import slip_kernel
 from estimators.slip import FootState, SlipDetector, SlipSettings
 from taslel_bench.interfaces import MAX_FRICTION, Estimator, FrictionEstimate, Proprioception, integer, number
 
@@ -138,14 +139,9 @@ class SlipBoundEstimator:
         of its time and the foot's arrival."""
         if not len(self._t):
             return np.full(4, np.inf)
-        ahead = (feet.feet_w[None, :, :2] - self._xy[:, None, :]) @ feet.heading_w  # (E, 4) [m] along the path
-        own = self._foot[:, None] == np.arange(4)[None, :]
-        reach = (ahead >= -self.behind_m) & (ahead <= self.ahead_m) & self.propagate
-        reach = np.where(own, ahead <= self.own_ahead_m, reach)
-        self._arrived = np.where(reach & np.isinf(self._arrived), t_s, self._arrived)
-        start = np.maximum(self._t[:, None], self._arrived)
-        cap = self._cap[:, None] + self.rise_per_s * np.maximum(0.0, t_s - start)
-        return np.where(reach, cap, np.inf).min(axis=0)
+        return slip_kernel.caps(self._xy, self._t, self._cap, self._foot, self._arrived,
+                                np.ascontiguousarray(feet.feet_w[:, :2]), feet.heading_w, float(t_s), self.behind_m,
+                                self.ahead_m, float(self.own_ahead_m), self.rise_per_s, self.propagate)
 
     # ---------------------------------------------------------------------------------------- extras
     def input_files(self) -> list[Path]:

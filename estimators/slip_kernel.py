@@ -149,3 +149,28 @@ def tick(q, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, hea
     for i in range(4):
         feet_w[i] = p_w + _matvec(rot, p_b[i])
     return started
+
+
+@njit(cache=True)
+def caps(xy, t, cap, foot, arrived, feet_xy, heading, t_s, behind_m, ahead_m, own_ahead_m, rise_per_s,
+         propagate) -> np.ndarray:
+    """(4,) [-] each foot's cap over the slip events (rows of ``xy`` [m], ``t`` [s], ``cap`` [-], ``foot``):
+    an event reaches its own foot up to ``own_ahead_m`` past its place and (``propagate``) the other feet
+    from ``behind_m`` behind to ``ahead_m`` ahead of it along ``heading``; a foot's cap relaxes at
+    ``rise_per_s`` [1/s] from the later of the event's time and the foot's first tick in reach, which is
+    written into ``arrived`` (E, 4) [s] (inf: not yet). Feet no event reaches get inf."""
+    out = np.full(4, np.inf)
+    for e in range(len(t)):
+        for j in range(4):
+            ahead = (feet_xy[j, 0] - xy[e, 0]) * heading[0] + (feet_xy[j, 1] - xy[e, 1]) * heading[1]
+            if foot[e] == j:
+                reach = ahead <= own_ahead_m
+            else:
+                reach = propagate and -behind_m <= ahead <= ahead_m
+            if not reach:
+                continue
+            if np.isinf(arrived[e, j]):
+                arrived[e, j] = t_s
+            c = cap[e] + rise_per_s * max(0.0, t_s - max(t[e], arrived[e, j]))
+            out[j] = min(out[j], c)
+    return out
