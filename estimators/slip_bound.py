@@ -14,6 +14,10 @@ with ``base_i`` the base estimator's value for foot i (its ``mu_per_foot``, or i
   ticks) the cap becomes ``max(floor_mu, ratio_scale x the median torque-implied force ratio of the slipping
   ticks)``: while a foot slides its force ratio *is* the friction, measured through a quasi-static leg
   (it reads high; ``ratio_scale`` = 0 keeps the floor).
+* **Gate** (``gate_margin``, for filters whose landings slide on any low floor, the paper's): a slip opens an
+  event only if what it proves (``ratio_scale`` x its force ratio at onset) lies ``gate_margin`` below the
+  foot's estimate -- a foot sliding at the friction the filter already assumes proves nothing new. Its
+  onset cap is then that evidence, not the floor.
 * **Who it caps**: the foot that slipped, until it is ``own_ahead_m`` past the place (None: wherever it
   walks); with ``propagate``, every other foot between ``behind_m`` behind and ``ahead_m`` ahead of the
   place along the direction of travel: surfaces are patches the robot walks into, so a hind foot stepping
@@ -45,7 +49,7 @@ class SlipBoundEstimator:
 
     def __init__(self, base: Estimator, floor_mu: float = 0.1, rise_per_s: float = 0.1, ratio_scale: float = 0.8,
                  ratio_ticks: int = 20, behind_m: float = 0.05, ahead_m: float = 0.3,
-                 own_ahead_m: float | None = None, propagate: bool = True,
+                 own_ahead_m: float | None = None, propagate: bool = True, gate_margin: float | None = None,
                  detector: dict[str, Any] | None = None, name: str | None = None) -> None:
         """``base``: the estimator whose per-foot values are capped; ``floor_mu`` [-]: cap at a slip's
         onset (the lowest friction the deployment may meet); ``rise_per_s`` [1/s]: relaxation of a cap;
@@ -53,7 +57,10 @@ class SlipBoundEstimator:
         relax); ``ratio_ticks``: slipping ticks after which the ratio cap is applied even if the slip goes on;
         ``behind_m`` / ``ahead_m`` [m]: a slip caps the other feet from this far behind its place to this far
         ahead of it along the path (``propagate``); ``own_ahead_m`` [m]: the foot that slipped, up to this far
-        past it (None: everywhere); ``detector``: :class:`estimators.slip.SlipSettings` fields."""
+        past it (None: everywhere); ``gate_margin`` [-]: a slip opens an event only if its evidence cap (with
+        ``ratio_scale`` > 0: ``ratio_scale`` x the force ratio of its first slipping tick) lies more than this
+        below the foot's current estimate (None: every slip does); ``detector``:
+        :class:`estimators.slip.SlipSettings` fields."""
         self.base = base
         self.floor_mu = number("estimator.floor_mu", floor_mu, 0.0, MAX_FRICTION, lo_open=True)
         self.rise_per_s = number("estimator.rise_per_s", rise_per_s, 0.0, 100.0, unit="1/s")
@@ -64,6 +71,7 @@ class SlipBoundEstimator:
         self.own_ahead_m = np.inf if own_ahead_m is None else number("estimator.own_ahead_m", own_ahead_m, 0.0, 100.0,
                                                                      lo_open=True, unit="m")
         self.propagate = bool(propagate)
+        self.gate_margin = None if gate_margin is None else number("estimator.gate_margin", gate_margin, 0.0, 1.0)
         self.detector = SlipDetector(SlipSettings(**dict(detector or {})))
         self.name = name if name is not None else f"slip_{getattr(base, 'name', 'base')}"
         self.reset()
@@ -79,6 +87,8 @@ class SlipBoundEstimator:
         self._open = np.full(4, -1)  # row of each foot's ongoing slip event (-1: none)
         self._ratios: list[list[float]] = [[], [], [], []]  # force ratios of each foot's ongoing slip
         self.slips_detected = 0  # slip onsets (feet x events) this episode
+        self.slips_ignored = 0  # slip onsets the gate let pass (their evidence was not below the estimate)
+        self._last_mu = np.full(4, np.inf)  # [-] each foot's last reported estimate
         self.last_feet: FootState | None = None
         self.last_caps = np.full(4, np.inf)
 
@@ -92,6 +102,7 @@ class SlipBoundEstimator:
         self.last_caps = caps
         base = np.full(4, est.mu) if est.mu_per_foot is None else np.asarray(est.mu_per_foot, float)
         mu_feet = np.minimum(base, caps)
+        self._last_mu = mu_feet
         return FrictionEstimate(mu=float(mu_feet.min()), sigma=est.sigma, ready=est.ready, mu_per_foot=mu_feet)
 
     def _update_events(self, t_s: float, feet: FootState) -> None:
@@ -105,7 +116,10 @@ class SlipBoundEstimator:
                 self._open[i] = -1
                 continue
             if row < 0:
-                self._add(i, feet.feet_w[i, :2], t_s)
+                if self._gated(i, feet.ratio[i]):
+                    self.slips_ignored += 1
+                    continue
+                self._add(i, feet.feet_w[i, :2], t_s, self._onset_cap(feet.ratio[i]))
                 self.slips_detected += 1
                 continue
             self._t[row] = t_s  # still slipping: its cap holds from now
@@ -114,15 +128,28 @@ class SlipBoundEstimator:
                 if len(self._ratios[i]) == self.ratio_ticks:
                     self._settle(i)
 
-    def _add(self, foot: int, xy_w: np.ndarray, t_s: float) -> None:
-        """A new event of ``foot`` at ``xy_w`` [m] with the floor cap (the oldest dropped beyond MAX_EVENTS)."""
+    def _onset_cap(self, ratio: float) -> float:
+        """[-] cap of a slip at its onset: the floor, or with ``gate_margin`` and ``ratio_scale`` > 0 the
+        evidence of its first tick (``ratio_scale`` x its force ratio, at least the floor)."""
+        if self.gate_margin is None or not self.ratio_scale > 0 or not np.isfinite(ratio):
+            return self.floor_mu
+        return max(self.floor_mu, self.ratio_scale * float(ratio))
+
+    def _gated(self, foot: int, ratio: float) -> bool:
+        """True if the slip's evidence (:meth:`_onset_cap`) does not lie ``gate_margin`` below the foot's
+        estimate: it proves nothing the filter did not already plan with."""
+        return self.gate_margin is not None and self._onset_cap(ratio) >= self._last_mu[foot] - self.gate_margin
+
+    def _add(self, foot: int, xy_w: np.ndarray, t_s: float, cap: float | None = None) -> None:
+        """A new event of ``foot`` at ``xy_w`` [m] with ``cap`` (None: the floor); the oldest is dropped
+        beyond MAX_EVENTS."""
         arrived = np.full(4, np.inf)
         arrived[foot] = t_s
         dropped = max(0, len(self._t) + 1 - MAX_EVENTS)  # rows that fall off the front
         self._open = np.where(self._open >= dropped, self._open - dropped, -1)
         self._xy = np.vstack([self._xy, xy_w])[-MAX_EVENTS:]
         self._t = np.append(self._t, t_s)[-MAX_EVENTS:]
-        self._cap = np.append(self._cap, self.floor_mu)[-MAX_EVENTS:]
+        self._cap = np.append(self._cap, self.floor_mu if cap is None else cap)[-MAX_EVENTS:]
         self._foot = np.append(self._foot, foot)[-MAX_EVENTS:]
         self._arrived = np.vstack([self._arrived, arrived])[-MAX_EVENTS:]
         self._open[foot] = len(self._t) - 1
@@ -150,6 +177,8 @@ class SlipBoundEstimator:
         return list(f()) if f is not None else []
 
     def diagnostics(self) -> dict[str, float]:
-        """The base's counters plus ``foot_slips``: slip onsets detected this episode (feet x events)."""
+        """The base's counters plus ``foot_slips`` (slip onsets that capped, feet x events) and
+        ``foot_slips_ignored`` (onsets the gate let pass) this episode."""
         d = getattr(self.base, "diagnostics", None)
-        return {**(d() if d is not None else {}), "foot_slips": self.slips_detected}
+        return {**(d() if d is not None else {}), "foot_slips": self.slips_detected,
+                "foot_slips_ignored": self.slips_ignored}

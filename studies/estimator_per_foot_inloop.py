@@ -189,7 +189,18 @@ def main(argv: list[str] | None = None) -> None:
                     help="a world: space-separated Hydra overrides added to the default drop world")
     ap.add_argument("--out", type=Path, default=None, help="JSON of every run")
     ap.add_argument("--md", type=Path, default=None, help="markdown table of the summaries")
+    ap.add_argument("--from-json", type=Path, nargs="+", default=None, metavar="FILE",
+                    help="run nothing: write --md from these --out files (a later file's rows replace an earlier's)")
     a = ap.parse_args(argv)
+    if a.from_json:
+        merged: dict[str, dict] = {}
+        for f in a.from_json:
+            merged.update(json.loads(f.read_text()))
+        text = markdown(merged)
+        print(text)
+        if a.md is not None:
+            a.md.write_text(text)
+        return
     load0, commit = os.getloadavg(), git_commit()
     sets = dict(s.split("=", 1) for s in a.set) or {"oracle": "estimator=oracle"}
     worlds = dict(w.split("=", 1) for w in a.world) or {"drop_0.8_0.2": ""}

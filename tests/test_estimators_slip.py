@@ -203,3 +203,15 @@ def test_events_are_capped_in_number_and_open_rows_follow() -> None:
         est._add(0, np.array([float(k), 0.0]), 0.01 * k)
     assert len(est._t) == MAX_EVENTS and est._open[1] == -1  # FR's event fell off
     assert est._xy[est._open[0], 0] == MAX_EVENTS - 1
+
+
+def test_gate_lets_slips_at_the_assumed_friction_pass() -> None:
+    """With gate_margin, a slip whose force ratio (x ratio_scale) is not below the foot's estimate opens no
+    event; one well below it opens an event capped at that evidence."""
+    est = SlipBoundEstimator(FixedEstimator(0.3), ratio_scale=0.8, gate_margin=0.05)
+    est._last_mu = np.full(4, 0.3)
+    assert est._gated(0, 0.35) and est._onset_cap(0.35) == pytest.approx(0.28)  # 0.28 >= 0.3 - 0.05
+    assert not est._gated(0, 0.25) and est._onset_cap(0.25) == pytest.approx(0.2)
+    assert est._onset_cap(float("nan")) == est.floor_mu
+    plain = SlipBoundEstimator(FixedEstimator(0.3), ratio_scale=0.8)
+    assert not plain._gated(0, 0.35) and plain._onset_cap(0.35) == plain.floor_mu  # no gate: the floor
