@@ -18,6 +18,7 @@ as the floor moves away from 0.9 carries no information about it.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -128,7 +129,8 @@ def main(argv: list[str] | None = None) -> None:
     lines = (detect if a.what == "detect" else identical)(a.filter.split())
     if a.out is not None:
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        cmd = "python -m studies.estimator_slip_observability " + " ".join(sys.argv[1:] if argv is None else argv)
+        cmd = "python -m studies.estimator_slip_observability " + " ".join(
+            shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
         a.out.write_text(f"`{cmd}` (seed 100, 4 s)\n\n" + "\n".join(lines) + "\n")
 
 
