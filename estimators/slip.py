@@ -8,9 +8,9 @@ plant contact flag, no true velocity. Every control tick:
    (quasi-static leg), rotated to world axes by the IMU attitude ``R``. A foot is *loaded* when that force's
    world-z component exceeds ``contact_force_n``.
 2. **Trunk velocity** (:class:`TrunkVelocityObserver`, world axes): the accelerometer integrated
-   (``v += dt (R a + g)``), pulled towards the leg odometry of the loaded feet that hold
-   (``-R (omega x p_i + J_i qd_i)``, their median) with time constant ``velocity_tau_s``; a foot whose
-   velocity this tick is more than 4 x ``speed_mps`` off the prediction is left out.
+   (``v += dt (R a + g)``), pulled towards the leg odometry of the loaded feet that hold -- past their
+   landing (``touchdown_s``), not slipping, and not more than 4 x ``speed_mps`` off the prediction this
+   tick -- (``-R (omega x p_i + J_i qd_i)``, their median) with time constant ``velocity_tau_s``.
 3. **Foot velocity in the world**: ``v_i = v_trunk + R (omega x p_i + J_i qd_i)``. A loaded foot *slips*
    when either rule fires:
 
@@ -20,9 +20,10 @@ plant contact flag, no true velocity. Every control tick:
    * fast (a foot sliding away as it lands): its speed exceeds ``fast_speed_mps`` on ``fast_confirm_ticks``
      consecutive ticks after the first ``fast_touchdown_s`` of its stance.
 
-The slipping feet's torque-implied force ratio ``|f_xy| / f_z`` during the slip is kept (``ratio``): while a
-foot slides, the ground's force ratio equals the friction coefficient, so it measures mu (the quasi-static
-leg makes it noisy: :mod:`estimators.slip_bound` uses it only through a robust statistic).
+Each loaded foot's torque-implied force ratio ``|f_xy| / f_z`` is reported (``ratio``): while a foot slides,
+the ground's force ratio equals the friction coefficient, but through a quasi-static leg it reads high
+(median 0.25-0.34 on a 0.2 floor, ``studies/notes/estimators/round8.md``), so :mod:`estimators.slip_bound`
+uses it only behind a scale < 1, or not at all.
 
 Frames: ``_b`` trunk axes, ``_w`` world axes (z up). Units: m, m/s, N, s.
 """
