@@ -24,7 +24,8 @@ with ``base_i`` the base estimator's value for foot i (its ``mu_per_foot``, or i
   where a front foot slipped is capped before it loads, the other front foot too.
 * **Relaxation**: each foot's cap from an event rises at ``rise_per_s`` [1/s] from the later of the slip
   and the foot's arrival at the place (a hind foot that arrives a second later starts from the event's
-  cap, not from what it has relaxed to). A foot that slips again opens a new event.
+  cap, not from what it has relaxed to), up to the event's ceiling (``ceiling_scale`` x the median force ratio
+  of its slip: what the slip proves). A foot that slips again opens a new event.
 
 The reported ``mu`` is the lowest foot's; ``ready`` and ``sigma`` are the base's. Events are kept in arrays
 (at most ``MAX_EVENTS``, the newest). Frames and units as in :mod:`estimators.slip`.
@@ -50,6 +51,7 @@ class SlipBoundEstimator:
     def __init__(self, base: Estimator, floor_mu: float = 0.1, rise_per_s: float = 0.1, ratio_scale: float = 0.8,
                  ratio_ticks: int = 20, behind_m: float = 0.05, ahead_m: float = 0.3,
                  own_ahead_m: float | None = None, propagate: bool = True, gate_margin: float | None = None,
+                 ceiling_scale: float | None = None,
                  detector: dict[str, Any] | None = None, name: str | None = None) -> None:
         """``base``: the estimator whose per-foot values are capped; ``floor_mu`` [-]: cap at a slip's
         onset (the lowest friction the deployment may meet); ``rise_per_s`` [1/s]: relaxation of a cap;
@@ -72,6 +74,8 @@ class SlipBoundEstimator:
                                                                      lo_open=True, unit="m")
         self.propagate = bool(propagate)
         self.gate_margin = None if gate_margin is None else number("estimator.gate_margin", gate_margin, 0.0, 1.0)
+        self.ceiling_scale = None if ceiling_scale is None else number("estimator.ceiling_scale", ceiling_scale,
+                                                                       0.0, 5.0, lo_open=True)
         self.detector = SlipDetector(SlipSettings(**dict(detector or {})))
         self.name = name if name is not None else f"slip_{getattr(base, 'name', 'base')}"
         self.reset()
@@ -82,6 +86,7 @@ class SlipBoundEstimator:
         self._xy = np.zeros((0, 2))  # [m] event places (world)
         self._t = np.zeros(0)  # [s] time the event's cap was set
         self._cap = np.zeros(0)  # [-] the event's cap
+        self._ceil = np.zeros(0)  # [-] the highest its cap relaxes to (inf: no ceiling)
         self._foot = np.zeros(0, int)  # the foot that slipped
         self._arrived = np.zeros((0, 4))  # [s] first time each foot was in the event's reach (inf: not yet)
         self._open = np.full(4, -1)  # row of each foot's ongoing slip event (-1: none)
@@ -120,6 +125,8 @@ class SlipBoundEstimator:
                     self.slips_ignored += 1
                     continue
                 self._add(i, feet.feet_w[i, :2], t_s, self._onset_cap(feet.ratio[i]))
+                if np.isfinite(feet.ratio[i]):
+                    self._ratios[i].append(float(feet.ratio[i]))
                 self.slips_detected += 1
                 continue
             self._t[row] = t_s  # still slipping: its cap holds from now
@@ -150,23 +157,29 @@ class SlipBoundEstimator:
         self._xy = np.vstack([self._xy, xy_w])[-MAX_EVENTS:]
         self._t = np.append(self._t, t_s)[-MAX_EVENTS:]
         self._cap = np.append(self._cap, self.floor_mu if cap is None else cap)[-MAX_EVENTS:]
+        self._ceil = np.append(self._ceil, np.inf)[-MAX_EVENTS:]
         self._foot = np.append(self._foot, foot)[-MAX_EVENTS:]
         self._arrived = np.vstack([self._arrived, arrived])[-MAX_EVENTS:]
         self._open[foot] = len(self._t) - 1
         self._ratios[foot] = []
 
     def _settle(self, foot: int) -> None:
-        """The cap of ``foot``'s ongoing event from its slipping force ratios (the floor without any)."""
+        """The cap (``ratio_scale``) and ceiling (``ceiling_scale``) of ``foot``'s ongoing event from its
+        slipping force ratios (the floor and no ceiling without any)."""
         row, ratios = self._open[foot], self._ratios[foot]
-        if row >= 0 and ratios and self.ratio_scale > 0:
+        if row < 0 or not ratios:
+            return
+        if self.ratio_scale > 0:
             self._cap[row] = max(self.floor_mu, self.ratio_scale * float(np.median(ratios)))
+        if self.ceiling_scale is not None:
+            self._ceil[row] = self.ceiling_scale * float(np.median(ratios))
 
     def _caps(self, t_s: float, feet: FootState) -> np.ndarray:
         """(4,) [-] each foot's cap now over the events that reach it (module doc), each relaxed from the later
         of its time and the foot's arrival."""
         if not len(self._t):
             return np.full(4, np.inf)
-        return slip_kernel.caps(self._xy, self._t, self._cap, self._foot, self._arrived,
+        return slip_kernel.caps(self._xy, self._t, self._cap, self._ceil, self._foot, self._arrived,
                                 np.ascontiguousarray(feet.feet_w[:, :2]), feet.heading_w, float(t_s), self.behind_m,
                                 self.ahead_m, float(self.own_ahead_m), self.rise_per_s, self.propagate)
 

@@ -152,13 +152,14 @@ def tick(q, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, hea
 
 
 @njit(cache=True)
-def caps(xy, t, cap, foot, arrived, feet_xy, heading, t_s, behind_m, ahead_m, own_ahead_m, rise_per_s,
+def caps(xy, t, cap, ceil, foot, arrived, feet_xy, heading, t_s, behind_m, ahead_m, own_ahead_m, rise_per_s,
          propagate) -> np.ndarray:
     """(4,) [-] each foot's cap over the slip events (rows of ``xy`` [m], ``t`` [s], ``cap`` [-], ``foot``):
     an event reaches its own foot up to ``own_ahead_m`` past its place and (``propagate``) the other feet
     from ``behind_m`` behind to ``ahead_m`` ahead of it along ``heading``; a foot's cap relaxes at
     ``rise_per_s`` [1/s] from the later of the event's time and the foot's first tick in reach, which is
-    written into ``arrived`` (E, 4) [s] (inf: not yet). Feet no event reaches get inf."""
+    written into ``arrived`` (E, 4) [s] (inf: not yet), up to the event's ``ceil`` [-] (never below its
+    cap). Feet no event reaches get inf."""
     out = np.full(4, np.inf)
     for e in range(len(t)):
         for j in range(4):
@@ -171,6 +172,6 @@ def caps(xy, t, cap, foot, arrived, feet_xy, heading, t_s, behind_m, ahead_m, ow
                 continue
             if np.isinf(arrived[e, j]):
                 arrived[e, j] = t_s
-            c = cap[e] + rise_per_s * max(0.0, t_s - max(t[e], arrived[e, j]))
+            c = min(cap[e] + rise_per_s * max(0.0, t_s - max(t[e], arrived[e, j])), max(ceil[e], cap[e]))
             out[j] = min(out[j], c)
     return out

@@ -215,3 +215,14 @@ def test_gate_lets_slips_at_the_assumed_friction_pass() -> None:
     assert est._onset_cap(float("nan")) == est.floor_mu
     plain = SlipBoundEstimator(FixedEstimator(0.3), ratio_scale=0.8)
     assert not plain._gated(0, 0.35) and plain._onset_cap(0.35) == plain.floor_mu  # no gate: the floor
+
+
+def test_caps_relax_no_higher_than_the_slip_proves() -> None:
+    """With ceiling_scale, an event's cap relaxes up to ceiling_scale x the median force ratio of its slip."""
+    est = SlipBoundEstimator(FixedEstimator(0.8), floor_mu=0.1, rise_per_s=1.0, ratio_scale=0.0, ceiling_scale=0.9)
+    est._add(0, np.zeros(2), 0.0)
+    est._ratios[0] = [0.15, 0.2, 0.25]
+    est._settle(0)
+    feet = _feet([[0.0, 0.05], [0.0, -0.05], [-0.36, 0.05], [-0.36, -0.05]])
+    assert est._caps(0.05, feet)[0] == pytest.approx(0.15)  # relaxing: 0.1 + 0.05
+    assert est._caps(5.0, feet)[0] == pytest.approx(0.18)  # the ceiling: 0.9 x 0.2
