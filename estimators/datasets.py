@@ -83,13 +83,17 @@ RECIPE: tuple[Collection | Merge, ...] = (
     Collection("r7_vlow_test", 35, {"test": 300, "shifted": 300}, (FR, "0.1", "0.3", *F), used_by=R7),
     Collection("r7_vlow_shiftval", 36, {"shifted": 300}, (FR, "0.1", "0.3", *F), used_by=R7),
     # round 8: floors with a strip of other friction across the path (drops and rises, 0.1-1.2)
-    Collection("r8_patch_train", 40, {"train": 2400}, ("--patch-fraction", "0.7", *F), used_by=R8),
+    # (a val split of its own: the set can be trained on alone; it was missing before)
+    Collection("r8_patch_train", 40, {"train": 2400, "val": 300}, ("--patch-fraction", "0.7", *F), used_by=R8),
     Collection("r8_patch_shiftval", 41, {"shifted": 300}, (*PATCHES, *F), used_by=R8),
     Collection("r8_patch_test", 42, {"test": 300, "shifted": 300}, (*PATCHES, *F), used_by=R8),
     Collection("r8_lowpatch_test", 43, {"test": 200, "shifted": 200},
                (FR, "0.1", "0.4", *PATCHES, "--patch-friction", "0.1", "0.4", *F), used_by=R8),
     Merge("r8_train", ("estimators_f", "estimators_f_extra", "estimators_f_extra2", "estimators_f_corner",
                        "estimators_f_corner2", "estimators_f_more5", "r8_patch_train"), used_by=R8),
+    # round 8 retraining on this machine: the patch episodes beside round 3's first collection (3 200 training
+    # episodes; val/test/shifted of estimators_f)
+    Merge("r8_train_small", ("estimators_f", "r8_patch_train"), used_by=R8),
 )
 
 

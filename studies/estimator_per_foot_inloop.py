@@ -13,16 +13,28 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
 * useful share: share of the foot's loaded ticks with mu_hat >= min(mu, 0.5) - 0.1 (an estimate pinned at
   its floor is never over-estimated and scores 0 s to safe on a drop; this says whether it was any use);
-* falls and the plant's foot sliding (mean horizontal slip speed of loaded feet [m/s]).
+  ``useful_ready``: the same from the estimator's first ready tick on (round 7's in-loop usefulness: after
+  the startup window, whose prior is the safe floor);
+* over-estimation on the new surface: the same share over the foot's loaded ticks from that first loaded
+  tick on (the drop target's "<= 5 % of that foot's ticks");
+* falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)
+  and each foot's slide on the new surface [m] (contact-point slip speed integrated over its loaded ticks
+  there), to hold against the per-foot oracle's.
 
-Prints one row per set: the p95 of the time to safe and to useful over feet x seeds, the pooled
-over-estimation rate, falls and sliding; ``--out`` writes the rows as JSON.
+Every world (``--world NAME=OVERRIDES``, default: the drop 0.8 -> 0.2) is run with every estimator set
+(``--set NAME=OVERRIDES``) and seed. Prints one row per world and set: the p95 of the time to safe and to
+useful over feet x seeds (the higher order statistic: no interpolation with an infinite time), the pooled
+over-estimation rates, falls and sliding; ``--out`` writes the rows as JSON and ``--md`` a markdown table.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +43,19 @@ from estimators.safety import useful
 from taslel_bench import api
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, FrictionEstimate, Proprioception
 
-DEFAULT_WORLD = ["scenario=friction_patch", "scenario.friction=0.8", "scenario.friction_after=0.2",
-                 "scenario.change_at_m=0.6", "duration=6", "filter=terrain", "record.mcap=false", "progress=false"]
+DROP_SCENARIO = ["scenario=friction_patch", "scenario.friction=0.8", "scenario.friction_after=0.2",
+                 "scenario.change_at_m=0.6"]
+RUN = ["duration=6", "filter=terrain", "record.mcap=false", "progress=false"]
+DEFAULT_WORLD = DROP_SCENARIO + RUN
+
+
+def world_overrides(world: str, extra: str = "") -> list[str]:
+    """The run's overrides for a world and an estimator set: the drop 0.8 -> 0.2 with ``world`` and
+    ``extra`` added. A top-level key they set (``scenario=...``, ``filter=...``, ``duration=...``)
+    replaces the default's, with the default's values under it (``scenario.friction`` ...)."""
+    ov = world.split() + extra.split()
+    top = {o.split("=", 1)[0] for o in ov if "=" in o and "." not in o.split("=", 1)[0]}
+    return [o for o in DEFAULT_WORLD if o.split("=", 1)[0].split(".")[0] not in top] + ov
 
 
 class Recorder:
@@ -51,24 +74,33 @@ class Recorder:
         return est
 
 
-def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt: float) -> dict[str, list]:
-    """Per-foot over-estimation rate on loaded ticks, time to safe and time to useful [s] (see the module doc)."""
+def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt: float,
+                slip_mps: np.ndarray | None = None, ready_from: int = 0) -> dict[str, list]:
+    """Per-foot over-estimation rate on loaded ticks (all, and on the new surface), time to safe and time to
+    useful [s], useful share (all loaded ticks, and from tick ``ready_from`` on) and (with ``slip_mps`` (n, 4)
+    [m/s]) the slide on the new surface [m] (see the module doc)."""
     over = mu_hat > mu_foot + OVERESTIMATE_MARGIN
     good = useful(mu_foot, mu_hat)
-    rate, t_safe, t_useful, useful_share = [], [], [], []
+    nan = float("nan")
+    out: dict[str, list] = {k: [] for k in ("over_rate", "over_rate_new", "time_to_safe_s", "time_to_useful_s",
+                                            "useful_share", "useful_ready", "slide_new_m")}
     for leg in range(4):
         ld = loaded[:, leg]
-        rate.append(float(over[ld, leg].mean()) if ld.any() else float("nan"))
-        useful_share.append(float(good[ld, leg].mean()) if ld.any() else float("nan"))
+        out["over_rate"].append(float(over[ld, leg].mean()) if ld.any() else nan)
+        out["useful_share"].append(float(good[ld, leg].mean()) if ld.any() else nan)
+        lr = ld[ready_from:]
+        out["useful_ready"].append(float(good[ready_from:, leg][lr].mean()) if lr.any() else nan)
         changed = np.flatnonzero(ld & (np.abs(mu_foot[:, leg] - mu_foot[0, leg]) > 1e-9))
         if not len(changed):
-            t_safe.append(float("nan"))
-            t_useful.append(float("nan"))
+            for k in ("over_rate_new", "time_to_safe_s", "time_to_useful_s", "slide_new_m"):
+                out[k].append(nan)
             continue
         k0 = changed[0]
-        t_safe.append(_first(ld[k0:] & ~over[k0:, leg], dt))
-        t_useful.append(_first(ld[k0:] & good[k0:, leg], dt))
-    return {"over_rate": rate, "time_to_safe_s": t_safe, "time_to_useful_s": t_useful, "useful_share": useful_share}
+        out["time_to_safe_s"].append(_first(ld[k0:] & ~over[k0:, leg], dt))
+        out["time_to_useful_s"].append(_first(ld[k0:] & good[k0:, leg], dt))
+        out["over_rate_new"].append(float(over[k0:, leg][ld[k0:]].mean()))
+        out["slide_new_m"].append(float(slip_mps[k0:, leg][ld[k0:]].sum() * dt) if slip_mps is not None else nan)
+    return out
 
 
 def _first(ok: np.ndarray, dt: float) -> float:
@@ -90,8 +122,9 @@ def run(overrides: list[str], seed: int) -> dict[str, object]:
     n = tr.n
     mu_hat, loaded = np.array(rec.rows[:n]), tr.in_contact[:n]
     dt = float(tr.t_s[1] - tr.t_s[0]) if n > 1 else 1e-3
-    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt)
     slip = np.linalg.norm(tr.slip_w[:n], axis=-1)
+    ready = np.flatnonzero(tr.mu_hat_ready[:n])
+    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip, int(ready[0]) if len(ready) else n)
     return {"seed": seed, "fell": bool(res.fell), "status": res.status, **scores,
             "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan")}
 
@@ -100,36 +133,107 @@ def _pooled(rows: list[dict], key: str) -> np.ndarray:
     return np.array([x for r in rows for x in r[key] if not np.isnan(x)])
 
 
+def _stat(a: np.ndarray, how: str) -> float:
+    """p95 (the higher order statistic), max or mean of ``a``; NaN if empty."""
+    if not len(a):
+        return float("nan")
+    if how == "p95":
+        return float(np.percentile(a, 95, method="higher"))
+    return float(a.max() if how == "max" else a.mean())
+
+
 def summarise(rows: list[dict]) -> dict[str, float]:
-    t, tu, over = _pooled(rows, "time_to_safe_s"), _pooled(rows, "time_to_useful_s"), _pooled(rows, "over_rate")
-    use = _pooled(rows, "useful_share")
-    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(t),
-            "time_to_safe_p95_s": float(np.percentile(t, 95)) if len(t) else float("nan"),
-            "time_to_safe_max_s": float(t.max()) if len(t) else float("nan"),
-            "time_to_useful_p95_s": float(np.percentile(tu, 95)) if len(tu) else float("nan"),
-            "time_to_useful_max_s": float(tu.max()) if len(tu) else float("nan"),
-            "over_rate_mean": float(over.mean()) if len(over) else float("nan"),
-            "over_rate_max": float(over.max()) if len(over) else float("nan"),
-            "useful_share_mean": float(use.mean()) if len(use) else float("nan"),
+    """The row of one world and set over its seeds (feet x seeds pooled)."""
+    p = {k: _pooled(rows, k) for k in ("time_to_safe_s", "time_to_useful_s", "over_rate", "over_rate_new",
+                                       "useful_share", "useful_ready", "slide_new_m")}
+    return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(p["time_to_safe_s"]),
+            "time_to_safe_p95_s": _stat(p["time_to_safe_s"], "p95"),
+            "time_to_safe_max_s": _stat(p["time_to_safe_s"], "max"),
+            "time_to_useful_p95_s": _stat(p["time_to_useful_s"], "p95"),
+            "time_to_useful_max_s": _stat(p["time_to_useful_s"], "max"),
+            "over_rate_mean": _stat(p["over_rate"], "mean"), "over_rate_max": _stat(p["over_rate"], "max"),
+            "over_rate_new_mean": _stat(p["over_rate_new"], "mean"),
+            "over_rate_new_max": _stat(p["over_rate_new"], "max"),
+            "useful_share_mean": _stat(p["useful_share"], "mean"),
+            "useful_ready_mean": _stat(p["useful_ready"], "mean"),
+            "slide_new_m_mean": _stat(p["slide_new_m"], "mean"),
             "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}
+
+
+COLUMNS = (("falls", "falls", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
+           ("time_to_safe_p95_s", "safe p95 [s]", "{:.3f}"), ("time_to_safe_max_s", "safe max [s]", "{:.3f}"),
+           ("over_rate_new_mean", "over new", "{:.3f}"), ("over_rate_new_max", "over new max", "{:.3f}"),
+           ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),
+           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"), ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
+           ("sliding_mps", "sliding [m/s]", "{:.4f}"))
+
+
+def markdown(table: dict[str, dict]) -> str:
+    """One row per world and set (the ``summary`` of each)."""
+    lines = ["| world | estimator | " + " | ".join(c[1] for c in COLUMNS) + " |",
+             "|---|---|" + "---|" * len(COLUMNS)]
+    for key, v in table.items():
+        world, name = key.split("/", 1)
+        cells = [fmt.format(v["summary"][k]) if np.isfinite(v["summary"][k]) or isinstance(v["summary"][k], int)
+                 else str(v["summary"][k]) for k, _, fmt in COLUMNS]
+        lines.append(f"| {world} | {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--set", action="append", default=[], metavar="NAME=OVERRIDES",
-                    help="a named set: space-separated Hydra overrides added to the default drop world")
-    ap.add_argument("--out", type=Path, default=None)
+                    help="an estimator set: space-separated Hydra overrides (after the world's)")
+    ap.add_argument("--world", action="append", default=[], metavar="NAME=OVERRIDES",
+                    help="a world: space-separated Hydra overrides added to the default drop world")
+    ap.add_argument("--out", type=Path, default=None, help="JSON of every run")
+    ap.add_argument("--md", type=Path, default=None, help="markdown table of the summaries")
+    ap.add_argument("--from-json", type=Path, nargs="+", default=None, metavar="FILE",
+                    help="run nothing: write --md from these --out files (a later file's rows replace an earlier's)")
     a = ap.parse_args(argv)
+    if a.from_json:
+        merged: dict[str, dict] = {}
+        for f in a.from_json:
+            merged.update(json.loads(f.read_text()))
+        text = markdown(merged)
+        print(text)
+        if a.md is not None:
+            a.md.write_text(text)
+        return
+    load0, commit = os.getloadavg(), git_commit()
     sets = dict(s.split("=", 1) for s in a.set) or {"oracle": "estimator=oracle"}
+    worlds = dict(w.split("=", 1) for w in a.world) or {"drop_0.8_0.2": ""}
     table = {}
-    for name, ov in sets.items():
-        rows = [run(DEFAULT_WORLD + ov.split(), seed) for seed in a.seeds]
-        table[name] = {"overrides": ov, "summary": summarise(rows), "runs": rows}
-        print(name, json.dumps(table[name]["summary"]), flush=True)
-    if a.out is not None:
-        a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(json.dumps(table, indent=2))
+    for world, wov in worlds.items():
+        for name, ov in sets.items():
+            rows = [run(world_overrides(wov, ov), seed) for seed in a.seeds]
+            key = f"{world}/{name}"
+            table[key] = {"world": wov, "overrides": ov, "summary": summarise(rows), "runs": rows}
+            print(key, json.dumps(table[key]["summary"]), flush=True)
+            if a.out is not None:  # after every set: a killed study keeps what it measured
+                a.out.parent.mkdir(parents=True, exist_ok=True)
+                a.out.write_text(json.dumps(table, indent=2))
+    if a.md is not None:
+        a.md.parent.mkdir(parents=True, exist_ok=True)
+        a.md.write_text(header(sys.argv[1:] if argv is None else argv, load0, a.seeds, commit) + markdown(table))
+
+
+def git_commit() -> str:
+    """The checkout's commit (short hash; ``+`` if the tree has changes), ``unknown`` outside git."""
+    try:
+        run_ = lambda *c: subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
+        return run_("rev-parse", "--short", "HEAD") + ("+" if run_("status", "--porcelain", "-uno") else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def header(argv: list[str], load0: tuple[float, ...], seeds: list[int], commit: str) -> str:
+    """The command, the commit the study started at, seeds and the machine's load at start and end (1-min
+    load average)."""
+    cmd = "python -m studies.estimator_per_foot_inloop " + " ".join(shlex.quote(x) for x in argv)
+    return (f"`{cmd}`\n\ncommit {commit}; seeds {seeds}; load average {load0[0]:.1f} at the start, "
+            f"{os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} cores); one process, torch 1 thread.\n\n")
 
 
 if __name__ == "__main__":

@@ -155,6 +155,18 @@ def overestimates(mu_hat, mu_true):
 
 
 @dataclass
+class ImuSample:
+    """What the trunk's IMU measures on one control tick (ideal: no noise, bias or delay; the IMU at the trunk
+    origin). A real A1's IMU reports its attitude (from its own filter), the gyro and the accelerometer."""
+
+    quat_wxyz: np.ndarray  # [-] (4,) trunk orientation in the world (world <- trunk)
+    gyro_in_base: np.ndarray  # [rad/s] (3,) trunk angular velocity, trunk axes
+    # [m/s²] (3,) specific force (trunk acceleration minus gravity), trunk axes: the mean over the last control
+    # tick (velocity change / tick), as an accelerometer averaged over the tick reads it
+    accel_in_base: np.ndarray
+
+
+@dataclass
 class Proprioception:
     """One control tick of what a real robot measures, plus the truth for the oracle and the metrics."""
 
@@ -169,6 +181,7 @@ class Proprioception:
     # [-] (4,) ground friction under each foot, LEGS order (oracle / metrics only; None unless the filter uses
     # per-foot friction cones)
     true_friction_per_foot: np.ndarray | None = None
+    imu: ImuSample | None = None  # the trunk IMU (None: the caller has none)
 
 
 @dataclass
@@ -184,7 +197,8 @@ class FrictionEstimate:
 class Estimator(Protocol):
     """Terrain (friction) estimator in the loop. Optional: ``diagnostics() -> dict[str, float]`` (counters of
     the episode, e.g. drops detected, inference deadlines missed), added to ``summary.json`` as
-    ``estimator_<key>``."""
+    ``estimator_<key>``; ``reads_imu = True`` (class attribute): the loop fills ``Proprioception.imu`` every
+    tick (else it is None: the sample costs time in every tick)."""
 
     name: str
 
@@ -202,7 +216,8 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "HeightField", "Log", "Plane", "Ramp",
     "Scenario", "Terrain", "TerrainPart", "rough_heights",
     # estimator
-    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "Proprioception", "overestimates",
+    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "ImuSample", "Proprioception",
+    "overestimates",
     # the plant's perturbations
     "ActuatorDelay", "PlantPerturbation",
     # the robot and config values

@@ -32,6 +32,16 @@ def test_every_recipe_command_parses_and_seeds_are_distinct(tmp_path: Path) -> N
         datasets.select(["nope"])
 
 
+def test_every_training_set_has_a_validation_split() -> None:
+    """estimators.train needs a val split: every merge takes it from its first source, and a collection with
+    a training split that is trained on alone (r8_patch_train) has its own."""
+    entries = {e.name: e for e in datasets.RECIPE}
+    for e in datasets.RECIPE:
+        if isinstance(e, datasets.Merge):
+            assert entries[e.sources[0]].counts.get("val", 0) > 0, e.name
+    assert entries["r8_patch_train"].counts["val"] > 0
+
+
 def test_scaled_collection_has_one_episode_per_split(tmp_path: Path) -> None:
     entry = datasets.select(["estimators_f"])[0]
     argv = entry.argv(tmp_path, 1, 1e-6)

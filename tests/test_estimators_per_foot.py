@@ -153,9 +153,13 @@ def test_per_foot_inloop_scores() -> None:
     loaded[4, 0] = False  # ... and loads it at tick 5
     mu_hat = np.full((10, 4), 0.7)
     mu_hat[8:, 0] = 0.2  # safe again from tick 8
-    s = foot_scores(mu_hat, mu_foot, loaded, 0.01)
+    slip = np.zeros((10, 4))
+    slip[6, 0] = 0.5  # [m/s] FL slides on the new surface one tick
+    s = foot_scores(mu_hat, mu_foot, loaded, 0.01, slip)
     assert s["time_to_safe_s"][0] == pytest.approx(0.03) and np.isnan(s["time_to_safe_s"][1])
     assert s["over_rate"][0] == pytest.approx(3 / 9) and s["over_rate"][1] == 0.0
+    assert s["over_rate_new"][0] == pytest.approx(3 / 5) and np.isnan(s["over_rate_new"][1])  # ticks 5-9
+    assert s["slide_new_m"][0] == pytest.approx(0.005) and np.isnan(s["slide_new_m"][1])
     # useful: mu_hat >= min(mu, 0.5) - 0.1; FL is useful from tick 5 (0.7 >= 0.1), the others never changed
     assert s["time_to_useful_s"][0] == pytest.approx(0.0) and np.isnan(s["time_to_useful_s"][1])
     rise = foot_scores(np.where(np.arange(10)[:, None] >= 7, 0.45, 0.2) * np.ones((1, 4)), 1.0 - mu_foot,
@@ -166,8 +170,26 @@ def test_per_foot_inloop_scores() -> None:
     # useful share over loaded ticks: FL 0.7 on 0.8 (ticks 0-3) and on 0.2 (5-9) -> all 9 useful; a floor of 0.2
     # on 0.8 is never useful (0.2 < 0.4), on 0.2 always (0.2 >= 0.1)
     assert s["useful_share"][0] == 1.0
-    floor = foot_scores(np.full((10, 4), 0.2), mu_foot, loaded, 0.01)
+    floor = foot_scores(np.full((10, 4), 0.2), mu_foot, loaded, 0.01, ready_from=5)
     assert floor["useful_share"][0] == pytest.approx(5 / 9) and floor["useful_share"][1] == 0.0
+    assert floor["useful_ready"][0] == 1.0 and floor["useful_ready"][1] == 0.0  # from tick 5: FL on 0.2 only
+
+
+def test_per_foot_inloop_summary_and_worlds() -> None:
+    """The p95 over feet x seeds is an order statistic (an infinite time gives inf, not NaN); a world that
+    names a scenario replaces the default drop, other worlds add to it."""
+    from studies.estimator_per_foot_inloop import DEFAULT_WORLD, RUN, summarise, world_overrides
+
+    nan, inf = float("nan"), float("inf")
+    run = {"fell": False, "sliding_mps": 0.1, "over_rate": [0.0, 0.1, 0.0, 0.0], "over_rate_new": [0.0, 0.2, nan, nan],
+           "time_to_safe_s": [0.1, inf, nan, nan], "time_to_useful_s": [0.0, 0.0, nan, nan],
+           "useful_share": [1.0, 0.5, 1.0, 1.0], "useful_ready": [1.0] * 4, "slide_new_m": [0.01, 0.03, nan, nan]}
+    s = summarise([run, {**run, "fell": True}])
+    assert s["falls"] == 1 and s["feet_on_new_surface"] == 4
+    assert s["time_to_safe_p95_s"] == inf and s["time_to_safe_max_s"] == inf
+    assert s["over_rate_new_mean"] == pytest.approx(0.1) and s["slide_new_m_mean"] == pytest.approx(0.02)
+    assert world_overrides("scenario=flat scenario.friction=0.3") == [*RUN, "scenario=flat", "scenario.friction=0.3"]
+    assert world_overrides("scenario.friction=0.9") == [*DEFAULT_WORLD, "scenario.friction=0.9"]
 
 
 def test_per_foot_offline_scores() -> None:

@@ -31,7 +31,7 @@ from taslel_bench.control.contact_estimate import ContactEstimate
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
-from taslel_bench.interfaces import Estimator, FrictionEstimate, Proprioception, Scenario
+from taslel_bench.interfaces import Estimator, FrictionEstimate, ImuSample, Proprioception, Scenario
 from taslel_bench.metrics import residuals
 from taslel_bench.metrics.residuals import ResidualSetup
 from taslel_bench.plant.bridge import StateBridge
@@ -41,6 +41,7 @@ from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import a1
 from taslel_bench.robot.model import A1Model
+from taslel_bench.sim.imu import TrunkImu
 from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
@@ -100,6 +101,8 @@ class Episode:
         self.contact_frames = ContactFrameReader(mj_model)  # every foot contact in its own frame (metrics)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
+        self.imu = TrunkImu(mj_model.opt.gravity, settings.control_dt_s)  # the estimator's trunk IMU
+        self._imu_on = False  # sampled every tick of a run whose estimator reads it (set at the run's start)
         self._scenario_step: Callable | None = None  # scenario.on_tick, None if it does nothing (per run)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
@@ -246,6 +249,9 @@ class Episode:
         self._true_mu = self.terrain.uniform_friction  # [-] one coefficient everywhere (None: read it each tick)
         self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
+        self._v_trunk_w = self._qvel[self.bridge.free_dadr : self.bridge.free_dadr + 3]  # [m/s] view, world axes
+        self._imu_on = bool(getattr(self.estimator, "reads_imu", False))
+        self.imu.reset(self._v_trunk_w)
         self._t0_plant = self.d.time
         self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
         self._reference_s = 0.0  # [s] spent in the reference check, outside the ticks' timers
@@ -256,6 +262,10 @@ class Episode:
             self.reference_check.reset()
         res.extras["warmup_s"] = self._warm_up()
         return trace, res
+
+    def _imu_sample(self) -> ImuSample | None:
+        """This tick's trunk IMU sample (None when the estimator does not read one)."""
+        return self.imu.read(self._q, self._v, self._v_trunk_w) if self._imu_on else None
 
     def _tick(self, k: int, trace: EpisodeTrace, res: EpisodeResult) -> bool:
         """Control tick ``k``: sense and estimate, control, filter, step the plant, record. True when the
@@ -271,7 +281,7 @@ class Episode:
             if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
         est = self.estimator.step(Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
-                                                 mu_feet))  # fmt: skip
+                                                 mu_feet, self._imu_sample()))  # fmt: skip
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.gait_state(t)
         if self.contact_estimate is not None:
