@@ -13,7 +13,8 @@ tick, and the number of ``steps.parquet`` columns that are not bit-identical (ev
 names ending ``_us``: trunk, joints, torques, contact forces and flags, QP status and iterations, metrics;
 NaN equal to NaN; columns present in both). A refactor that preserves
 behaviour shows 0 differing keys, 0.0 and 0 columns there. ``--set all`` (default) is the issue 22 set that
-produced the core redesign's identity table; ``--set speed`` the issue 25 tick-speed set (10 s runs).
+produced the core redesign's identity table; ``--set speed`` the issue 25 tick-speed set (10 s runs);
+``--set terrain`` ``filter=terrain`` on the terrain worlds (issue 28's cost work, 5 s runs).
 """
 
 from __future__ import annotations
@@ -70,7 +71,24 @@ SPEED_CASES: dict[str, list[str]] = {
     **{f"{name}_osqp": [*o, "duration=10", "solver=osqp"] for name, o in SPEED_WORLDS.items()
        if "filter.enabled=false" not in o},
 }
-SETS = {"all": (CASES, SEEDS), "speed": (SPEED_CASES, (0,))}
+# the terrain-filter set (issue 28's cost work): filter=terrain on the terrain worlds under the preset's nominal
+# (terrain following, foothold choice) and under the paper's flat-ground nominal, the landing barrier switched on,
+# the paper's filter under the preset's nominal; 5 s each, seeds 0 and 1
+FLAT_GROUND_NOMINAL = ["controller.terrain_following=false", "controller.foothold_search=0.0",
+                       "controller.foothold_replan_phase=0.0", "controller.swing_from_measured_hips=false"]
+TERRAIN_WORLDS = ("steps", "rough", "logs", "slope", "friction_patch", "low_friction")
+TERRAIN_CASES: dict[str, list[str]] = {
+    **{f"terrain_{w}": ["+experiment=terrain", f"scenario={w}", "filter=terrain", "duration=5"]
+       for w in TERRAIN_WORLDS},
+    **{f"terrain_{w}_flat_nominal": ["+experiment=terrain", f"scenario={w}", "filter=terrain", "duration=5",
+                                     *FLAT_GROUND_NOMINAL] for w in ("steps", "rough", "logs", "slope")},
+    **{f"terrain_{w}_landing": ["+experiment=terrain", f"scenario={w}", "filter=terrain", "duration=5",
+                                "+filter.barriers.landing._target_=taslel_bench.filter.barriers.landing.LandingVelocity"]
+       for w in ("rough", "logs")},
+    **{f"paper_{w}": ["+experiment=terrain", f"scenario={w}", "filter=id_cbf_qp", "duration=5"]
+       for w in ("rough", "logs")},
+}
+SETS = {"all": (CASES, SEEDS), "speed": (SPEED_CASES, (0,)), "terrain": (TERRAIN_CASES, SEEDS)}
 COMMON = ["record.mcap=false", "progress=false"]
 # steps.parquet columns that time the code (µs): the only ones a behaviour-preserving change may alter
 TIMER_SUFFIX = "_us"
