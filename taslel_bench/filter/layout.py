@@ -36,3 +36,9 @@ class TickInputs:
     swing_phase: np.ndarray  # [-] (4,) progress of each swing in [0, 1]
     swing_phase_rate: float  # [1/s]
     mu_per_foot: np.ndarray | None = None  # [-] (4,) friction under each foot (None: ``mu`` for all four)
+
+    def with_mu(self, mu: float) -> TickInputs:
+        """A copy with ``mu`` [-] in place of this one's: ``dataclasses.replace(self, mu=mu)`` field by field
+        (~1 µs instead of ~5 µs per tick; tests/test_terrain_filter.py checks it keeps every other field)."""
+        return TickInputs(self.model, self.v, self.in_stance, mu, self.swing_phase, self.swing_phase_rate,
+                          self.mu_per_foot)

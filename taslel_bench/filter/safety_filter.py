@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -297,7 +297,7 @@ class SafetyFilter:
             for barrier in self.barriers:
                 barrier.margin_mps2 = margin
         if self._friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
-            inputs = replace(inputs, mu=inputs.mu * (1.0 - self._friction_margin))
+            inputs = inputs.with_mu(inputs.mu * (1.0 - self._friction_margin))
         qp = self.build(inputs, u_nom)
         if robust:
             self.robust.observe(self.barriers)

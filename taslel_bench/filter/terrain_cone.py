@@ -24,11 +24,13 @@ from __future__ import annotations
 import numpy as np
 
 from taslel_bench.filter.constraints import FrictionCone
-from taslel_bench.filter.layout import NU, NV, TickInputs
+from taslel_bench.filter.layout import INACTIVE_RHS, NU, NV, TickInputs
 from taslel_bench.interfaces import QPProblem
 from taslel_bench.robot import a1
 from taslel_bench.terrain.parts import FrictionStrips, Plane
+from taslel_bench.terrain.packed import _norm3, surface_normal, terrain_distance
 from taslel_bench.terrain.terrain import Terrain
+from taslel_bench.util.jit import kernel
 
 CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upward normal (floor beside a log)
 CONTACT_TOL_M = 0.005  # [m] a foot farther than this from the terrain takes the normal of the surface under it
@@ -86,8 +88,24 @@ class TerrainFrictionCone(FrictionCone):
         self.normals = np.tile([0.0, 0.0, 1.0], (a1.N_LEGS, 1))  # the last normals used (world)
         self.mu_used = np.full(a1.N_LEGS, np.nan)  # [-] the last per-foot coefficients used
         self._written = np.full((a1.N_LEGS, 3), np.nan)  # normals the rows were last written with
+        self.edge_downhill = bool(edge_downhill)
+        self._dist, self._point = np.empty(a1.N_LEGS), np.empty((a1.N_LEGS, 3))  # scratch of the compiled write
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
+        packed = self.terrain.packed()
+        if not packed.compiled:  # a part only Python measures
+            self.write_python(qp, x)
+            return
+        mu = x.mu_per_foot if x.mu_per_foot is not None else np.full(a1.N_LEGS, x.mu)
+        _cone_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, packed.surface_rows,
+                   x.model.foot_pos_in_world, self.flat, self.edge_downhill, x.in_stance, mu, self.lambda_min_n,
+                   self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written, self._dist,
+                   self._point)  # fmt: skip
+        self.mu_used[:] = mu
+
+    def write_python(self, qp: QPProblem, x: TickInputs) -> None:
+        """:meth:`write` with the normals from :func:`contact_normals` and each foot's rows in numpy (a part the
+        compiled query does not know; the reference of the compiled write in the tests)."""
         if not self.flat:
             self.normals[:] = contact_normals(self.terrain, x.model.foot_pos_in_world)
         mu = x.mu_per_foot if x.mu_per_foot is not None else np.full(a1.N_LEGS, x.mu)
@@ -110,3 +128,100 @@ class TerrainFrictionCone(FrictionCone):
         qp.h[r : r + 5] = (-self.lambda_min_n, 0.0, 0.0, 0.0, 0.0)
         self._stance[i], self._mu[i] = True, mu
         self._written[i] = n
+
+
+# ------------------------------------------------------------------------------------------ compiled write
+# The same float operations as the numpy code above (tests/test_terrain_filter.py compares the bits).
+
+
+@kernel
+def _cross_into(a, b, out):
+    """out = a x b (as :func:`cross3`)."""
+    out[0], out[1], out[2] = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@kernel
+def _tangent_basis_into(n, t1, t2):
+    """:func:`tangent_basis` into ``t1``, ``t2``."""
+    t1[0], t1[1], t1[2] = 1.0 - n[0] * n[0], 0.0 - n[0] * n[1], 0.0 - n[0] * n[2]
+    if _norm3(t1) < 1e-6:
+        t1[0], t1[1], t1[2] = 0.0 - n[1] * n[0], 1.0 - n[1] * n[1], 0.0 - n[1] * n[2]
+    size = _norm3(t1)
+    for a in range(3):
+        t1[a] /= size
+    _cross_into(n, t1, t2)
+
+
+@kernel
+def _downhill_edge_basis_into(n, t1, t2):
+    """:func:`downhill_edge_basis` into ``t1``, ``t2`` (``t2`` is scratch for d, then for e)."""
+    d = np.empty(3)
+    d[0], d[1], d[2] = n[2] * n[0] - 0.0, n[2] * n[1] - 0.0, n[2] * n[2] - 1.0
+    size = _norm3(d)
+    if size < 1e-6:
+        _tangent_basis_into(n, t1, t2)
+        return
+    for a in range(3):
+        d[a] /= size
+    _cross_into(n, d, t2)  # e
+    root2 = np.sqrt(2.0)
+    for a in range(3):
+        t1[a] = (d[a] + t2[a]) / root2
+    _cross_into(n, t1, t2)
+
+
+@kernel
+def _foot_rows_about(G, hvec, r, c, n, mu, lambda_min, downhill):
+    """A stance foot's 5 rows about the normal ``n`` with coefficient ``mu`` (:meth:`TerrainFrictionCone._write_foot_about`)."""
+    t1, t2 = np.empty(3), np.empty(3)
+    if downhill:
+        _downhill_edge_basis_into(n, t1, t2)
+    else:
+        _tangent_basis_into(n, t1, t2)
+    mu_t = mu / np.sqrt(2.0)
+    for a in range(3):
+        G[r, c + a] = -n[a]
+        G[r + 1, c + a] = t1[a] - mu_t * n[a]
+        G[r + 2, c + a] = -t1[a] - mu_t * n[a]
+        G[r + 3, c + a] = t2[a] - mu_t * n[a]
+        G[r + 4, c + a] = -t2[a] - mu_t * n[a]
+    hvec[r] = -lambda_min
+    for k in range(1, 5):
+        hvec[r + k] = 0.0
+
+
+@kernel
+def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, normals, dist, point):
+    """:func:`contact_normals` into ``normals`` (4, 3) (``dist``, ``point``: scratch)."""
+    terrain_distance(rows, field_heights, field_grid, has_field, foot_pos, a1.FOOT_RADIUS_M, CORNER_TOL_M, dist,
+                     normals, point)  # fmt: skip
+    for i in range(foot_pos.shape[0]):
+        if dist[i] > CONTACT_TOL_M:
+            surface_normal(surface_rows, field_heights, field_grid, foot_pos[i, 0], foot_pos[i, 1], normals[i])
+
+
+@kernel
+def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, flat, downhill, in_stance, mu,
+               lambda_min, r0, G, hvec, normals, stance, mu_written, written, dist, point):  # fmt: skip
+    """:meth:`TerrainFrictionCone.write_python` in one call: the normals (unless ``flat``), then per foot its rows
+    rewritten when its mode, normal or mu changed (``stance``, ``mu_written``, ``written``: what they were written
+    with)."""
+    if not flat:
+        _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, normals, dist, point)
+    for i in range(foot_pos.shape[0]):
+        r, c = r0 + 5 * i, NV + NU + 3 * i
+        if in_stance[i]:
+            same = stance[i] and mu[i] == mu_written[i]
+            for a in range(3):
+                same = same and normals[i, a] == written[i, a]
+            if not same:
+                _foot_rows_about(G, hvec, r, c, normals[i], mu[i], lambda_min, downhill)
+                stance[i], mu_written[i] = True, mu[i]
+                for a in range(3):
+                    written[i, a] = normals[i, a]
+        elif stance[i]:
+            for k in range(5):
+                for a in range(3):
+                    G[r + k, c + a] = 0.0
+                hvec[r + k] = INACTIVE_RHS
+            stance[i], mu_written[i] = False, np.nan

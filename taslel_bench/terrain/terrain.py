@@ -129,12 +129,17 @@ class Terrain:
         kernel (:mod:`taslel_bench.terrain.packed`, same numbers), the others (a heightfield) in Python.
         ``upward_tol_m``: see :meth:`PackedTerrain.sphere_distance` (the contact normal of a foot in a corner).
         ``role``: only the parts of that role (+inf distances without any)."""
+        return self.packed(role).sphere_distance(centres, radius, upward_tol_m)
+
+    def packed(self, role: str | None = None) -> PackedTerrain:
+        """The parts of ``role`` (every part: None) packed for the compiled query, made on the first call (after
+        :meth:`build`: a heightfield's heights are drawn there) and kept."""
         key = f"_packed_{role}"
         packed = self.__dict__.get(key)
         if packed is None:
             packed = PackedTerrain([p for p in self.parts if role is None or p.role == role])
             object.__setattr__(self, key, packed)
-        return packed.sphere_distance(centres, radius, upward_tol_m)
+        return packed
 
     def obstacle_distance(self, centres: np.ndarray, radius: float) -> Distances:
         """:meth:`sphere_distance` to the obstacle parts only (+inf without obstacles)."""

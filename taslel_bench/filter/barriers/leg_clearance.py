@@ -11,6 +11,7 @@ from taslel_bench.filter.barriers.leg_points import LegPoints, _point_terms
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
 from taslel_bench.robot import a1
+from taslel_bench.terrain.packed import terrain_distance
 from taslel_bench.util.jit import kernel
 
 PARTS = ("shin", "knee")
@@ -44,10 +45,38 @@ class LegClearance(Barrier):
         self.swing_only = bool(swing_only)  # rows for swing legs only (a stance leg's rows constrain the trunk)
         self._points: LegPoints | None = None
         self._fractions = np.linspace(0.0, self.axis_fraction, SHIN_SAMPLES)[None, :, None]  # along knee -> foot
+        # the compiled write's inputs and per-tick scratch: axis points [m], their distances [m], normals, closest
+        # terrain points [m], the legs with rows
+        self._knee_only, self._fraction_list = part == "knee", np.ascontiguousarray(self._fractions.ravel())
+        n = a1.N_LEGS * (1 if self._knee_only else SHIN_SAMPLES)
+        self._scratch = (np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty(a1.N_LEGS, bool))
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        m, r0 = x.model, self.start
+        m = x.model
         if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
+            return
+        if self._points is None or self._points.model is not m:
+            self._points = LegPoints(m)
+        packed = self.terrain.packed(self.role)
+        if not packed.compiled:  # a part only Python measures
+            self.write_python(qp, x)
+            return
+        k0, k1, k2, k3 = self._points.knee_views
+        points, dist, normal, closest, legs = self._scratch
+        d = m.data
+        _leg_distance_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, k0, k1, k2, k3,
+                           m.foot_pos_in_world, self._fraction_list, self._knee_only, self.radius_m, points,
+                           dist, normal, closest, qp.G, qp.h, self.start, d.J, d.dJ, self._points.cols_array, x.v,
+                           self.alpha1, self.alpha2, self.activation_m, x.in_stance, self.swing_only, legs, self.h,
+                           self.h_e)  # fmt: skip
+        self.tighten(qp)
+
+    def write_python(self, qp: QPProblem, x: TickInputs) -> None:
+        """:meth:`write` with the axis points in numpy and the terrain measured through
+        :meth:`Terrain.near_distance` (a part the compiled query does not know; the reference of the compiled
+        write in the tests)."""
+        m, r0 = x.model, self.start
+        if not self._has_parts:
             return
         if self._points is None or self._points.model is not m:
             self._points = LegPoints(m)
@@ -63,6 +92,26 @@ class LegClearance(Barrier):
         _leg_rows(qp.G, qp.h, r0, dist, normal, points, axis.shape[1], d.J, d.dJ, self._points.cols_array, x.v,
                   self.alpha1, self.alpha2, self.activation_m, legs, self.h, self.h_e)  # fmt: skip
         self.tighten(qp)
+
+
+@kernel
+def _leg_distance_rows(rows, field_heights, field_grid, has_field, k0, k1, k2, k3, foot_pos, fractions, knee_only,
+                       radius, points, dist, normal, closest, G, hvec, r0, J_world, dJ_world, cols, v, alpha1, alpha2,
+                       activation, in_stance, swing_only, legs, h_out, he_out):  # fmt: skip
+    """:meth:`LegClearance.write` in one call: the axis points per leg (the knee ``k0`` .. ``k3`` [m, world] if
+    ``knee_only``, else knee + f (foot - knee) for each of ``fractions``) into ``points``, their distances to the
+    packed terrain (:func:`terrain_distance`), the legs with rows (every leg, or the swing legs if ``swing_only``)
+    into ``legs``, then the rows (:func:`_leg_rows`)."""
+    n_per_leg = 1 if knee_only else fractions.shape[0]
+    for i in range(foot_pos.shape[0]):
+        knee = k0 if i == 0 else k1 if i == 1 else k2 if i == 2 else k3
+        for j in range(n_per_leg):
+            for a in range(3):
+                points[i * n_per_leg + j, a] = knee[a] if knee_only else knee[a] + fractions[j] * (foot_pos[i, a] - knee[a])
+        legs[i] = not in_stance[i] if swing_only else True
+    terrain_distance(rows, field_heights, field_grid, has_field, points, radius, 0.0, dist, normal, closest)
+    _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation, legs,
+              h_out, he_out)
 
 
 @kernel

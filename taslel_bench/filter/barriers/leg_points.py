@@ -26,6 +26,9 @@ class LegPoints:
             self.cols.append(np.array([pm.joints[s].idx_v + k for s in support for k in range(pm.joints[s].nv)],
                                       dtype=np.int64))
         self.cols_array = np.array(self.cols)  # (4, 9) velocity columns that move each calf body
+        # the knees' world positions [m] as live views of Pinocchio's data.oMi (no copy: they follow each
+        # update of the model; a kernel reads them without a Python call per knee and tick)
+        self.knee_views = tuple(model.data.oMi[j].translation for j in self.knee_joints)
 
     def knees(self) -> np.ndarray:
         """(4, 3) world positions [m] of the four knees."""

@@ -10,6 +10,7 @@ from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_b
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
 from taslel_bench.robot import a1
+from taslel_bench.terrain.packed import terrain_distance
 from taslel_bench.util.fields import number
 from taslel_bench.util.jit import kernel
 
@@ -51,17 +52,45 @@ class TerrainClearance(Barrier):
         self.touchdown_allowance_m = float(touchdown_allowance_m)  # [m]
         # [-] rows only where the terrain normal's z is below this (1: every swing foot)
         self.max_normal_z = number(f"filter.barriers.{name}.max_normal_z", max_normal_z, -1.0, 1.0)
+        self._dist = np.empty(a1.N_LEGS)  # [m] per-tick scratch of the compiled write: distance, normal, point
+        self._normal, self._point = np.empty((a1.N_LEGS, 3)), np.empty((a1.N_LEGS, 3))
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
-        m = x.model
         if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
             return
+        packed, m = self.terrain.packed(self.role), x.model
+        if not packed.compiled:  # a part only Python measures
+            self.write_python(qp, x)
+            return
+        _terrain_distance_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field,
+                               m.foot_pos_in_world, a1.FOOT_RADIUS_M, self._dist, self._normal, self._point, qp.G,
+                               qp.h, self.start, m.foot_vel_in_world, m.foot_jac_in_world, m.foot_jdotv_in_world,
+                               x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
+                               self.touchdown_allowance_m, self.max_normal_z, self.alpha1, self.alpha2, self.h,
+                               self.h_e)  # fmt: skip
+        self.tighten(qp)
+
+    def write_python(self, qp: QPProblem, x: TickInputs) -> None:
+        """:meth:`write` with the terrain measured through :meth:`Terrain.near_distance` (a part the compiled
+        query does not know; the reference of the compiled write in the tests)."""
+        m = x.model
         dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world, a1.FOOT_RADIUS_M, role=self.role)
         _terrain_rows(qp.G, qp.h, self.start, dist, normal, m.foot_vel_in_world, m.foot_jac_in_world,
                       m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
                       self.touchdown_allowance_m, self.max_normal_z, self.alpha1, self.alpha2, self.h,
                       self.h_e)  # fmt: skip
         self.tighten(qp)
+
+
+@kernel
+def _terrain_distance_rows(rows, field_heights, field_grid, has_field, foot_pos, radius, dist, normal, point, G, hvec,
+                           r0, foot_vel, foot_jac, foot_jdotv, in_stance, swing_phase, sdot, k_lift, allowance,
+                           max_normal_z, alpha1, alpha2, h_out, he_out):  # fmt: skip
+    """The foot spheres' distances to the packed terrain (:func:`terrain_distance`, into the scratch ``dist``,
+    ``normal``, ``point``), then the rows (:func:`_terrain_rows`): :meth:`TerrainClearance.write` in one call."""
+    terrain_distance(rows, field_heights, field_grid, has_field, foot_pos, radius, 0.0, dist, normal, point)
+    _terrain_rows(G, hvec, r0, dist, normal, foot_vel, foot_jac, foot_jdotv, in_stance, swing_phase, sdot, k_lift,
+                  allowance, max_normal_z, alpha1, alpha2, h_out, he_out)
 
 
 @kernel
