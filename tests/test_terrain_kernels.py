@@ -166,3 +166,23 @@ def test_with_mu_is_dataclass_replace(states):
     a, b = x.with_mu(0.72), replace(x, mu=0.72)
     for name in TickInputs.__dataclass_fields__:
         assert getattr(a, name) is getattr(b, name) or getattr(a, name) == getattr(b, name)
+
+
+def test_heightfield_distance_within_a_cutoff_is_exact_below_it():
+    """Below the cutoff the same bits as the exact query; at or beyond it any value >= the cutoff."""
+    from taslel_bench.terrain.packed import FIELD_REACH_CELLS
+    from taslel_bench.terrain.relief import _hfield_distance_within
+
+    field = field_at(0.5)
+    x0, y0, dx, dy = field._grid
+    rng = np.random.default_rng(7)
+    c = np.column_stack([rng.uniform(0.4, 2.6, 2000), rng.uniform(-1.1, 1.1, 2000), rng.uniform(-0.06, 0.3, 2000)])
+    exact = heightfield_distance(field, c, 0.02)
+    for cutoff in (0.0, 0.03, 0.08):
+        d, n, p = np.empty(len(c)), np.empty((len(c), 3)), np.empty((len(c), 3))
+        _hfield_distance_within(field.heights_m, x0, y0, dx, dy, c, 0.02, FIELD_REACH_CELLS, cutoff, d, n, p)
+        near = exact[0] < cutoff
+        assert near.sum() > 100 and (~near).sum() > 100
+        assert np.array_equal(d[near], exact[0][near]) and np.array_equal(n[near], exact[1][near])
+        assert np.array_equal(p[near], exact[2][near])
+        assert np.all(d[~near] >= cutoff)

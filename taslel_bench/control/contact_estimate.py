@@ -55,6 +55,8 @@ class ContactEstimate:
         self.ticks_in_stance = np.zeros(a1.N_LEGS, np.int64)  # control ticks since the scheduled stance began
         self.early_touchdowns = 0  # count of early touchdowns taken as stance in the episode
         self.late_touchdown_ticks = 0  # foot-ticks of scheduled stance treated as swing (not landed yet)
+        self._late_ticks = round(self.s.late_touchdown_max_s / self.s.control_dt_s)  # (the settings are frozen)
+        self._late: np.ndarray | None = None  # this tick's feet in a late touchdown (None: none)
 
     def reset(self) -> None:
         self.in_stance[:] = False
@@ -64,26 +66,26 @@ class ContactEstimate:
         self.ticks_in_stance[:] = 0
         self.early_touchdowns = 0
         self.late_touchdown_ticks = 0
+        self._late = None
 
     def update(self, scheduled_stance: np.ndarray, swing_phase: np.ndarray,
                foot_force_in_world: np.ndarray) -> np.ndarray:  # fmt: skip
         """The stance set (4,) bool for this tick from the schedule (``scheduled_stance``, ``swing_phase``)
         and the contact force on each foot (4, 3) [N]."""
-        late_ticks = round(self.s.late_touchdown_max_s / self.s.control_dt_s)
         new, late = _update(np.asarray(scheduled_stance), np.asarray(swing_phase, float),
                             np.asarray(foot_force_in_world, float), self.s.force_threshold_n, self.s.min_swing_phase,
-                            self.s.min_force_vertical_share, late_ticks, self.early, self._prev_scheduled,
+                            self.s.min_force_vertical_share, self._late_ticks, self.early, self._prev_scheduled,
                             self.touched, self.ticks_in_stance, self.in_stance)  # fmt: skip
         self.early_touchdowns += new
-        self.late_touchdown_ticks += late
-        self._late = np.asarray(scheduled_stance, bool) & ~self.in_stance
+        self.late_touchdown_ticks += late  # = the feet scheduled in stance and not in the stance set now
+        self._late = np.asarray(scheduled_stance, bool) & ~self.in_stance if late else None
         return self.in_stance.copy()
 
     def swing_phase(self, scheduled_phase: np.ndarray) -> np.ndarray:
         """The swing phase the filter's barriers should see: the schedule's, and 1 (the end of the swing) for a
         foot in a late touchdown (scheduled stance, phase 0 in the schedule, not landed)."""
-        late = getattr(self, "_late", None)
-        if late is None or not late.any():
+        late = self._late
+        if late is None:  # no late touchdown this tick
             return scheduled_phase
         phase = np.array(scheduled_phase, float)
         phase[late] = 1.0

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from taslel_bench.terrain.parts import Box, FrictionStrips, Log, Plane
-from taslel_bench.terrain.relief import HeightField, Ramp, _hfield_distance, _hfield_top
+from taslel_bench.terrain.relief import HeightField, Ramp, _hfield_distance_within, _hfield_top
 from taslel_bench.util.jit import kernel
 
 PLANE, LOG, ORIENTED_BOX = 0.0, 1.0, 2.0
@@ -112,12 +112,22 @@ def terrain_distance(rows, field_heights, field_grid, has_field, centres, radius
     """:meth:`PackedTerrain.sphere_distance` of its compiled parts into ``d`` (n,) [m], ``normal`` (n, 3) and
     ``point`` (n, 3) [m, world]: the packed rows, then the heightfield (if ``has_field``) merged as a part after
     them (:func:`_take_closer`, the order of the Python query)."""
+    terrain_distance_within(rows, field_heights, field_grid, has_field, centres, radius, upward_tol, np.inf, d, normal,
+                            point)  # fmt: skip
+
+
+@kernel
+def terrain_distance_within(rows, field_heights, field_grid, has_field, centres, radius, upward_tol, cutoff, d, normal,
+                            point):  # fmt: skip
+    """:func:`terrain_distance` exact below ``cutoff`` [m]: a sphere whose heightfield distance is at least
+    ``cutoff`` may get any value >= ``cutoff`` for it (:func:`_hfield_distance_within`; with ``upward_tol`` 0 its
+    merged distance is then exact where below ``cutoff``, and >= ``cutoff`` elsewhere). +inf: every distance exact."""
     _packed_distance(rows, centres, radius, upward_tol, d, normal, point)
     if has_field:
         n = centres.shape[0]
         d_f, n_f, p_f = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
-        _hfield_distance(field_heights, field_grid[0], field_grid[1], field_grid[2], field_grid[3], centres, radius,
-                         FIELD_REACH_CELLS, d_f, n_f, p_f)  # fmt: skip
+        _hfield_distance_within(field_heights, field_grid[0], field_grid[1], field_grid[2], field_grid[3], centres,
+                                radius, FIELD_REACH_CELLS, cutoff, d_f, n_f, p_f)  # fmt: skip
         _take_closer(d, normal, point, d_f, n_f, p_f, upward_tol)
 
 

@@ -347,6 +347,18 @@ def _cell_corners(h, x0, y0, dx, dy, r, c, A, B, C, D):
 
 @kernel
 def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_out):
+    """Signed distance [m] of spheres (``centres`` (n, 3) [m, world], ``radius`` [m]) to the triangulated surface of
+    heights ``h`` on the grid (x0, y0, dx, dy) [m], from the triangles within ``reach`` cells; its unit normal and
+    closest point (:meth:`HeightField.sphere_distance`)."""
+    _hfield_distance_within(h, x0, y0, dx, dy, centres, radius, reach, np.inf, d_out, n_out, p_out)
+
+
+@kernel
+def _hfield_distance_within(h, x0, y0, dx, dy, centres, radius, reach, cutoff, d_out, n_out, p_out):
+    """:func:`_hfield_distance` exact below ``cutoff`` [m]: a sphere above the surface whose distance is at least
+    ``cutoff`` may be reported at any distance >= ``cutoff`` (+inf, normal up, point = centre, when even the highest
+    vertex of the cells within reach is that far below it) -- for a caller that only asks which spheres are within
+    ``cutoff`` and how far (a leg barrier's activation distance). ``cutoff`` = +inf: every distance exact."""
     nrow, ncol = h.shape
     q = np.empty(3)
     best_q = np.empty(3)
@@ -361,14 +373,21 @@ def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_
             continue
         c0 = min(max(int(np.floor((p[0] - x0) / dx)), 0), ncol - 2)
         r0 = min(max(int(np.floor((p[1] - y0) / dy)), 0), nrow - 2)
+        r_lo, r_hi = max(r0 - reach, 0), min(r0 + reach, nrow - 2)
+        c_lo, c_hi = max(c0 - reach, 0), min(c0 + reach, ncol - 2)
+        if cutoff < np.inf and p[2] - _highest(h, r_lo, r_hi + 1, c_lo, c_hi + 1) - radius >= cutoff + 1e-9:
+            continue  # every candidate triangle lies at least cutoff below the sphere
         # the cell under the point bounds the minimum: a cell whose box (its x-y rectangle, its heights' range)
         # is farther than that holds no closer point and is skipped (the same result: the numpy reference,
-        # tests/test_terrain_filter.py::test_packed_heightfield_distance_equals_the_part)
+        # tests/test_terrain_filter.py::test_packed_heightfield_distance_equals_the_part); above the surface a
+        # cell farther than cutoff + radius is skipped too (what it holds is at least cutoff away)
         _cell_corners(h, x0, y0, dx, dy, r0, c0, A, B, C, D)
         bound = min(_closest_on_triangle(p, A, B, D, q), _closest_on_triangle(p, A, C, D, q)) + 1e-9
+        if p[2] >= surface:
+            bound = min(bound, cutoff + radius + 1e-9)
         best = np.inf
-        for r in range(max(r0 - reach, 0), min(r0 + reach, nrow - 2) + 1):
-            for c in range(max(c0 - reach, 0), min(c0 + reach, ncol - 2) + 1):
+        for r in range(r_lo, r_hi + 1):
+            for c in range(c_lo, c_hi + 1):
                 lo = min(h[r, c], h[r, c + 1], h[r + 1, c], h[r + 1, c + 1])
                 hi = max(h[r, c], h[r, c + 1], h[r + 1, c], h[r + 1, c + 1])
                 ex = max(x0 + c * dx - p[0], 0.0, p[0] - (x0 + (c + 1) * dx))
@@ -385,6 +404,8 @@ def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_
                 if g < best:
                     best = g
                     best_q[:] = q
+        if best == np.inf:  # above the surface, nothing within cutoff (only with a finite cutoff)
+            continue
         sign = -1.0 if p[2] < surface else 1.0
         d_out[k] = sign * best - radius
         if best > 1e-12:
@@ -394,3 +415,13 @@ def _hfield_distance(h, x0, y0, dx, dy, centres, radius, reach, d_out, n_out, p_
             nz = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
             n_out[k, 0], n_out[k, 1], n_out[k, 2] = -gx * nz, -gy * nz, nz
         p_out[k, 0], p_out[k, 1], p_out[k, 2] = best_q[0], best_q[1], best_q[2]
+
+
+@kernel
+def _highest(h, r0, r1, c0, c1):
+    """The largest vertex height [m] of rows r0..r1 and columns c0..c1 (both inclusive)."""
+    top = -np.inf
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            top = max(top, h[r, c])
+    return top

@@ -11,7 +11,7 @@ from taslel_bench.filter.barriers.leg_points import LegPoints, _point_terms
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
 from taslel_bench.robot import a1
-from taslel_bench.terrain.packed import terrain_distance
+from taslel_bench.terrain.packed import terrain_distance_within
 from taslel_bench.util.jit import kernel
 
 PARTS = ("shin", "knee")
@@ -109,7 +109,10 @@ def _leg_distance_rows(rows, field_heights, field_grid, has_field, k0, k1, k2, k
             for a in range(3):
                 points[i * n_per_leg + j, a] = knee[a] if knee_only else knee[a] + fractions[j] * (foot_pos[i, a] - knee[a])
         legs[i] = not in_stance[i] if swing_only else True
-    terrain_distance(rows, field_heights, field_grid, has_field, points, radius, 0.0, dist, normal, closest)
+    # exact below the activation distance, the only distances the rows use (a point at least that far from a
+    # heightfield is not measured to it: _hfield_distance_within)
+    terrain_distance_within(rows, field_heights, field_grid, has_field, points, radius, 0.0, activation, dist, normal,
+                            closest)  # fmt: skip
     _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation, legs,
               h_out, he_out)
 
