@@ -67,7 +67,7 @@ def test_packed_query_with_the_heightfield_gives_the_old_bits():
                 assert np.array_equal(a, b)
 
 
-def test_surface_normal_is_normal_at_bit_for_bit():
+def test_compiled_height_and_normal_are_the_parts_bit_for_bit():
     terrain = Terrain((Plane(1.0), Log(1.0, -0.02, 0.06), Box((1.6, 0.0, 0.03), (0.2, 0.5, 0.03)),
                        Ramp(start_x_m=2.0, run_m=0.5, angle_deg=12.0), field_at(2.6)))  # fmt: skip
     packed = terrain.packed()
@@ -78,8 +78,14 @@ def test_surface_normal_is_normal_at_bit_for_bit():
     xy[50:60, 0] = 1.0 - 0.06  # a log's edge
     out = np.empty(3)
     for x, y in xy:
+        x, y = float(x), float(y)
         surface_normal(packed.surface_rows, packed.field_heights, packed.field_grid, x, y, out)
-        assert np.array_equal(out, terrain.normal_at(float(x), float(y)))
+        assert np.array_equal(out, terrain.surface_part(x, y).normal(x, y))  # the Python normal_at
+        assert np.array_equal(terrain.normal_at(x, y), out)
+        assert terrain.height_at(x, y) == max(part.top_z(x, y) for part in terrain.parts)  # the Python height_at
+    for (x0, y0), (x1, y1) in xy.reshape(-1, 2, 2)[:300]:  # the path maximum of the terrain-following nominal
+        python = max(terrain.height_at(x0 + (x1 - x0) * k / 8, y0 + (y1 - y0) * k / 8) for k in range(9))
+        assert terrain.highest_along((x0, y0), (x1, y1), 8) == python
     for v in rng.normal(size=(500, 3)) * rng.choice([1e-4, 1.0, 30.0], size=(500, 1)):
         assert _norm3(v) == np.linalg.norm(v)
 
@@ -102,8 +108,12 @@ class Pillar:
 
 def test_a_part_of_another_kind_keeps_the_python_query(states):
     assert not PackedTerrain((Plane(1.0), Pillar())).compiled
+    pillar = Terrain((Plane(1.0), Pillar()))
+    assert pillar.height_at(0.3, 0.0) == 0.2 and pillar.height_at(1.0, 0.0) == 0.0
     two = PackedTerrain((Plane(1.0), field_at(0.0), field_at(3.0)))  # two fields: both in Python
     assert not two.compiled and two.surface_rows is None and len(two.others) == 2
+    undrawn = Terrain((Plane(1.0), HeightField(None, 1.0, 0.0, 0.5, 0.5, draw=lambda rng: np.zeros((3, 3)))))
+    assert undrawn.packed().pending and not undrawn._packs  # not kept before the heights are drawn
     st, pm = states
     old, new = families(Terrain((Plane(1.0), Pillar())), True), families(Terrain((Plane(1.0), Pillar())), True)
     for state in st[:3]:

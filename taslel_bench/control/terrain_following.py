@@ -186,9 +186,7 @@ class TerrainFollowingController(NominalController):
                 self._td_m[i] = self.terrain.height_at(*td_w)
                 if self._was_stance[i]:  # lift-off
                     self._lift_m[i] = self._top_m[i] = self._latched_m[i]
-                path = max(self.terrain.height_at(foot_w[0] + (td_w[0] - foot_w[0]) * k / PATH_SAMPLES,
-                                                  foot_w[1] + (td_w[1] - foot_w[1]) * k / PATH_SAMPLES)
-                           for k in range(PATH_SAMPLES + 1))
+                path = self.terrain.highest_along(foot_w, td_w, PATH_SAMPLES)
                 self._top_m[i] = max(self._top_m[i], path, self._td_m[i])
                 if phase < 0.5:
                     ground[i] = self._lift_m[i] + (self._top_m[i] - self._lift_m[i]) * _ease(2.0 * phase)

@@ -89,6 +89,7 @@ class PackedTerrain:
         self.field_heights = np.ascontiguousarray(field.heights_m, float) if field is not None else np.zeros((2, 2))
         self.field_grid = np.array(field._grid if field is not None else (0.0, 0.0, 1.0, 1.0), float)
         self.compiled = not self.others
+        self.pending = any(isinstance(p, HeightField) and p._grid is None for p in parts)  # heights not drawn yet
         surface = [surface_row(p) for p in parts]
         self.surface_rows = np.array(surface) if self.compiled and surface else None
 
@@ -148,6 +149,27 @@ def _surface_top(row, field_heights, field_grid, x, y):
         inside = row[1] <= x <= row[2] and abs(y - row[3]) <= row[4]
         return row[5] * (x - row[1]) if inside else -np.inf
     return _hfield_top(field_heights, field_grid[0], field_grid[1], field_grid[2], field_grid[3], x, y)[0]
+
+
+@kernel
+def surface_height(surface_rows, field_heights, field_grid, x, y):
+    """:meth:`Terrain.height_at` (x, y): the highest part's top z [m, world] over (x, y) (-inf over none)."""
+    top = -np.inf
+    for r in range(surface_rows.shape[0]):
+        top = max(top, _surface_top(surface_rows[r], field_heights, field_grid, x, y))
+    return top
+
+
+@kernel
+def highest_along(surface_rows, field_heights, field_grid, x0, y0, x1, y1, samples):
+    """The largest :func:`surface_height` [m] at the ``samples`` + 1 points x0 + (x1 - x0) k / samples (and the
+    same in y), k = 0 .. samples, from (x0, y0) to (x1, y1) [m, world]."""
+    top = -np.inf
+    for k in range(samples + 1):
+        x = x0 + (x1 - x0) * k / samples
+        y = y0 + (y1 - y0) * k / samples
+        top = max(top, surface_height(surface_rows, field_heights, field_grid, x, y))
+    return top
 
 
 @kernel

@@ -22,7 +22,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.terrain.geoms import add_obstacle_sensors, obstacle_body
-from taslel_bench.terrain.packed import PackedTerrain
+from taslel_bench.terrain.packed import PackedTerrain, highest_along, surface_height, surface_normal
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Distances, Log, Plane, TerrainPart
 
 CAPSULE_SAMPLES = 9  # points along a capsule's axis in :meth:`Terrain.capsule_distance`
@@ -32,6 +32,7 @@ CAPSULE_SAMPLES = 9  # points along a capsule's axis in :meth:`Terrain.capsule_d
 class Terrain:
     parts: tuple[TerrainPart, ...] = (Plane(),)
     _uniform_friction: float | None = field(init=False, repr=False, compare=False)
+    _packs: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # a part with one coefficient has ``friction``; one whose friction varies (FrictionStrips) has not
@@ -39,6 +40,7 @@ class Terrain:
         uniform = len(frictions) == 1 and None not in frictions
         object.__setattr__(self, "parts", tuple(self.parts))
         object.__setattr__(self, "_uniform_friction", float(frictions.pop()) if uniform else None)
+        object.__setattr__(self, "_packs", {})  # role -> PackedTerrain (packed())
 
     # ------------------------------------------------------------------------------------------ plant
     def build(self, spec: mujoco.MjSpec, rng: np.random.Generator) -> None:
@@ -68,11 +70,31 @@ class Terrain:
         return best
 
     def height_at(self, x: float, y: float) -> float:
-        """World z [m] of the surface over (x, y)."""
+        """World z [m] of the surface over (x, y) (compiled when every part's kind is known to
+        :mod:`taslel_bench.terrain.packed`: the same numbers)."""
+        packed = self.packed()
+        if packed.compiled:
+            return surface_height(packed.surface_rows, packed.field_heights, packed.field_grid, float(x), float(y))
         return max(part.top_z(x, y) for part in self.parts)
 
+    def highest_along(self, start_xy: tuple[float, float], end_xy: tuple[float, float], samples: int) -> float:
+        """The largest :meth:`height_at` [m, world z] at ``samples`` + 1 evenly spaced points from ``start_xy`` to
+        ``end_xy`` [m, world] (both ends included; compiled as :meth:`height_at`)."""
+        (x0, y0), (x1, y1) = start_xy, end_xy
+        packed = self.packed()
+        if packed.compiled:
+            return highest_along(packed.surface_rows, packed.field_heights, packed.field_grid, float(x0), float(y0),
+                                 float(x1), float(y1), int(samples))  # fmt: skip
+        return max(self.height_at(x0 + (x1 - x0) * k / samples, y0 + (y1 - y0) * k / samples)
+                   for k in range(samples + 1))  # fmt: skip
+
     def normal_at(self, x: float, y: float) -> np.ndarray:
-        """Unit upward normal (3,) of the surface over (x, y)."""
+        """Unit upward normal (3,) of the surface over (x, y) (compiled as :meth:`height_at`)."""
+        packed = self.packed()
+        if packed.compiled:
+            out = np.empty(3)
+            surface_normal(packed.surface_rows, packed.field_heights, packed.field_grid, float(x), float(y), out)
+            return out
         return self.surface_part(x, y).normal(x, y)
 
     def friction_at(self, xy_in_world) -> float:
@@ -132,13 +154,13 @@ class Terrain:
         return self.packed(role).sphere_distance(centres, radius, upward_tol_m)
 
     def packed(self, role: str | None = None) -> PackedTerrain:
-        """The parts of ``role`` (every part: None) packed for the compiled query, made on the first call (after
-        :meth:`build`: a heightfield's heights are drawn there) and kept."""
-        key = f"_packed_{role}"
-        packed = self.__dict__.get(key)
+        """The parts of ``role`` (every part: None) packed for the compiled query, made on the first call and kept
+        (once a heightfield's heights are drawn: :meth:`build`)."""
+        packed = self._packs.get(role)
         if packed is None:
             packed = PackedTerrain([p for p in self.parts if role is None or p.role == role])
-            object.__setattr__(self, key, packed)
+            if not packed.pending:
+                self._packs[role] = packed
         return packed
 
     def obstacle_distance(self, centres: np.ndarray, radius: float) -> Distances:
