@@ -6,7 +6,7 @@ boxes, or a class of your own with the same members). It edits the plant's ``MjS
 with an explicit ``np.random.Generator`` for parts drawn at random) and answers, in world axes [m]:
 
 * :meth:`height_at` / :meth:`normal_at` / :meth:`friction_at`: the surface under (x, y) -- the part whose top
-  is highest there;
+  is highest there (:meth:`highest_along`: the highest of it along a segment);
 * :meth:`sphere_distance` (every part) and :meth:`obstacle_distance` (obstacle parts only): signed distance
   of spheres to the terrain with its gradient (unit normal) and closest point;
 * :meth:`capsule_distance`: the same for a capsule (a leg link), by the closest of points along its axis;
@@ -148,7 +148,8 @@ class Terrain:
     def near_distance(self, centres: np.ndarray, radius: float, upward_tol_m: float = 0.0,
                       role: str | None = None) -> Distances:
         """:meth:`sphere_distance` over every part, for the control tick: the simple parts through one compiled
-        kernel (:mod:`taslel_bench.terrain.packed`, same numbers), the others (a heightfield) in Python.
+        kernel (:mod:`taslel_bench.terrain.packed`, same numbers) with one heightfield, parts of other kinds in
+        Python.
         ``upward_tol_m``: see :meth:`PackedTerrain.sphere_distance` (the contact normal of a foot in a corner).
         ``role``: only the parts of that role (+inf distances without any)."""
         return self.packed(role).sphere_distance(centres, radius, upward_tol_m)
