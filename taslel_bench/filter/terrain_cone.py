@@ -27,8 +27,8 @@ from taslel_bench.filter.constraints import FrictionCone
 from taslel_bench.filter.layout import INACTIVE_RHS, NU, NV, TickInputs
 from taslel_bench.interfaces import QPProblem
 from taslel_bench.robot import a1
-from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.packed import _norm3, surface_normal, terrain_distance
+from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
