@@ -168,6 +168,7 @@ def test_knee_views_follow_the_model(states):
     for state in st[:4]:
         pm.update(*state[:2])
         assert np.array_equal(np.array(points.knee_views), points.knees())
+    assert points.data is pm.data
 
 
 def test_with_mu_is_dataclass_replace(states):

@@ -55,8 +55,8 @@ class LegClearance(Barrier):
         m = x.model
         if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
             return
-        if self._points is None or self._points.model is not m:
-            self._points = LegPoints(m)
+        if self._points is None or self._points.model is not m or self._points.data is not m.data:
+            self._points = LegPoints(m)  # (its knee views belong to one Pinocchio data object)
         packed = self.terrain.packed(self.role)
         if not packed.compiled:  # a part only Python measures
             self.write_python(qp, x)

@@ -27,7 +27,9 @@ class LegPoints:
                                       dtype=np.int64))
         self.cols_array = np.array(self.cols)  # (4, 9) velocity columns that move each calf body
         # the knees' world positions [m] as live views of Pinocchio's data.oMi (no copy: they follow each
-        # update of the model; a kernel reads them without a Python call per knee and tick)
+        # update of the model; a kernel reads them without a Python call per knee and tick), valid while the
+        # model keeps this data object (``data``)
+        self.data = model.data
         self.knee_views = tuple(model.data.oMi[j].translation for j in self.knee_joints)
 
     def knees(self) -> np.ndarray:
