@@ -91,6 +91,27 @@ def test_leg_point_terms_are_the_models_foot_terms_at_the_foot(states):
         assert knee_to_foot == pytest.approx(0.2, abs=1e-3)  # the calf: 0.2 m
 
 
+def test_friction_margin_shrinks_each_feet_cone_too(states):
+    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before stop 42)."""
+    from taslel_bench.filter.robust import RobustSettings
+
+    st, pm = states
+    q, v, gs, u = st[2]
+    pm.update(q, v)
+    mu = np.array([0.2, 0.4, 0.6, 0.8])
+    plane = Terrain((Plane(1.0),))
+    margin = SafetyFilter(FilterSettings(friction_cone="terrain", robust=RobustSettings(friction_margin=0.1)),
+                          TightReference(), terrain=plane)
+    exact = SafetyFilter(FilterSettings(friction_cone="terrain"), TightReference(), terrain=plane)
+    margin.filter(TickInputs(pm, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate, mu), u)
+    exact.filter(TickInputs(pm, v, gs.in_stance, 0.9, gs.swing_phase, gs.swing_phase_rate, 0.9 * mu), u)
+    rows = slice(margin.friction.start, margin.friction.start + 20)
+    assert np.array_equal(margin.problem.G[rows], exact.problem.G[rows])
+    assert not np.array_equal(margin.problem.G[rows], SafetyFilter(
+        FilterSettings(friction_cone="terrain"), TightReference(), terrain=plane).build(
+        TickInputs(pm, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate, mu), u).G[rows])
+
+
 def test_terrain_and_leg_barriers_hold_at_the_solution(states):
     st, pm = states
     terrain = Terrain((Plane(1.0), Log(0.25, 0.0, 0.06)))  # a log under the front legs

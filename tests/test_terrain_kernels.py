@@ -171,12 +171,15 @@ def test_knee_views_follow_the_model(states):
     assert points.data is pm.data
 
 
-def test_with_mu_is_dataclass_replace(states):
+def test_with_mu_scaled_is_dataclass_replace(states):
     st, pm = states
-    x = replace(inputs_for(pm, st[0], 0.8), mu_per_foot=np.full(4, 0.8))
-    a, b = x.with_mu(0.72), replace(x, mu=0.72)
+    feet = np.array([0.8, 0.6, 0.4, 0.2])
+    x = replace(inputs_for(pm, st[0], 0.8), mu_per_foot=feet)
+    a, b = x.with_mu_scaled(0.9), replace(x, mu=0.8 * 0.9, mu_per_foot=feet * 0.9)
     for name in TickInputs.__dataclass_fields__:
-        assert getattr(a, name) is getattr(b, name) or getattr(a, name) == getattr(b, name)
+        va, vb = getattr(a, name), getattr(b, name)
+        assert va is vb or np.array_equal(va, vb)
+    assert x.with_mu_scaled(0.9).mu_per_foot is not feet and replace(x, mu_per_foot=None).with_mu_scaled(0.9).mu_per_foot is None
 
 
 def test_heightfield_distance_within_a_cutoff_is_exact_below_it():

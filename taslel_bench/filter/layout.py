@@ -37,8 +37,10 @@ class TickInputs:
     swing_phase_rate: float  # [1/s]
     mu_per_foot: np.ndarray | None = None  # [-] (4,) friction under each foot (None: ``mu`` for all four)
 
-    def with_mu(self, mu: float) -> TickInputs:
-        """A copy with ``mu`` [-] in place of this one's: ``dataclasses.replace(self, mu=mu)`` field by field
-        (~1 µs instead of ~5 µs per tick; tests/test_terrain_filter.py checks it keeps every other field)."""
-        return TickInputs(self.model, self.v, self.in_stance, mu, self.swing_phase, self.swing_phase_rate,
-                          self.mu_per_foot)
+    def with_mu_scaled(self, factor: float) -> TickInputs:
+        """A copy with ``mu`` and, where given, every foot's ``mu_per_foot`` multiplied by ``factor`` [-] (the
+        friction margin: the per-foot cones shrink with the single value they replace); built field by field,
+        ~1 µs instead of ~5 µs for ``dataclasses.replace`` (tests/test_terrain_kernels.py checks the fields)."""
+        feet = None if self.mu_per_foot is None else self.mu_per_foot * factor
+        return TickInputs(self.model, self.v, self.in_stance, self.mu * factor, self.swing_phase,
+                          self.swing_phase_rate, feet)

@@ -297,7 +297,7 @@ class SafetyFilter:
             for barrier in self.barriers:
                 barrier.margin_mps2 = margin
         if self._friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
-            inputs = inputs.with_mu(inputs.mu * (1.0 - self._friction_margin))
+            inputs = inputs.with_mu_scaled(1.0 - self._friction_margin)  # per-foot values too
         qp = self.build(inputs, u_nom)
         if robust:
             self.robust.observe(self.barriers)
