@@ -4,9 +4,10 @@
 For every checkpoint and set: the MAE [-] of the raw mean per foot against ``y_foot`` (all feet pooled; the
 number comparable to the paper's 0.072 on a constant-friction test split, where every foot stands on the
 trunk's friction), the same on loaded feet only (``foot_loaded``), the over-estimation rate (estimate >
-truth + 0.05) of the raw mean and of the lower-quantile head per foot, and the MAE of the lowest foot's mean
-against the trunk label ``y`` (what a single-cone filter would be given). A checkpoint with one output per
-window is scored with that output for every foot.
+truth + 0.05) of the raw mean and of the lower-quantile head per foot, and the MAE and over-estimation rate
+of the lowest foot's mean (and lower head) against the trunk label ``y`` (what a single-cone filter would be
+given; for a model with one output per window, that output: the per-window scores). A checkpoint with one
+output per window is scored with that output for every foot.
 """
 
 from __future__ import annotations
@@ -41,7 +42,10 @@ def score(mean: np.ndarray, lower: np.ndarray | None, y_foot: np.ndarray, loaded
            "mae_loaded": float(err[loaded].mean()) if loaded.any() else float("nan"),
            "over_mean": float(overestimates(mean, y_foot).mean()),
            "over_lower": float(overestimates(lower, y_foot).mean()) if lower is not None else float("nan"),
-           "mae_lowest_vs_trunk": float(np.abs(mean.min(1) - y).mean())}
+           "mae_lowest_vs_trunk": float(np.abs(mean.min(1) - y).mean()),
+           "over_lowest_vs_trunk": float(overestimates(mean.min(1), y).mean()),
+           "over_lower_lowest_vs_trunk": (float(overestimates(lower.min(1), y).mean()) if lower is not None
+                                          else float("nan"))}
     return out
 
 
@@ -63,6 +67,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--set", action="append", required=True, metavar="NAME=PATH.npz")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="the rows as a JSON list")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
     sets = dict(s.split("=", 1) for s in a.set)
@@ -72,6 +77,11 @@ def main(argv: list[str] | None = None) -> None:
             r = evaluate(ck, Path(p))
             rows.append({"checkpoint": Path(ck).name, "set": name, **r})
             print(rows[-1], flush=True)
+    if a.json is not None:
+        import json
+
+        a.json.parent.mkdir(parents=True, exist_ok=True)
+        a.json.write_text(json.dumps(rows, indent=1))
     if a.out is not None:
         import pandas as pd
 

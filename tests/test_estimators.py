@@ -686,9 +686,13 @@ def test_evaluate_chooses_the_bound_on_the_bound_set(tmp_path: Path) -> None:
 
     model.norm.fit(torch.from_numpy(_tiny_data(48, 0)[0]), torch.from_numpy(_tiny_data(48, 0)[1]))
     save_checkpoint(model, tmp_path / "m")
+    meta = json.loads((tmp_path / "m.json").read_text())  # recorded by other studies before: one kept
+    meta["metrics"] = {"safety_calibration": {"bound": "gaussian", "k": 0.5}, "test/stale": 1.0}
+    (tmp_path / "m.json").write_text(json.dumps(meta))
     evaluate(data, [str(tmp_path / "m.pt")], [1.0], tmp_path / "out", latency_runs=3,
              bound_set=tmp_path / "bound_set.npz")
     rec = json.loads((tmp_path / "m.json").read_text())["metrics"]
+    assert rec["safety_calibration"] == {"bound": "gaussian", "k": 0.5} and "test/stale" not in rec
     assert rec["bound_selection"]["set"] == str(tmp_path / "bound_set.npz")
     for label, v in rec["val_bounds"].items():
         k = float(label.split("k=")[1])
@@ -698,3 +702,17 @@ def test_evaluate_chooses_the_bound_on_the_bound_set(tmp_path: Path) -> None:
     choice = rec["val_bound_choice"]
     if choice is not None:
         assert rec["val_bounds"][choice]["selection_set_overestimate_rate"] <= 0.05
+
+
+def test_evaluate_report_data_section_names_each_variants_training_data() -> None:
+    """The report's data section names the training folder of every variant (its checkpoint's record), not
+    only the ``--data`` folder's manifest."""
+    from studies.estimator_evaluate import _data_section
+
+    manifest = {"env_steps": 10, "wall_time_s": 1.0, "workers": 2, "env_steps_per_s": 10.0,
+                "splits": {"test": {"episodes": 1, "windows": 3, "episodes_fallen": 0}},
+                "train_ranges": {}, "shifted_ranges": {}}
+    lines = _data_section(manifest, {"test": 0.2, "shifted": 0.3}, {"mlp": "/d/a", "attention_step": "/d/b"})
+    text = "\n".join(lines)
+    assert "`mlp`: `/d/a`; `attention_step`: `/d/b`" in text
+    assert "training data" not in "\n".join(_data_section(manifest, {"test": 0.2}))

@@ -205,5 +205,9 @@ def test_per_foot_offline_scores() -> None:
     assert s["mae_loaded"] == pytest.approx(0.3 / 6)
     assert s["over_mean"] == pytest.approx(2 / 8) and s["over_lower"] == pytest.approx(1 / 8)
     assert s["mae_lowest_vs_trunk"] == pytest.approx(0.6 / 2)  # |0.2 - 0.8| and |0.5 - 0.5|
+    assert s["over_lowest_vs_trunk"] == 0.0  # lowest feet 0.2 (trunk 0.8) and 0.5 (0.5)
+    s = score(mean, mean - 0.1, y_foot, loaded, np.array([0.1, 0.3]))
+    assert s["over_lowest_vs_trunk"] == pytest.approx(1.0)  # 0.2 > 0.1 + 0.05, 0.5 > 0.3 + 0.05
+    assert s["over_lower_lowest_vs_trunk"] == pytest.approx(0.5)  # lower 0.1 vs 0.1: no; 0.4 vs 0.3: yes
     assert per_foot(np.array([0.3, 0.4]), 2).tolist() == [[0.3] * 4, [0.4] * 4]
     assert per_foot(None, 2) is None
