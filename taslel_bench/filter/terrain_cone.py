@@ -96,19 +96,24 @@ class TerrainFrictionCone(FrictionCone):
         if not packed.compiled:  # a part only Python measures
             self.write_python(qp, x)
             return
-        mu = x.mu_per_foot if x.mu_per_foot is not None else np.full(a1.N_LEGS, x.mu)
+        mu = self._feet_mu(x)
         _cone_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, packed.surface_rows,
                    x.model.foot_pos_in_world, self.flat, self.edge_downhill, x.in_stance, mu, self.lambda_min_n,
                    self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written, self._dist,
                    self._point)  # fmt: skip
-        self.mu_used[:] = mu
+
+    def _feet_mu(self, x: TickInputs) -> np.ndarray:
+        """``mu_used`` (4,) [-] set to this tick's coefficient of each foot: ``mu_per_foot``, or ``mu`` for all four
+        (written in place: no array made per tick)."""
+        self.mu_used[:] = x.mu_per_foot if x.mu_per_foot is not None else x.mu
+        return self.mu_used
 
     def write_python(self, qp: QPProblem, x: TickInputs) -> None:
         """:meth:`write` with the normals from :func:`contact_normals` and each foot's rows in numpy (a part the
         compiled query does not know; the reference of the compiled write in the tests)."""
         if not self.flat:
             self.normals[:] = contact_normals(self.terrain, x.model.foot_pos_in_world)
-        mu = x.mu_per_foot if x.mu_per_foot is not None else np.full(a1.N_LEGS, x.mu)
+        mu = self._feet_mu(x)
         for i in range(a1.N_LEGS):
             if x.in_stance[i]:
                 same = self._stance[i] and mu[i] == self._mu[i] and np.array_equal(self.normals[i], self._written[i])
@@ -116,7 +121,6 @@ class TerrainFrictionCone(FrictionCone):
                     self._write_foot_about(qp, i, self.normals[i], float(mu[i]))
             elif self._stance[i]:
                 self._write_foot(qp, i, False, np.nan)
-        self.mu_used[:] = mu
 
     def _write_foot_about(self, qp: QPProblem, i: int, n: np.ndarray, mu: float) -> None:
         r, c = self.start + 5 * i, NV + NU + 3 * i
