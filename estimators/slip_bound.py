@@ -40,6 +40,7 @@ import numpy as np
 
 from estimators import slip_kernel
 from estimators.slip import FootState, SlipDetector, SlipSettings
+from estimators.stance_proof import ProofSettings, StanceProof
 from taslel_bench.interfaces import MAX_FRICTION, Estimator, FrictionEstimate, Proprioception, integer, number
 
 MAX_EVENTS = 64  # slip events remembered (the newest)
@@ -54,7 +55,8 @@ class SlipBoundEstimator:
                  ratio_ticks: int = 20, behind_m: float = 0.05, ahead_m: float = 0.3,
                  own_ahead_m: float | None = None, propagate: bool = True, gate_margin: float | None = None,
                  ceiling_scale: float | None = None,
-                 detector: dict[str, Any] | None = None, name: str | None = None) -> None:
+                 detector: dict[str, Any] | None = None, proof: dict[str, Any] | None = None,
+                 name: str | None = None) -> None:
         """``base``: the estimator whose per-foot values are capped; ``floor_mu`` [-]: cap at a slip's
         onset (the lowest friction the deployment may meet); ``rise_per_s`` [1/s]: relaxation of a cap;
         ``ratio_scale`` [-]: factor on the median slipping force ratio (0: caps stay at the floor until they
@@ -64,7 +66,8 @@ class SlipBoundEstimator:
         past it (None: everywhere); ``gate_margin`` [-]: a slip opens an event only if its evidence cap (with
         ``ratio_scale`` > 0: ``ratio_scale`` x the force ratio of its first slipping tick) lies more than this
         below the foot's current estimate (None: every slip does); ``detector``:
-        :class:`estimators.slip.SlipSettings` fields."""
+        :class:`estimators.slip.SlipSettings` fields; ``proof``: :class:`estimators.stance_proof.ProofSettings`
+        fields (None: off), each foot's base raised to what holding feet proved where it stands plus a step."""
         self.base = base
         self.floor_mu = number("estimator.floor_mu", floor_mu, 0.0, MAX_FRICTION, lo_open=True)
         self.rise_per_s = number("estimator.rise_per_s", rise_per_s, 0.0, 100.0, unit="1/s")
@@ -79,12 +82,15 @@ class SlipBoundEstimator:
         self.ceiling_scale = None if ceiling_scale is None else number("estimator.ceiling_scale", ceiling_scale,
                                                                        0.0, 5.0, lo_open=True)
         self.detector = SlipDetector(SlipSettings(**dict(detector or {})))
+        self.proof = None if proof is None else StanceProof(ProofSettings(**dict(proof)))
         self.name = name if name is not None else f"slip_{getattr(base, 'name', 'base')}"
         self.reset()
 
     def reset(self) -> None:
         self.base.reset()
         self.detector.reset()
+        if self.proof is not None:
+            self.proof.reset()
         self._xy = np.zeros((0, 2))  # [m] event places (world)
         self._t = np.zeros(0)  # [s] time the event's cap was set
         self._cap = np.zeros(0)  # [-] the event's cap
@@ -108,6 +114,10 @@ class SlipBoundEstimator:
         caps = self._caps(obs.t_s, feet)
         self.last_caps = caps
         base = np.full(4, est.mu) if est.mu_per_foot is None else np.asarray(est.mu_per_foot, float)
+        if self.proof is not None:
+            self.proof.update(obs.t_s, feet)
+            proven = self.proof.proven(np.ascontiguousarray(feet.feet_w[:, :2]))
+            base = np.maximum(base, np.minimum(proven + self.proof.s.step, MAX_FRICTION))
         mu_feet = np.minimum(base, caps)
         self._last_mu = mu_feet
         return FrictionEstimate(mu=float(mu_feet.min()), sigma=est.sigma, ready=est.ready, mu_per_foot=mu_feet)
@@ -154,6 +164,8 @@ class SlipBoundEstimator:
         beyond MAX_EVENTS."""
         arrived = np.full(4, np.inf)
         arrived[foot] = t_s
+        if self.proof is not None:
+            self.proof.forget_near(xy_w)
         dropped = max(0, len(self._t) + 1 - MAX_EVENTS)  # rows that fall off the front
         self._open = np.where(self._open >= dropped, self._open - dropped, -1)
         self._xy = np.vstack([self._xy, xy_w])[-MAX_EVENTS:]
@@ -195,5 +207,8 @@ class SlipBoundEstimator:
         """The base's counters plus ``foot_slips`` (slip onsets that capped, feet x events) and
         ``foot_slips_ignored`` (onsets the gate let pass) this episode."""
         d = getattr(self.base, "diagnostics", None)
-        return {**(d() if d is not None else {}), "foot_slips": self.slips_detected,
-                "foot_slips_ignored": self.slips_ignored}
+        out = {**(d() if d is not None else {}), "foot_slips": self.slips_detected,
+               "foot_slips_ignored": self.slips_ignored}
+        if self.proof is not None:
+            out["stance_proofs"] = self.proof.proofs
+        return out

@@ -63,6 +63,7 @@ class Recorder:
 
     def __init__(self, inner) -> None:
         self.inner, self.name, self.rows = inner, getattr(inner, "name", "estimator"), []
+        self.reads_imu = bool(getattr(inner, "reads_imu", False))  # the loop samples the IMU only if asked
 
     def reset(self) -> None:
         self.inner.reset()
@@ -117,6 +118,8 @@ def run(overrides: list[str], seed: int) -> dict[str, object]:
     rec = Recorder(b.episode.estimator)
     b.episode.estimator = rec
     res = b.episode.run()
+    if res.status == "error":
+        raise RuntimeError(f"{overrides} seed {seed}: {res.message}")
     tr = res.trace
     tr.finalize()
     n = tr.n

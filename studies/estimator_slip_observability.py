@@ -36,6 +36,8 @@ DETECT_CASES = ((0.1, "oracle"), (0.2, "oracle"), (0.5, "oracle"), (0.9, "oracle
 class WithDetector:
     """Wraps an estimator; runs a slip detector on the same observations and keeps its output per tick."""
 
+    reads_imu = True  # the detector's trunk velocity comes from the IMU (the loop samples it only if asked)
+
     def __init__(self, inner) -> None:
         self.inner, self.name, self.det = inner, getattr(inner, "name", "estimator"), SlipDetector()
         self.loaded: list[np.ndarray] = []
@@ -64,6 +66,8 @@ def _run(overrides: list[str]):
     w = WithDetector(b.episode.estimator)
     b.episode.estimator = w
     res = b.episode.run()
+    if res.status == "error":
+        raise RuntimeError(f"{overrides}: {res.message}")
     res.trace.finalize()
     return res, w
 
