@@ -142,7 +142,10 @@ def main(argv: list[str] | None = None) -> None:
     if a.out is not None:
         cmd = "python -m studies.estimator_probe_signal " + " ".join(
             shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
-        a.out.write_text(f"`{cmd}`\n\n{__doc__}\n" + "\n".join(lines) + "\n")
+        from taslel_bench.util.machine import machine_info
+
+        code = machine_info()["code"]
+        a.out.write_text(f"`{cmd}` ({code})\n\n{__doc__}\n" + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
