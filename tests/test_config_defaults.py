@@ -62,7 +62,11 @@ def _class_files() -> list[Path]:
     ``low_friction`` is FlatGround with friction 0.2); they must hold the class's defaults."""
     out = []
     for path in sorted(p for group in ("scenario", "estimator", "solver") for p in (CONF_DIR / group).glob("*.yaml")):
-        target = get_class_or_function(OmegaConf.load(path)["_target_"])
+        node = OmegaConf.load(path)
+        if "_target_" not in node:  # a preset over another file of its group (its defaults list): checked there
+            assert "defaults" in node, f"{path}: neither _target_ nor a defaults list"
+            continue
+        target = get_class_or_function(node["_target_"])
         params = inspect.signature(target).parameters
         if "name" in params and params["name"].default == path.stem:
             out.append(path)
