@@ -98,3 +98,45 @@ def test_leg_link_contact_beside_its_foot_is_told_from_one_away_from_it():
     assert frames["leg_link_obstacle_contact"][:, fl].tolist() == [True, True]
     assert frames["leg_link_obstacle_contact_off_foot"][:, fl].tolist() == [False, True]
     assert not frames["leg_link_obstacle_contact"][:, [i for i in range(a1.N_LEGS) if i != fl]].any()
+
+
+def test_foot_cone_edge_is_the_contacts_edge_for_one_contact_and_the_net_force_for_two():
+    """One contact per foot (the logs run): the foot's mean normal is that contact's normal and its edge flag is
+    the contact's. Two contacts tilted +-30 deg about x, each at its cone edge (mu 0.5) with tangential forces
+    that cancel sideways: the foot's net force is vertical, inside the cone about their mean normal (world z)."""
+    from types import SimpleNamespace
+
+    from taslel_bench.metrics.contacts import CONE_EDGE_FRACTION, _foot_cone_edge
+
+    tilt = np.radians(30.0)
+    normals = np.array([[0.0, -np.sin(tilt), np.cos(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])
+    tangents = np.array([[0.0, np.cos(tilt), np.sin(tilt)], [0.0, -np.cos(tilt), np.sin(tilt)]])
+    f_n, mu = 40.0, 0.5
+    forces = f_n * normals + mu * f_n * tangents  # each at its cone edge, pushing the foot up the other flank
+    tr = SimpleNamespace(grf_plant_w=forces.sum(axis=0)[None, None, :].repeat(4, axis=1),
+                         foot_contact_normal_w=(f_n * normals).sum(axis=0)[None, None, :].repeat(4, axis=1))
+    edge, loaded = _foot_cone_edge(tr, slice(0, 1), np.full((1, 4, 3), mu))
+    assert loaded.all() and not edge.any()
+    assert np.allclose(tr.grf_plant_w[0, 0, :2], 0.0)  # the tangential parts cancel: the net force is vertical
+
+    single, per_contact, per_foot = _single_contact_edges(CONE_EDGE_FRACTION)
+    assert single.sum() > 1000
+    assert np.array_equal(per_contact[single], per_foot[single])
+
+
+def _single_contact_edges(fraction: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The logs run's (single-contact feet, per-contact edge of the main contact, per-foot edge)."""
+    from taslel_bench.metrics.contacts import _foot_cone_edge
+
+    cfg = compose_cfg(["scenario=logs", "filter.enabled=false", "duration=1.5", "progress=false",
+                       "record.mcap=false", "seed=0"])
+    tr = Built(cfg).episode.run().trace
+    tr.finalize()
+    n = slice(0, tr.n)
+    fn, ft, mu = tr.contact_fn_n[n], tr.contact_ft_n[n], tr.contact_mu[n]
+    single = ((fn > 0).sum(axis=2) == 1) & (fn.max(axis=2) >= 1.0)
+    main = np.argmax(fn, axis=2)[..., None]
+    fn1, ft1, mu1 = (np.take_along_axis(a, main, 2)[..., 0] for a in (fn, ft, mu))
+    per_contact = ft1 >= fraction * mu1 * fn1
+    per_foot, _ = _foot_cone_edge(tr, n, mu)
+    return single, per_contact, per_foot

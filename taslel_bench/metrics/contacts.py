@@ -13,7 +13,9 @@ reported separately, ``_stand``):
 * **stance** (``_stance`` suffix, the paper's selection): the filter's stance set; for the cone and slip metrics
   its plant-loaded contacts, for the GRF error every stance foot (one in the air has f = 0).
 
-Cone edge: |f_t| >= 0.98 mu f_n with the contact's own mu (sliding or about to). Slip rates are per loaded
+Cone edge: |f_t| >= 0.98 mu f_n with the contact's own mu (sliding or about to); beside it, per foot
+(``friction_cone_edge_rate_foot``), the foot's net force against its mean contact normal (a heightfield's tilted
+prism contacts can sit at their edges while the foot holds: ``studies/terrain_contact_normals.py``). Slip rates are per loaded
 contact; the sliding distance integrates, per plant-loaded foot, the slip of its most loaded contact. The
 filter's planned lambda is judged against the true cone about the terrain normal under the foot (mu = the
 terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mod:`taslel_bench.metrics.windows`).
@@ -121,12 +123,32 @@ class ContactStream:
             acc.pct(f"slip_mps_p95{key}", slip[sel], 95)
             acc.total(f"sliding_distance_m{key}", slip_main[feet])
         acc.window(f"friction_cone_edge_rate_worst_window{suffix}", edge, loaded_c, window_ticks(dt))
+        foot_edge, foot_loaded = _foot_cone_edge(tr, ticks, mu_c)
+        acc.mean(f"friction_cone_edge_rate_foot{suffix}", foot_edge[foot_loaded])
+        acc.window(f"friction_cone_edge_rate_foot_worst_window{suffix}", foot_edge, foot_loaded, window_ticks(dt))
         acc.mean(f"touchdown_slip_mps_mean{suffix}", slip_main[self.touchdowns(plant_loaded)])
         if tr.filter_on:
             _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix)
 
 
 FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank
+
+
+def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((n, 4) at the edge, (n, 4) loaded) per foot from its net terrain force (the foot sensor's, world axes:
+    every contact's force summed) against its mean contact normal (the contacts' normals weighted by their normal force): loaded
+    where the net normal force >= MIN_NORMAL_FORCE_N, at the edge where |net tangential| >= 0.98 mu x net
+    normal (mu = the foot's contacts' largest). Beside the per-contact rule: a foot wedged between contacts whose
+    frames tilt away from the surface (a heightfield's prisms) can hold each of them at its cone edge while the
+    foot as a whole is well inside the cone."""
+    f = tr.grf_plant_w[ticks]
+    nrm = tr.foot_contact_normal_w[ticks]
+    size = np.linalg.norm(nrm, axis=2, keepdims=True)
+    nrm = np.divide(nrm, size, out=np.zeros_like(nrm), where=size > 0)
+    f_n = np.einsum("nlj,nlj->nl", f, nrm)
+    f_t = np.linalg.norm(f - f_n[..., None] * nrm, axis=2)
+    loaded = f_n >= MIN_NORMAL_FORCE_N
+    return loaded & (f_t >= CONE_EDGE_FRACTION * mu_c.max(axis=2) * f_n), loaded
 
 
 def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,

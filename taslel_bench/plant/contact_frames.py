@@ -154,6 +154,10 @@ class ContactFrameReader:
         ground = np.where(foot_is_geom2, geom[tick, j, 0], geom[tick, j, 1])
         force = log.force[t][tick, j]
         normal = log.normal[t][tick, j] * np.where(foot_is_geom2, 1.0, -1.0)[:, None]
+        # [N] per foot, every terrain contact's normal weighted by its normal force, summed (its direction: the
+        # foot's mean contact normal; the foot's net force is the foot sensor's, the trace's grf_plant_w)
+        out["foot_contact_normal_w"] = np.zeros((n, a1.N_LEGS, 3))
+        np.add.at(out["foot_contact_normal_w"], (tick, leg), normal * force[:, :1])
         # [m/s] the foot's material point at the contact: v + omega x (p - c), c the root's subtree com
         cvel = log.foot_cvel[t][tick, leg]
         r = log.pos[t][tick, j] - log.root_com[t][tick]

@@ -140,6 +140,7 @@ class EpisodeTrace:
         self.contact_slip_mps = np.zeros((c, nl, k))
         self.contact_touching = np.zeros((c, nl, k), bool)
         self.contact_on_obstacle = np.zeros((c, nl, k), bool)
+        self.foot_contact_normal_w = np.zeros((c, nl, 3))  # [N] sum of f_n x normal over each foot's contacts
         self.leg_link_obstacle_contact = np.zeros((c, nl), bool)
         self.leg_link_obstacle_contact_off_foot = np.zeros((c, nl), bool)
 
