@@ -20,15 +20,11 @@ plans with, the floor).
 
 from __future__ import annotations
 
-import argparse
-import shlex
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from estimators.slip import SlipDetector, SlipSettings
-from taslel_bench import api
+from studies.estimator_slip_observability import run_wrapped
+from studies.study_table import table_study
 from taslel_bench.interfaces import FrictionEstimate, Proprioception
 
 RUN = ["scenario=flat", "duration=4", "record.mcap=false", "progress=false", "seed=100"]
@@ -64,16 +60,8 @@ class RatioRecorder:
 
 
 def _run(overrides: list[str]):
-    from taslel_bench.sim.build import Built
-
-    b = Built(api.compose(overrides))
-    w = RatioRecorder(b.episode.estimator)
-    b.episode.estimator = w
-    res = b.episode.run()
-    if res.status == "error":
-        raise RuntimeError(f"{overrides}: {res.message}")
-    res.trace.finalize()
-    return res, np.array(w.ratio)
+    res, rec = run_wrapped(overrides, RatioRecorder)
+    return res, np.array(rec.ratio)
 
 
 def stances(loaded: np.ndarray, t_s: np.ndarray) -> list[tuple[int, int, int]]:
@@ -126,27 +114,11 @@ def case_row(name: str, filt: list[str], plan: float | str, floor: float) -> str
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", type=Path, default=None, help="markdown table (a new file)")
-    a = ap.parse_args(argv)
-    if a.out is not None and a.out.exists():
-        ap.error(f"--out: {a.out} exists; not overwritten")
-    lines = [("| filter | plans mu | floor | fell | stances | landing max ratio, median / p90 | support max ratio, "
-             "median / p90 | quasi-static: error median | abs error p50 / p90 / p99 | with leg gravity: error median "
-             "| abs error p50 / p90 / p99 | landing, with leg gravity: error median | abs error p50 / p90 / p99 |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    print("\n".join(lines), flush=True)
-    for case in CASES:
-        lines.append(case_row(*case))
-        print(lines[-1], flush=True)
-    if a.out is not None:
-        cmd = "python -m studies.estimator_probe_signal " + " ".join(
-            shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
-        from taslel_bench.util.machine import machine_info
-
-        code = machine_info()["code"]
-        a.out.write_text(f"`{cmd}` ({code})\n\n{__doc__}\n" + "\n".join(lines) + "\n")
-
+    header = [("| filter | plans mu | floor | fell | stances | landing max ratio, median / p90 | support max ratio, "
+               "median / p90 | quasi-static: error median | abs error p50 / p90 / p99 | with leg gravity: error median "
+               "| abs error p50 / p90 / p99 | landing, with leg gravity: error median | abs error p50 / p90 / p99 |"),
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    table_study("studies.estimator_probe_signal", __doc__, header, (case_row(*case) for case in CASES), argv)
 
 if __name__ == "__main__":
     main()

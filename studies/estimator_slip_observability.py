@@ -59,17 +59,23 @@ def _estimator(plan: float | str) -> list[str]:
     return ["estimator=oracle"] if plan == "oracle" else ["estimator=fixed", f"estimator.mu={plan}"]
 
 
-def _run(overrides: list[str]):
+def run_wrapped(overrides: list[str], wrapper):
+    """One episode of ``overrides`` with its estimator wrapped by ``wrapper(estimator)`` (a recorder that passes
+    the estimate through): (result with its trace finalized, the wrapper). A run that errors raises."""
     from taslel_bench.sim.build import Built
 
     b = Built(api.compose(overrides))
-    w = WithDetector(b.episode.estimator)
+    w = wrapper(b.episode.estimator)
     b.episode.estimator = w
     res = b.episode.run()
     if res.status == "error":
         raise RuntimeError(f"{overrides}: {res.message}")
     res.trace.finalize()
     return res, w
+
+
+def _run(overrides: list[str]):
+    return run_wrapped(overrides, WithDetector)
 
 
 def stance_detection(loaded: np.ndarray, slipping: np.ndarray, t_s: np.ndarray,

@@ -13,11 +13,9 @@ within 5 deg of the surface; the contact-point slip speed (median) of edge and o
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 
+from studies.study_table import table_study
 from taslel_bench import api
 
 CASES = (("rough", "filter.enabled=false", 0), ("rough", "filter=terrain", 0), ("rough", "filter=terrain", 1),
@@ -51,24 +49,10 @@ def row(world: str, controller: str, seed: int) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", type=Path, default=None)
-    a = ap.parse_args(argv)
-    if a.out is not None and a.out.exists():
-        ap.error(f"--out: {a.out} exists; not overwritten")
-    lines = [("| world | controller | seed | loaded contacts | cone-edge share | edge contacts > 20 deg off the surface | "
-             "edge share within 5 deg of the surface | slip at edge [m/s] | slip elsewhere [m/s] |"),
-             "|---|---|---|---|---|---|---|---|---|"]
-    print("\n".join(lines), flush=True)
-    for case in CASES:
-        lines.append(row(*case))
-        print(lines[-1], flush=True)
-    if a.out is not None:
-        from taslel_bench.util.machine import machine_info
-
-        text = f"`python -m studies.terrain_contact_normals --out {a.out}` ({machine_info()['code']})\n\n{__doc__}\n"
-        a.out.write_text(text + "\n".join(lines) + "\n")
-
+    header = [("| world | controller | seed | loaded contacts | cone-edge share | edge contacts > 20 deg off the surface "
+               "| edge share within 5 deg of the surface | slip at edge [m/s] | slip elsewhere [m/s] |"),
+              "|---|---|---|---|---|---|---|---|---|"]
+    table_study("studies.terrain_contact_normals", __doc__, header, (row(*case) for case in CASES), argv)
 
 if __name__ == "__main__":
     main()
