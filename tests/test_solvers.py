@@ -383,6 +383,16 @@ def test_solver_verdict_ships_the_fastest_backend_with_no_wrong_answer_and_no_mi
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 10_000
 
 
+def test_verdict_tolerances_of_osqp_follow_the_formulation():
+    """OSQP's ``settings_with_equalities`` (eps_abs 1e-8) apply to QPs with equality rows only: the condensed
+    QP's row states the 1e-6 it was solved with."""
+    from taslel_bench.sweep.solver_verdict import _tolerances
+
+    described = str(make_backend("osqp").describe())
+    assert "eps_abs=1e-06" in _tolerances(described, equality_rows=False)[1]
+    assert "eps_abs=1e-08" in _tolerances(described, equality_rows=True)[1]
+
+
 def test_paper_claims_do_not_pool_backends_as_seeds(tmp_path):
     import pandas as pd
 

@@ -71,15 +71,19 @@ def _columns(path: Path) -> list[str]:
     return list(pq.read_schema(path).names)
 
 
-def _tolerances(settings: object) -> tuple[str, str]:
-    """(route, tolerance text) from a run's ``solver_settings`` (the backend's ``describe()``)."""
+def _tolerances(settings: object, equality_rows: bool = True) -> tuple[str, str]:
+    """(route, tolerance text) from a run's ``solver_settings`` (the backend's ``describe()``); a backend's
+    ``settings_with_equalities`` count only for QPs with equality rows (``equality_rows``: the full
+    formulation; the condensed QP has none)."""
     try:
         d = ast.literal_eval(str(settings))
     except (ValueError, SyntaxError):
         return "—", "—"
     if not isinstance(d, dict):
         return "—", "—"
-    native = {**dict(d.get("settings") or {}), **dict(d.get("settings_with_equalities") or {})}
+    native = dict(d.get("settings") or {})
+    if equality_rows:
+        native.update(dict(d.get("settings_with_equalities") or {}))
     tol = [f"{k}={v:g}" for k, v in native.items() if isinstance(v, (int, float)) and not isinstance(v, bool)
            and (k.startswith("eps") or "tol" in k) and "iterative_refinement" not in k]  # fmt: skip
     check = d.get("check") or {}
@@ -111,7 +115,8 @@ def verdict_rows(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> pd.Da
         checked = err[np.isfinite(err)]
         period_us = 1e6 / float(runs["control_rate_hz"].astype(float).iloc[0]) if "control_rate_hz" in runs else ONE_MS_US
         tol_nm = float(runs["qp_reference_tol_nm"].astype(float).iloc[0]) if "qp_reference_tol_nm" in runs else math.nan
-        route, tol = _tolerances(runs["solver_settings"].iloc[0] if "solver_settings" in runs else "")
+        condensed = "filter_formulation" in runs and str(runs["filter_formulation"].iloc[0]) == "condensed"
+        route, tol = _tolerances(runs["solver_settings"].iloc[0] if "solver_settings" in runs else "", not condensed)
         s = solve[solved]
         rows.append({
             "scenario": scenario, "backend": label, "runs": len(runs), "ticks": int(t["qp_status"].size),
