@@ -15,7 +15,9 @@ Columns per world, controller and plant (runs that did not fall): runs; late-top
 summary counts them (``foot_trips_top_late_swing``) and as found here (the check of this reading: the two
 differ where the foot sensor and the contact-frame log disagree on the onset tick); of those found here, the
 share within 5, 10 and 20 ms of the scheduled touchdown; median and max [ms] before it; the swing phase's
-minimum. Swing duration 200 ms in the preset.
+minimum; then the verdict's trips per run, and the same with the landings found here within 10 ms and within 20
+ms of the scheduled touchdown not counted (the largest run's count of the latter in brackets): a reading of
+the trip rule that tolerates touchdowns this close to the schedule. Swing duration 200 ms in the preset.
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ REARM_TICKS = 10  # taslel_bench.metrics.clearance.TRIP_REARM_S at 1 kHz
 FLANK_COS = math.cos(math.radians(45.0))  # taslel_bench.metrics.contacts.FLANK_COS
 WORLDS = ("logs", "steps", "rough", "slope")
 HEADER = [("| world | controller | plant | runs | late-top landings/run (summary) | found here/run | <= 5 ms early | "
-           "<= 10 ms | <= 20 ms | median early [ms] | max early [ms] | min swing phase |"),
-          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "<= 10 ms | <= 20 ms | median early [ms] | max early [ms] | min swing phase | trips/run | trips/run "
+           "less landings <= 10 ms early | <= 20 ms early (max per run) |"),
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def onsets(mask: np.ndarray) -> np.ndarray:
@@ -84,7 +87,7 @@ def rows(sweep: Path):
         if key[0] in WORLDS:
             groups.setdefault(key, []).append(run)
     for (world, controller, plant), group in sorted(groups.items()):
-        counted, phases, swing_ms, n = [], [], 200.0, 0
+        counted, phases, trips, swing_ms, n = [], [], [], 200.0, 0
         for run in group:
             s = json.loads((run / "summary.json").read_text())
             if s.get("fell"):
@@ -92,17 +95,22 @@ def rows(sweep: Path):
             p, swing_ms = late_top_phases(run)
             counted.append(float(s.get("foot_trips_top_late_swing", math.nan)))
             phases.append(p)
+            early_ms = (1.0 - p) * swing_ms
+            total = float(s.get("trips", math.nan))
+            trips.append((total, total - np.sum(early_ms <= 10.0), total - np.sum(early_ms <= 20.0)))
             n += 1
         if not n:
-            yield f"| {world} | {controller} | {plant} | 0 | - | - | - | - | - | - | - | - |"
+            yield f"| {world} | {controller} | {plant} | 0 | - | - | - | - | - | - | - | - | - | - | - |"
             continue
         early = (1.0 - np.concatenate(phases)) * swing_ms
         share = [f"{np.mean(early <= ms):.2f}" if early.size else "-" for ms in (5.0, 10.0, 20.0)]
         med = f"{np.median(early):.0f}" if early.size else "-"
         top = f"{early.max():.0f}" if early.size else "-"
         low = f"{1.0 - early.max() / swing_ms:.2f}" if early.size else "-"
+        t = np.array(trips)
         yield (f"| {world} | {controller} | {plant} | {n} | {np.nanmean(counted):.1f} | {early.size / n:.1f} | "
-               f"{' | '.join(share)} | {med} | {top} | {low} |")
+               f"{' | '.join(share)} | {med} | {top} | {low} | {np.nanmean(t[:, 0]):.1f} | {np.nanmean(t[:, 1]):.1f} | "
+               f"{np.nanmean(t[:, 2]):.1f} ({np.nanmax(t[:, 2]):.0f}) |")
 
 
 def _sweep_arg(ap) -> None:
