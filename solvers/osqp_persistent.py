@@ -8,7 +8,8 @@ formulation's dense pattern they are half of G, and leaving them out cuts OSQP's
 2.5x (measured: 177 -> 68 µs per QP, same iterations and answers). The sparsity pattern of the kept rows is
 part of the layout: a change (e.g. standing -> walking) sets OSQP up again. P is passed as its
 upper triangle. The CSC structures come from the problem's constant masks (:mod:`solvers.sparse`), so
-``update(Px=..., Ax=...)`` can send all values in one go every tick.
+the compiled solver's ``update_data_mat`` can take all values in one go every tick. Updates and solves go to
+the compiled solver (``osqp.OSQP``'s ``_solver``) directly: the same calls without the wrapper's copies.
 
 Warm start: OSQP keeps its last iterate (x, y) in the workspace and starts the next solve from it when
 its ``warm_starting`` setting is on; ``warm_start=False`` sets it off (every solve starts from zero).

@@ -383,6 +383,15 @@ def test_solver_verdict_ships_the_fastest_backend_with_no_wrong_answer_and_no_mi
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 10_000
 
 
+def test_osqp_infinity_is_the_installed_osqps():
+    """The persistent OSQP's gather clips bounds to OSQP_INFTY, the value ``osqp.OSQP.update`` clips to."""
+    from osqp.interface import constant
+
+    from solvers.osqp_persistent import OSQP_INFTY
+
+    assert OSQP_INFTY == constant("OSQP_INFTY")
+
+
 def test_verdict_tolerances_of_osqp_follow_the_formulation():
     """OSQP's ``settings_with_equalities`` (eps_abs 1e-8) apply to QPs with equality rows only: the condensed
     QP's row states the 1e-6 it was solved with."""
