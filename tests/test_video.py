@@ -88,6 +88,31 @@ def test_verdict_text_reads_the_safety_keys_when_present():
     assert verdict_text({"fell": True, "fall_reason": "trunk_height", "trips": 2}).endswith("fell (trunk_height), 2 trips")
 
 
+def test_overlay_fit_cuts_to_the_longest_prefix_that_fits():
+    """The overlay's line cut (a binary search) gives what cutting one character at a time gave."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    from taslel_bench.record.video import _fit
+
+    draw = ImageDraw.Draw(Image.new("RGB", (512, 64)))
+    font = ImageFont.load_default(size=14)
+
+    def one_at_a_time(text: str, width: int) -> str:
+        if draw.textlength(text, font=font) <= width:
+            return text
+        while text and draw.textlength(text + "...", font=font) > width:
+            text = text[:-1]
+        return text + "..."
+
+    verdict = ("verdict: UNSAFE tripped: trips=22 > 0 (new contacts of a swing foot or a leg link with an obstacle); "
+               "cone_edge: friction_cone_edge_rate_worst_window=0.307 > 0.25 (loaded contacts at the cone edge)")
+    for text in (verdict, "t =  3.000 s", "status: ok", "x" * 300, ""):
+        for width in (0, 20, 200, 502, 5000):
+            fitted = _fit(draw, text, font, width)
+            assert fitted == one_at_a_time(text, width), (text[:20], width)
+            assert _fit(draw, text, font, width) == fitted  # remembered
+
+
 def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(tmp_path):
     """The report's stills (sweep/stills.py): a fall row gets a PNG strip of 5 frames and an event clip
     (no video.mp4 in the run); the first trip is the first walking tick of a swing foot on an obstacle."""

@@ -11,6 +11,7 @@ Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``).
 from __future__ import annotations
 
 import re
+import sys
 import traceback
 from pathlib import Path
 
@@ -26,6 +27,7 @@ STRIP_OFFSETS_S = (-1.0, -0.75, -0.5, -0.25, 0.0)  # [s] frame times relative to
 STILL_SIZE = (256, 192)  # [px] width, height of one frame
 CLIP_WINDOW_S = (-2.0, 0.5)  # [s] the event clip, relative to the event
 FPS = 30.0
+PROGRESS_EVERY = 20  # runs between progress lines while the stills render
 
 
 def event_of_run(run_dir: Path, row: pd.Series) -> tuple[str, float] | None:
@@ -93,17 +95,29 @@ def _video_link(sweep_dir: Path, run_dir: str, t_event_s: float, name: str) -> s
     return str(clip)
 
 
+def _event_or_error(run_dir: Path, row: pd.Series) -> tuple[str, float] | str | None:
+    """:func:`event_of_run`, or the last line of its traceback when it fails (reported as the run's missing still)."""
+    try:
+        return event_of_run(run_dir, row)
+    except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+        return traceback.format_exc().strip().splitlines()[-1]
+
+
 def still_strips(sweep_dir: Path, frame: pd.DataFrame) -> list[str]:
     """Report lines: per finished run that fell or tripped, its still strip linked to its video."""
     if frame.empty or "run_dir" not in frame or "status" not in frame:
         return []
     lines: list[str] = []
-    for _, row in frame[frame["status"].isin(("ok", "degraded"))].iterrows():
-        run_dir = str(row["run_dir"])
+    runs = [(str(row["run_dir"]), row) for _, row in frame[frame["status"].isin(("ok", "degraded"))].iterrows()]
+    events = [(run_dir, row, _event_or_error(sweep_dir / run_dir, row)) for run_dir, row in runs]
+    events = [e for e in events if e[2] is not None]
+    for i, (run_dir, row, event) in enumerate(events):
+        if i % PROGRESS_EVERY == 0:  # ~3 s per run: a large sweep's report renders for minutes
+            print(f"report: still strips and clips {i}/{len(events)}", file=sys.stderr, flush=True)
+        if isinstance(event, str):  # event_of_run failed
+            lines.append(f"- `{run_dir}`: no still ({event})\n")
+            continue
         try:
-            event = event_of_run(sweep_dir / run_dir, row)
-            if event is None:
-                continue
             kind, t = event
             name = _name(run_dir)
             png = still_strip(sweep_dir / run_dir, t, sweep_dir / STILLS_DIR / f"{name}.png")
