@@ -12,6 +12,7 @@ from taslel_bench.util.fields import fail, integer, number
 
 MAX_TRIPS = 10_000
 MAX_DEPTH_M = 0.5  # [m]
+MAX_TOUCHDOWN_TOLERANCE_S = 0.1  # [s] half of the default swing
 
 
 def safety_limits(cfg: DictConfig) -> SafetyLimits:
@@ -30,6 +31,8 @@ def safety_limits(cfg: DictConfig) -> SafetyLimits:
             raise fail(path, value, f"unknown key; valid: {', '.join(sorted(fields))}")
         if key == "trips_max":
             values[key] = integer(path, value, 0, MAX_TRIPS)
+        elif key.endswith("_s"):
+            values[key] = number(path, value, 0.0, MAX_TOUCHDOWN_TOLERANCE_S, unit="s")
         elif key.endswith("_m"):
             values[key] = number(path, value, 0.0, MAX_DEPTH_M, unit="m")
         else:  # a rate

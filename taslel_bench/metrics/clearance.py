@@ -31,6 +31,10 @@ early touchdown, as the floor's are) and the leg-link onsets within
 :data:`taslel_bench.plant.contact_frames.FOOT_NEIGHBOURHOOD_M` of the leg's own foot centre (the URDF calf
 box grazing the log the foot stands on). ``trips_strikes`` is what is left: flank hits, top hits in the first
 half of the swing and leg-link contacts away from the foot (``shin_trips_off_foot``).
+``foot_trips_top_near_touchdown`` are the late-swing top landings at most ``touchdown_tolerance_s`` before the
+scheduled touchdown ((1 - swing phase) x the swing's duration), and ``trips_beyond_touchdown_tolerance`` is
+``trips`` without them (equal to ``trips`` when the tolerance is 0): the count the verdict reads when
+``safety.trip_touchdown_tolerance_s`` > 0.
 """
 
 from __future__ import annotations
@@ -61,11 +65,13 @@ def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
     acc.max(f"{prefix}_max_m", x)
 
 
-def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str, float]:
+def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001, swing_s: float = 0.2,
+                      touchdown_tolerance_s: float = 0.0) -> dict[str, float]:  # fmt: skip
     """Virtual-profile clearance, physical-obstacle trips and strikes, and the filter's barrier values over the
-    walking ticks ``k0:n`` (``dt`` [s] control period). Keys are nan when the run has no profile / no
-    obstacles / no filter."""
-    stream = ClearanceStream(dt)
+    walking ticks ``k0:n`` (``dt`` [s] control period, ``swing_s`` [s] the scheduled swing's duration,
+    ``touchdown_tolerance_s`` [s] see the module doc). Keys are nan when the run has no profile / no obstacles
+    / no filter."""
+    stream = ClearanceStream(dt, swing_s, touchdown_tolerance_s)
     stream.feed(tr, slice(k0, tr.n))
     return stream.result()
 
@@ -74,8 +80,10 @@ class ClearanceStream:
     """:func:`clearance_metrics` fed chunk by chunk (rows of the trace's current chunk); contact onsets
     carried across chunks."""
 
-    def __init__(self, dt: float) -> None:
+    def __init__(self, dt: float, swing_s: float = 0.2, touchdown_tolerance_s: float = 0.0) -> None:
         self.dt, self.acc = dt, Reducer()
+        # swing phase from which a late-swing top landing is within the tolerance (> 1: none is)
+        self.near_touchdown_phase = 1.0 - touchdown_tolerance_s / swing_s if touchdown_tolerance_s > 0.0 else 2.0
         rearm = max(1, round(TRIP_REARM_S / dt))
         self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
         self.link_off_foot = Onsets(rearm)
@@ -132,6 +140,9 @@ class ClearanceStream:
         acc.count("foot_trips_top_late_swing", late_top.sum())
         acc.count("shin_trips_off_foot", off_foot)
         acc.count("trips_strikes", (new & swing).sum() - late_top.sum() + off_foot)
+        near = (late_top & (tr.swing_phase[w] >= self.near_touchdown_phase)).sum()
+        acc.count("foot_trips_top_near_touchdown", near)
+        acc.count("trips_beyond_touchdown_tolerance", (new & swing).sum() + link_new.sum() - near)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
         acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)

@@ -35,18 +35,21 @@ DEFAULT_SAFETY = SafetyLimits()
 
 
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
-              limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY) -> dict[str, object]:  # fmt: skip
-    """The run's summary. ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip window);
-    ``limits``: when the run is ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``. The
-    numbers come from the episode's :class:`SummaryStream` (fed chunk by chunk during the episode) when it
-    was made with these settings, else from the whole trace (which must then hold every tick)."""
+              limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY,
+              swing_duration_s: float = 0.2) -> dict[str, object]:  # fmt: skip
+    """The run's summary. ``stance_duration_s`` / ``swing_duration_s`` [s]: the scheduled stance length
+    (touchdown-slip window) and swing length (how early a landing is); ``limits``: when the run is ``degraded``
+    instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from the episode's
+    :class:`SummaryStream` (fed chunk by chunk during the episode) when it was made with these settings, else
+    from the whole trace (which must then hold every tick)."""
     stream = res.extras.get("metrics")
-    if not isinstance(stream, SummaryStream) or stream.settings != (control_dt_s, stand_duration_s,
-                                                                     stance_duration_s, limits):  # fmt: skip
+    settings = (control_dt_s, stand_duration_s, stance_duration_s, limits, swing_duration_s,
+                safety.trip_touchdown_tolerance_s)  # fmt: skip
+    if not isinstance(stream, SummaryStream) or stream.settings != settings:
         if res.trace.offset:
             raise ValueError("summarize: the trace holds only the last chunk and the episode's metrics were "
                              "made with other settings")
-        stream = SummaryStream(control_dt_s, stand_duration_s, stance_duration_s, limits)
+        stream = SummaryStream(*settings)
         stream.feed(res.trace, res.trace.n)
     n = res.trace.n
     out: dict[str, object] = {
@@ -82,13 +85,15 @@ class SummaryStream:
     key; a percentile key keeps at most :data:`taslel_bench.metrics.stream.EXACT_QUANTILE_VALUES` values,
     then a fixed-size histogram; the reference-checked ticks' u errors are kept whole (8 bytes per check)."""
 
-    def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS) -> None:
-        self.settings = (dt, stand_s, stance_s, limits)
+    def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS,
+                 swing_s: float = 0.2, trip_touchdown_tolerance_s: float = 0.0) -> None:  # fmt: skip
+        self.settings = (dt, stand_s, stance_s, limits, swing_s, trip_touchdown_tolerance_s)
         self.dt, self.k_walk = dt, round(stand_s / dt)  # first walking tick
         self.acc, self.n, self.filter_on = Reducer(), 0, False
         self.walk_contacts = ContactStream(dt, stance_s, "")
         self.stand_contacts = ContactStream(dt, stance_s, "_stand")
-        self.clearance, self.residuals = ClearanceStream(dt), ResidualStream(limits)
+        self.clearance = ClearanceStream(dt, swing_s, trip_touchdown_tolerance_s)
+        self.residuals = ResidualStream(limits)
         self.estimator = EstimatorStream()
         self.ends: dict[str, np.ndarray] = {}  # trunk position and yaw of the first walking and the last tick
         self.fed = {"walk": False, "stand": False}

@@ -19,6 +19,10 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class SafetyLimits:
     trips_max: int = 0  # [-] trips per run (a swing foot's or a leg link's new contact with an obstacle)
+    # [s] > 0: a swing foot landing on an obstacle's top at most this long before its scheduled touchdown is an
+    # early touchdown, not a trip (as on the floor): the check reads ``trips_beyond_touchdown_tolerance``
+    # instead of ``trips``; 0: every trip counts
+    trip_touchdown_tolerance_s: float = 0.0
     cone_edge_rate_worst_window_max: float = 0.25  # [-] loaded contacts at the cone edge, worst 0.5 s window
     clearance_violation_rate_worst_window_max: float = 0.10  # [-] swing ticks > 1 mm below z(s), worst window
     clearance_violation_depth_max_m: float = 0.01  # [m] deepest swing-foot violation of the profile z(s)
@@ -49,6 +53,10 @@ def judge(summary: dict[str, object], limits: SafetyLimits) -> tuple[bool, str]:
         reasons.append(f"fell: at {float(summary.get('time_to_fall_s', math.nan)):.2f} s "
                        f"({summary.get('fall_reason', '')})")
     for tag, (key, attr, meaning) in CHECKS.items():
+        if tag == "tripped" and limits.trip_touchdown_tolerance_s > 0.0:
+            key = "trips_beyond_touchdown_tolerance"
+            meaning += (f", top landings within {1e3 * limits.trip_touchdown_tolerance_s:g} ms of the scheduled "
+                        f"touchdown not counted")
         value = summary.get(key)
         limit = getattr(limits, attr)
         if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > limit:

@@ -215,6 +215,12 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     return summary
 
 
+def _stance_and_swing_s(cfg: DictConfig) -> tuple[float, float]:
+    """[s] the gait's scheduled stance and swing durations (period x duty, period x (1 - duty))."""
+    period, duty = float(cfg.controller.period), float(cfg.controller.duty)
+    return period * duty, period * (1.0 - duty)
+
+
 def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
     """The episode in chunks of ``record.chunk_ticks`` ticks (null: the whole episode in memory): each
     chunk's rows go to steps.parquet (a temporary file until the end) and to the summary's metrics."""
@@ -222,8 +228,9 @@ def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
     episode = built.episode
     episode.chunk_ticks = int(chunk) if chunk is not None else None
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
-    episode.metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg))
+    stance_s, swing_s = _stance_and_swing_s(cfg)
+    episode.metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), swing_s,
+                                    safety_limits(cfg).trip_touchdown_tolerance_s)  # fmt: skip
     writer = StepsWriter(out_dir / run_files.STEPS)
     episode.steps_sink = writer.append
     return writer
@@ -262,8 +269,9 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     """The episode's metrics (:func:`taslel_bench.metrics.summary.summarize`), the estimator's own
     diagnostics (optional ``diagnostics()``) and the backend's settings."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s = float(cfg.controller.period) * float(cfg.controller.duty)
-    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg))
+    stance_s, swing_s = _stance_and_swing_s(cfg)
+    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg),
+                    swing_s)  # fmt: skip
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))
     out["reference_s"] = float(res.extras.get("reference_s", 0.0))
     out.update(_reference_summary(built, res, dt))  # record.reference_every: u error against the reference

@@ -337,7 +337,9 @@ crossed a health limit and are listed below):
 - `trips_strikes`: `trips` less the swing feet landing on an obstacle's top in the second half of the swing
   (`foot_trips_top_late_swing`: early touchdowns, which on the floor are not counted) and less the leg-link
   contacts within 4 cm of the leg's own foot centre (the URDF calf box grazing the log the foot stands on);
-  `shin_trips_off_foot` the leg-link onsets beyond 4 cm. `trips` stays the verdict's count.
+  `shin_trips_off_foot` the leg-link onsets beyond 4 cm. `trips` stays the verdict's count unless
+  `safety.trip_touchdown_tolerance_s` > 0: then `trips_beyond_touchdown_tolerance`, `trips` less the top
+  landings at most that long before the scheduled touchdown (`foot_trips_top_near_touchdown`).
 - `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
 - `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
   |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows
