@@ -40,7 +40,6 @@ from pathlib import Path
 import numpy as np
 
 from estimators.safety import useful
-from taslel_bench import api
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, FrictionEstimate, Proprioception
 
 DROP_SCENARIO = ["scenario=friction_patch", "scenario.friction=0.8", "scenario.friction_after=0.2",
@@ -112,16 +111,10 @@ def _first(ok: np.ndarray, dt: float) -> float:
 
 def run(overrides: list[str], seed: int) -> dict[str, object]:
     """One episode of ``overrides`` + ``seed``; its per-foot scores, fall and sliding."""
-    from taslel_bench.sim.build import Built
+    from studies.estimator_slip_observability import run_wrapped
 
-    b = Built(api.compose([*overrides, f"seed={seed}"]))
-    rec = Recorder(b.episode.estimator)
-    b.episode.estimator = rec
-    res = b.episode.run()
-    if res.status == "error":
-        raise RuntimeError(f"{overrides} seed {seed}: {res.message}")
+    res, rec = run_wrapped([*overrides, f"seed={seed}"], Recorder)
     tr = res.trace
-    tr.finalize()
     n = tr.n
     mu_hat, loaded = np.array(rec.rows[:n]), tr.in_contact[:n]
     dt = float(tr.t_s[1] - tr.t_s[0]) if n > 1 else 1e-3

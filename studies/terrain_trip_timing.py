@@ -31,10 +31,10 @@ import pandas as pd
 import yaml
 
 from studies.study_table import table_study
+from taslel_bench.metrics.clearance import TRIP_REARM_S, onsets
+from taslel_bench.metrics.contacts import FLANK_COS
 
 LEGS = ("FL", "FR", "RL", "RR")
-REARM_TICKS = 10  # taslel_bench.metrics.clearance.TRIP_REARM_S at 1 kHz
-FLANK_COS = math.cos(math.radians(45.0))  # taslel_bench.metrics.contacts.FLANK_COS
 WORLDS = ("logs", "steps", "rough", "slope")
 HEADER = [("| world | controller | plant | runs | late-top landings/run (summary) | found here/run | <= 5 ms early | "
            "<= 10 ms | <= 20 ms | median early [ms] | max early [ms] | min swing phase | trips/run | trips/run "
@@ -42,29 +42,17 @@ HEADER = [("| world | controller | plant | runs | late-top landings/run (summary
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
-def onsets(mask: np.ndarray) -> np.ndarray:
-    """True where ``mask`` turns on after at least REARM_TICKS ticks off (a run under way at row 0 is not one)."""
-    out = np.zeros_like(mask)
-    off = 0 if mask[0] else REARM_TICKS  # ticks since the mask was last on
-    for k in range(1, mask.size):
-        if mask[k]:
-            out[k] = off >= REARM_TICKS and not mask[k - 1]
-            off = 0
-        else:
-            off += 1
-    return out
-
-
 def late_top_phases(run: Path) -> tuple[np.ndarray, float]:
     """(swing phases of the run's late-swing top landings, swing duration [ms])."""
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     swing_ms = 1000.0 * float(cfg["controller"]["period"]) * (1.0 - float(cfg["controller"]["duty"]))
     d = pd.read_parquet(run / "steps.parquet")
+    rearm = max(1, round(TRIP_REARM_S / (d["t_s"].iloc[1] - d["t_s"].iloc[0])))  # the harness's trip re-arm
     walking = d["t_s"].to_numpy() >= float(cfg["controller"]["stand_duration"])
     phases = []
     for leg in LEGS:
         touch = d[f"{leg}_obstacle_contact"].to_numpy(bool)
-        new = onsets(touch)
+        new = onsets(touch, rearm)
         air = ~d[f"{leg}_stance"].to_numpy(bool) & ~d[f"{leg}_scheduled_stance"].to_numpy(bool)
         phase = d[f"{leg}_swing_phase"].to_numpy(float)
         top = d[f"{leg}_contact_frame_normal_z_w"].to_numpy(float) >= FLANK_COS

@@ -179,12 +179,12 @@ def _qpos_addresses(model) -> np.ndarray:
 
 def _overlay(image: np.ndarray, lines: list[tuple[str, tuple[int, int, int]]]) -> np.ndarray:
     """Text lines on a dark band at the top-left of the image (PIL's default font)."""
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     img = Image.fromarray(image)
     draw = ImageDraw.Draw(img)
     line_h = max(11, img.height // 24)
-    font = _font(line_h - 2, ImageFont)
+    font = _font(line_h - 2)
     lines = [(_fit(draw, text, font, img.width - 10), colour) for text, colour in lines]
     width = max((draw.textlength(text, font=font) for text, _ in lines), default=0)
     draw.rectangle([0, 0, int(width) + 10, line_h * len(lines) + 6], fill=(0, 0, 0))
@@ -198,10 +198,13 @@ _FITTED: dict[tuple[str, int, int], str] = {}  # (text, font size, width) -> the
 _FITTED_MAX = 4096  # entries kept (a long video's lines change every frame only in their time stamp)
 
 
-def _font(size: int, image_font):
+def _font(size: int):
+    """PIL's default font at ``size`` px, loaded once."""
+    from PIL import ImageFont
+
     font = _FONTS.get(size)
     if font is None:
-        font = _FONTS[size] = image_font.load_default(size=size)
+        font = _FONTS[size] = ImageFont.load_default(size=size)
     return font
 
 
