@@ -129,12 +129,20 @@ def test_target_sentences_say_missed_when_a_number_misses():
     assert "2.50x" in sentences[6]
 
 
-def test_trip_target_sentences_give_both_readings_every_trip_and_strikes_only():
-    sentences = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=0.5))
-    assert sentences[0].startswith("**logs**") and ": missed: falls 0/1, trips 20 per run" in sentences[0]
-    assert "(strikes 0.5: counting strikes, met)" in sentences[0], sentences[0]
-    sentences = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=1.5))
-    assert "(strikes 1.5: counting strikes, missed)" in sentences[0], sentences[0]
+def test_trip_target_sentences_read_the_trips_three_ways_with_the_worst_run():
+    """Every trip, beyond 20 ms of the touchdown and strikes, each with its mean, its largest run and met or
+    missed; a sweep without the 20 ms key (older summaries) shows the two it has."""
+    frame = _sweep(trips=20, trips_beyond_touchdown_20ms=0.5, trips_strikes=0.5)
+    extra = _row("logs", "terrain", trips=22, trips_beyond_touchdown_20ms=3, trips_strikes=1)
+    sentence = terrain_table.target_sentences(pd.concat([frame, pd.DataFrame([extra])]))[0]
+    assert sentence.startswith("**logs**") and ": missed: falls 0/2, 3 m;" in sentence, sentence
+    assert "every trip 21 (at most 22): missed" in sentence, sentence
+    assert "beyond 20 ms of the touchdown 1.75 (at most 3): missed" in sentence, sentence
+    assert "strikes 0.75 (at most 1): met" in sentence, sentence
+    old = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=1.5))[0]
+    assert "beyond 20 ms" not in old and "strikes 1.5 (at most 1.5): missed" in old, old
+    ok = terrain_table.target_sentences(_sweep(trips=1, trips_beyond_touchdown_20ms=0, trips_strikes=0))[0]
+    assert ": met: falls 0/1" in ok and "every trip 1 (at most 1): met" in ok, ok
 
 
 def test_urdf_plant_runs_keep_the_paper_claims_on_one_plant():

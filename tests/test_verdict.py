@@ -68,6 +68,9 @@ def test_a_touchdown_tolerance_leaves_out_top_landings_just_before_the_schedule_
     assert strict["trips"] == tolerant["trips"] == 4
     assert (strict["foot_trips_top_near_touchdown"], strict["trips_beyond_touchdown_tolerance"]) == (0, 4)
     assert (tolerant["foot_trips_top_near_touchdown"], tolerant["trips_beyond_touchdown_tolerance"]) == (1, 3)
+    # the reports' fixed 20 ms reading, whatever the verdict's tolerance; 5 ms leaves the 10 ms landing in
+    assert strict["trips_beyond_touchdown_20ms"] == tolerant["trips_beyond_touchdown_20ms"] == 3
+    assert clearance_metrics(tr, 0, DT, 0.2, 0.005)["trips_beyond_touchdown_tolerance"] == 4
     base = {"status": "ok", "fell": False}
     assert "trips=4" in judge({**base, **tolerant}, SafetyLimits())[1]  # the default reads every trip
     limits = SafetyLimits(trips_max=3, trip_touchdown_tolerance_s=0.02)

@@ -34,7 +34,9 @@ half of the swing and leg-link contacts away from the foot (``shin_trips_off_foo
 ``foot_trips_top_near_touchdown`` are the late-swing top landings at most ``touchdown_tolerance_s`` before the
 scheduled touchdown ((1 - swing phase) x the swing's duration), and ``trips_beyond_touchdown_tolerance`` is
 ``trips`` without them (equal to ``trips`` when the tolerance is 0): the count the verdict reads when
-``safety.trip_touchdown_tolerance_s`` > 0.
+``safety.trip_touchdown_tolerance_s`` > 0. ``trips_beyond_touchdown_20ms`` is the same count at a fixed
+:data:`REPORT_TOUCHDOWN_TOLERANCE_S`, whatever the verdict's tolerance: the reports' third reading of the trips,
+between ``trips`` and ``trips_strikes``.
 """
 
 from __future__ import annotations
@@ -50,12 +52,19 @@ from taslel_bench.record.trace import EpisodeTrace
 
 CLEARANCE_TOLERANCE_M = 0.001  # [m] below the profile by more than this = a violation
 TRIP_REARM_S = 0.01  # [s] an obstacle contact starting within this of the foot's last one continues it
+REPORT_TOUCHDOWN_TOLERANCE_S = 0.02  # [s] trips_beyond_touchdown_20ms: 10 % of the default 0.2 s swing
 
 
 def onsets(mask: np.ndarray, rearm_ticks: int = 1) -> np.ndarray:
     """Bool array like ``mask`` (ticks on axis 0): True where ``mask`` turns on after at least ``rearm_ticks``
     ticks off (a run under way at the first row is not an onset: it continues from before)."""
     return Onsets(rearm_ticks)(mask)
+
+
+def _near_touchdown_phase(tolerance_s: float, swing_s: float) -> float:
+    """Swing phase from which a late-swing top landing is at most ``tolerance_s`` [s] before the scheduled
+    touchdown (> 1, none is, when the tolerance is 0)."""
+    return 1.0 - tolerance_s / swing_s if tolerance_s > 0.0 else 2.0
 
 
 def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
@@ -82,8 +91,8 @@ class ClearanceStream:
 
     def __init__(self, dt: float, swing_s: float = 0.2, touchdown_tolerance_s: float = 0.0) -> None:
         self.dt, self.acc = dt, Reducer()
-        # swing phase from which a late-swing top landing is within the tolerance (> 1: none is)
-        self.near_touchdown_phase = 1.0 - touchdown_tolerance_s / swing_s if touchdown_tolerance_s > 0.0 else 2.0
+        self.near_touchdown_phase = _near_touchdown_phase(touchdown_tolerance_s, swing_s)
+        self.near_touchdown_phase_report = _near_touchdown_phase(REPORT_TOUCHDOWN_TOLERANCE_S, swing_s)
         rearm = max(1, round(TRIP_REARM_S / dt))
         self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
         self.link_off_foot = Onsets(rearm)
@@ -143,6 +152,8 @@ class ClearanceStream:
         near = (late_top & (tr.swing_phase[w] >= self.near_touchdown_phase)).sum()
         acc.count("foot_trips_top_near_touchdown", near)
         acc.count("trips_beyond_touchdown_tolerance", (new & swing).sum() + link_new.sum() - near)
+        near_report = (late_top & (tr.swing_phase[w] >= self.near_touchdown_phase_report)).sum()
+        acc.count("trips_beyond_touchdown_20ms", (new & swing).sum() + link_new.sum() - near_report)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
         acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)

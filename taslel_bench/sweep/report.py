@@ -340,6 +340,8 @@ crossed a health limit and are listed below):
   `shin_trips_off_foot` the leg-link onsets beyond 4 cm. `trips` stays the verdict's count unless
   `safety.trip_touchdown_tolerance_s` > 0: then `trips_beyond_touchdown_tolerance`, `trips` less the top
   landings at most that long before the scheduled touchdown (`foot_trips_top_near_touchdown`).
+  `trips_beyond_touchdown_20ms` is the same count at 20 ms whatever the verdict reads (the terrain table's
+  third reading).
 - `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
 - `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
   |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows

@@ -34,6 +34,8 @@ MAX_TICK_COST_RATIO = 2.0  # terrain filter / paper filter, tick median, same ba
 # table column -> summary column (means over finished runs)
 METRICS = {
     "trips/run": "trips",
+    # trips less the top landings at most 20 ms before the scheduled touchdown (absent in sweeps before the key)
+    "beyond 20 ms/run": "trips_beyond_touchdown_20ms",
     "strikes/run": "trips_strikes",  # trips less late-swing top landings and calf grazes beside the foot
     "distance [m]": "distance_m",
     "GRF err z loaded [N]": "grf_mae_z_n",
@@ -114,6 +116,30 @@ def _duration_s(frame: pd.DataFrame) -> float:
     return _mean(frame, "duration_s") if "duration_s" in frame else 10.0
 
 
+# the three readings of the trip target, each with its summary key (the owner's open question: which one the
+# target means); every one is shown with its mean and its largest count in one run
+TRIP_READINGS = {"every trip": "trips", "beyond 20 ms of the touchdown": "trips_beyond_touchdown_20ms",
+                 "strikes": "trips_strikes"}  # fmt: skip
+
+
+def _max(runs: pd.DataFrame, col: str) -> float:
+    v = pd.to_numeric(runs[col], errors="coerce").dropna() if col in runs else pd.Series(dtype=float)
+    return float(v.max()) if len(v) else math.nan
+
+
+def _trip_readings(on: pd.DataFrame, falls: int, walked: bool) -> tuple[bool, str]:
+    """(met under every trip, text of the three readings: mean per run, max in a run, met or missed)."""
+    parts, met_every = [], False
+    for label, col in TRIP_READINGS.items():
+        mean, most = _mean(on, col), _max(on, col)
+        if math.isnan(mean):
+            continue
+        met = falls == 0 and walked and mean <= MAX_TRIPS_PER_RUN
+        met_every = met if col == "trips" else met_every
+        parts.append(f"{label} {_fmt(mean)} (at most {_fmt(most)}): {'met' if met else 'missed'}")
+    return met_every, "; ".join(parts)
+
+
 def _rough_targets(frame: pd.DataFrame) -> list[str]:
     duration = _duration_s(frame)
     need_m = MIN_DISTANCE_M_PER_10_S * (duration / 10.0 if not math.isnan(duration) else 1.0)
@@ -123,18 +149,15 @@ def _rough_targets(frame: pd.DataFrame) -> list[str]:
         if on.empty:
             continue
         falls = int(on["fell"].fillna(False).astype(bool).sum())
-        trips, dist, strikes = _mean(on, "trips"), _mean(on, "distance_m"), _mean(on, "trips_strikes")
-        met = falls == 0 and trips <= MAX_TRIPS_PER_RUN and dist >= need_m
-        # the owner's open question: whether the trip target counts every trip or strikes only; both readings shown
-        met_on_strikes = falls == 0 and strikes <= MAX_TRIPS_PER_RUN and dist >= need_m
+        dist = _mean(on, "distance_m")
+        met, readings = _trip_readings(on, falls, dist >= need_m)
         beside = "; ".join(f"{v}: falls {_falls(_finished(cell(frame, world, v, 'none')))}, trips "
                            f"{_fmt(_mean(_finished(cell(frame, world, v, 'none')), 'trips'))}, "
                            f"{_fmt(_mean(_finished(cell(frame, world, v, 'none')), 'distance_m'))} m"
                            for v in ("nominal", "paper"))  # fmt: skip
         out.append(f"**{world}** (target: 0 falls, <= {MAX_TRIPS_PER_RUN:g} trip per run, >= {need_m:.3g} m walked "
-                   f"in {duration:.3g} s): {'met' if met else 'missed'}: falls {falls}/{len(on)}, trips {_fmt(trips)} "
-                   f"per run (strikes {_fmt(strikes)}: counting strikes, "
-                   f"{'met' if met_on_strikes else 'missed'}), {_fmt(dist)} m ({beside}).")
+                   f"in {duration:.3g} s): {'met' if met else 'missed'}: falls {falls}/{len(on)}, {_fmt(dist)} m; "
+                   f"trips per run, mean over runs, read three ways: {readings} ({beside}).")
     return out
 
 
