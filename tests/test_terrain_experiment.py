@@ -139,6 +139,10 @@ def test_trip_target_sentences_read_the_trips_three_ways_with_the_worst_run():
     assert "every trip 21 (at most 22): missed" in sentence, sentence
     assert "beyond 20 ms of the touchdown 1.75 (at most 3): missed" in sentence, sentence
     assert "strikes 0.75 (at most 1): met" in sentence, sentence
+    extra = _row("logs", "terrain", trips=22, trips_beyond_touchdown_20ms=2, trips_strikes=1)
+    frame = _sweep(trips=20, trips_beyond_touchdown_20ms=0, trips_strikes=0.5)
+    sentence = terrain_table.target_sentences(pd.concat([frame, pd.DataFrame([extra])]))[0]
+    assert "beyond 20 ms of the touchdown 1 (at most 2): met on average, not in every run (1 of 2 over)" in sentence
     old = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=1.5))[0]
     assert "beyond 20 ms" not in old and "strikes 1.5 (at most 1.5): missed" in old, old
     ok = terrain_table.target_sentences(_sweep(trips=1, trips_beyond_touchdown_20ms=0, trips_strikes=0))[0]

@@ -130,9 +130,14 @@ def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(
     assert Image.open(png).size == (STILL_SIZE[0] * len(STRIP_OFFSETS_S), STILL_SIZE[1])
     clip = tmp_path / "sweep" / "stills" / "r0.mp4"
     assert "(stills/r0.mp4)" in lines[1] and imageio_ffmpeg.count_frames_and_secs(str(clip))[0] == EXPECTED_FRAMES  # 0 .. 0.7 s (the run ends)
+    drawn = png.stat().st_mtime_ns, clip.stat().st_mtime_ns
+    assert still_strips(tmp_path / "sweep", pd.DataFrame([row]), keep=True) == lines  # --keep-stills: not drawn again
+    assert (png.stat().st_mtime_ns, clip.stat().st_mtime_ns) == drawn
     steps = pd.read_parquet(run_dir / "steps.parquet")
     assert first_trip_s(run_dir) is None  # flat floor: nothing to trip on
     steps.loc[600, "FL_obstacle_contact"], steps.loc[600, "FL_stance"] = True, False
     steps.loc[100, "nonfoot_obstacle_contact"] = True  # during the stand: not a trip
     steps.to_parquet(run_dir / "steps.parquet")
     assert first_trip_s(run_dir) == pytest.approx(steps["t_s"][600])
+    still_strips(tmp_path / "sweep", pd.DataFrame([row]), keep=True)  # the run changed since: drawn again
+    assert png.stat().st_mtime_ns > drawn[0] and clip.stat().st_mtime_ns > drawn[1]

@@ -388,7 +388,7 @@ def _guarded(make, what: str) -> tuple[list, str]:
         return [], f"{what} skipped: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
 
 
-def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
+def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills: bool = False) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
         frame = pd.read_parquet(sweep_dir / SUMMARY_TABLE) if (sweep_dir / SUMMARY_TABLE).is_file() else aggregate(sweep_dir)
@@ -418,7 +418,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None) -> Path:
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
     lines += _run_list(frame, "error", "message", "Runs that ended in an error")
-    strips, strips_skipped = _guarded(lambda: still_strips(sweep_dir, frame), "still strips")
+    strips, strips_skipped = _guarded(lambda: still_strips(sweep_dir, frame, keep_stills), "still strips")
     lines += strips  # falls and trips seen (taslel_bench.sweep.stills)
     lines += [f"_{note}_\n" for note in (skipped, strips_skipped) if note]
     if figures:
@@ -434,6 +434,8 @@ def main(argv: list[str] | None = None) -> None:
     could not be written (one line); 2: not a sweep folder."""
     ap = argparse.ArgumentParser(description="Aggregate a sweep folder and write its report.")
     ap.add_argument("sweep_dir", type=Path)
+    ap.add_argument("--keep-stills", action="store_true",
+                    help="keep still strips and clips newer than their run's files instead of drawing them again")
     args = ap.parse_args(argv)
     if not args.sweep_dir.is_dir():
         print(f"error: not a folder: {args.sweep_dir}", file=sys.stderr)
@@ -445,7 +447,7 @@ def main(argv: list[str] | None = None) -> None:
     frame = collect(args.sweep_dir)
     try:
         aggregate(args.sweep_dir, frame=frame)
-        print(write_report(args.sweep_dir, frame))
+        print(write_report(args.sweep_dir, frame, args.keep_stills))
     except OSError as exc:
         what = "disk full" if exc.errno == errno.ENOSPC else type(exc).__name__
         print(f"error: {what}: could not write the table or report in {args.sweep_dir}: {exc}", file=sys.stderr)

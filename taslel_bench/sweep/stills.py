@@ -5,7 +5,9 @@ rendered beside the strip (from 2 s before to 0.5 s after it).
 
 The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the first trip
 (``first_trip_s``: the first of the onsets ``trips`` counts, :mod:`taslel_bench.metrics.clearance`).
-Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``).
+Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``). With ``keep=True`` (``python -m taslel_bench.report
+<sweep> --keep-stills``) a strip, and its clip, newer than every file of its run is kept as it is, not drawn
+again (a 420-run sweep's 210 strips and clips take ~15 min); a change of the drawing code is not seen then.
 """
 
 from __future__ import annotations
@@ -82,13 +84,16 @@ def still_strip(run_dir: Path, t_event_s: float, out: Path) -> Path:
     return out
 
 
-def _video_link(sweep_dir: Path, run_dir: str, t_event_s: float, name: str) -> str:
-    """The run's video.mp4 (relative to the sweep folder), else a clip of the event rendered now."""
+def _video_link(sweep_dir: Path, run_dir: str, t_event_s: float, name: str, keep: bool = False) -> str:
+    """The run's video.mp4 (relative to the sweep folder), else a clip of the event rendered now (``keep``: or
+    kept from before when it is newer than the run's files)."""
     from taslel_bench.record.video import VIDEO_NAME, render_video
 
     if (sweep_dir / run_dir / VIDEO_NAME).is_file():
         return f"{run_dir}/{VIDEO_NAME}"
     clip = Path(STILLS_DIR) / f"{name}.mp4"
+    if keep and _up_to_date(sweep_dir / clip, sweep_dir / run_dir):
+        return str(clip)
     t0, t1 = t_event_s + CLIP_WINDOW_S[0], t_event_s + CLIP_WINDOW_S[1]
     render_video(sweep_dir / run_dir, sweep_dir / clip, fps=FPS, width=STILL_SIZE[0] * 2, height=STILL_SIZE[1] * 2,
                  t0_s=max(0.0, t0), t1_s=t1)  # fmt: skip
@@ -103,8 +108,17 @@ def _event_or_error(run_dir: Path, row: pd.Series) -> tuple[str, float] | str | 
         return traceback.format_exc().strip().splitlines()[-1]
 
 
-def still_strips(sweep_dir: Path, frame: pd.DataFrame) -> list[str]:
-    """Report lines: per finished run that fell or tripped, its still strip linked to its video."""
+def _up_to_date(out: Path, run_dir: Path) -> bool:
+    """``out`` exists and is newer than every file of the run (summary, steps, events, config)."""
+    if not out.is_file():
+        return False
+    newest = max((f.stat().st_mtime for f in run_dir.iterdir() if f.is_file()), default=0.0)
+    return out.stat().st_mtime >= newest
+
+
+def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> list[str]:
+    """Report lines: per finished run that fell or tripped, its still strip linked to its video (``keep``:
+    strips and clips newer than their run's files are not drawn again)."""
     if frame.empty or "run_dir" not in frame or "status" not in frame:
         return []
     lines: list[str] = []
@@ -120,8 +134,10 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame) -> list[str]:
         try:
             kind, t = event
             name = _name(run_dir)
-            png = still_strip(sweep_dir / run_dir, t, sweep_dir / STILLS_DIR / f"{name}.png")
-            link = _video_link(sweep_dir, run_dir, t, name)
+            png = sweep_dir / STILLS_DIR / f"{name}.png"
+            if not (keep and _up_to_date(png, sweep_dir / run_dir)):
+                still_strip(sweep_dir / run_dir, t, png)
+            link = _video_link(sweep_dir, run_dir, t, name, keep)
             reason = f" ({row.get('fall_reason')})" if kind == "fall" else ""
             lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
                          f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link})\n\n"
