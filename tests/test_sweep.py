@@ -167,3 +167,25 @@ def test_report_rows_split_by_every_swept_override_and_list_degraded_runs(tmp_pa
     assert "| flat | daqp | oracle | 1.0 |  | 1 | 0 | 0 |" in report
     assert "| flat | osqp | oracle |  | 1 | 1 | 0 | 1 |" in report
     assert "## Runs that ended degraded" in report and "qp_failed_rate=1 > 0.05" in report
+
+
+def test_a_swept_none_level_splits_the_report_rows_and_the_fall_figure(tmp_path):
+    """``+mismatch_plant=none,lossy``: "none" (the URDF plant) is a level the sweep chose, so the summary table
+    and the fall-rate bars keep the two plants apart (they were pooled as one group of 2 x the seeds); a summary
+    column's "none" (filter off) still is no value of its own."""
+    from taslel_bench.sweep.aggregate import OVERRIDE_SEPARATOR, expand_overrides
+    from taslel_bench.sweep.report import group_columns, summary_table
+
+    rows = []
+    for plant, seed in ((p, s) for p in ("none", "lossy") for s in (0, 1)):
+        rows.append({"scenario": "logs", "solver": "daqp", "estimator": "oracle", "status": "ok", "seed": seed,
+                     "fell": plant == "lossy" and seed == 0, "filter_contact_velocity_gain": "none" if seed else 0.0,
+                     "overrides": OVERRIDE_SEPARATOR.join([f"+mismatch_plant={plant}", f"seed={seed}"]),
+                     "run_dir": f"p={plant},s={seed}"})  # fmt: skip
+    frame = expand_overrides(pd.DataFrame(rows))
+    assert group_columns(frame) == ["scenario", "solver", "estimator", "mismatch_plant"]
+    table = summary_table(tmp_path, frame)
+    assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"])) == [("lossy", 2, "1/2"),
+                                                                                       ("none", 2, "0/2")]
+    write_report(tmp_path, frame)
+    assert (tmp_path / "fall_rates.png").is_file()

@@ -39,12 +39,15 @@ def override_columns(frame: pd.DataFrame) -> list[str]:
 
 def group_columns(frame: pd.DataFrame) -> list[str]:
     """The columns that tell the rows of a sweep apart: scenario, solver, estimator, and every setting the
-    sweep varies (optional columns and overridden keys only when they take more than one value)."""
-    def varies(c: str) -> bool:  # among runs that have the setting at all ("none": filter off)
-        return frame.loc[frame[c] != "none", c].astype(str).nunique() > 1
+    sweep varies (optional columns and overridden keys only when they take more than one value). In a summary
+    column "none" is a run without the setting (filter off) and does not count as a value; in an overridden key
+    it is a value the sweep chose (``+mismatch_plant=none,lossy``: the URDF plant and the lossy one)."""
+    def varies(c: str, none_counts: bool = False) -> bool:
+        values = frame[c] if none_counts else frame.loc[frame[c] != "none", c]
+        return values.astype(str).nunique() > 1
 
     cols = [c for c in GROUP if c in frame.columns and (c not in OPTIONAL_GROUP or varies(c))]
-    return cols + [c for c in override_columns(frame) if varies(c)]
+    return cols + [c for c in override_columns(frame) if varies(c, none_counts=True)]
 
 
 def solver_label(row: pd.Series | dict, frame: pd.DataFrame) -> str:
@@ -171,16 +174,16 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
     made = solve_time_figure(sweep_dir, frame, group_columns(frame), plt)  # every tick (sweep.solver_verdict)
     if "scenario" in table and len(table):
         ok = _finished(frame)
-        by = ["scenario", "solver"] if "solver" in ok else ["scenario"]  # backends are not seeds
-        rates = ok.groupby(by)["fell"].mean() if len(ok) else pd.Series(dtype=float)
+        by = [c for c in group_columns(frame) if c in ok]  # the summary table's groups: only seeds pooled
+        rates = ok.groupby(by, dropna=False)["fell"].mean() if len(ok) and by else pd.Series(dtype=float)
         if len(rates) and rates.max() > 0:  # nothing fell: no empty axis
-            fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(rates)), 3))
+            fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(rates)), 3.5))
             names = ["\n".join(map(str, k)) if isinstance(k, tuple) else str(k) for k in rates.index]
             ax.bar(names, rates.to_numpy())
             ax.set_ylim(0, 1)
             ax.set_ylabel("fall rate")
             ax.tick_params(axis="x", labelsize=6)
-            ax.set_title("Fall rate per scenario and solver (estimators and seeds pooled)")
+            ax.set_title(f"Fall rate per {', '.join(by)} (seeds pooled)", fontsize=9)
             fig.tight_layout()
             fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
             plt.close(fig)
