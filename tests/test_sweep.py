@@ -187,5 +187,8 @@ def test_a_swept_none_level_splits_the_report_rows_and_the_fall_figure(tmp_path)
     table = summary_table(tmp_path, frame)
     assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"])) == [("lossy", 2, "1/2"),
                                                                                        ("none", 2, "0/2")]
-    write_report(tmp_path, frame)
+    assert "figures skipped" not in write_report(tmp_path, frame).read_text()
     assert (tmp_path / "fall_rates.png").is_file()
+    frame["filter_contact_velocity_gain"] = [0.0, 100.0, float("nan"), 100.0]  # swept, and NaN: runs without it
+    assert "filter_contact_velocity_gain" in group_columns(frame)
+    assert "figures skipped" not in write_report(tmp_path, frame).read_text()

@@ -12,6 +12,7 @@ import argparse
 import datetime as dt
 import errno
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -175,15 +176,21 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
     if "scenario" in table and len(table):
         ok = _finished(frame)
         by = [c for c in group_columns(frame) if c in ok]  # the summary table's groups: only seeds pooled
-        rates = ok.groupby(by, dropna=False)["fell"].mean() if len(ok) and by else pd.Series(dtype=float)
+        fell = ok.groupby(by, dropna=False)["fell"] if len(ok) and by else None
+        rates = fell.mean() if fell is not None else pd.Series(dtype=float)
         if len(rates) and rates.max() > 0:  # nothing fell: no empty axis
-            fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(rates)), 3.5))
-            names = ["\n".join(map(str, k)) if isinstance(k, tuple) else str(k) for k in rates.index]
-            ax.bar(names, rates.to_numpy())
-            ax.set_ylim(0, 1)
-            ax.set_ylabel("fall rate")
-            ax.tick_params(axis="x", labelsize=6)
-            ax.set_title(f"Fall rate per {', '.join(by)} (seeds pooled)", fontsize=9)
+            keys = rates.index.to_frame(index=False).map(lambda v: "—" if pd.isna(v) else str(v))  # NaN: no setting
+            shown = [c for c in keys if keys[c].nunique() > 1] or list(keys.columns[:1])  # constants: in the title
+            fixed = [f"{c} {keys[c].iloc[0]}" for c in keys if c not in shown]
+            fig, ax = plt.subplots(figsize=(7, max(2.5, 0.22 * len(rates) + 1.2)))
+            bars = ax.barh([" · ".join(row) for row in keys[shown].itertuples(index=False)], rates.to_numpy())
+            ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size())], fontsize=6, padding=2)
+            ax.invert_yaxis()  # the table's order, top to bottom
+            ax.set_xlim(0, 1.1)
+            ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
+            ax.tick_params(axis="y", labelsize=7)
+            title = f"Fall rate per {' · '.join(shown)}" + (f" ({', '.join(fixed)})" if fixed else "")
+            ax.set_title(textwrap.fill(title, 70), fontsize=8)
             fig.tight_layout()
             fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
             plt.close(fig)
