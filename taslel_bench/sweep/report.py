@@ -173,31 +173,41 @@ def _figures(sweep_dir: Path, frame: pd.DataFrame, table: pd.DataFrame) -> list[
     import matplotlib.pyplot as plt
 
     made = solve_time_figure(sweep_dir, frame, group_columns(frame), plt)  # every tick (sweep.solver_verdict)
-    if "scenario" in table and len(table):
-        ok = _finished(frame)
-        by = [c for c in group_columns(frame) if c in ok]  # the summary table's groups: only seeds pooled
-        fell = ok.groupby(by, dropna=False)["fell"] if len(ok) and by else None
-        rates = fell.mean() if fell is not None else pd.Series(dtype=float)
-        if len(rates) and rates.max() > 0:  # nothing fell: no empty axis
-            keys = rates.index.to_frame(index=False).map(lambda v: "—" if pd.isna(v) else str(v))  # NaN: no setting
-            shown = [c for c in keys if keys[c].nunique() > 1] or list(keys.columns[:1])  # constants: in the title
-            fixed = [f"{c} {keys[c].iloc[0]}" for c in keys if c not in shown]
-            fig, ax = plt.subplots(figsize=(7, max(2.5, 0.22 * len(rates) + 1.2)))
-            bars = ax.barh([" · ".join(row) for row in keys[shown].itertuples(index=False)], rates.to_numpy())
-            ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size())], fontsize=6, padding=2)
-            ax.invert_yaxis()  # the table's order, top to bottom
-            ax.set_xlim(0, 1.1)
-            ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
-            ax.tick_params(axis="y", labelsize=7)
-            title = f"Fall rate per {' · '.join(shown)}" + (f" ({', '.join(fixed)})" if fixed else "")
-            ax.set_title(textwrap.fill(title, 70), fontsize=8)
-            fig.tight_layout()
-            fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
-            plt.close(fig)
-            made.append("fall_rates.png")
+    if "scenario" in table and len(table) and _fall_rate_figure(sweep_dir, frame, plt):
+        made.append("fall_rates.png")
     if "run_dir" in frame:
         made += _episode_figures(sweep_dir, frame, plt)
     return made
+
+
+def _fall_rate_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> bool:
+    """``fall_rates.png``: one horizontal bar per group of the summary table (only seeds pooled), falls/runs
+    beside each bar, the columns that vary as labels and the constant ones in the title. False (no file) when
+    nothing fell: no empty axis."""
+    ok = _finished(frame)
+    by = [c for c in group_columns(frame) if c in ok]
+    if not len(ok) or not by:
+        return False
+    fell = ok.groupby(by, dropna=False)["fell"]
+    rates = fell.mean()
+    if not len(rates) or rates.max() <= 0:
+        return False
+    keys = rates.index.to_frame(index=False).map(lambda v: "—" if pd.isna(v) else str(v))  # NaN: no setting
+    shown = [c for c in keys if keys[c].nunique() > 1] or list(keys.columns[:1])
+    fixed = [f"{c} {keys[c].iloc[0]}" for c in keys if c not in shown]
+    fig, ax = plt.subplots(figsize=(7, max(2.5, 0.22 * len(rates) + 1.2)))
+    bars = ax.barh([" · ".join(row) for row in keys[shown].itertuples(index=False)], rates.to_numpy())
+    ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size())], fontsize=6, padding=2)
+    ax.invert_yaxis()  # the table's order, top to bottom
+    ax.set_xlim(0, 1.1)
+    ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
+    ax.tick_params(axis="y", labelsize=7)
+    title = f"Fall rate per {' · '.join(shown)}" + (f" ({', '.join(fixed)})" if fixed else "")
+    ax.set_title(textwrap.fill(title, 70), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
+    plt.close(fig)
+    return True
 
 
 def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series | None:
