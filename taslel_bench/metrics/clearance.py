@@ -134,26 +134,29 @@ class ClearanceStream:
         on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
         new = self.foot(on_obstacle)
         link_new = self.link(tr.leg_link_obstacle_contact[w])
-        trip_ticks = np.flatnonzero((new & swing).any(axis=1) | link_new.any(axis=1))
+        foot_trips = new & swing
+        trip_ticks = np.flatnonzero(foot_trips.any(axis=1) | link_new.any(axis=1))
         touch = on_obstacle & swing
-        acc.count("trips", (new & swing).sum() + link_new.sum())
-        acc.count("foot_trips", (new & swing).sum())
+        n_foot, n_link = foot_trips.sum(), link_new.sum()
+        acc.count("trips", n_foot + n_link)
+        acc.count("foot_trips", n_foot)
         # the same split by where the foot met the obstacle: on a flank (normal > 45 deg from vertical: a riser,
         # a log's side) or on a top (a swing foot landing early on a step's top); they add up to foot_trips
         on_flank = flank.any(axis=2)
-        acc.count("foot_trips_flank", (new & swing & on_flank).sum())
-        acc.count("foot_trips_top", (new & swing & ~on_flank).sum())
-        acc.count("shin_trips", link_new.sum())  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
-        late_top = new & swing & ~on_flank & (tr.swing_phase[w] >= 0.5)
+        acc.count("foot_trips_flank", (foot_trips & on_flank).sum())
+        acc.count("foot_trips_top", (foot_trips & ~on_flank).sum())
+        acc.count("shin_trips", n_link)  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
+        phase = tr.swing_phase[w]
+        late_top = foot_trips & ~on_flank & (phase >= 0.5)
         off_foot = self.link_off_foot(tr.leg_link_obstacle_contact_off_foot[w]).sum()
         acc.count("foot_trips_top_late_swing", late_top.sum())
         acc.count("shin_trips_off_foot", off_foot)
-        acc.count("trips_strikes", (new & swing).sum() - late_top.sum() + off_foot)
-        near = (late_top & (tr.swing_phase[w] >= self.near_touchdown_phase)).sum()
+        acc.count("trips_strikes", n_foot - late_top.sum() + off_foot)
+        near = (late_top & (phase >= self.near_touchdown_phase)).sum()
         acc.count("foot_trips_top_near_touchdown", near)
-        acc.count("trips_beyond_touchdown_tolerance", (new & swing).sum() + link_new.sum() - near)
-        near_report = (late_top & (tr.swing_phase[w] >= self.near_touchdown_phase_report)).sum()
-        acc.count("trips_beyond_touchdown_20ms", (new & swing).sum() + link_new.sum() - near_report)
+        acc.count("trips_beyond_touchdown_tolerance", n_foot + n_link - near)
+        near_report = (late_top & (phase >= self.near_touchdown_phase_report)).sum()
+        acc.count("trips_beyond_touchdown_20ms", n_foot + n_link - near_report)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
         acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)

@@ -122,20 +122,15 @@ TRIP_READINGS = {"every trip": "trips", "beyond 20 ms of the touchdown": "trips_
                  "strikes": "trips_strikes"}  # fmt: skip
 
 
-def _max(runs: pd.DataFrame, col: str) -> float:
-    v = pd.to_numeric(runs[col], errors="coerce").dropna() if col in runs else pd.Series(dtype=float)
-    return float(v.max()) if len(v) else math.nan
-
-
 def _trip_readings(on: pd.DataFrame, falls: int, walked: bool) -> tuple[bool, str]:
     """(met under every trip, text of the three readings: mean per run, largest run, and met (every run <= the
     bound), met on average only (the mean <= the bound, some run over it) or missed)."""
     parts, met_every = [], False
     for label, col in TRIP_READINGS.items():
-        mean, most = _mean(on, col), _max(on, col)
-        if math.isnan(mean):
+        counts = pd.to_numeric(on[col], errors="coerce").dropna() if col in on else pd.Series(dtype=float)
+        if counts.empty:
             continue
-        over = int((pd.to_numeric(on[col], errors="coerce") > MAX_TRIPS_PER_RUN).sum())
+        mean, most, over = float(counts.mean()), float(counts.max()), int((counts > MAX_TRIPS_PER_RUN).sum())
         ok = falls == 0 and walked
         if ok and most <= MAX_TRIPS_PER_RUN:
             verdict = "met"
