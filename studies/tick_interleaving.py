@@ -1,0 +1,213 @@
+"""Do the tick's parts slow each other down, or does the glue between them slow them down? (issue 25)
+
+    python -m studies.tick_interleaving [--ticks N] [--repeats R] [overrides ...]
+
+The bench's sum-of-parts limit times each part alone, in a tight loop. In the episode loop the same parts run
+about half as fast (by instructions the loop is at 0.82 of its parts, `studies.tick_instructions`). Two causes
+are possible: the Python glue between the parts (its bytecode, objects and numpy temporaries) evicts the parts'
+code and data from the caches, or the parts (MuJoCo, Pinocchio, the QP build, the solver) evict each other.
+
+This study records N consecutive walking ticks of one episode (the plant state and torque before each physics
+step, the Pinocchio (q, v), the controller's arguments, the filter's inputs and u_nom), then replays them three
+ways, timing every call with ``perf_counter`` as the bench does:
+
+* ``alone``: each part over the N ticks in its own loop (the bench's isolated parts, replayed in order);
+* ``bare``: the parts of tick i back to back, tick after tick, with nothing between them but the replay's
+  argument lookups (what a tick would cost with no glue at all);
+* ``loop``: the episode loop's own per-part timers (``tick_<part>_us``) for the same ticks.
+
+If ``bare`` is as slow as ``loop`` the parts evict each other and no glue cut reaches the limit; if ``bare``
+is close to ``alone`` the glue's footprint is what costs. Prints medians [µs] per part and the share
+sum(alone) / sum(bare). The timings vary with the machine's load: run it on a quiet machine, several repeats.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+
+from taslel_bench.api import compose
+from taslel_bench.filter.layout import TickInputs
+from taslel_bench.record.trace import TICK_PARTS
+from taslel_bench.sim.build import Built
+
+PARTS = ("mj_step", "controller", "pinocchio_update", "qp_build", "qp_solve", "contact_check")  # the limit's
+
+
+class Recorder:
+    """Copies of each walking tick's part arguments, ticks ``k0 .. k0 + n - 1`` (instance-level wrappers)."""
+
+    def __init__(self, built: Built, k0: int, n: int) -> None:
+        self.e, self.f, self.k0, self.n = built.episode, built.filter, k0, n
+        self.tick = -1
+        self.rows: dict[str, list] = {p: [] for p in PARTS if p not in ("qp_solve", "contact_check")}
+        e, f = self.e, self.f
+        self._orig = {"compute": e.controller.compute, "update": e.model.update, "filter": f.filter}
+        e.controller.compute = self._compute
+        e.model.update = self._update
+        f.filter = self._filter
+        self._step = mujoco.mj_step
+        mujoco.mj_step = self._mj_step
+
+    def _on(self) -> bool:
+        return self.k0 <= self.tick < self.k0 + self.n
+
+    def _compute(self, t, q_joints, qd_joints, base_pose=None):
+        self.tick = round(t / self.e.s.control_dt_s)  # the controller runs first in every tick
+        if self._on():
+            self.rows["controller"].append((t, q_joints.copy(), qd_joints.copy(),
+                                            None if base_pose is None else base_pose.copy()))
+        return self._orig["compute"](t, q_joints, qd_joints, base_pose)
+
+    def _update(self, q, v):
+        if self._on():
+            self.rows["pinocchio_update"].append((q.copy(), v.copy()))
+        return self._orig["update"](q, v)
+
+    def _filter(self, inputs: TickInputs, u_nom):
+        if self._on():
+            mu_feet = None if inputs.mu_per_foot is None else inputs.mu_per_foot.copy()
+            self.rows["qp_build"].append((inputs.v.copy(), inputs.in_stance.copy(), inputs.mu,
+                                          inputs.swing_phase.copy(), inputs.swing_phase_rate, mu_feet,
+                                          u_nom.copy()))
+        return self._orig["filter"](inputs, u_nom)
+
+    def _mj_step(self, m, d):
+        if self._on():
+            self.rows["mj_step"].append((d.qpos.copy(), d.qvel.copy(), d.ctrl.copy(), d.qacc_warmstart.copy()))
+        return self._step(m, d)
+
+    def close(self) -> None:
+        mujoco.mj_step = self._step
+        for name in ("compute", "update"):
+            delattr(self.e.controller if name == "compute" else self.e.model, name)
+        delattr(self.f, "filter")
+
+
+def record(overrides: list[str], n: int) -> tuple[Built, Recorder, np.ndarray, float]:
+    """Run the episode twice (kernels loaded; the second run's own timers are the loop's numbers), then once
+    more recording ``n`` walking ticks (the recorder's copies slow that run: its timers are not used).
+    Returns the build, the recorder, the clean run's per-part times [µs] over those ticks (``tick_<part>_us``,
+    one row per tick) and its wall time per tick [µs]."""
+    built = Built(compose(["scenario=obstacle", "duration=3.0", "progress=false", "record.reference_every=0",
+                           *overrides]))  # fmt: skip
+    e = built.episode
+    e.s = replace(e.s, analyse=False)
+    e.run()
+    clean = e.run()
+    k0 = round(e.controller.stand_duration_s / e.s.control_dt_s) + 100
+    loop = clean.trace.tick_parts_s[k0 : k0 + n] * 1e6  # [µs] (raw timers: no analysis)
+    rec = Recorder(built, k0, n)
+    try:
+        e.run()
+    finally:
+        rec.close()
+    return built, rec, loop, clean.wall_time_s / clean.trace.n * 1e6
+
+
+def _calls(built: Built, rec: Recorder) -> tuple[int, dict]:
+    """(n ticks, {part: call(i)}): each part on recorded tick ``i``, in the tick's order (controller, Pinocchio
+    update, QP build, QP solve, then physics: the plant set to the recorded state before the step, untimed,
+    mj_step, the contact check). The build and the solve read the model and QP the calls before them left."""
+    e, f, rows = built.episode, built.filter, rec.rows
+    m, d = e.m, mujoco.MjData(e.m)
+    n = min(len(v) for v in rows.values())
+    ppt = e.physics_per_tick
+    states = rows["mj_step"][::ppt][:n]  # the first physics step of each tick
+    inputs = []
+    for v, stance, mu, phase, rate, mu_feet, u_nom in rows["qp_build"][:n]:
+        x = TickInputs(e.model, v, stance, mu, phase, rate, mu_feet)
+        if f._friction_margin > 0.0:  # as SafetyFilter.filter does before its build
+            x = x.with_mu_scaled(1.0 - f._friction_margin)
+        inputs.append((x, u_nom))
+    ctrl, upd, build, solve, check = (e.controller.compute, e.model.update, f.build, f._solve,
+                                      e.contacts.check_non_foot_contact)  # fmt: skip
+
+    def set_state(i):
+        qpos, qvel, u, warm = states[i]
+        d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos, qvel, u, warm
+
+    calls = {
+        "controller": lambda i: ctrl(*rows["controller"][i]),
+        "pinocchio_update": lambda i: upd(*rows["pinocchio_update"][i]),
+        "qp_build": lambda i: build(*inputs[i]),
+        "qp_solve": lambda i: solve(f.problem),
+        "mj_step": lambda i: mujoco.mj_step(m, d),
+        "contact_check": lambda i: check(d),
+    }
+    return n, calls, set_state
+
+
+def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
+    """(alone, bare): µs of each part (columns PARTS) on each recorded tick, replayed alone (each part over
+    every tick in its own loop; what it needs from the parts before it prepared untimed) and back to back."""
+    n, calls, set_state = _calls(built, rec)
+    order = ("controller", "pinocchio_update", "qp_build", "qp_solve", "mj_step", "contact_check")
+    needs = {"qp_build": ("pinocchio_update",), "qp_solve": ("pinocchio_update", "qp_build"),
+             "contact_check": ("mj_step",)}  # fmt: skip
+    col = {p: PARTS.index(p) for p in order}
+    pc = time.perf_counter
+    alone, bare = np.empty((n, len(PARTS))), np.empty((n, len(PARTS)))
+    for part in order:
+        built.filter.reset()  # the solver's warm start from tick to tick, as in the loop
+        call, before, j = calls[part], needs.get(part, ()), col[part]
+        for i in range(n):
+            if part in ("mj_step", "contact_check"):
+                set_state(i)
+            for p in before:
+                calls[p](i)
+            t0 = pc()
+            call(i)
+            alone[i, j] = pc() - t0
+    built.filter.reset()
+    c = [calls[p] for p in order]
+    cols = [col[p] for p in order]
+    for i in range(n):
+        t0 = pc()
+        c[0](i)
+        t1 = pc()
+        c[1](i)
+        t2 = pc()
+        c[2](i)
+        t3 = pc()
+        c[3](i)
+        t4 = pc()
+        set_state(i)  # the recorded plant state: not a part of the tick (the loop's plant is already there)
+        t5 = pc()
+        c[4](i)
+        t6 = pc()
+        c[5](i)
+        t7 = pc()
+        bare[i, cols] = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t6 - t5, t7 - t6)
+    return alone * 1e6, bare * 1e6
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--ticks", type=int, default=1000, help="walking ticks recorded and replayed")
+    ap.add_argument("--repeats", type=int, default=3, help="replays of the recorded ticks (each printed)")
+    ap.add_argument("overrides", nargs="*", help="config overrides, e.g. filter.formulation=full")
+    args = ap.parse_args(argv)
+    built, rec, loop, wall_us = record(args.overrides, args.ticks)
+    parts = np.median(loop, axis=0)
+    print(f"loop (a clean run's own timers, median µs over {len(loop)} walking ticks): "
+          + ", ".join(f"{k} {v:.1f}" for k, v in zip(TICK_PARTS, parts))
+          + f"; tick {np.median(loop.sum(axis=1)):.1f}, wall per tick (mean, whole run) {wall_us:.1f}")
+    print("\n| repeat | replay | " + " | ".join(PARTS) + " | sum | alone / this |")
+    print("|---|---|" + "---|" * (len(PARTS) + 2))
+    for r in range(args.repeats):
+        alone, bare = replay(built, rec)
+        a, b = np.median(alone, axis=0), np.median(bare, axis=0)
+        for way, x in (("alone", a), ("bare", b)):
+            print(f"| {r} | {way} | " + " | ".join(f"{v:.1f}" for v in x) + f" | {x.sum():.1f} | {a.sum() / x.sum():.2f} |")
+        tick = np.median(loop.sum(axis=1))
+        print(f"| {r} | loop tick (median) | | | | | | | {tick:.1f} | {a.sum() / tick:.2f} |")
+        print(f"| {r} | loop wall per tick (mean) | | | | | | | {wall_us:.1f} | {a.sum() / wall_us:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
