@@ -1,6 +1,6 @@
 """Do the tick's parts slow each other down, or does the glue between them slow them down? (issue 25)
 
-    python -m studies.tick_interleaving [--ticks N] [--repeats R] [overrides ...]
+    python -m studies.tick_interleaving [--ticks N] [--rounds R] [overrides ...]
 
 The bench's sum-of-parts limit times each part alone, in a tight loop. In the episode loop the same parts run
 about half as fast (by instructions the loop is at 0.82 of its parts, `studies.tick_instructions`). Two causes
@@ -14,11 +14,14 @@ ways, timing every call with ``perf_counter`` as the bench does:
 * ``alone``: each part over the N ticks in its own loop (the bench's isolated parts, replayed in order);
 * ``bare``: the parts of tick i back to back, tick after tick, with nothing between them but the replay's
   argument lookups (what a tick would cost with no glue at all);
-* ``loop``: the episode loop's own per-part timers (``tick_<part>_us``) for the same ticks.
+* ``loop``: a clean run of the episode loop, its own per-part timers (``tick_<part>_us``) over the same ticks
+  (their sum is the tick) and its wall time per tick (the tick plus what runs between ticks: the trace's row
+  copy, the end checks, the loop itself), as the bench's real-time factor counts it.
 
 If ``bare`` is as slow as ``loop`` the parts evict each other and no glue cut reaches the limit; if ``bare``
-is close to ``alone`` the glue's footprint is what costs. Prints medians [µs] per part and the share
-sum(alone) / sum(bare). The timings vary with the machine's load: run it on a quiet machine, several repeats.
+is close to ``alone`` the glue is what costs. Prints medians [µs] per part and the share sum(alone) / x, x the
+bare sum, the loop's tick and its wall time per tick; each round runs the loop and both replays one after the
+other, because this VM's speed drifts by up to 2x within minutes. Run it on a quiet machine.
 """
 
 from __future__ import annotations
@@ -88,25 +91,27 @@ class Recorder:
         delattr(self.f, "filter")
 
 
-def record(overrides: list[str], n: int) -> tuple[Built, Recorder, np.ndarray, float]:
-    """Run the episode twice (kernels loaded; the second run's own timers are the loop's numbers), then once
-    more recording ``n`` walking ticks (the recorder's copies slow that run: its timers are not used).
-    Returns the build, the recorder, the clean run's per-part times [µs] over those ticks (``tick_<part>_us``,
-    one row per tick) and its wall time per tick [µs]."""
+def record(overrides: list[str], n: int) -> tuple[Built, Recorder]:
+    """Run the episode once (kernels loaded), then once more recording ``n`` walking ticks (the recorder's
+    copies slow that run: its timers are not used)."""
     built = Built(compose(["scenario=obstacle", "duration=3.0", "progress=false", "record.reference_every=0",
                            *overrides]))  # fmt: skip
     e = built.episode
     e.s = replace(e.s, analyse=False)
     e.run()
-    clean = e.run()
-    k0 = round(e.controller.stand_duration_s / e.s.control_dt_s) + 100
-    loop = clean.trace.tick_parts_s[k0 : k0 + n] * 1e6  # [µs] (raw timers: no analysis)
-    rec = Recorder(built, k0, n)
+    rec = Recorder(built, round(e.controller.stand_duration_s / e.s.control_dt_s) + 100, n)
     try:
         e.run()
     finally:
         rec.close()
-    return built, rec, loop, clean.wall_time_s / clean.trace.n * 1e6
+    return built, rec
+
+
+def loop_run(built: Built, rec: Recorder) -> tuple[np.ndarray, float]:
+    """A clean run of the episode: its own timers over the recorded ticks (µs per part, one row per tick,
+    ``tick_<part>_us``) and its wall time per tick [µs] (mean over the run, as the real-time factor)."""
+    res = built.episode.run()
+    return res.trace.tick_parts_s[rec.k0 : rec.k0 + rec.n] * 1e6, res.wall_time_s / res.trace.n * 1e6
 
 
 def _calls(built: Built, rec: Recorder) -> tuple[int, dict]:
@@ -189,24 +194,24 @@ def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ticks", type=int, default=1000, help="walking ticks recorded and replayed")
-    ap.add_argument("--repeats", type=int, default=3, help="replays of the recorded ticks (each printed)")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of (clean loop run, replay alone, replay bare)")
     ap.add_argument("overrides", nargs="*", help="config overrides, e.g. filter.formulation=full")
     args = ap.parse_args(argv)
-    built, rec, loop, wall_us = record(args.overrides, args.ticks)
-    parts = np.median(loop, axis=0)
-    print(f"loop (a clean run's own timers, median µs over {len(loop)} walking ticks): "
-          + ", ".join(f"{k} {v:.1f}" for k, v in zip(TICK_PARTS, parts))
-          + f"; tick {np.median(loop.sum(axis=1)):.1f}, wall per tick (mean, whole run) {wall_us:.1f}")
-    print("\n| repeat | replay | " + " | ".join(PARTS) + " | sum | alone / this |")
+    built, rec = record(args.overrides, args.ticks)
+    print(f"median µs per part over {args.ticks} walking ticks; each round: a clean run of the loop, then the "
+          "replays, one after the other (the VM's speed drifts between rounds)\n")
+    print("| round | way | " + " | ".join(PARTS) + " | sum | alone / this |")
     print("|---|---|" + "---|" * (len(PARTS) + 2))
-    for r in range(args.repeats):
+    for r in range(args.rounds):
+        loop, wall_us = loop_run(built, rec)
         alone, bare = replay(built, rec)
         a, b = np.median(alone, axis=0), np.median(bare, axis=0)
         for way, x in (("alone", a), ("bare", b)):
             print(f"| {r} | {way} | " + " | ".join(f"{v:.1f}" for v in x) + f" | {x.sum():.1f} | {a.sum() / x.sum():.2f} |")
-        tick = np.median(loop.sum(axis=1))
-        print(f"| {r} | loop tick (median) | | | | | | | {tick:.1f} | {a.sum() / tick:.2f} |")
-        print(f"| {r} | loop wall per tick (mean) | | | | | | | {wall_us:.1f} | {a.sum() / wall_us:.2f} |")
+        parts = ", ".join(f"{k} {v:.1f}" for k, v in zip(TICK_PARTS, np.median(loop, axis=0)))
+        tick = float(np.median(loop.sum(axis=1)))
+        print(f"| {r} | loop tick, median ({parts}) |" + " |" * len(PARTS) + f" {tick:.1f} | {a.sum() / tick:.2f} |")
+        print(f"| {r} | loop wall per tick, mean |" + " |" * len(PARTS) + f" {wall_us:.1f} | {a.sum() / wall_us:.2f} |")
 
 
 if __name__ == "__main__":
