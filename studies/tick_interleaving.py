@@ -48,6 +48,7 @@ class Recorder:
         self.e, self.f, self.k0, self.n = built.episode, built.filter, k0, n
         self.tick = -1
         self.rows: dict[str, list] = {p: [] for p in PARTS if p not in ("qp_solve", "contact_check")}
+        self.solutions: list[np.ndarray | None] = []  # the backend's answer on each recorded tick
         e, f = self.e, self.f
         self._orig = {"compute": e.controller.compute, "update": e.model.update, "filter": f.filter}
         e.controller.compute = self._compute
@@ -72,12 +73,16 @@ class Recorder:
         return self._orig["update"](q, v)
 
     def _filter(self, inputs: TickInputs, u_nom):
-        if self._on():
+        on = self._on()
+        if on:
             mu_feet = None if inputs.mu_per_foot is None else inputs.mu_per_foot.copy()
             self.rows["qp_build"].append((inputs.v.copy(), inputs.in_stance.copy(), inputs.mu,
                                           inputs.swing_phase.copy(), inputs.swing_phase_rate, mu_feet,
                                           u_nom.copy()))
-        return self._orig["filter"](inputs, u_nom)
+        result = self._orig["filter"](inputs, u_nom)
+        if on:
+            self.solutions.append(None if result.solve.x is None else result.solve.x.copy())
+        return result
 
     def _mj_step(self, m, d):
         if self._on():
@@ -143,13 +148,19 @@ def _calls(built: Built, rec: Recorder) -> tuple[int, dict]:
         "qp_solve": lambda i: solve(f.problem),
         "mj_step": lambda i: mujoco.mj_step(m, d),
         "contact_check": lambda i: check(d),
+        "qpos": lambda: d.qpos.copy(),  # not a part: the state a step left (the replay's faithfulness check)
     }
     return n, calls, set_state
 
 
+REPLAY_TOLERANCE = 1e-9  # largest |difference| between a replayed result and the recorded one
+
+
 def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
     """(alone, bare): µs of each part (columns PARTS) on each recorded tick, replayed alone (each part over
-    every tick in its own loop; what it needs from the parts before it prepared untimed) and back to back."""
+    every tick in its own loop; what it needs from the parts before it prepared untimed) and back to back.
+    Raises if the back-to-back replay does not redo the loop's work: every solve's answer as recorded and
+    every physics step ending in the recorded state of the next one (to ``REPLAY_TOLERANCE``)."""
     n, calls, set_state = _calls(built, rec)
     order = ("controller", "pinocchio_update", "qp_build", "qp_solve", "mj_step", "contact_check")
     needs = {"qp_build": ("pinocchio_update",), "qp_solve": ("pinocchio_update", "qp_build"),
@@ -171,6 +182,7 @@ def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
     built.filter.reset()
     c = [calls[p] for p in order]
     cols = [col[p] for p in order]
+    answers, next_qpos = [], []
     for i in range(n):
         t0 = pc()
         c[0](i)
@@ -179,7 +191,7 @@ def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
         t2 = pc()
         c[2](i)
         t3 = pc()
-        c[3](i)
+        answer = c[3](i)
         t4 = pc()
         set_state(i)  # the recorded plant state: not a part of the tick (the loop's plant is already there)
         t5 = pc()
@@ -188,7 +200,21 @@ def replay(built: Built, rec: Recorder) -> tuple[np.ndarray, np.ndarray]:
         c[5](i)
         t7 = pc()
         bare[i, cols] = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t6 - t5, t7 - t6)
+        answers.append(answer.x)
+        next_qpos.append(calls["qpos"]())
+    _check_faithful(rec, answers, next_qpos)
     return alone * 1e6, bare * 1e6
+
+
+def _check_faithful(rec: Recorder, answers: list, next_qpos: list) -> None:
+    """Raise unless the replayed answers and post-step states are the recorded ones (see :func:`replay`)."""
+    worst_x = max(float(np.max(np.abs(a - b))) for a, b in zip(answers, rec.solutions))
+    ppt = len(rec.rows["mj_step"]) // max(len(rec.solutions), 1)
+    recorded = [row[0] for row in rec.rows["mj_step"][ppt::ppt]]  # the state before each next tick's step
+    worst_q = max(float(np.max(np.abs(a - b))) for a, b in zip(next_qpos, recorded))
+    if not (worst_x <= REPLAY_TOLERANCE and worst_q <= REPLAY_TOLERANCE):
+        raise RuntimeError(f"the replay does not redo the loop's work: max |x - x_loop| {worst_x:.3g}, "
+                           f"max |qpos - qpos_loop| {worst_q:.3g} (tolerance {REPLAY_TOLERANCE})")
 
 
 def main(argv: list[str] | None = None) -> None:
