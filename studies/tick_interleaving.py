@@ -2,10 +2,11 @@
 
     python -m studies.tick_interleaving [--ticks N] [--rounds R] [overrides ...]
 
-The bench's sum-of-parts limit times each part alone, in a tight loop. In the episode loop the same parts run
-about half as fast (by instructions the loop is at 0.82 of its parts, `studies.tick_instructions`). Two causes
-are possible: the Python glue between the parts (its bytecode, objects and numpy temporaries) evicts the parts'
-code and data from the caches, or the parts (MuJoCo, Pinocchio, the QP build, the solver) evict each other.
+The bench's sum-of-parts limit times each part alone, in a tight loop. The default loop runs at ~0.5-0.6 of
+that limit, although by instructions it is at 0.82 of its parts (`studies.tick_instructions`). Two causes are
+possible: the parts (MuJoCo, Pinocchio, the QP build, the solver) evict each other's code and data from the
+caches when they run one after the other, or the Python glue between them (its bytecode, objects, numpy
+temporaries and Numba hand-overs) costs more time than its instructions suggest and evicts the parts' caches.
 
 This study records N consecutive walking ticks of one episode (the plant state and torque before each physics
 step, the Pinocchio (q, v), the controller's arguments, the filter's inputs and u_nom), then replays them three
