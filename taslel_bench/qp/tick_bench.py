@@ -36,6 +36,7 @@ from rich.table import Table
 
 from taslel_bench.api import compose
 from taslel_bench.filter.layout import TickInputs
+from taslel_bench.qp.tick_replay import record_ticks, replay
 from taslel_bench.record.run_files import atomic_write
 from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
 from taslel_bench.sim.build import Built
@@ -230,6 +231,27 @@ def cold_vs_warm(built: Built) -> dict[str, tuple[float, float]]:
     return {k: tuple(float(x) for x in np.median(np.array(v[1:]) * 1e6, axis=0)) for k, v in times.items() if v}
 
 
+def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -> dict[str, float]:
+    """The limit's parts replayed on ``n`` of the loop's walking ticks (:mod:`taslel_bench.qp.tick_replay`,
+    one more run of the episode records them): the sums of their medians [µs] alone and back to back with no
+    glue (mj_step x physics steps per tick, as the limit), the share alone / back to back (the most a loop
+    with no glue could reach) and alone / the loop's wall per tick ``wall_per_tick_us``. {} when the episode
+    walks too briefly to record 10 ticks."""
+    e = built.episode
+    n = min(n, round(e.s.duration_s / e.s.control_dt_s) - 101)
+    if n < 10:
+        return {}
+    alone, back = replay(built, record_ticks(built, n))
+    ppt = e.physics_per_tick
+
+    def total(parts: dict[str, np.ndarray]) -> float:
+        return sum(float(np.median(x)) * (ppt if p == "mj_step" else 1) for p, x in parts.items())
+
+    a, b = total(alone), total(back)
+    return {"ticks": n, "alone": a, "back to back": b, "share back to back": a / b, "wall": wall_per_tick_us,
+            "share loop": a / wall_per_tick_us}
+
+
 # each timed part of the loop's tick (TICK_PARTS) and the isolated parts it contains
 ISOLATED_IN_PART = {"controller": ("controller",), "model": ("pinocchio_update",),
                     "filter": ("qp_build", "qp_solve"), "physics": ("mj_step", "contact_check")}
@@ -322,7 +344,7 @@ def _solver_overrides(name: str) -> list[str]:
 def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
     factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
-    :func:`wall_accounting`, :func:`cold_vs_warm` or {} without ``--cold``)."""
+    :func:`wall_accounting`, :func:`cold_vs_warm` and :func:`back_to_back`, both {} without ``--cold``)."""
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
@@ -339,8 +361,9 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     limit = sum_of_parts_limit(isolated, 1.0 / float(cfg.control_rate_hz), ppt)
     accounting = wall_accounting(wall_us, tick_mean_us, parts_mean, isolated, ppt)
     cold = cold_vs_warm(built) if args.cold else {}
+    back = back_to_back(built, wall_us) if args.cold else {}
     return (label, float(np.median(tr.tick_us[:n])), rtf, limit, res.status, res.fell, in_loop, isolated,
-            accounting, cold)
+            accounting, cold, back)
 
 
 def _fmt_parts(parts: dict[str, float]) -> str:
@@ -361,6 +384,7 @@ def _print_table(rows: list[tuple], args: argparse.Namespace) -> None:
     print(_accounting_text(rows))
     if args.cold:
         print(_cold_text(rows))
+        print(_back_to_back_text(rows))
 
 
 def _accounting_text(rows: list[tuple]) -> str:
@@ -383,6 +407,20 @@ def _cold_text(rows: list[tuple]) -> str:
     head = ("Interleaving (`--cold`): each call in the loop vs the same call repeated at once (mj_step: vs its "
             "isolated tight loop), median µs:\n")
     return head + markdown_table(cells, ("loop", "part", "in the loop", "warm", "cold penalty"), fmt=str).rstrip("\n")
+
+
+def _back_to_back_text(rows: list[tuple]) -> str:
+    """The :func:`back_to_back` of each loop as a markdown table."""
+    cells = [(r[0], f"{b['alone']:.1f}", f"{b['back to back']:.1f}", f"{b['share back to back']:.2f}",
+              f"{b['wall']:.1f}", f"{b['share loop']:.2f}") for r in rows if (b := r[10])]  # fmt: skip
+    n = max((r[10]["ticks"] for r in rows if r[10]), default=0)
+    head = (f"Back to back (`--cold`): the limit's parts replayed on {n} of the loop's walking ticks, each part "
+            "alone and all of them one after the other with no glue between them (the replay's QP answers and "
+            "plant states checked equal to the loop's); sums of the parts' medians, µs per tick. Share = alone / "
+            "that column: back to back is the most a loop with no glue could reach; the gap from there to the "
+            "loop's wall is the glue's own time:\n")
+    cols = ("loop", "parts alone", "back to back", "share back to back", "loop wall per tick (mean)", "share loop")
+    return head + markdown_table(cells, cols, fmt=str).rstrip("\n")
 
 
 def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
@@ -409,7 +447,7 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
     lines.append(markdown_table(cells, _COLUMNS, fmt=str).rstrip("\n"))
     lines += ["", _accounting_text(rows)]
     if args.cold:
-        lines += ["", _cold_text(rows)]
+        lines += ["", _cold_text(rows), "", _back_to_back_text(rows)]
     if main_rtf:
         lines += ["", _main_text(args.main, main_rtf)]
     args.out.parent.mkdir(parents=True, exist_ok=True)

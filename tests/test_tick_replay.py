@@ -1,0 +1,79 @@
+"""taslel_bench.qp.tick_replay: the replay of the loop's ticks redoes the loop's work (same QP answers, same
+plant states), says so when it does not, and covers the nominal-only loop's parts."""
+
+import numpy as np
+import pytest
+
+from taslel_bench.api import compose
+from taslel_bench.qp.tick_replay import PARTS, record_ticks, replay
+from taslel_bench.sim.build import Built
+
+N = 30
+
+
+def _recorded(*overrides):
+    built = Built(compose(["duration=1.0", "progress=false", "record.reference_every=0", *overrides]))
+    return built, record_ticks(built, N)
+
+
+@pytest.fixture(scope="module")
+def filtered():
+    return _recorded("scenario=obstacle")
+
+
+def test_replay_redoes_the_loops_ticks(filtered):
+    built, rec = filtered
+    alone, back = replay(built, rec)  # raises if an answer or a state differs from the loop's
+    assert list(alone) == list(back) == list(PARTS)
+    assert all(x.shape == (N,) and np.all(x > 0) for x in (*alone.values(), *back.values()))
+    assert len(rec.solutions) == N and all(x is not None for x in rec.solutions)
+
+
+def test_replay_fails_on_a_changed_answer_or_state(filtered):
+    built, rec = filtered
+    kept = rec.solutions[7]
+    rec.solutions[7] = kept + 1e-6
+    try:
+        with pytest.raises(RuntimeError, match="does not redo the loop's work"):
+            replay(built, rec)
+    finally:
+        rec.solutions[7] = kept
+    qpos = rec.rows["mj_step"][5][0]
+    qpos[2] += 1e-6  # the trunk height before tick 5's step: tick 4's replayed step no longer ends there
+    try:
+        with pytest.raises(RuntimeError, match="max \\|qpos - qpos_loop\\| 1e-06"):
+            replay(built, rec)
+    finally:
+        qpos[2] -= 1e-6
+
+
+def test_nominal_only_replays_its_three_parts():
+    built, rec = _recorded("filter.enabled=false")
+    alone, back = replay(built, rec)
+    assert list(alone) == list(back) == ["controller", "mj_step", "contact_check"]
+
+
+def test_a_run_shorter_than_the_record_is_an_error():
+    built = Built(compose(["duration=0.05", "progress=false", "filter.enabled=false"]))
+    with pytest.raises(RuntimeError, match="recorded 0 of 30 walking ticks"):
+        record_ticks(built, N)
+
+
+def test_bench_back_to_back_sums_the_parts_and_restores_the_episode():
+    import mujoco
+
+    from taslel_bench.qp.tick_bench import _back_to_back_text, back_to_back
+
+    step = mujoco.mj_step
+    built = Built(compose(["duration=0.3", "progress=false", "record.mcap=false"]))
+    built.episode.run()
+    out = back_to_back(built, wall_per_tick_us=500.0)
+    assert out["ticks"] == 199  # 0.3 s walk = 300 ticks, less the 100 after the stand and one
+    assert out["alone"] > 0 and out["back to back"] > 0
+    assert out["share back to back"] == pytest.approx(out["alone"] / out["back to back"])
+    assert out["share loop"] == pytest.approx(out["alone"] / 500.0)
+    assert "compute" not in vars(built.episode.controller) and "filter" not in vars(built.filter)
+    assert mujoco.mj_step is step  # the episode's physics is MuJoCo's again
+    row = ("filter + daqp", *([None] * 9), out)
+    assert "| filter + daqp | " in _back_to_back_text([row, ("short", *([None] * 9), {})])
+    assert back_to_back(Built(compose(["duration=0.05", "progress=false"])), 500.0) == {}
