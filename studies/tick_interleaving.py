@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
     print("|---|---|" + "---|" * (len(PARTS) + 2))
     for r in range(args.rounds):
         loop, wall_us = loop_run(built, rec)
-        alone, bare = replay(built, rec)
+        alone, bare, _ = replay(built, rec)
         a = np.array([np.median(alone[p]) for p in PARTS if p in alone])
         b = np.array([np.median(bare[p]) for p in PARTS if p in bare])
         for way, x in (("alone", a), ("bare", b)):

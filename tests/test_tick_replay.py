@@ -23,7 +23,8 @@ def filtered():
 
 def test_replay_redoes_the_loops_ticks(filtered):
     built, rec = filtered
-    alone, back = replay(built, rec)  # raises if an answer or a state differs from the loop's
+    alone, back, worst = replay(built, rec)  # raises if an answer or a state differs from the loop's
+    assert worst["qpos"] == 0.0 and worst["u_nm"] < 1e-12  # DAQP: the loop's answers to rounding
     assert list(alone) == list(back) == list(PARTS)
     assert all(x.shape == (N,) and np.all(x > 0) for x in (*alone.values(), *back.values()))
     assert len(rec.solutions) == N and all(x is not None for x in rec.solutions)
@@ -34,8 +35,9 @@ def test_replay_fails_on_a_changed_answer_or_state(filtered):
     kept = rec.solutions[7]
     rec.solutions[7] = kept + 1e-6
     try:
-        with pytest.raises(RuntimeError, match="does not redo the loop's work"):
-            replay(built, rec)
+        with pytest.raises(RuntimeError, match="does not redo the loop's work: max \\|u - u_loop\\| 1e-06"):
+            replay(built, rec, answer_tol_nm=1e-9)
+        assert replay(built, rec)[2]["u_nm"] == pytest.approx(1e-6)  # within the run's 1e-3 N·m
     finally:
         rec.solutions[7] = kept
     qpos = rec.rows["mj_step"][5][0]
@@ -47,10 +49,17 @@ def test_replay_fails_on_a_changed_answer_or_state(filtered):
         qpos[2] -= 1e-6
 
 
+def test_an_iterative_solver_replays_within_the_wrong_answer_tolerance():
+    built, rec = _recorded("scenario=obstacle", "solver=osqp")
+    worst = replay(built, rec)[2]  # the first replayed solve starts cold: the answers move within tolerance
+    assert worst["qpos"] == 0.0 and worst["u_nm"] < 1e-3
+
+
 def test_nominal_only_replays_its_three_parts():
     built, rec = _recorded("filter.enabled=false")
-    alone, back = replay(built, rec)
+    alone, back, worst = replay(built, rec)
     assert list(alone) == list(back) == ["controller", "mj_step", "contact_check"]
+    assert worst == {"u_nm": 0.0, "qpos": 0.0}
 
 
 def test_a_run_shorter_than_the_record_is_an_error():

@@ -241,7 +241,7 @@ def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -
     n = min(n, round(e.s.duration_s / e.s.control_dt_s) - 101)
     if n < 10:
         return {}
-    alone, back = replay(built, record_ticks(built, n))
+    alone, back, worst = replay(built, record_ticks(built, n))
     ppt = e.physics_per_tick
 
     def total(parts: dict[str, np.ndarray]) -> float:
@@ -249,7 +249,7 @@ def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -
 
     a, b = total(alone), total(back)
     return {"ticks": n, "alone": a, "back to back": b, "share back to back": a / b, "wall": wall_per_tick_us,
-            "share loop": a / wall_per_tick_us}
+            "share loop": a / wall_per_tick_us, "u error": worst["u_nm"] if built.filter is not None else float("nan")}
 
 
 # each timed part of the loop's tick (TICK_PARTS) and the isolated parts it contains
@@ -412,14 +412,17 @@ def _cold_text(rows: list[tuple]) -> str:
 def _back_to_back_text(rows: list[tuple]) -> str:
     """The :func:`back_to_back` of each loop as a markdown table."""
     cells = [(r[0], f"{b['alone']:.1f}", f"{b['back to back']:.1f}", f"{b['share back to back']:.2f}",
-              f"{b['wall']:.1f}", f"{b['share loop']:.2f}") for r in rows if (b := r[10])]  # fmt: skip
+              f"{b['wall']:.1f}", f"{b['share loop']:.2f}", f"{b['u error']:.1g}" if np.isfinite(b["u error"]) else "-")
+             for r in rows if (b := r[10])]  # fmt: skip
     n = max((r[10]["ticks"] for r in rows if r[10]), default=0)
     head = (f"Back to back (`--cold`): the limit's parts replayed on {n} of the loop's walking ticks, each part "
-            "alone and all of them one after the other with no glue between them (the replay's QP answers and "
-            "plant states checked equal to the loop's); sums of the parts' medians, µs per tick. Share = alone / "
-            "that column: back to back is the most a loop with no glue could reach; the gap from there to the "
-            "loop's wall is the glue's own time:\n")
-    cols = ("loop", "parts alone", "back to back", "share back to back", "loop wall per tick (mean)", "share loop")
+            "alone and all of them one after the other with no glue between them (the replay's plant states "
+            "checked equal to the loop's, its QP answers' u within `record.reference_tol_nm`: an iterative "
+            "solver's first replayed solve starts cold; the largest u difference is its column); sums of the "
+            "parts' medians, µs per tick. Share = alone / that column: back to back is the most a loop with no "
+            "glue could reach; the gap from there to the loop's wall is the glue's own time:\n")
+    cols = ("loop", "parts alone", "back to back", "share back to back", "loop wall per tick (mean)", "share loop",
+            "max |u - u_loop| N·m")
     return head + markdown_table(cells, cols, fmt=str).rstrip("\n")
 
 
