@@ -83,6 +83,12 @@ def test_bench_back_to_back_sums_the_parts_and_restores_the_episode():
     assert out["share loop"] == pytest.approx(out["alone"] / 500.0)
     assert "compute" not in vars(built.episode.controller) and "filter" not in vars(built.filter)
     assert mujoco.mj_step is step  # the episode's physics is MuJoCo's again
-    row = ("filter + daqp", *([None] * 9), out)
-    assert "| filter + daqp | " in _back_to_back_text([row, ("short", *([None] * 9), {})])
+    steady = {"ticks": 199, "alone": 70.0, "back to back": 80.0, "share back to back": 0.875, "wall": 120.0,
+              "share loop": 0.58, "u error": 1e-15}  # fmt: skip
+    row = ("filter + daqp", *([None] * 9), steady)
+    text = _back_to_back_text([row, ("short", *([None] * 9), {})])
+    assert "| filter + daqp | 70.0 | 80.0 | 0.88 | 120.0 | 0.58 | 1e-15 |  |" in text and "short" not in text
     assert back_to_back(Built(compose(["duration=0.05", "progress=false"])), 500.0) == {}
+    fast_loop = {**steady, "share loop": 1.5}  # the parts alone timed slower than the whole loop: a disturbed run
+    assert "share loop > 1.05: the machine's speed changed" in _back_to_back_text([("x", *([None] * 9), fast_loop)])
+    assert "speed changed" not in _back_to_back_text([row])

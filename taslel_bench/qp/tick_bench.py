@@ -409,11 +409,21 @@ def _cold_text(rows: list[tuple]) -> str:
     return head + markdown_table(cells, ("loop", "part", "in the loop", "warm", "cold penalty"), fmt=str).rstrip("\n")
 
 
+DISTURBED_SHARE = 1.05  # a share above this: the parts alone timed slower than the same parts with more around them
+
+
+def _disturbed(b: dict[str, float]) -> str:
+    """"" or why the row's shares cannot be read: the parts alone cannot cost more than the same parts back to
+    back or than the whole loop unless the machine's speed changed between the runs (other jobs, VM phases)."""
+    over = [k for k in ("share back to back", "share loop") if b[k] > DISTURBED_SHARE]
+    return f"{' and '.join(over)} > {DISTURBED_SHARE}: the machine's speed changed between the runs" if over else ""
+
+
 def _back_to_back_text(rows: list[tuple]) -> str:
     """The :func:`back_to_back` of each loop as a markdown table."""
     cells = [(r[0], f"{b['alone']:.1f}", f"{b['back to back']:.1f}", f"{b['share back to back']:.2f}",
-              f"{b['wall']:.1f}", f"{b['share loop']:.2f}", f"{b['u error']:.1g}" if np.isfinite(b["u error"]) else "-")
-             for r in rows if (b := r[10])]  # fmt: skip
+              f"{b['wall']:.1f}", f"{b['share loop']:.2f}", f"{b['u error']:.1g}" if np.isfinite(b["u error"]) else "-",
+              _disturbed(b)) for r in rows if (b := r[10])]  # fmt: skip
     n = max((r[10]["ticks"] for r in rows if r[10]), default=0)
     head = (f"Back to back (`--cold`): the limit's parts replayed on {n} of the loop's walking ticks, each part "
             "alone and all of them one after the other with no glue between them (the replay's plant states "
@@ -422,7 +432,7 @@ def _back_to_back_text(rows: list[tuple]) -> str:
             "parts' medians, µs per tick. Share = alone / that column: back to back is the most a loop with no "
             "glue could reach; the gap from there to the loop's wall is the glue's own time:\n")
     cols = ("loop", "parts alone", "back to back", "share back to back", "loop wall per tick (mean)", "share loop",
-            "max |u - u_loop| N·m")
+            "max |u - u_loop| N·m", "check")
     return head + markdown_table(cells, cols, fmt=str).rstrip("\n")
 
 
