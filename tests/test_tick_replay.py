@@ -92,3 +92,18 @@ def test_bench_back_to_back_sums_the_parts_and_restores_the_episode():
     fast_loop = {**steady, "share loop": 1.5}  # the parts alone timed slower than the whole loop: a disturbed run
     assert "share loop > 1.05: the machine's speed changed" in _back_to_back_text([("x", *([None] * 9), fast_loop)])
     assert "speed changed" not in _back_to_back_text([row])
+    failed = {"ticks": 0, "error": "not replayed: the episode recorded 12 of 30 walking ticks"}
+    assert "| fell | - | - | - | - | - | - | not replayed: the episode recorded 12" in _back_to_back_text(
+        [("fell", *([None] * 9), failed)])
+
+
+def test_bench_back_to_back_reports_a_failed_replay(monkeypatch):
+    from taslel_bench.qp import tick_bench
+
+    def ended_early(built, n):
+        raise RuntimeError("the episode recorded 12 of 199 walking ticks")
+
+    monkeypatch.setattr(tick_bench, "record_ticks", ended_early)
+    built = Built(compose(["duration=0.3", "progress=false", "filter.enabled=false"]))
+    assert tick_bench.back_to_back(built, 500.0) == {"ticks": 0, "error": "not replayed: the episode recorded 12 of "
+                                                                          "199 walking ticks"}

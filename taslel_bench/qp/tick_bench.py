@@ -236,12 +236,16 @@ def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -
     one more run of the episode records them): the sums of their medians [µs] alone and back to back with no
     glue (mj_step x physics steps per tick, as the limit), the share alone / back to back (the most a loop
     with no glue could reach) and alone / the loop's wall per tick ``wall_per_tick_us``. {} when the episode
-    walks too briefly to record 10 ticks."""
+    walks too briefly to record 10 ticks; {"ticks": 0, "error": why} when the replay fails (a run that ends
+    early, answers or states that differ from the loop's)."""
     e = built.episode
     n = min(n, round(e.s.duration_s / e.s.control_dt_s) - 101)
     if n < 10:
         return {}
-    alone, back, worst = replay(built, record_ticks(built, n))
+    try:
+        alone, back, worst = replay(built, record_ticks(built, n))
+    except RuntimeError as exc:
+        return {"ticks": 0, "error": f"not replayed: {exc}"}
     ppt = e.physics_per_tick
 
     def total(parts: dict[str, np.ndarray]) -> float:
@@ -413,17 +417,25 @@ DISTURBED_SHARE = 1.05  # a share above this: the parts alone timed slower than 
 
 
 def _disturbed(b: dict[str, float]) -> str:
-    """"" or why the row's shares cannot be read: the parts alone cannot cost more than the same parts back to
-    back or than the whole loop unless the machine's speed changed between the runs (other jobs, VM phases)."""
+    """Empty, or why the row's shares cannot be read: the replay failed, or the parts alone timed slower than
+    the same parts back to back or than the whole loop (the machine's speed changed between the runs)."""
+    if "error" in b:
+        return b["error"]
     over = [k for k in ("share back to back", "share loop") if b[k] > DISTURBED_SHARE]
     return f"{' and '.join(over)} > {DISTURBED_SHARE}: the machine's speed changed between the runs" if over else ""
 
 
+def _back_to_back_cells(b: dict[str, float]) -> tuple[str, ...]:
+    """The numbers of one :func:`back_to_back` row (dashes when it was not replayed)."""
+    if "error" in b:
+        return ("-",) * 6
+    return (f"{b['alone']:.1f}", f"{b['back to back']:.1f}", f"{b['share back to back']:.2f}", f"{b['wall']:.1f}",
+            f"{b['share loop']:.2f}", f"{b['u error']:.1g}" if np.isfinite(b["u error"]) else "-")
+
+
 def _back_to_back_text(rows: list[tuple]) -> str:
     """The :func:`back_to_back` of each loop as a markdown table."""
-    cells = [(r[0], f"{b['alone']:.1f}", f"{b['back to back']:.1f}", f"{b['share back to back']:.2f}",
-              f"{b['wall']:.1f}", f"{b['share loop']:.2f}", f"{b['u error']:.1g}" if np.isfinite(b["u error"]) else "-",
-              _disturbed(b)) for r in rows if (b := r[10])]  # fmt: skip
+    cells = [(r[0], *_back_to_back_cells(b), _disturbed(b)) for r in rows if (b := r[10])]
     n = max((r[10]["ticks"] for r in rows if r[10]), default=0)
     head = (f"Back to back (`--cold`): the limit's parts replayed on {n} of the loop's walking ticks, each part "
             "alone and all of them one after the other with no glue between them (the replay's plant states "
