@@ -107,3 +107,12 @@ def test_bench_back_to_back_reports_a_failed_replay(monkeypatch):
     built = Built(compose(["duration=0.3", "progress=false", "filter.enabled=false"]))
     assert tick_bench.back_to_back(built, 500.0) == {"ticks": 0, "error": "not replayed: the episode recorded 12 of "
                                                                           "199 walking ticks"}
+
+
+def test_an_answer_missing_on_one_side_is_a_difference():
+    from taslel_bench.qp.tick_replay import _u_difference
+
+    x = np.arange(4.0)
+    assert _u_difference(None, None, slice(0, 2)) == 0.0
+    assert _u_difference(x, None, slice(0, 2)) == np.inf and _u_difference(None, x, slice(0, 2)) == np.inf
+    assert _u_difference(x + 1e-3, x, slice(0, 2)) == pytest.approx(1e-3)

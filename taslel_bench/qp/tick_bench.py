@@ -36,7 +36,7 @@ from rich.table import Table
 
 from taslel_bench.api import compose
 from taslel_bench.filter.layout import TickInputs
-from taslel_bench.qp.tick_replay import record_ticks, replay
+from taslel_bench.qp.tick_replay import AFTER_STAND_TICKS, record_ticks, replay
 from taslel_bench.record.run_files import atomic_write
 from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
 from taslel_bench.sim.build import Built
@@ -239,7 +239,7 @@ def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -
     walks too briefly to record 10 ticks; {"ticks": 0, "error": why} when the replay fails (a run that ends
     early, answers or states that differ from the loop's)."""
     e = built.episode
-    n = min(n, round(e.s.duration_s / e.s.control_dt_s) - 101)
+    n = min(n, round(e.s.duration_s / e.s.control_dt_s) - AFTER_STAND_TICKS - 1)  # walking ticks left to record
     if n < 10:
         return {}
     try:

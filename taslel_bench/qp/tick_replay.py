@@ -21,6 +21,7 @@ active-set solver such as DAQP gives the loop's answer to rounding). Used by ``p
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -34,6 +35,7 @@ from taslel_bench.sim.build import Built
 
 PARTS = ("controller", "pinocchio_update", "qp_build", "qp_solve", "mj_step", "contact_check")  # tick order
 STATE_TOLERANCE = 1e-9  # largest |qpos difference| between a replayed step's end and the loop's
+AFTER_STAND_TICKS = 100  # the recording starts this many ticks into the walk (past the first steps' transient)
 
 
 class TickRecorder:
@@ -100,7 +102,7 @@ class TickRecorder:
         return self._step(m, d)
 
 
-def record_ticks(built: Built, n: int, after_stand_ticks: int = 100) -> TickRecorder:
+def record_ticks(built: Built, n: int, after_stand_ticks: int = AFTER_STAND_TICKS) -> TickRecorder:
     """Run the built episode once more (no analysis) recording ``n`` walking ticks from ``after_stand_ticks``
     after the stand. Raises if the run ends before them."""
     e = built.episode
@@ -164,8 +166,9 @@ def replay(built: Built, rec: TickRecorder, answer_tol_nm: float | None = None
     for part in order:
         reset()  # the solver's warm start from tick to tick, as in the loop
         call, before, out = calls[part], NEEDS.get(part, ()), alone[part]
+        physics = part in ("mj_step", "contact_check")
         for i in range(n):
-            if part in ("mj_step", "contact_check"):
+            if physics:
                 set_state(i)
             for p in before:
                 calls[p](i)
@@ -174,16 +177,16 @@ def replay(built: Built, rec: TickRecorder, answer_tol_nm: float | None = None
             out[i] = pc() - t0
     reset()
     back = {p: np.empty(n) for p in order}
-    seq = [(calls[p], back[p], p == "mj_step") for p in order]
+    seq = [(calls[p], back[p], p == "mj_step", p == "qp_solve") for p in order]
     answers, after_step = [], []
     for i in range(n):
-        for call, out, physics in seq:
+        for call, out, physics, solve in seq:
             if physics:
                 set_state(i)  # the recorded plant state (the loop's plant is already there): untimed
             t0 = pc()
             result = call(i)
             out[i] = pc() - t0
-            if call is calls.get("qp_solve"):
+            if solve:
                 answers.append(result.x)
         after_step.append(qpos())
     tol = float(built.cfg.record.reference_tol_nm) if answer_tol_nm is None else answer_tol_nm
@@ -200,10 +203,16 @@ def _check_faithful(built: Built, rec: TickRecorder, answers: list, after_step: 
     # state before the physics step after each tick's first one (the next tick's first with one step a tick)
     worst_q = max((float(np.max(np.abs(a - b))) for a, b in zip(after_step, recorded)), default=0.0)
     u = built.filter.backend_problem.layout["u"] if built.filter is not None else slice(0)
-    worst_u = max((float(np.max(np.abs(a[u] - b[u]))) for a, b in zip(answers, rec.solutions)
-                   if a is not None and b is not None), default=0.0)  # fmt: skip
+    worst_u = max((_u_difference(a, b, u) for a, b in zip(answers, rec.solutions)), default=0.0)
     if not (worst_u <= answer_tol_nm and worst_q <= STATE_TOLERANCE):
         raise RuntimeError(f"the replay does not redo the loop's work: max |u - u_loop| {worst_u:.3g} N·m "
                            f"(tolerance {answer_tol_nm:g}), max |qpos - qpos_loop| {worst_q:.3g} "
                            f"(tolerance {STATE_TOLERANCE:g})")  # fmt: skip
     return {"u_nm": worst_u, "qpos": worst_q}
+
+
+def _u_difference(replayed: np.ndarray | None, loop: np.ndarray | None, u: slice) -> float:
+    """max |u - u_loop| [N·m] of one tick's answers; 0 when neither has one, inf when only one does."""
+    if replayed is None or loop is None:
+        return 0.0 if replayed is None and loop is None else math.inf
+    return float(np.max(np.abs(replayed[u] - loop[u])))
