@@ -92,11 +92,11 @@ def refused(overrides: list[str], out: Path, *texts: str) -> tuple[bool, str]:
 
 
 def scene(folder: Path) -> Path:
-    from taslel_bench.plant.build import a1_spec
+    from taslel_bench.plant.build import robot_spec
 
     (folder / "assets").mkdir(parents=True, exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA)
-    xml = a1_spec().to_xml().replace(
+    xml = robot_spec().to_xml().replace(
         '<compiler angle="radian"/>',
         '<compiler angle="radian" meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>')
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
@@ -420,13 +420,13 @@ def _(tmp: Path):
 
 @case("messages", "unnamed foot spheres: 'name these 4 spheres' hint")
 def _(tmp: Path):
-    from taslel_bench.plant.build import a1_spec
-    from taslel_bench.robot import a1
+    from taslel_bench.plant.build import robot_spec
+    from taslel_bench.robot import quadruped as quad
 
-    spec = a1_spec()
+    spec = robot_spec()
     for e in list(spec.sensors) + list(spec.sites):
         spec.delete(e)
-    for f in a1.FOOT_FRAMES:
+    for f in quad.FOOT_FRAMES:
         spec.geom(f).name = ""
     (tmp / "a1.xml").write_text(spec.to_xml())
     return refused([f"robot.plant_mjcf={tmp / 'a1.xml'}"], tmp / "run", "name these 4 spheres")

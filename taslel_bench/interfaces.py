@@ -5,7 +5,7 @@ The axis packages import from the core only this module (types, protocols, the t
 A1's constants, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
 the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
 
-Joint vectors are in the core order (:data:`taslel_bench.robot.a1.JOINT_NAMES`, legs FL, FR, RL, RR).
+Joint vectors are in the core order (:data:`taslel_bench.robot.quad.JOINT_NAMES`, legs FL, FR, RL, RR).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.plant.perturbation import ActuatorDelay, PlantPerturbation
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.parts import GROUND, OBSTACLE, Box, FrictionStrips, Log, Plane, TerrainPart
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.relief import HeightField, Ramp, rough_heights

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from taslel_bench.plant.contact_frames import ContactFrameReader, ContactLog
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.build import Built
 from tests.conftest import compose_cfg
 
@@ -55,10 +55,10 @@ def test_contact_point_velocity_is_the_point_jacobian_times_qvel():
     mujoco.mj_forward(m, d)
     reader, log = ContactFrameReader(m), ContactLog(1)
     reader.record(d, log, 0)
-    frames = reader.frames(log, 0, 1, np.zeros((1, a1.N_LEGS, 3)))
+    frames = reader.frames(log, 0, 1, np.zeros((1, quad.N_LEGS, 3)))
     jacp = np.zeros((3, m.nv))
     checked = 0
-    feet = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f): i for i, f in enumerate(a1.FOOT_FRAMES)}
+    feet = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f): i for i, f in enumerate(quad.FOOT_FRAMES)}
     for i in range(d.ncon):
         c = d.contact[i]
         foot = next((g for g in (c.geom1, c.geom2) if g in feet), None)
@@ -86,8 +86,8 @@ def test_leg_link_contact_beside_its_foot_is_told_from_one_away_from_it():
                 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX)
     log_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "obstacles_0")
     reader, log = ContactFrameReader(m), ContactLog(2)
-    fl = a1.LEGS.index("FL")
-    foot_pos = np.zeros((2, a1.N_LEGS, 3))
+    fl = quad.LEGS.index("FL")
+    foot_pos = np.zeros((2, quad.N_LEGS, 3))
     for k, away_m in enumerate((0.025, 0.11)):
         log.count[k] = 1
         log.geom[k, 0] = (log_geom, calf)
@@ -97,7 +97,7 @@ def test_leg_link_contact_beside_its_foot_is_told_from_one_away_from_it():
     frames = reader.frames(log, 0, 2, foot_pos)
     assert frames["leg_link_obstacle_contact"][:, fl].tolist() == [True, True]
     assert frames["leg_link_obstacle_contact_off_foot"][:, fl].tolist() == [False, True]
-    assert not frames["leg_link_obstacle_contact"][:, [i for i in range(a1.N_LEGS) if i != fl]].any()
+    assert not frames["leg_link_obstacle_contact"][:, [i for i in range(quad.N_LEGS) if i != fl]].any()
 
 
 def test_foot_cone_edge_is_the_contacts_edge_for_one_contact_and_the_net_force_for_two():

@@ -443,7 +443,7 @@ def test_foot_kinematics_match_leg_fk_and_its_finite_difference() -> None:
     out = foot_kinematics(x)[0, 0].numpy()
     h = 1e-6
     for leg in range(4):
-        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], a1.LEG_SIDE[leg]
+        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], quad.LEG_SIDE[leg]
         p = kinematics.leg_fk(ql, side) + a1.HIP_POSITIONS_IN_TRUNK[leg]
         v = (kinematics.leg_fk(ql + h * dl, side) - kinematics.leg_fk(ql - h * dl, side)) / (2 * h)
         np.testing.assert_allclose(out[3 * leg : 3 * leg + 3], p, atol=1e-6)

@@ -12,7 +12,7 @@ from estimators.slip_bound import SlipBoundEstimator
 from estimators.stance_proof import ProofSettings, StanceProof
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import build_plant
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 
 def test_leg_gravity_matches_mujoco_bias_forces() -> None:
@@ -25,7 +25,7 @@ def test_leg_gravity_matches_mujoco_bias_forces() -> None:
     for _ in range(10):
         quat = rng.normal(size=4)
         quat /= np.linalg.norm(quat)
-        q = np.zeros(a1.NQ)
+        q = np.zeros(quad.NQ)
         q[3:7] = quat[[1, 2, 3, 0]]  # Pinocchio's xyzw
         q[7:] = rng.uniform(-0.8, 0.8, 12)
         q[9::3] = rng.uniform(-2.6, -1.0, 4)
@@ -33,15 +33,15 @@ def test_leg_gravity_matches_mujoco_bias_forces() -> None:
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
         # T maps Pinocchio's velocity to MuJoCo's (joints permuted): the bias in Pinocchio's order is T' qfrc_bias
-        T = np.column_stack([_mj_velocity(br, q, i) for i in range(a1.NV)])
+        T = np.column_stack([_mj_velocity(br, q, i) for i in range(quad.NV)])
         tau_mj = (T.T @ d.qfrc_bias)[6:]
         worst = max(worst, float(np.abs(grav.torques(q[7:], quat) - tau_mj).max()))
     assert worst < 1e-9
 
 
 def _mj_velocity(br: StateBridge, q: np.ndarray, i: int) -> np.ndarray:
-    out = np.zeros(a1.NV)
-    br.qvel_mj(q, np.eye(a1.NV)[i], out)
+    out = np.zeros(quad.NV)
+    br.qvel_mj(q, np.eye(quad.NV)[i], out)
     return out
 
 

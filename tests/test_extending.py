@@ -34,7 +34,7 @@ class FootCeiling(Barrier):
 
     def write(self, qp: QPProblem, x) -> None:
         m = x.model
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             r = self.start + i
             if x.in_stance[i]:
                 qp.G[r], qp.h[r], self.h[i], self.h_e[i] = 0.0, 1e6, np.nan, np.nan
@@ -57,14 +57,14 @@ def test_a_barrier_family_is_one_class_and_one_config_entry(tmp_path):
     assert summary["status"] in ("ok", "degraded") and summary["qp_failed_rate"] == 0.0
     steps = pd.read_parquet(tmp_path / "toy" / "steps.parquet")
     walking = steps[steps.t_s >= 0.5]
-    h = walking[[f"{leg}_barrier_ceiling_h_m" for leg in a1.LEGS]].to_numpy()
+    h = walking[[f"{leg}_barrier_ceiling_h_m" for leg in quad.LEGS]].to_numpy()
     assert np.isfinite(h).any() and np.nanmin(h) > -5e-3  # the swing feet were kept (nearly) below 4 cm
     plain_steps = pd.read_parquet(tmp_path / "plain" / "steps.parquet")
     apex = {name: (s[s.t_s >= 0.5]["FL_foot_z_w_m"] - a1.FOOT_RADIUS_M).max()
             for name, s in (("toy", steps), ("plain", plain_steps))}
     assert apex["plain"] > 0.05 and apex["toy"] < 0.045  # the trot lifts the feet ~6 cm without it
     fields = next(msg for topic, _, msg in read_messages(tmp_path / "toy" / "episode.mcap") if topic == "/barrier")
-    assert all("ceiling_h_m" in fields[leg] and "ceiling_h_e_mps" in fields[leg] for leg in a1.LEGS)
+    assert all("ceiling_h_m" in fields[leg] and "ceiling_h_e_mps" in fields[leg] for leg in quad.LEGS)
     assert math.isfinite(summary["barrier_negative_rate"])  # the metrics judged the toy family
 
 
@@ -123,5 +123,5 @@ def test_a_kind_of_terrain_is_one_class(tmp_path):
     # the metrics read the toy terrain: clearance of the feet to the pebbles, and the plant's contacts on them
     assert math.isfinite(summary["obstacle_clearance_min_m"]) and summary["obstacle_clearance_min_m"] < 0.05
     steps = pd.read_parquet(tmp_path / "steps.parquet")
-    touched = steps[[f"{leg}_obstacle_contact" for leg in a1.LEGS]].to_numpy().any()
+    touched = steps[[f"{leg}_obstacle_contact" for leg in quad.LEGS]].to_numpy().any()
     assert touched and math.isfinite(summary["obstacle_touch_swing_rate"])

@@ -21,7 +21,7 @@ from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
 from taslel_bench.interfaces import ClearanceProfile, Plane, QPSolution, Terrain
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import PlantOptions, build_plant
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 
 
@@ -210,7 +210,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
         res = f.filter(x, s[3])
         assert res.status == "solved"
         p = f.problem
-        row = p.row_labels.index(f"{a1.LEGS[i]}_obstacle")
+        row = p.row_labels.index(f"{quad.LEGS[i]}_obstacle")
         xvec = np.concatenate([res.vdot, res.u, res.lam])
         slack = p.h[row] - p.G[row] @ xvec
         assert slack >= -1e-6
@@ -320,7 +320,7 @@ def test_condensed_formulation_has_the_same_minimiser(states, target):
     kw = {"regularization": 1e-4, "regularization_target": target}
     full = SafetyFilter(FilterSettings(**kw), ActiveSetReference(), clearance_rows())
     cond = SafetyFilter(FilterSettings(formulation="condensed", **kw), ActiveSetReference(), clearance_rows())
-    assert cond.condensed.n == a1.N_JOINTS and cond.condensed.A.shape[0] == 0
+    assert cond.condensed.n == quad.N_JOINTS and cond.condensed.A.shape[0] == 0
     moved = 0
     for s in st:
         for mu in (0.05, 1.0):
@@ -367,7 +367,7 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
         filt.build(inputs_for(pm, st, 0.6), st[3])
         rhs = rng.normal(size=(qp.A.shape[0], 13))
         tree, dense = rhs.copy(), rhs.copy()
-        assert solve_tree(qp.A, tree, 0, a1.NV, K, piv, W, V, S, T, pivS)
+        assert solve_tree(qp.A, tree, 0, quad.NV, K, piv, W, V, S, T, pivS)
         assert solve_dense(qp.A, dense, A_free, piv_dense)
         worst = max(worst, np.abs(tree - dense).max() / np.abs(dense).max())
         A_free_np = np.hstack([qp.A[:, VDOT], qp.A[:, LAM]])
@@ -376,13 +376,13 @@ def test_tree_solve_of_the_equality_rows_equals_the_dense_lu(states):
     # a singular leg block: foot 0 in stance with a zero Jacobian on its own joints
     A = qp.A.copy()
     A[:] = 0.0
-    A[: a1.NV, : a1.NV] = np.eye(a1.NV)
-    A[a1.NV : a1.NV + 3, :3] = np.eye(3)  # foot 0's contact rows use only base columns
+    A[: quad.NV, : quad.NV] = np.eye(quad.NV)
+    A[quad.NV : quad.NV + 3, :3] = np.eye(3)  # foot 0's contact rows use only base columns
     for i in range(1, 4):
-        A[a1.NV + 3 * i : a1.NV + 3 * i + 3, 30 + 3 * i : 33 + 3 * i] = np.eye(3)  # swing feet
+        A[quad.NV + 3 * i : quad.NV + 3 * i + 3, 30 + 3 * i : 33 + 3 * i] = np.eye(3)  # swing feet
     A[:3, 30:33] = -np.eye(3)
     rhs = rng.normal(size=(qp.A.shape[0], 1))
-    assert not solve_tree(A, rhs.copy(), 0, a1.NV, K, piv, W, V, S, T, pivS)
+    assert not solve_tree(A, rhs.copy(), 0, quad.NV, K, piv, W, V, S, T, pivS)
     from taslel_bench.filter.equality_solve import solve_free
 
     y = rhs.copy()

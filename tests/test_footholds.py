@@ -13,7 +13,7 @@ from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, Ramp, Terrain
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.kinematics import leg_ik, leg_knee_and_foot
 from taslel_bench.robot.model import A1Model
 from tests.conftest import compose_cfg
@@ -22,26 +22,26 @@ HEADING = (1.0, 0.0)
 STAND_M = GaitParams().stand_height_m
 HALF = 0.5 * GaitParams().speed_mps * GaitParams().period_s * GaitParams().duty  # half the stance stroke [m]
 LOG = Log(x_m=0.6, z_m=-0.04, radius_m=0.1, half_width_m=0.5, friction=1.0)  # the logs world's first log
-FL = a1.LEGS.index("FL")
+FL = quad.LEGS.index("FL")
 
 
 def _target(leg: int) -> list[float]:
-    return [HALF, float(a1.LEG_SIDE[leg]) * a1.HIP_OFFSET_Y_M, -STAND_M]
+    return [HALF, float(quad.LEG_SIDE[leg]) * a1.HIP_OFFSET_Y_M, -STAND_M]
 
 
 def test_knee_and_foot_match_pinocchio():
     """The planner's knee (calf joint) and foot in the hip frame against Pinocchio's joint placements."""
     model = A1Model()
     rng = np.random.default_rng(7)
-    knees = [model.model.getJointId(f"{leg}_calf_joint") for leg in a1.LEGS]
+    knees = [model.model.getJointId(f"{leg}_calf_joint") for leg in quad.LEGS]
     for _ in range(20):
-        targets = [np.array([rng.uniform(-0.1, 0.1), a1.LEG_SIDE[i] * a1.HIP_OFFSET_Y_M + rng.uniform(-0.03, 0.03),
+        targets = [np.array([rng.uniform(-0.1, 0.1), quad.LEG_SIDE[i] * a1.HIP_OFFSET_Y_M + rng.uniform(-0.03, 0.03),
                              rng.uniform(-0.32, -0.2)]) for i in range(4)]
         q = pin.neutral(model.model)
-        q[7:] = np.concatenate([leg_ik(t, a1.LEG_SIDE[i]) for i, t in enumerate(targets)])
-        model.update(q, np.zeros(a1.NV))
+        q[7:] = np.concatenate([leg_ik(t, quad.LEG_SIDE[i]) for i, t in enumerate(targets)])
+        model.update(q, np.zeros(quad.NV))
         for i, t in enumerate(targets):
-            knee, foot = leg_knee_and_foot(*t, float(a1.LEG_SIDE[i]))
+            knee, foot = leg_knee_and_foot(*t, float(quad.LEG_SIDE[i]))
             hip = a1.HIP_POSITIONS_IN_TRUNK[i]
             np.testing.assert_allclose(np.array(knee) + hip, model.data.oMi[knees[i]].translation, atol=1e-9)
             np.testing.assert_allclose(np.array(foot) + hip, model.foot_pos_in_world[i], atol=1e-9)
@@ -139,7 +139,7 @@ def test_the_planner_changes_nothing_on_flat_ground_and_moves_a_touchdown_off_a_
     ctl = TerrainFollowingController(GaitParams(), PDGains(), terrain=terrain,
                                      footholds=FootholdPlanner(terrain, 0.05))
     _q_des(ctl, times[times < 0.51], pose)
-    fr = a1.LEGS.index("FR")
+    fr = quad.LEGS.index("FR")
     assert abs(ctl._offset_plan_m[fr]) >= 0.02  # off the edge: 3 cm probes
     assert ctl._offset_plan_m[FL] == 0.0  # FL still stands
 
@@ -168,7 +168,7 @@ def test_a_replan_at_mid_swing_plans_from_the_hip_then_and_the_offset_stays_cont
     pose = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])
     step = Box(centre_m=(1.265, 0.0, 0.025), half_size_m=(1.0, 1.0, 0.025), friction=1.0, role=OBSTACLE)
     terrain = Terrain((Plane(), step))
-    fr = a1.LEGS.index("FR")
+    fr = quad.LEGS.index("FR")
     ctl = TerrainFollowingController(GaitParams(), PDGains(), terrain=terrain,
                                      footholds=FootholdPlanner(terrain, 0.05), replan_phase=0.5)
     offsets, plans = [], []
@@ -220,9 +220,9 @@ def test_swing_heights_from_measured_hips_lift_a_sagging_trunks_swing_feet_by_th
     rows = fresh.gait.foot_targets_list(fresh.gait_time(t))
     for i in range(4):
         lifted = rows[i][2] + (0.0 if gs.in_stance[i] else fresh.sag_m)
-        expected = leg_ik([rows[i][0], rows[i][1], lifted], a1.LEG_SIDE[i])
+        expected = leg_ik([rows[i][0], rows[i][1], lifted], quad.LEG_SIDE[i])
         np.testing.assert_allclose(fresh.q_des[3 * i:3 * i + 3], expected, atol=1e-9)
-    assert not gs.in_stance[a1.LEGS.index("FR")] and gs.in_stance[FL]
+    assert not gs.in_stance[quad.LEGS.index("FR")] and gs.in_stance[FL]
 
 
 def test_swing_from_measured_hips_needs_terrain_following():

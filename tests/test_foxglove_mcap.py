@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 
 from taslel_bench.record import foxglove_layout, scene
 from taslel_bench.record.mcap import FINAL_NAME
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.run import run
 from tests.conftest import compose_cfg
 
@@ -102,7 +102,7 @@ def test_transforms_put_each_foot_where_mujoco_measured_it(logs_run):
         row = steps.iloc[by_time[round(pub * 1e-9, 6)] + 1]
         tf = {t["child_frame_id"]: t for t in body["transforms"]}
         assert tf["trunk"]["parent_frame_id"] == "world"
-        for leg in a1.LEGS:
+        for leg in quad.LEGS:
             pos, quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
             for link in ("trunk", f"{leg}_hip", f"{leg}_thigh", f"{leg}_calf"):
                 t = tf[link]["translation"]
@@ -173,7 +173,7 @@ def test_signals_have_named_per_foot_fields(logs_run):
     steps = pd.read_parquet(out / "steps.parquet")
     _, _, body, _ = messages["/contact_force"][5]
     row = steps[np.isclose(steps["t_s"], body["t_s"])].iloc[0]
-    assert set(body) == {"t_s", *a1.LEGS}
+    assert set(body) == {"t_s", *quad.LEGS}
     assert body["RL"]["plant_w_n"]["z"] == pytest.approx(row["RL_grf_plant_z_w_n"])
     assert body["RL"]["stance"] == bool(row["RL_stance"])
     _, _, joints, _ = messages["/joint_state"][5]

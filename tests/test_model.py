@@ -8,7 +8,7 @@ import pinocchio as pin
 import pytest
 
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
-from taslel_bench.plant.build import PlantOptions, a1_spec, build_plant, compile_plant
+from taslel_bench.plant.build import PlantOptions, robot_spec, build_plant, compile_plant
 from taslel_bench.plant.contacts import FootContactReader, foot_geom_ids, measure_contact_friction
 from taslel_bench.robot import a1, kinematics
 from taslel_bench.robot.model import A1Model
@@ -21,10 +21,10 @@ def setup():
 
 
 def random_state(pm: A1Model, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    q = pin.randomConfiguration(pm.model, -np.ones(a1.NQ), np.ones(a1.NQ))
+    q = pin.randomConfiguration(pm.model, -np.ones(quad.NQ), np.ones(quad.NQ))
     q[7:] = rng.uniform(-0.8, 0.8, 12)
     q[9::3] = rng.uniform(-2.6, -1.0, 4)  # calf range
-    return q, rng.normal(0.0, 2.0, a1.NV)
+    return q, rng.normal(0.0, 2.0, quad.NV)
 
 
 def same_random_state(m, d, br: StateBridge, pm: A1Model, rng: np.random.Generator):
@@ -39,9 +39,9 @@ def same_random_state(m, d, br: StateBridge, pm: A1Model, rng: np.random.Generat
 
 def velocity_map(br: StateBridge, q: np.ndarray) -> np.ndarray:
     """T with qvel_mujoco = T v_pinocchio (linear part rotated, joints permuted)."""
-    T = np.zeros((a1.NV, a1.NV))
-    for i in range(a1.NV):
-        e = np.zeros(a1.NV)
+    T = np.zeros((quad.NV, quad.NV))
+    for i in range(quad.NV):
+        e = np.zeros(quad.NV)
         e[i] = 1.0
         br.qvel_mj(q, e, T[:, i])
     return T
@@ -58,10 +58,10 @@ def test_mass_bias_feet_match_mujoco(setup):
         mujoco.mj_fullM(m, d, M_mj)  # MuJoCo 4 signature
         worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
         # qacc = T vdot + Tdot v; Tdot v is R (w x v_lin) on the linear rows (linear velocity frame change)
-        tdot_v = np.zeros(a1.NV)
+        tdot_v = np.zeros(quad.NV)
         tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
         worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - pm.h).max())
-        for i, foot in enumerate(a1.FOOT_FRAMES):
+        for i, foot in enumerate(quad.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
             worst["pos"] = max(worst["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
             jac = np.zeros((3, m.nv))
@@ -105,7 +105,7 @@ def test_foot_terms_match_pinocchio_frame_api(setup):
         pm.update(q, v)
         md = pm.model.createData()
         pin.computeJointJacobians(pm.model, md, q)
-        pin.forwardKinematics(pm.model, md, q, v, np.zeros(a1.NV))
+        pin.forwardKinematics(pm.model, md, q, v, np.zeros(quad.NV))
         pin.updateFramePlacements(pm.model, md)
         for i, fid in enumerate(pm.foot_frame_ids):
             jac = pin.getFrameJacobian(pm.model, md, fid, lwa)[:3]
@@ -124,7 +124,7 @@ def test_foot_velocity_matches_mujoco(setup):
     res = np.zeros(6)
     for _ in range(10):
         same_random_state(m, d, br, pm, rng)
-        for i, foot in enumerate(a1.FOOT_FRAMES):
+        for i, foot in enumerate(quad.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, sid, res, 0)  # world axes, [ang, lin]
             assert np.abs(res[3:] - pm.foot_vel_in_world[i]).max() < 1e-9
@@ -139,7 +139,7 @@ def test_bridge_round_trip(setup):
     br.qvel_mj(q, v, qvel)
     assert np.allclose(br.q_pin(qpos), q, atol=1e-15)
     assert np.allclose(br.v_pin(qpos, qvel), v, atol=1e-12)
-    q2, v2 = np.zeros(a1.NQ), np.zeros(a1.NV)
+    q2, v2 = np.zeros(quad.NQ), np.zeros(quad.NV)
     br.state_pin(qpos, qvel, q2, v2)  # the compiled tick read: same conversion
     assert np.allclose(q2, q, atol=1e-15) and np.allclose(v2, v, atol=1e-12)
     # leg order: core joint 0 is FL_hip, which MuJoCo (URDF order FR, FL, ...) stores at index 3
@@ -158,24 +158,24 @@ def test_leg_ik_inverts_fk_and_matches_pinocchio(setup):
         qj = np.concatenate([[rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 1.5), rng.uniform(-2.5, -1.0)] for _ in range(4)])
         q = pin.neutral(pm.model)
         q[7:] = qj
-        pm.update(q, np.zeros(a1.NV))
-        for i in range(a1.N_LEGS):
-            p = kinematics.leg_fk(qj[3 * i : 3 * i + 3], a1.LEG_SIDE[i])
+        pm.update(q, np.zeros(quad.NV))
+        for i in range(quad.N_LEGS):
+            p = kinematics.leg_fk(qj[3 * i : 3 * i + 3], quad.LEG_SIDE[i])
             assert np.allclose(p + a1.HIP_POSITIONS_IN_TRUNK[i], pm.foot_pos_in_world[i], atol=1e-12)
-            assert np.allclose(kinematics.leg_ik(p, a1.LEG_SIDE[i]), qj[3 * i : 3 * i + 3], atol=1e-9)
+            assert np.allclose(kinematics.leg_ik(p, quad.LEG_SIDE[i]), qj[3 * i : 3 * i + 3], atol=1e-9)
 
 
 def test_plant_limits_and_friction(setup):
     m, _d, _br, _ = setup
     assert np.allclose(m.actuator_ctrlrange, [[-33.5, 33.5]] * 12)
     assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-    spec = a1_spec(PlantOptions(floor_friction=0.3, timestep_s=0.002))
+    spec = robot_spec(options=PlantOptions(floor_friction=0.3, timestep_s=0.002))
     m2 = compile_plant(spec)
     assert m2.opt.timestep == 0.002
     d2 = mujoco.MjData(m2)
     q = pin.neutral(A1Model().model)
     q[2] = 0.3
-    q[7:] = kinematics.legs_ik([[0.0, s * a1.HIP_OFFSET_Y_M, -0.28] for s in a1.LEG_SIDE])
+    q[7:] = kinematics.legs_ik([[0.0, s * a1.HIP_OFFSET_Y_M, -0.28] for s in quad.LEG_SIDE])
     StateBridge(m2).qpos_mj(q, d2.qpos)
     for _ in range(300):
         mujoco.mj_step(m2, d2)
@@ -191,12 +191,12 @@ def test_foot_contact_sensors_match_contact_forces(setup):
     m, _, br, _ = setup
     d = mujoco.MjData(m)
     ctl = NominalController(GaitParams(), PDGains())
-    q = np.zeros(a1.NQ)
+    q = np.zeros(quad.NQ)
     q[6], q[2], q[7:] = 1.0, 0.29, ctl.stand_configuration()
     br.qpos_mj(q, d.qpos)
     reader = FootContactReader(m)
     feet = foot_geom_ids(m)
-    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in a1.FOOT_FRAMES]
+    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in quad.FOOT_FRAMES]
     log, per_tick = [], []
     checked = 0
     for k in range(1500):

@@ -12,8 +12,8 @@ import pytest
 from taslel_bench.config.settings import model_options
 from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
-from taslel_bench.plant.build import a1_spec, compile_plant
-from taslel_bench.robot import a1
+from taslel_bench.plant.build import robot_spec, compile_plant
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.build import Built
@@ -26,7 +26,7 @@ AGREE = 1e-9  # [kg·m², N·m] the issue's bound; measured ~1e-13
 
 
 def perturbed_plant(**kw) -> mujoco.MjModel:
-    spec = a1_spec()
+    spec = robot_spec()
     PlantPerturbation.checked("scenario", **kw).apply(spec)  # the one implementation of the plant edits
     return compile_plant(spec)
 
@@ -48,7 +48,7 @@ def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) 
         T = velocity_map(br, q)
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
-        tdot_v = np.zeros(a1.NV)
+        tdot_v = np.zeros(quad.NV)
         tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
         worst_m = max(worst_m, float(np.abs(T.T @ M @ T - pm.M).max()))
         worst_h = max(worst_h, float(np.abs(T.T @ (d.qfrc_bias - d.qfrc_passive + M @ tdot_v) - pm.h).max()))

@@ -16,9 +16,9 @@ from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.adapter import read_record
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.plant.build import a1_spec, build_plant, compile_plant
+from taslel_bench.plant.build import robot_spec, build_plant, compile_plant
 from taslel_bench.plant.comparison import plant_vs_model
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
@@ -47,7 +47,7 @@ def third_party_a1(
     removed, elements renamed (joints ``FL_hip``, actuators ``FL_hip_servo``, feet ``FL``, trunk ``torso``),
     optionally position servos (kp 60, kv 2), a plane ``ground`` of its own (priority 0, friction 0.8) and
     joint losses (damping 1.5, armature 0.01, frictionloss 0.2); a joint sensor refers to a renamed joint."""
-    spec = a1_spec()
+    spec = robot_spec()
     for element in list(spec.sensors) + list(spec.sites):
         spec.delete(element)
     for act in spec.actuators:
@@ -57,13 +57,13 @@ def third_party_a1(
             act.set_to_position(kp=60.0, kv=2.0)
             act.ctrlrange = [-1.5, 1.5]  # [rad] position targets
     for j in spec.joints:
-        if j.name in a1.JOINT_NAMES:
+        if j.name in quad.JOINT_NAMES:
             j.name = "_".join(j.name.split("_")[:2])
             if losses:
                 j.damping, j.armature, j.frictionloss = [1.5, 0.0, 0.0], 0.01, 0.2
-    for foot in a1.FOOT_FRAMES:
+    for foot in quad.FOOT_FRAMES:
         spec.geom(foot).name = foot.split("_")[0]
-    spec.body(a1.TRUNK_BODY).name = "torso"
+    spec.body(quad.TRUNK_BODY).name = "torso"
     ground = spec.geom("floor")
     if floor:
         ground.name, ground.priority, ground.friction[0] = "ground", 0, 0.8
@@ -137,7 +137,7 @@ def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
     for _ in range(3):
         q = np.concatenate([[0.1, -0.2, 0.4], [0.1, 0.0, 0.0, 0.995], rng.uniform(-0.6, 0.6, 12)])
         q[3:7] /= np.linalg.norm(q[3:7])
-        v = rng.normal(0.0, 1.0, a1.NV)
+        v = rng.normal(0.0, 1.0, quad.NV)
         feet, states = [], []
         for m in (adapted, default):
             d, br = mujoco.MjData(m), StateBridge(m)
@@ -145,7 +145,7 @@ def test_bridge_maps_the_renamed_plant_like_the_default_one(tmp_path):
             br.qvel_mj(q, v, d.qvel)
             mujoco.mj_forward(m, d)
             feet.append(
-                d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]]
+                d.geom_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]]
             )
             states.append(np.concatenate([br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)]))
         np.testing.assert_allclose(feet[0], feet[1], atol=1e-12)
@@ -264,7 +264,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
         "payload_mass_kg": 1.0,
         "payload_pos_m": (0.1, 0.0, 0.0),
     }
-    spec = a1_spec()
+    spec = robot_spec()
     PlantPerturbation.checked("scenario", **kw).apply(spec)  # the one implementation of the plant edits
     m = compile_plant(spec)
     nominal = plant_vs_model(m, A1Model(), STAND)

@@ -43,12 +43,12 @@ TETRA_OBJ = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3
 def menagerie_like_scene(folder: Path) -> Path:
     """``scene.xml`` that ``<include>``s ``robot.xml`` (the harness's A1, as MuJoCo Menagerie splits its
     models), whose trunk carries a visual mesh ``assets/tetra.obj`` (compiler meshdir)."""
-    from taslel_bench.plant.build import a1_spec
+    from taslel_bench.plant.build import robot_spec
 
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "assets").mkdir(exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA_OBJ)
-    xml = a1_spec().to_xml()
+    xml = robot_spec().to_xml()
     xml = xml.replace('<compiler angle="radian"/>',
                       '<compiler angle="radian" meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>')
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
@@ -456,19 +456,19 @@ def test_massless_body_compile_error_names_the_field(tmp_path, no_episode):
 
 
 def test_unnamed_foot_spheres_get_a_hint(tmp_path, no_episode):
-    from taslel_bench.plant.build import a1_spec
-    from taslel_bench.robot import a1
+    from taslel_bench.plant.build import robot_spec
+    from taslel_bench.robot import quadruped as quad
 
-    spec = a1_spec()
+    spec = robot_spec()
     for element in list(spec.sensors) + list(spec.sites):
         spec.delete(element)
-    for foot in a1.FOOT_FRAMES:
+    for foot in quad.FOOT_FRAMES:
         spec.geom(foot).name = ""
     (tmp_path / "a1.xml").write_text(spec.to_xml())
     with pytest.raises(ConfigError) as err:
         Built(compose_cfg([f"robot.plant_mjcf={tmp_path / 'a1.xml'}", *TINY]))
     message = str(err.value)
-    assert "4 unnamed sphere geom(s)" in message and f"name these 4 spheres {', '.join(a1.FOOT_FRAMES)}" in message
+    assert "4 unnamed sphere geom(s)" in message and f"name these 4 spheres {', '.join(quad.FOOT_FRAMES)}" in message
     assert "FR_calf" in message  # the bodies they are in
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from taslel_bench.plant.build import a1_spec
+from taslel_bench.plant.build import robot_spec
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
@@ -79,7 +79,7 @@ def test_actuator_delay_holds_commands_back():
 
 def test_plant_mjcf_override_runs_and_bad_model_is_named(tmp_path):
     xml = tmp_path / "a1_other.xml"
-    xml.write_text(a1_spec().to_xml())
+    xml.write_text(robot_spec().to_xml())
     summary = run(compose_cfg([f"robot.plant_mjcf={xml}", "duration=0.3", "progress=false", "record.mcap=false"]),
                   tmp_path / "run")
     assert summary["status"] == "ok"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from taslel_bench.interfaces import Box, FrictionStrips, Log, Plane, Terrain
-from taslel_bench.plant.build import a1_spec, compile_plant
+from taslel_bench.plant.build import robot_spec, compile_plant
 
 PROBE_RADIUS_M = 0.02
 
@@ -19,7 +19,7 @@ PROBE_RADIUS_M = 0.02
 def _plant_with_probe(terrain: Terrain) -> tuple[mujoco.MjModel, mujoco.MjData, int]:
     """The A1 plant with ``terrain`` and a free-floating probe sphere (mocap, collides with nothing; contype 2
     so the URDF import does not discard it as a visual)."""
-    spec = a1_spec()
+    spec = robot_spec()
     terrain.build(spec, np.random.default_rng(0))
     probe = spec.worldbody.add_body(name="probe", mocap=True)
     probe.add_geom(name="probe", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[PROBE_RADIUS_M, 0, 0], contype=2,

@@ -10,7 +10,7 @@ from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.interfaces import OBSTACLE, Box, Plane, Terrain
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.kinematics import leg_fk
 from tests.conftest import compose_cfg
 
@@ -20,7 +20,7 @@ STEP_M = 0.05
 
 def _feet_z(q_des: np.ndarray) -> np.ndarray:
     """Foot-centre z [m] in each hip frame of joint angles ``q_des`` (12,)."""
-    return np.array([leg_fk(q_des[3 * i : 3 * i + 3], a1.LEG_SIDE[i])[2] for i in range(4)])
+    return np.array([leg_fk(q_des[3 * i : 3 * i + 3], quad.LEG_SIDE[i])[2] for i in range(4)])
 
 
 def _controllers(terrain: Terrain) -> tuple[NominalController, TerrainFollowingController]:
@@ -64,7 +64,7 @@ def test_a_swing_toward_a_step_rises_to_its_top_by_mid_swing_and_lands_on_it():
     start = stand + 0.5 * GaitParams().period_s  # FR and RL swing first (offset 0.5), FL at this time
     times = np.arange(0.0, start + swing_s + 1e-3, 1e-3)
     _q_des_over(follow, times[times < start + 0.5 * swing_s + 5e-4], LEVEL_POSE)
-    fl = a1.LEGS.index("FL")
+    fl = quad.LEGS.index("FL")
     assert follow.ground_ref_m[fl] == pytest.approx(STEP_M, abs=1e-6)  # at mid swing: the step's top
     _q_des_over(follow, times[times >= start + 0.5 * swing_s + 5e-4], LEVEL_POSE)
     assert follow._latched_m[fl] == pytest.approx(STEP_M)  # touched down on the top
@@ -99,7 +99,7 @@ def test_touchdown_aim_ends_the_swing_above_the_ground_and_descends_early_in_the
     assert np.abs(dz[times < stand]).max() < 1e-12  # standing: no aim
     steepest = 0.5 * np.pi * aim / TOUCHDOWN_DESCENT_S * 1e-3  # [m per tick] the eased descent's largest step
     assert np.abs(np.diff(dz, axis=0)).max() < 1.01 * steepest
-    fl = a1.LEGS.index("FL")  # offset 0: stance first, swing from phase duty
+    fl = quad.LEGS.index("FL")  # offset 0: stance first, swing from phase duty
     swing_start = stand + p.duty * p.period_s
     touchdown = stand + p.period_s
     first_stance = times < swing_start - 1e-6

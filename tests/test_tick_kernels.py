@@ -15,7 +15,7 @@ from taslel_bench.filter.safety_filter import FilterResult
 from taslel_bench.interfaces import QPSolution
 from taslel_bench.plant.contacts import more_contacts_than_feet
 from taslel_bench.record.trace import EpisodeTrace
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.terminations import _HEIGHT, _NONE, _OTHER_CONTACTS, _TILT, _step_term, _trunk_term
 from tests.conftest import compose_cfg
@@ -169,7 +169,7 @@ def test_controller_references_are_rows_of_one_array():
     np.testing.assert_allclose(ctl.q_des, fresh.q_des, atol=1e-12)
     np.testing.assert_allclose(ctl.qd_des, fresh.qd_des, atol=1e-8)
     assert ctl.q_des.base is ctl._references and ctl.qd_des.base is ctl._references
-    assert a1.N_JOINTS == ctl.q_des.shape[0]
+    assert quad.N_JOINTS == ctl.q_des.shape[0]
 
 
 def _record_numpy(reader, data: mujoco.MjData, log, k: int) -> None:

@@ -40,7 +40,7 @@ from taslel_bench.filter.safety_filter import (
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.plant.perturbation import check_trunk_and_joints
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
@@ -396,7 +396,7 @@ def _optional_name(path: str, value: Any) -> None:
 def _plant_names(cfg: DictConfig, has_file: bool) -> None:
     """``robot.plant_names``: per kind null, a pattern with {leg} (and {joint}) or {core name: file name}."""
     p = "robot.plant_names"
-    kinds = (("joints", a1.JOINT_NAMES), ("actuators", a1.JOINT_NAMES), ("feet", a1.FOOT_FRAMES))
+    kinds = (("joints", quad.JOINT_NAMES), ("actuators", quad.JOINT_NAMES), ("feet", quad.FOOT_FRAMES))
     for kind, cores in kinds:
         path, value = f"{p}.{kind}", _get(cfg, f"{p}.{kind}")
         if value is not None and not has_file:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 
@@ -48,11 +48,11 @@ class ContactEstimate:
 
     def __init__(self, settings: ContactEstimateSettings | None = None) -> None:
         self.s = settings or ContactEstimateSettings()
-        self.in_stance = np.zeros(a1.N_LEGS, bool)
-        self.early = np.zeros(a1.N_LEGS, bool)  # latched early touchdown (cleared when the schedule swings again)
-        self._prev_scheduled = np.ones(a1.N_LEGS, bool)
-        self.touched = np.ones(a1.N_LEGS, bool)  # the foot has carried load since its scheduled stance began
-        self.ticks_in_stance = np.zeros(a1.N_LEGS, np.int64)  # control ticks since the scheduled stance began
+        self.in_stance = np.zeros(quad.N_LEGS, bool)
+        self.early = np.zeros(quad.N_LEGS, bool)  # latched early touchdown (cleared when the schedule swings again)
+        self._prev_scheduled = np.ones(quad.N_LEGS, bool)
+        self.touched = np.ones(quad.N_LEGS, bool)  # the foot has carried load since its scheduled stance began
+        self.ticks_in_stance = np.zeros(quad.N_LEGS, np.int64)  # control ticks since the scheduled stance began
         self.early_touchdowns = 0  # count of early touchdowns taken as stance in the episode
         self.late_touchdown_ticks = 0  # foot-ticks of scheduled stance treated as swing (not landed yet)
         self._late_ticks = round(self.s.late_touchdown_max_s / self.s.control_dt_s)  # (the settings are frozen)

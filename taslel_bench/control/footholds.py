@@ -6,8 +6,8 @@ the foot during stance, or on an edge itself, where the foot slides off. This pl
 along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen at
 lift-off (and again at mid-swing with the controller's ``replan_phase``) from the terrain object:
 
-* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to :data:`a1.SHIN_AXIS_FRACTION` of the
-  way to the foot centre, radius :data:`a1.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to :data:`quad.SHIN_AXIS_FRACTION` of the
+  way to the foot centre, radius :data:`quad.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
   height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far
   ahead left the calf nearly level and the shin still met the log in stance: 1.1 against 0.8 strikes per run on
@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.kinematics import leg_knee_and_foot
 from taslel_bench.terrain.terrain import Terrain
 
@@ -83,7 +83,7 @@ class FootholdPlanner:
 
     def _shin_violation(self, leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m) -> np.ndarray:
         c, s = heading
-        side = float(a1.LEG_SIDE[leg])
+        side = float(quad.LEG_SIDE[leg])
         x_td, y_hip, z_stand = foot_in_hip_td
         points = []
         for k, delta in enumerate(self.offsets_m):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 TROT_OFFSETS = np.array([0.0, 0.5, 0.5, 0.0])  # LEGS order: FL, FR, RL, RR
 TROT_OFFSETS_LIST = TROT_OFFSETS.tolist()  # plain floats for the control tick
@@ -30,7 +30,7 @@ class GaitParams:
 
 @dataclass
 class GaitState:
-    """Schedule at one instant (arrays in :data:`a1.LEGS` order)."""
+    """Schedule at one instant (arrays in :data:`quad.LEGS` order)."""
 
     phi: float  # [-] gait phase in [0, 1)
     phi_dot: float  # [1/s]
@@ -45,7 +45,7 @@ class TrotGait:
     def __init__(self, params: GaitParams) -> None:
         self.p = params
         self.nominal_foot_in_hip = np.stack(
-            [np.zeros(4), a1.LEG_SIDE * a1.HIP_OFFSET_Y_M, -params.stand_height_m * np.ones(4)], axis=1
+            [np.zeros(4), quad.LEG_SIDE * a1.HIP_OFFSET_Y_M, -params.stand_height_m * np.ones(4)], axis=1
         )
         self._nominal_rows = self.nominal_foot_in_hip.tolist()
 

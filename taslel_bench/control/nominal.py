@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from taslel_bench.control.gait import GaitParams, GaitState, TrotGait
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.kinematics import legs_ik, legs_ik_list
 from taslel_bench.util.jit import kernel
 
@@ -47,14 +47,14 @@ class NominalController:
         self.fd_dt_s = fd_dt_s
         # (q_des [rad], qd_des [rad/s]) in one array: a table row is copied in one operation; the two are its
         # rows (views: write them in place, never rebind them)
-        self._references = np.zeros((2, a1.N_JOINTS))
+        self._references = np.zeros((2, quad.N_JOINTS))
         self.q_des, self.qd_des = self._references
         self._cache_t: float = float("nan")
         self._cache_list: list[float] = []
         # per-period reference table (see class doc): row j = (q_des, qd_des) at gait time j * fd_dt_s
         n_period = gait.period_s / fd_dt_s
         self._period_ticks = round(n_period) if abs(n_period - round(n_period)) < 1e-9 else 0
-        self._table = np.zeros((max(self._period_ticks, 1), 2, a1.N_JOINTS))
+        self._table = np.zeros((max(self._period_ticks, 1), 2, quad.N_JOINTS))
         self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
         self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
         self._stand_q: np.ndarray | None = None  # q_des while standing (the same IK every tick)
@@ -101,7 +101,7 @@ class NominalController:
         """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]
         (``base_pose``, the trunk's, is not used: the paper's references are open loop)."""
         self.update_references(t)
-        u = np.empty(a1.N_JOINTS)
+        u = np.empty(quad.N_JOINTS)
         _pd(self._references, q_joints, qd_joints, self._kp, self._kd, self.torque_limit_nm, u)
         return u
 

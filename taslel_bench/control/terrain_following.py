@@ -47,7 +47,7 @@ import numpy as np
 from taslel_bench.control.footholds import FootholdPlanner, heading_of
 from taslel_bench.control.gait import TROT_OFFSETS_LIST
 from taslel_bench.control.nominal import NominalController
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.kinematics import legs_ik_list
 from taslel_bench.terrain.terrain import Terrain
 
@@ -119,7 +119,7 @@ class TerrainFollowingController(NominalController):
         gs = self.gait_state(t)
         ground = self._ground_references(gs, self._base_pose, rows)
         h_ref = float(np.mean(ground))
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             rows[i][2] += ground[i] - h_ref
         if self.swing_from_measured_hips:
             self._lift_from_measured_hips(gs, rows, ground)
@@ -156,7 +156,7 @@ class TerrainFollowingController(NominalController):
         if heights:
             sag = self.gait.p.stand_height_m - sum(heights) / len(heights)
             self.sag_m += (min(max(sag, -MAX_SAG_M), MAX_SAG_M) - self.sag_m) * min(1.0, self.fd_dt_s / SAG_TIME_CONSTANT_S)
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             if not gs.in_stance[i]:
                 rows[i][2] += self.sag_m * _ease(float(gs.swing_phase[i]) / SWING_SAG_RAMP)
 
@@ -170,7 +170,7 @@ class TerrainFollowingController(NominalController):
         ground = self.ground_ref_m
         if self.footholds is not None:
             self._apply_foothold_offsets(gs, rows, (x, y), (c, s), half, t_swing)
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             hx, hy = self._hips_xy[i]
             fx, fy = hx + rows[i][0], hy + rows[i][1]  # foot target, trunk axes, from the trunk origin
             foot_w = (x + c * fx - s * fy, y + s * fx + c * fy)
@@ -210,7 +210,7 @@ class TerrainFollowingController(NominalController):
         """Plan each lifting foot's touchdown offset (:class:`FootholdPlanner`; again at ``replan_phase``) and add
         this tick's offsets to the foot targets' x (hip frame, along the heading): eased in over a swing, held
         through a stance."""
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             if gs.in_stance[i]:
                 if not self._was_stance[i]:  # touchdown: the planned offset holds through this stance
                     self.foothold_offset_m[i] = self._offset_plan_m[i]

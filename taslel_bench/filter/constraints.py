@@ -10,7 +10,7 @@ import numpy as np
 
 from taslel_bench.filter.layout import INACTIVE_RHS, LAM, NL, NU, NV, VDOT, TickInputs, U
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 
@@ -57,7 +57,7 @@ class ContactOrSwing(EqualityFamily):
         self.velocity_gain = velocity_gain  # [1/s]
 
     def pattern(self, mask: np.ndarray) -> None:
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             rows = slice(self.start + 3 * i, self.start + 3 * i + 3)
             mask[rows, VDOT] = True
             mask[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = np.eye(3, dtype=bool)
@@ -75,24 +75,24 @@ class FrictionCone:
     already fixed to 0 by the equality rows, and duplicating that as inequalities makes some solvers
     (quadprog, interior-point methods) see dependent constraints."""
 
-    name, n_rows = "friction", 5 * a1.N_LEGS
+    name, n_rows = "friction", 5 * quad.N_LEGS
 
     def __init__(self, lambda_min_n: float) -> None:
         self.lambda_min_n = lambda_min_n  # [N]
         self.start = 0
 
     def pattern(self, mask: np.ndarray) -> None:
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             mask[self.start + 5 * i : self.start + 5 * i + 5, NV + NU + 3 * i : NV + NU + 3 * i + 3] = True
 
     def labels(self) -> list[str]:
-        return [f"{leg}_{k}" for leg in a1.LEGS for k in ("unilateral", "fx+", "fx-", "fy+", "fy-")]
+        return [f"{leg}_{k}" for leg in quad.LEGS for k in ("unilateral", "fx+", "fx-", "fy+", "fy-")]
 
     def init(self, qp: QPProblem) -> None:
-        self._stance = np.zeros(a1.N_LEGS, bool)
-        self._mu = np.full(a1.N_LEGS, np.nan)
+        self._stance = np.zeros(quad.N_LEGS, bool)
+        self._mu = np.full(quad.N_LEGS, np.nan)
         self._key: tuple[bytes, float] | None = None
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             self._write_foot(qp, i, False, np.nan)
 
     def _write_foot(self, qp: QPProblem, i: int, stance: bool, mu: float) -> None:
@@ -112,7 +112,7 @@ class FrictionCone:
         if key == self._key:
             return
         self._key = key
-        for i in range(a1.N_LEGS):  # rewrite a foot's rows only when its contact mode or mu changed
+        for i in range(quad.N_LEGS):  # rewrite a foot's rows only when its contact mode or mu changed
             stance = bool(x.in_stance[i])
             if stance != self._stance[i] or (stance and x.mu != self._mu[i]):
                 self._write_foot(qp, i, stance, x.mu)

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
-NV, NU, NL = a1.NV, a1.N_JOINTS, 3 * a1.N_LEGS
+NV, NU, NL = quad.NV, quad.N_JOINTS, 3 * quad.N_LEGS
 N_BASE = 6  # floating-base velocity coordinates (first in vdot)
 LAM0 = NV + NU  # first lambda column of X = (vdot, u, lambda)
 
@@ -34,7 +34,7 @@ class FreeBlockSolver:
     contact-or-swing rows (3 per foot, LEGS order) in A."""
 
     def __init__(self, n_rhs: int, eom_row0: int, contact_row0: int) -> None:
-        n_legs, m_eq = a1.N_LEGS, NV + NL
+        n_legs, m_eq = quad.N_LEGS, NV + NL
         self.rows = np.array([eom_row0, contact_row0], np.int64)
         self.workspace = (
             np.zeros((n_legs, 6, 6)),  # K: leg blocks, LU-factorised

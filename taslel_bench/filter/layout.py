@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 
-NV, NU, NL = a1.NV, a1.N_JOINTS, 3 * a1.N_LEGS
+NV, NU, NL = quad.NV, quad.N_JOINTS, 3 * quad.N_LEGS
 VDOT, U, LAM = slice(0, NV), slice(NV, NV + NU), slice(NV + NU, NV + NU + NL)
 N_VARS = NV + NU + NL
 INACTIVE_RHS = 1e6  # right-hand side of an inactive inequality row (0 <= 1e6); finite for every solver

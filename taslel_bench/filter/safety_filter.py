@@ -43,7 +43,7 @@ from taslel_bench.filter.layout import INACTIVE_RHS, LAM, N_VARS, NL, NU, NV, VD
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
 from taslel_bench.filter.terrain_cone import TerrainFrictionCone
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
@@ -148,7 +148,7 @@ class SafetyFilter:
             fam.init(self.problem)
         # the equality rows solved for (vdot, lambda): condensed -> [z0, Z] from [b, A_u] (13 right-hand
         # sides); full -> (vdot_nom, lambda_nom) from b - A_u u_nom (1), for the regularisation target
-        n_rhs = 1 + a1.N_JOINTS if settings.formulation == "condensed" else 1
+        n_rhs = 1 + quad.N_JOINTS if settings.formulation == "condensed" else 1
         self._equalities = FreeBlockSolver(n_rhs, self.eq_families[0].start, self.eq_families[1].start)
         self._rhs = np.zeros((m_eq, n_rhs))
         self._last_u: np.ndarray | None = None
@@ -160,7 +160,7 @@ class SafetyFilter:
         s = self.settings
         P = np.zeros((N_VARS, N_VARS))
         np.fill_diagonal(P, s.regularization)
-        P[U, U] = np.eye(a1.N_JOINTS)
+        P[U, U] = np.eye(quad.N_JOINTS)
         lb = np.full(N_VARS, -np.inf)
         ub = np.full(N_VARS, np.inf)
         lb[U], ub[U] = -s.torque_limit_nm, s.torque_limit_nm
@@ -193,7 +193,7 @@ class SafetyFilter:
         return self.condensed if self.condensed is not None else self.problem
 
     def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
-        s, nu = self.settings, a1.N_JOINTS
+        s, nu = self.settings, quad.N_JOINTS
         self.condensed = QPProblem(
             P=np.eye(nu),
             q=np.zeros(nu),
@@ -309,7 +309,7 @@ class SafetyFilter:
             sol, relaxed = self._relax(qp, u_nom, sol)
             ok = sol.ok
         if ok:
-            u, lam, vdot = np.empty(a1.N_JOINTS), np.empty(NL), np.empty(NV)
+            u, lam, vdot = np.empty(quad.N_JOINTS), np.empty(NL), np.empty(NV)
             # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
             # hold to solver tolerance)
             _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
@@ -320,7 +320,7 @@ class SafetyFilter:
                 self.robust.remember(self.barriers)
             if self.observer is not None:
                 m = inputs.model
-                jac_t_lambda = np.einsum("ikj,ik->j", m.foot_jac_in_world, lam.reshape(a1.N_LEGS, 3))
+                jac_t_lambda = np.einsum("ikj,ik->j", m.foot_jac_in_world, lam.reshape(quad.N_LEGS, 3))
                 self.observer.remember(inputs.v, m.M, m.h, u, jac_t_lambda, inputs.in_stance)
             self._last_u = u
             margin = self.barriers[0].margin_mps2 if self.barriers else 0.0

@@ -26,7 +26,7 @@ import numpy as np
 from taslel_bench.filter.constraints import FrictionCone
 from taslel_bench.filter.layout import INACTIVE_RHS, NU, NV, TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.packed import _norm3, surface_normal, terrain_distance
 from taslel_bench.terrain.parts import FrictionStrips, Plane
 from taslel_bench.terrain.terrain import Terrain
@@ -85,11 +85,11 @@ class TerrainFrictionCone(FrictionCone):
         self.terrain = terrain
         self.basis = downhill_edge_basis if edge_downhill else tangent_basis  # (t1, t2) of a normal
         self.flat = all(isinstance(p, (Plane, FrictionStrips)) for p in terrain.parts)  # normal: world z
-        self.normals = np.tile([0.0, 0.0, 1.0], (a1.N_LEGS, 1))  # the last normals used (world)
-        self.mu_used = np.full(a1.N_LEGS, np.nan)  # [-] the last per-foot coefficients used
-        self._written = np.full((a1.N_LEGS, 3), np.nan)  # normals the rows were last written with
+        self.normals = np.tile([0.0, 0.0, 1.0], (quad.N_LEGS, 1))  # the last normals used (world)
+        self.mu_used = np.full(quad.N_LEGS, np.nan)  # [-] the last per-foot coefficients used
+        self._written = np.full((quad.N_LEGS, 3), np.nan)  # normals the rows were last written with
         self.edge_downhill = bool(edge_downhill)
-        self._dist, self._point = np.empty(a1.N_LEGS), np.empty((a1.N_LEGS, 3))  # scratch of the compiled write
+        self._dist, self._point = np.empty(quad.N_LEGS), np.empty((quad.N_LEGS, 3))  # scratch of the compiled write
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         packed = self.terrain.packed()
@@ -114,7 +114,7 @@ class TerrainFrictionCone(FrictionCone):
         if not self.flat:
             self.normals[:] = contact_normals(self.terrain, x.model.foot_pos_in_world)
         mu = self._feet_mu(x)
-        for i in range(a1.N_LEGS):
+        for i in range(quad.N_LEGS):
             if x.in_stance[i]:
                 same = self._stance[i] and mu[i] == self._mu[i] and np.array_equal(self.normals[i], self._written[i])
                 if not same:  # rewrite a foot's rows only when its mode, normal or mu changed

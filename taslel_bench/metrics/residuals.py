@@ -28,7 +28,7 @@ import pinocchio as pin
 from taslel_bench.metrics.stream import Reducer
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.record.trace import EpisodeTrace
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 
 
@@ -60,9 +60,9 @@ def compute_rows(trace: EpisodeTrace, setup: ResidualSetup, n: int, qpos_before:
     br, m, dt = setup.bridge, setup.model, setup.control_dt_s
     qpos = np.vstack([qpos_before[None], trace.qpos_mj[:n]])  # state before tick k: row k
     qvel = np.vstack([qvel_before[None], trace.qvel_mj[:n]])
-    residual = np.full((n, a1.NV), np.nan)
-    acc_error = np.full((n, a1.N_LEGS, 3), np.nan)
-    q_all, v_all = np.zeros((n, a1.NQ)), np.zeros((n, a1.NV))
+    residual = np.full((n, quad.NV), np.nan)
+    acc_error = np.full((n, quad.N_LEGS, 3), np.nan)
+    q_all, v_all = np.zeros((n, quad.NQ)), np.zeros((n, quad.NV))
     for k in range(n):
         br.state_pin(qpos[k], qvel[k], q_all[k], v_all[k])
     vdot_all = realised_acceleration(br, qpos, qvel, v_all, dt)
@@ -71,7 +71,7 @@ def compute_rows(trace: EpisodeTrace, setup: ResidualSetup, n: int, qpos_before:
     torques = plant_side["torques_in_world"]  # [N·m] about the contact point
     points = plant_side["contact_point_in_world"]  # [m] force-weighted centroid of the foot's contacts
     loaded = np.abs(forces).sum(axis=2) > 0.0
-    u_in_v = np.zeros((n, a1.NV))
+    u_in_v = np.zeros((n, quad.NV))
     u_in_v[:, 6:] = trace.u[:n]  # S u: the torques act on the joint rows
     filtered = np.isfinite(trace.vdot_filter[:n]).all(axis=1)
     local = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -108,7 +108,7 @@ def realised_acceleration(br: StateBridge, qpos: np.ndarray, qvel: np.ndarray, v
         np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], axis=1),
         np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], axis=1),
     ], axis=1)  # fmt: skip
-    vdot = np.empty((qacc.shape[0], a1.NV))
+    vdot = np.empty((qacc.shape[0], quad.NV))
     vdot[:, :3] = np.einsum("nij,nj->ni", rot_t, qacc[:, d : d + 3]) - np.cross(v[:, 3:6], v[:, :3])
     vdot[:, 3:6] = qacc[:, d + 3 : d + 6]
     vdot[:, 6:] = qacc[:, br.joint_dadr]

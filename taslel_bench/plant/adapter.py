@@ -1,6 +1,6 @@
 """Fitting another A1 MJCF (``robot.plant_mjcf``) to the harness: names, actuators, floor, overrides.
 
-The harness finds plant elements by the core's names (:mod:`taslel_bench.robot.a1`): joints ``FL_hip_joint``
+The harness finds plant elements by the core's names (:mod:`taslel_bench.robot.quadruped`): joints ``FL_hip_joint``
 .. ``RR_calf_joint``, one actuator per joint named like the joint, sphere foot geoms ``FL_foot`` ..
 ``RR_foot``, the ``trunk`` body, a ``floor`` geom. :func:`adapt` renames a file's elements to those names
 (and every reference to them: actuator targets, sensors, equalities, contact pairs and excludes), so the
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.fields import ConfigError
 
 RECORD_TEXT = "taslel_plant_adapter"  # custom text element holding the adapter's record (JSON)
@@ -33,7 +33,7 @@ INTEGRATORS = {
 CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
 NameMap = Mapping[str, str] | str | None  # {core name: file name}, a "{leg}_{joint}" pattern, or None (same)
 _KINDS = ("joints", "actuators", "feet")
-_CORE_NAMES = {"joints": a1.JOINT_NAMES, "actuators": a1.JOINT_NAMES, "feet": a1.FOOT_FRAMES}
+_CORE_NAMES = {"joints": quad.JOINT_NAMES, "actuators": quad.JOINT_NAMES, "feet": quad.FOOT_FRAMES}
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ def _fmt(values) -> str:
 # ------------------------------------------------------------------------------------------- renaming
 
 
-def _rename(
+def rename(
     spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, object], new_names: dict[str, str]
 ) -> None:
     """Give each element (``elements[old] -> element``) its name ``new_names[old]`` -- through unique
@@ -149,9 +149,9 @@ def adapt(
     joints = {j.name: j for j in spec.joints if j.name}
     geoms = {g.name: g for g in spec.geoms if g.name}
     bodies = {b.name: b for b in spec.bodies if b.name}
-    file_joint = {core: names.file_name("joints", core) for core in a1.JOINT_NAMES}
-    feet = {core: names.file_name("feet", core) for core in a1.FOOT_FRAMES}
-    trunk = names.trunk or a1.TRUNK_BODY
+    file_joint = {core: names.file_name("joints", core) for core in quad.JOINT_NAMES}
+    feet = {core: names.file_name("feet", core) for core in quad.FOOT_FRAMES}
+    trunk = names.trunk or quad.TRUNK_BODY
     unnamed = [g for g in spec.geoms if not g.name and g.type == mujoco.mjtGeom.mjGEOM_SPHERE]
     problems = _joint_problems(file_joint, joints) + _foot_problems(feet, geoms, unnamed)
     problems += _trunk_problems(spec, trunk, bodies)
@@ -170,7 +170,7 @@ def adapt(
         [
             ("joints", mujoco.mjtObj.mjOBJ_JOINT, joints, file_joint),
             ("feet", mujoco.mjtObj.mjOBJ_GEOM, geoms, feet),
-            ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {a1.TRUNK_BODY: trunk}),
+            ("trunk", mujoco.mjtObj.mjOBJ_BODY, bodies, {quad.TRUNK_BODY: trunk}),
             _actuator_renames(chosen),
         ],
     )
@@ -252,7 +252,7 @@ def _rename_to_core(
     for kind, objtype, table, wanted in renames:
         to_core = {f: core for core, f in wanted.items() if f != core}
         if to_core:
-            _rename(spec, objtype, {f: table[f] for f in to_core}, to_core)
+            rename(spec, objtype, {f: table[f] for f in to_core}, to_core)
             renamed[kind] = {core: f for f, core in to_core.items()}
     return renamed
 
@@ -264,7 +264,7 @@ def _name_floor(spec: mujoco.MjSpec, floor: mujoco.MjsGeom | None) -> str | None
         return None
     old = floor.name or "(unnamed plane)"
     if floor.name:
-        _rename(spec, mujoco.mjtObj.mjOBJ_GEOM, {floor.name: floor}, {floor.name: FLOOR})
+        rename(spec, mujoco.mjtObj.mjOBJ_GEOM, {floor.name: floor}, {floor.name: FLOOR})
     else:
         floor.name = FLOOR
     return old
@@ -462,7 +462,7 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: PlantOverrides, timestep_s: 
     if o.impratio is not None:
         note("impratio", f"{spec.option.impratio:g}", f"{o.impratio:g}")
         spec.option.impratio = float(o.impratio)
-    feet = [spec.geom(f) for f in a1.FOOT_FRAMES]
+    feet = [spec.geom(f) for f in quad.FOOT_FRAMES]
     floor = [g for g in [spec.geom(FLOOR)] if g is not None]
     for attr, value, geoms in (
         ("solref", o.contact_solref, feet + floor),

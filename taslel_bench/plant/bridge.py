@@ -4,7 +4,7 @@ Conversions (see DESIGN.md, "conversion traps"):
   * quaternion: MuJoCo wxyz -> Pinocchio xyzw;
   * trunk linear velocity: MuJoCo world axes -> Pinocchio trunk axes (angular is in the trunk frame in both);
   * leg order: MuJoCo keeps the plant model's joint order (URDF: FR, FL, RR, RL); Pinocchio and the core use
-    :data:`a1.LEGS` = FL, FR, RL, RR. The permutation is built from joint and actuator names, so any
+    :data:`quad.LEGS` = FL, FR, RL, RR. The permutation is built from joint and actuator names, so any
     plant MJCF with the A1 joint names works.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 
@@ -34,7 +34,7 @@ class StateBridge:
     def __init__(self, mj_model: mujoco.MjModel) -> None:
         missing = []
         qadr, dadr, act = [], [], []
-        for name in a1.JOINT_NAMES:
+        for name in quad.JOINT_NAMES:
             jid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, name)
             aid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
             if jid < 0:
@@ -64,13 +64,13 @@ class StateBridge:
     # --- MuJoCo -> Pinocchio -------------------------------------------------------------------------
     def q_pin(self, qpos: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Pinocchio configuration (19) from MuJoCo ``qpos``."""
-        out = np.empty(a1.NQ) if out is None else out
+        out = np.empty(quad.NQ) if out is None else out
         np.take(qpos, self._q_pin_from_qpos, out=out)  # position, quaternion x y z w, joints in core order
         return out
 
     def v_pin(self, qpos: np.ndarray, qvel: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Pinocchio velocity (18) from MuJoCo ``qvel``: trunk linear velocity rotated into trunk axes."""
-        out = np.empty(a1.NV) if out is None else out
+        out = np.empty(quad.NV) if out is None else out
         a, d = self.free_qadr, self.free_dadr
         np.take(qvel, self._v_pin_from_qvel, out=out)  # angular velocity and joints are already right
         mujoco.mju_negQuat(self._quat_trunk_from_world, qpos[a + 3 : a + 7])  # inverse rotation

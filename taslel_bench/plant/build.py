@@ -1,4 +1,8 @@
-"""The MuJoCo plant: the A1 URDF turned into an ``MjSpec`` with a free joint, a floor and torque motors.
+"""The MuJoCo plant: a robot's URDF turned into an ``MjSpec`` with a free joint, a floor and torque motors.
+
+The robot's joints, foot spheres and trunk body are renamed to the core's names
+(:mod:`taslel_bench.robot.quadruped`: ``FL_hip_joint`` .. ``RR_calf_joint``, ``FL_foot`` .., ``trunk``), so the state
+bridge, the contact reader and the scenarios read every robot alike.
 
 Frames: MuJoCo world is z-up, the floor is the plane z = 0. ``qpos[:3]`` is the trunk-frame origin in
 world [m], ``qpos[3:7]`` its orientation as a wxyz quaternion; ``qvel[:3]`` is the trunk linear velocity
@@ -12,14 +16,16 @@ from contact data by :func:`measure_contact_friction`). Robot geoms collide only
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
 
-from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, store_record
+from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, rename, store_record
 from taslel_bench.plant.mjcf_files import mjcf_files
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import RobotDescription, load_robot, physical_urdf_text
 from taslel_bench.terrain.geoms import TERRAIN_PRIORITY, add_terrain_geom
 from taslel_bench.util.fields import ConfigError
 
@@ -30,49 +36,72 @@ class PlantOptions:
 
     timestep_s: float = 0.001  # [s] physics step
     floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
-    torque_limit_nm: float = a1.TORQUE_LIMIT_NM  # [N·m] motor ctrlrange
+    torque_limit_nm: tuple[float, ...] | None = None  # [N·m] per joint (core order) motor ctrlrange; None: robot's
     names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
     overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
 
 
-def _strip_visuals(spec: mujoco.MjSpec) -> None:
-    """Delete mesh geoms (the URDF visuals; MuJoCo cannot read the .dae files) and their mesh assets."""
+def _strip_unloadable_meshes(spec: mujoco.MjSpec) -> None:
+    """Delete mesh geoms whose file MuJoCo cannot read (COLLADA .dae: the URDFs' visuals) and their assets."""
     for geom in list(spec.geoms):
         if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
-            spec.delete(geom)
+            mesh = spec.mesh(geom.meshname)
+            if mesh is None or not mesh.file.lower().endswith((".stl", ".obj", ".msh")):
+                spec.delete(geom)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
     for mesh in list(spec.meshes):
-        spec.delete(mesh)
+        if mesh.name not in used:
+            spec.delete(mesh)
 
 
-def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
-    """Uncompiled A1 plant: URDF collision geometry, free joint on the trunk, floor, 12 motors.
+def _urdf_text(robot: RobotDescription) -> str:
+    """The URDF without ``<visual>`` elements, mesh paths ``package://<pkg>/...`` made absolute (found above the
+    URDF's folder), and without the foot links' collisions where the plant puts its own foot sphere."""
+    text = re.sub(r"<visual>.*?</visual>", "", physical_urdf_text(robot.urdf_path, robot.trunk_link)[0], flags=re.DOTALL)
+    text = re.sub(r'filename="package://([^/"]+)/([^"]*)"',
+                  lambda m: f'filename="{_package_file(robot.urdf_path, m.group(1), m.group(2))}"', text)
+    if not robot.foot_from_urdf:
+        for foot in robot.foot_frames:
+            link = rf'(<link\s+name="{re.escape(foot)}"\s*>(?:(?!</link>).)*?)<collision\b[^>]*>.*?</collision>'
+            while re.search(link, text, flags=re.DOTALL):
+                text = re.sub(link, r"\1", text, count=1, flags=re.DOTALL)
+    return text
+
+
+def _package_file(urdf: Path, package: str, inner: str) -> str:
+    for folder in urdf.parents:
+        if folder.name == package and (folder / inner).is_file():
+            return str(folder / inner)
+    return f"package://{package}/{inner}"  # left as it was: MuJoCo's compile error names the file
+
+
+def robot_spec(robot: RobotDescription | None = None, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+    """Uncompiled plant of ``robot`` (default: the A1): its URDF's collision geometry under the core's names, a
+    free joint on the trunk, a floor, 12 torque motors at the robot's limits, foot sites and sensors.
 
     Scenarios edit the returned spec (terrain, obstacles, perturbations) before :func:`compile_plant`.
     """
-    # Parse from a string with visuals removed: the URDF's package:// .dae meshes are not loadable.
-    import re
-
-    urdf_text = a1.a1_urdf_path().read_text()
-    urdf_text = re.sub(r"<visual>.*?</visual>", "", urdf_text, flags=re.DOTALL)
-    spec = mujoco.MjSpec.from_string(urdf_text)
-    _strip_visuals(spec)
-    spec.compiler.fusestatic = True  # the massless `base` root and fixed links are fused away
+    robot = robot if robot is not None else load_robot("a1")
+    spec = mujoco.MjSpec.from_string(_urdf_text(robot))
+    _strip_unloadable_meshes(spec)
+    spec.compiler.fusestatic = True  # massless roots and fixed links are fused away
+    # masses and inertias from the URDF only, as Pinocchio reads them (MuJoCo's default would give a link with
+    # collision shapes but no <inertial> a mass from its geoms' volume)
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     spec.option.timestep = options.timestep_s
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    _core_names(spec, robot)
 
-    trunk = spec.body(a1.TRUNK_BODY)
+    trunk = spec.body(quad.TRUNK_BODY)
     trunk.add_freejoint(name="root")
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 1, 0
         geom.condim = 3
-    for leg in a1.LEGS:
-        foot_body = spec.body(f"{leg}_foot")
-        for geom in foot_body.geoms:
-            if geom.type == mujoco.mjtGeom.mjGEOM_SPHERE:
-                geom.name = f"{leg}_foot"
-        foot_body.add_site(name=f"{leg}_foot", pos=[0, 0, 0])
-    spec.body(a1.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])
+    for leg, foot in enumerate(quad.FOOT_FRAMES):
+        geom = spec.geom(foot)
+        geom.parent.add_site(name=foot, pos=list(geom.pos))
+    spec.body(quad.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])
 
     add_terrain_geom(
         spec,
@@ -82,15 +111,40 @@ def a1_spec(options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
         friction=options.floor_friction,
     )
     add_foot_contact_sensors(spec)
-    for name in a1.JOINT_NAMES:
+    limits = options.torque_limit_nm if options.torque_limit_nm is not None else robot.torque_limit_nm
+    for name, limit in zip(quad.JOINT_NAMES, limits, strict=True):
         act = spec.add_actuator(name=name, target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.set_to_motor()
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.ctrlrange = [-options.torque_limit_nm, options.torque_limit_nm]
+        act.ctrlrange = [-limit, limit]
     changes = apply_overrides(spec, options.overrides, options.timestep_s)  # the defaults change nothing here
     store_record(spec, {"overrides": changes} if changes else {})
     return spec
+
+
+def _core_names(spec: mujoco.MjSpec, robot: RobotDescription) -> None:
+    """Rename the robot's joints, foot spheres and trunk body to the core's names (no-ops where they agree, as
+    on the A1); a foot the URDF gives as a mesh gets a sphere of the description's radius at its frame."""
+    joints = {j.name: j for j in spec.joints}
+    rename(spec, mujoco.mjtObj.mjOBJ_JOINT,
+           {old: joints[old] for old, new in zip(robot.joint_names, quad.JOINT_NAMES, strict=True) if old != new},
+           dict(zip(robot.joint_names, quad.JOINT_NAMES, strict=True)))
+    feet: dict[str, mujoco.MjsGeom] = {}
+    for leg, foot in enumerate(robot.foot_frames):
+        body = spec.body(foot)
+        if not robot.foot_from_urdf:
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[robot.foot_radius_m, 0, 0], pos=[0, 0, 0],
+                          name=f"__foot_{leg}")
+        spheres = [g for g in body.geoms if g.type == mujoco.mjtGeom.mjGEOM_SPHERE]
+        if len(spheres) != 1:
+            raise ConfigError(f"robot.feet: the plant's {foot} has {len(spheres)} sphere geoms; the core needs one")
+        spheres[0].name = spheres[0].name or f"__foot_{leg}"
+        feet[spheres[0].name] = spheres[0]
+    rename(spec, mujoco.mjtObj.mjOBJ_GEOM, feet, dict(zip(feet, quad.FOOT_FRAMES, strict=True)))
+    if robot.trunk_link != quad.TRUNK_BODY:
+        rename(spec, mujoco.mjtObj.mjOBJ_BODY, {robot.trunk_link: spec.body(robot.trunk_link)},
+               {robot.trunk_link: quad.TRUNK_BODY})
 
 
 # MuJoCo contact-sensor parameters (as the MJCF <contact data="found force torque pos" reduce="netforce"
@@ -106,7 +160,7 @@ def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
     looping over ``data.contact``. The force, torque and point give the generalised contact force exactly
     (J(point)' f + J_rot' torque = MuJoCo's qfrc_constraint of the contacts). Requires a site named like the
     foot."""
-    for foot in a1.FOOT_FRAMES:
+    for foot in quad.FOOT_FRAMES:
         sensor = spec.add_sensor(name=f"{foot}_contact", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot)
         sensor.intprm[:3] = _CONTACT_SENSOR_INTPRM
@@ -141,7 +195,7 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
     except ValueError as exc:
         raise ConfigError(str(exc) if str(exc).startswith(where) else f"{where}: {exc}") from exc
     sites = {s.name for s in spec.sites}
-    for foot in a1.FOOT_FRAMES:
+    for foot in quad.FOOT_FRAMES:
         g = spec.geom(foot)
         if foot not in sites:
             g.parent.add_site(name=foot, pos=list(g.pos))
@@ -159,7 +213,7 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
     if changes:
         record["overrides"] = changes
     sensors = {s.name for s in spec.sensors}
-    if f"{a1.FOOT_FRAMES[0]}_contact" not in sensors:
+    if f"{quad.FOOT_FRAMES[0]}_contact" not in sensors:
         add_foot_contact_sensors(spec)
     store_record(spec, record)
     return spec
@@ -167,7 +221,7 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
 
 def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) -> None:
     """Raise naming *feet* if a foot geom's contype/conaffinity bits exclude collisions with ``floor``."""
-    blind = [f for f in a1.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
+    blind = [f for f in quad.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
                                                  or (floor.contype & spec.geom(f).conaffinity))]
     if blind:
         raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
@@ -186,10 +240,10 @@ def compile_plant(spec: mujoco.MjSpec, source: Path | None = None) -> mujoco.MjM
             raise
         raise ConfigError(compile_error_message(Path(source), exc)) from exc
     missing = [
-        n for n in a1.JOINT_NAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) < 0
+        n for n in quad.JOINT_NAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) < 0
     ]
     missing += [
-        f"geom {f}" for f in a1.FOOT_FRAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) < 0
+        f"geom {f}" for f in quad.FOOT_FRAMES if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) < 0
     ]
     if missing:
         raise ValueError(f"plant model is missing {', '.join(missing)}")
@@ -210,6 +264,6 @@ def compile_error_message(source: Path, exc: BaseException) -> str:
     return message
 
 
-def build_plant(options: PlantOptions = PlantOptions()) -> mujoco.MjModel:
-    """The default flat-floor plant."""
-    return compile_plant(a1_spec(options))
+def build_plant(options: PlantOptions = PlantOptions(), robot: RobotDescription | None = None) -> mujoco.MjModel:
+    """The flat-floor plant of ``robot`` (default: the A1)."""
+    return compile_plant(robot_spec(robot, options))

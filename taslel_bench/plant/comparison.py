@@ -18,7 +18,7 @@ import pinocchio as pin
 
 from taslel_bench.plant.adapter import FLOOR, read_record
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 
 STAND_PENETRATION_M = 1e-4  # [m] lowest foot-sphere bottom below the floor for the contact read-out
@@ -33,12 +33,12 @@ def _per_foot(values: list[str]) -> str:
     return (
         values[0]
         if len(set(values)) == 1
-        else "; ".join(f"{leg}: {v}" for leg, v in zip(a1.LEGS, values, strict=True))
+        else "; ".join(f"{leg}: {v}" for leg, v in zip(quad.LEGS, values, strict=True))
     )
 
 
 def _stand_q(stand_joints_rad: np.ndarray) -> np.ndarray:
-    q = np.zeros(a1.NQ)
+    q = np.zeros(quad.NQ)
     q[6] = 1.0  # identity orientation (x, y, z, w)
     q[7:] = stand_joints_rad
     return q
@@ -60,7 +60,7 @@ def plant_vs_model(
 
 def _masses_com_feet(m: mujoco.MjModel, pm: A1Model, qj: np.ndarray) -> dict[str, object]:
     """Total and trunk mass [kg], whole-robot CoM and foot centres at the stand pose [m, trunk frame]."""
-    trunk = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+    trunk = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
     root = m.body_rootid[trunk]
     d, br = mujoco.MjData(m), StateBridge(m)
     q = _stand_q(qj)
@@ -68,9 +68,9 @@ def _masses_com_feet(m: mujoco.MjModel, pm: A1Model, qj: np.ndarray) -> dict[str
     mujoco.mj_kinematics(m, d)
     mujoco.mj_comPos(m, d)
     plant_com = d.subtree_com[root].copy()
-    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]
+    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
     plant_feet = d.geom_xpos[feet].copy()
-    pm.update(q, np.zeros(a1.NV))
+    pm.update(q, np.zeros(quad.NV))
     model_feet = pm.foot_pos_in_world.copy()
     model_com = pin.centerOfMass(pm.model, pm.model.createData(), q)
     plant_total = float(m.body_mass[m.body_rootid == root].sum())
@@ -158,7 +158,7 @@ def _options_and_geoms(m: mujoco.MjModel) -> dict[str, object]:
         "plant_noslip_iterations": int(m.opt.noslip_iterations),
         "plant_impratio": float(m.opt.impratio),
     }
-    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]
+    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
     per_foot = [_geom_params(m, g) for g in feet]
     for key in per_foot[0]:
         out[f"plant_foot_{key}"] = _per_foot([p[key] for p in per_foot])
@@ -176,14 +176,14 @@ def _contacts_at_stand(m: mujoco.MjModel, qj: np.ndarray) -> dict[str, object]:
     q = _stand_q(qj)
     br.qpos_mj(q, d.qpos)
     mujoco.mj_kinematics(m, d)
-    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]
+    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
     q[2] = -float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0])) - STAND_PENETRATION_M
     br.qpos_mj(q, d.qpos)
     mujoco.mj_forward(m, d)
     rows = {}
     for i in range(d.ncon):
         c = d.contact[i]
-        leg = next((a1.LEGS[k] for k, g in enumerate(feet) if g in (c.geom1, c.geom2)), None)
+        leg = next((quad.LEGS[k] for k, g in enumerate(feet) if g in (c.geom1, c.geom2)), None)
         if leg is not None:
             rows.setdefault(
                 leg,
@@ -197,7 +197,7 @@ def _contacts_at_stand(m: mujoco.MjModel, qj: np.ndarray) -> dict[str, object]:
             )
     out: dict[str, object] = {"plant_contact_feet_at_stand": len(rows)}
     if rows:
-        legs = [leg for leg in a1.LEGS if leg in rows]
+        legs = [leg for leg in quad.LEGS if leg in rows]
         for key in rows[legs[0]]:
             values = [rows[leg][key] for leg in legs]
             out[f"plant_contact_{key}"] = (

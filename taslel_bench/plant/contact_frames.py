@@ -29,7 +29,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.plant.contacts import foot_geom_ids, obstacle_geom_mask
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 MAX_CONTACTS_PER_FOOT = 3  # a sphere meets a plane and a log's flank at once at most twice in practice
@@ -49,7 +49,7 @@ class ContactLog:
         self.friction = np.zeros((c, m))  # [-] tangential coefficient
         self.dist = np.zeros((c, m))  # [m] negative: penetration
         self.force = np.zeros((c, m, 3))  # [N] in the contact frame (normal, tangent1, tangent2)
-        self.foot_cvel = np.zeros((c, a1.N_LEGS, 6))  # (omega, v at the root's subtree com) of each foot's body
+        self.foot_cvel = np.zeros((c, quad.N_LEGS, 6))  # (omega, v at the root's subtree com) of each foot's body
         self.root_com = np.zeros((c, 3))  # [m] subtree centre of mass of the robot's root body
 
 
@@ -60,15 +60,15 @@ class ContactFrameReader:
     def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model
         feet = foot_geom_ids(model)
-        trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         self._root = int(model.body_rootid[trunk])
         self._is_robot = model.body_rootid[model.geom_bodyid] == self._root
         self._foot_leg = np.full(model.ngeom + 1, -1)  # index -1 (an unused row) maps to -1 too
-        self._foot_leg[feet] = np.arange(a1.N_LEGS)
+        self._foot_leg[feet] = np.arange(quad.N_LEGS)
         self._link_leg = np.full(model.ngeom + 1, -1)  # leg of every other robot geom below the trunk
         for g in range(model.ngeom):
             name = model.body(model.geom_bodyid[g]).name
-            for i, leg in enumerate(a1.LEGS):
+            for i, leg in enumerate(quad.LEGS):
                 if self._is_robot[g] and self._foot_leg[g] < 0 and name.startswith(f"{leg}_"):
                     self._link_leg[g] = i
         self._is_robot = np.append(self._is_robot, True)
@@ -136,8 +136,8 @@ class ContactFrameReader:
         used = geom[..., 0] >= 0
         terrain_pair = used & (robot[..., 0] != robot[..., 1])
         touching = log.dist[t] <= 0.0
-        out = {"leg_link_obstacle_contact": np.zeros((n, a1.N_LEGS), bool),
-               "leg_link_obstacle_contact_off_foot": np.zeros((n, a1.N_LEGS), bool)}
+        out = {"leg_link_obstacle_contact": np.zeros((n, quad.N_LEGS), bool),
+               "leg_link_obstacle_contact_off_foot": np.zeros((n, quad.N_LEGS), bool)}
         link = self._link_leg[geom]
         for side in (0, 1):
             hit = terrain_pair & touching & (link[..., side] >= 0) & self._is_obstacle[geom[..., 1 - side]]
@@ -156,7 +156,7 @@ class ContactFrameReader:
         normal = log.normal[t][tick, j] * np.where(foot_is_geom2, 1.0, -1.0)[:, None]
         # [N] per foot, every terrain contact's normal weighted by its normal force, summed (its direction: the
         # foot's mean contact normal; the foot's net force is the foot sensor's, the trace's grf_plant_w)
-        out["foot_contact_normal_w"] = np.zeros((n, a1.N_LEGS, 3))
+        out["foot_contact_normal_w"] = np.zeros((n, quad.N_LEGS, 3))
         np.add.at(out["foot_contact_normal_w"], (tick, leg), normal * force[:, :1])
         # [m/s] the foot's material point at the contact: v + omega x (p - c), c the root's subtree com
         cvel = log.foot_cvel[t][tick, leg]
@@ -164,16 +164,16 @@ class ContactFrameReader:
         v = cvel[:, 3:] + np.cross(cvel[:, :3], r)
         v_t = v - np.sum(v * normal, axis=1)[:, None] * normal
         order = np.lexsort((-force[:, 0], leg, tick))  # per (tick, leg), the largest normal force first
-        key = tick[order] * a1.N_LEGS + leg[order]
+        key = tick[order] * quad.N_LEGS + leg[order]
         slot = np.arange(order.size) - np.searchsorted(key, key, side="left")
         keep = slot < kk
         o, s = order[keep], slot[keep]
         ti, li = tick[o], leg[o]
-        arrays = {"contact_fn_n": np.zeros((n, a1.N_LEGS, kk)), "contact_ft_n": np.zeros((n, a1.N_LEGS, kk)),
-                  "contact_mu": np.zeros((n, a1.N_LEGS, kk)), "contact_slip_mps": np.zeros((n, a1.N_LEGS, kk)),
-                  "contact_normal_w": np.zeros((n, a1.N_LEGS, kk, 3)),
-                  "contact_touching": np.zeros((n, a1.N_LEGS, kk), bool),
-                  "contact_on_obstacle": np.zeros((n, a1.N_LEGS, kk), bool)}
+        arrays = {"contact_fn_n": np.zeros((n, quad.N_LEGS, kk)), "contact_ft_n": np.zeros((n, quad.N_LEGS, kk)),
+                  "contact_mu": np.zeros((n, quad.N_LEGS, kk)), "contact_slip_mps": np.zeros((n, quad.N_LEGS, kk)),
+                  "contact_normal_w": np.zeros((n, quad.N_LEGS, kk, 3)),
+                  "contact_touching": np.zeros((n, quad.N_LEGS, kk), bool),
+                  "contact_on_obstacle": np.zeros((n, quad.N_LEGS, kk), bool)}
         arrays["contact_fn_n"][ti, li, s] = force[o, 0]
         arrays["contact_ft_n"][ti, li, s] = np.hypot(force[o, 1], force[o, 2])
         arrays["contact_mu"][ti, li, s] = log.friction[t][tick[o], j[o]]

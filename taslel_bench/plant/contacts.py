@@ -10,7 +10,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.geoms import OBSTACLE_BODY, OBSTACLE_SENSOR_SUFFIX
 from taslel_bench.util.jit import kernel
 
@@ -23,13 +23,13 @@ def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
 
 
 def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
-    """MuJoCo geom ids of the four foot spheres, in :data:`a1.LEGS` order."""
-    return np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES])
+    """MuJoCo geom ids of the four foot spheres, in :data:`quad.LEGS` order."""
+    return np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES])
 
 
 def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, float]]:
     """(foot name, sliding friction coefficient) of every active foot contact, read from ``data.contact``."""
-    feet = {int(g): name for g, name in zip(foot_geom_ids(model), a1.FOOT_FRAMES)}
+    feet = {int(g): name for g, name in zip(foot_geom_ids(model), quad.FOOT_FRAMES)}
     out = []
     for i in range(data.ncon):
         c = data.contact[i]
@@ -65,7 +65,7 @@ class FootContactReader:
         self.foot_geoms = foot_geom_ids(model)
 
         def sensor_adr(kind: str) -> np.ndarray:
-            ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_{kind}") for f in a1.FOOT_FRAMES]
+            ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{f}_{kind}") for f in quad.FOOT_FRAMES]
             if min(ids) < 0:
                 raise ValueError(
                     f"plant model has no foot {kind} sensors; build it with plant.add_foot_contact_sensors"
@@ -83,7 +83,7 @@ class FootContactReader:
         self._radius_sign = a1.FOOT_RADIUS_M * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
         self._is_foot = np.zeros(model.ngeom, bool)
         self._is_foot[self.foot_geoms] = True
-        robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         self._is_robot_geom = model.body_rootid[model.geom_bodyid] == model.body_rootid[robot_root]
         foot_bodies = model.geom_bodyid[self.foot_geoms]
         self._is_lower_leg = np.isin(model.geom_bodyid, foot_bodies) & ~self._is_foot  # calves (knee to foot)
@@ -93,10 +93,10 @@ class FootContactReader:
             self._obstacle_rows = sensor_adr(OBSTACLE_SENSOR_SUFFIX)
         self.body_contact = self.shin_contact = self.non_foot_obstacle_contact = False
         self.non_foot_contact_name = ""
-        self.forces_in_world = np.zeros((a1.N_LEGS, 3))
-        self.in_contact = np.zeros(a1.N_LEGS, bool)
-        self.slip_velocity_in_world = np.zeros((a1.N_LEGS, 2))
-        self.foot_pos_in_world = np.zeros((a1.N_LEGS, 3))
+        self.forces_in_world = np.zeros((quad.N_LEGS, 3))
+        self.in_contact = np.zeros(quad.N_LEGS, bool)
+        self.slip_velocity_in_world = np.zeros((quad.N_LEGS, 2))
+        self.foot_pos_in_world = np.zeros((quad.N_LEGS, 3))
         self._data: mujoco.MjData | None = None
         self._sensordata = np.zeros(0)
 
@@ -143,7 +143,7 @@ class FootContactReader:
             "slip_velocity_in_world": sensors[:, self._lin_rows] + sensors[:, self._ang_rows] * self._radius_sign,
             "foot_pos_in_world": sensors[:, self._pos_rows],
             "obstacle_contact": (sensors[:, self._obstacle_rows] > 0.0 if self.has_obstacles
-                                 else np.zeros((n, a1.N_LEGS), bool)),
+                                 else np.zeros((n, quad.N_LEGS), bool)),
         }
 
     def classify_other_contacts(self, data: mujoco.MjData) -> None:

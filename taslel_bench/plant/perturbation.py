@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 import mujoco
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.fields import integer, number, number_or_list, numbers
 
 MAX_SCALE = 10.0  # [-] mass and motor-strength factors
@@ -43,7 +43,7 @@ JointValues = tuple[float, ...]  # 12 values, core joint order
 def check_trunk_and_joints(prefix: str, values: dict) -> dict:
     """The fields the plant and the controller's model share, checked and normalised (joint values as 12-tuples);
     a bad value raises naming ``<prefix>.<field>``. Fields absent from ``values`` are not returned."""
-    p, n, out = f"{prefix}.", a1.N_JOINTS, {}
+    p, n, out = f"{prefix}.", quad.N_JOINTS, {}
     rules = {
         "trunk_mass_scale": lambda v: number(p + "trunk_mass_scale", v, 0.0, MAX_SCALE, lo_open=True),
         "trunk_com_shift_m": lambda v: numbers(p + "trunk_com_shift_m", v, -MAX_COM_SHIFT_M, MAX_COM_SHIFT_M,
@@ -71,9 +71,9 @@ class PlantPerturbation:
     trunk_com_shift_m: Vector3 = (0.0, 0.0, 0.0)
     payload_mass_kg: float = 0.0
     payload_pos_m: Vector3 = (0.0, 0.0, 0.0)
-    joint_damping: JointValues = (0.0,) * a1.N_JOINTS
-    armature: JointValues = (0.0,) * a1.N_JOINTS
-    joint_frictionloss: JointValues = (0.0,) * a1.N_JOINTS
+    joint_damping: JointValues = (0.0,) * quad.N_JOINTS
+    armature: JointValues = (0.0,) * quad.N_JOINTS
+    joint_frictionloss: JointValues = (0.0,) * quad.N_JOINTS
     motor_strength_scale: float = 1.0
     actuator_delay_steps: int = 0
 
@@ -95,7 +95,7 @@ class PlantPerturbation:
     def apply(self, spec: mujoco.MjSpec) -> None:
         """Edit the plant spec (before compiling): trunk mass, inertia and CoM, the payload body, the leg
         joints' damping, friction loss and armature, the actuators' gear."""
-        trunk = spec.body(a1.TRUNK_BODY)
+        trunk = spec.body(quad.TRUNK_BODY)
         trunk.mass *= self.trunk_mass_scale
         trunk.inertia[:] = np.asarray(trunk.inertia) * self.trunk_mass_scale  # URDF import: fullinertia
         trunk.fullinertia[:] = np.asarray(trunk.fullinertia) * self.trunk_mass_scale
@@ -105,7 +105,7 @@ class PlantPerturbation:
             payload.explicitinertial = True
             payload.mass, payload.ipos = self.payload_mass_kg, [0.0] * 3
             payload.inertia = [0.0] * 3  # a point mass
-        for i, name in enumerate(a1.JOINT_NAMES):
+        for i, name in enumerate(quad.JOINT_NAMES):
             joint = spec.joint(name)
             damping = np.array(joint.damping)  # MuJoCo >= 4: [linear, higher-order polynomial terms ...]
             damping[0] += self.joint_damping[i]  # the linear coefficient only: torque -d qdot
@@ -139,5 +139,5 @@ class ActuatorDelay:
 def as_joint_values(value: float | Sequence[float]) -> JointValues:
     """One number for every leg joint, or 12 in the core order, as 12 values."""
     if isinstance(value, (int, float)):
-        return (float(value),) * a1.N_JOINTS
+        return (float(value),) * quad.N_JOINTS
     return tuple(float(v) for v in value)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import foxglove.layouts as fl
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 LAYOUT_PATH = Path(__file__).resolve().parents[2] / "conf" / "foxglove" / "layout.json"
 LEG_COLORS = {"FL": "#1f77b4", "FR": "#d62728", "RL": "#2ca02c", "RR": "#9467bd"}
@@ -33,7 +33,7 @@ def _three_d() -> fl.ThreeDeePanel:
                     for topic in ("/scene/robot", "/scene/terrain", "/scene/contact")}  # fmt: skip
     return fl.ThreeDeePanel(title="A1 (trunk followed; blue: MuJoCo contact force, orange: filter lambda)",
                             config=fl.ThreeDeeConfig(
-                                follow_tf=a1.TRUNK_BODY, fixed_frame="world", follow_mode="follow-position",
+                                follow_tf=quad.TRUNK_BODY, fixed_frame="world", follow_mode="follow-position",
                                 camera_state=fl.ThreeDeeCameraState(distance=1.6, phi=65.0, theta_offset=135.0,
                                                                     perspective=True, target_offset=(0.0, 0.0, 0.0)),
                                 topics=scene_topics,
@@ -42,16 +42,16 @@ def _three_d() -> fl.ThreeDeePanel:
 
 
 def _plots() -> list[fl.PlotPanel]:
-    grf = [(f"/contact_force.{leg}.plant_w_n.z", f"{leg} MuJoCo f_z [N]") for leg in a1.LEGS]
-    grf += [(f"/contact_force.{leg}.filter_w_n.z", f"{leg} filter lambda_z [N]") for leg in a1.LEGS]
+    grf = [(f"/contact_force.{leg}.plant_w_n.z", f"{leg} MuJoCo f_z [N]") for leg in quad.LEGS]
+    grf += [(f"/contact_force.{leg}.filter_w_n.z", f"{leg} filter lambda_z [N]") for leg in quad.LEGS]
     return [
         _plot("Forward speed", [("/base_state.linvel_w_mps.x", "trunk v_x (world) [m/s]")], "m/s"),
         _plot("Vertical ground reaction force", grf, "N"),
         _plot("Barrier h per swing foot (smallest family)",
-              [(f"/barrier.{leg}.h_m", f"{leg} h [m]") for leg in a1.LEGS], "m"),
+              [(f"/barrier.{leg}.h_m", f"{leg} h [m]") for leg in quad.LEGS], "m"),
         _plot("QP solve time", [("/qp.solve_us", "solve [µs]"), ("/qp.build_us", "build [µs]")], "µs"),
         _plot("Friction", [("/friction.mu_true", "mu under the trunk"), ("/friction.mu_hat", "mu_hat (filter)")]
-              + [(f"/contact_force.{leg}.mu_foot", f"mu under {leg}") for leg in a1.LEGS], "-"),
+              + [(f"/contact_force.{leg}.mu_foot", f"mu under {leg}") for leg in quad.LEGS], "-"),
     ]  # fmt: skip
 
 

@@ -42,7 +42,7 @@ from mcap.writer import Writer
 
 from taslel_bench.record import scene, signals
 from taslel_bench.record.trace import EpisodeTrace
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.provenance import code_version
 
 FINAL_NAME = "episode.mcap"
@@ -98,7 +98,7 @@ class McapStream:
     def _run_record(self) -> dict[str, str]:
         return {"start_unix_ns": str(self.start_ns), "log_time": "start_unix_ns + simulated time [ns]",
                 "publish_time": "simulated time [ns]", "record_every_ticks": str(self.every),
-                "fixed_frame": scene.WORLD_FRAME, "follow_frame": a1.TRUNK_BODY,
+                "fixed_frame": scene.WORLD_FRAME, "follow_frame": quad.TRUNK_BODY,
                 "force_arrow_m_per_n": str(scene.FORCE_SCALE_M_PER_N)}  # fmt: skip
 
     def _register_json(self, topic: str, schema: dict) -> None:
@@ -155,7 +155,7 @@ class McapStream:
         pos, quat = p.tree.relative_poses(qpos_rows)
         feet = _leg_array(frame, "{leg}_foot_{ax}_w_m")
         plant_f, filter_f = _leg_array(frame, "{leg}_grf_plant_{ax}_w_n"), _leg_array(frame, "{leg}_grf_filter_{ax}_w_n")
-        h = {name: frame[[f"{leg}_barrier_{name}_h_m" for leg in a1.LEGS]].to_numpy() for name in self.barrier_names}
+        h = {name: frame[[f"{leg}_barrier_{name}_h_m" for leg in quad.LEGS]].to_numpy() for name in self.barrier_names}
         for i, t in enumerate(times):
             ns = self.log_ns(float(t))
             self._put("/tf", float(t), scene.body_transforms(p.tree, ns, pos[i], quat[i]).encode())
@@ -191,8 +191,8 @@ class McapStream:
 
 def _leg_array(frame: pd.DataFrame, pattern: str) -> np.ndarray:
     """(n, 4, 3) of the columns ``pattern`` per leg and axis (legs in LEGS order, world axes)."""
-    cols = [pattern.format(leg=leg, ax=ax) for leg in a1.LEGS for ax in "xyz"]
-    return frame[cols].to_numpy(float).reshape(len(frame), a1.N_LEGS, 3)
+    cols = [pattern.format(leg=leg, ax=ax) for leg in quad.LEGS for ax in "xyz"]
+    return frame[cols].to_numpy(float).reshape(len(frame), quad.N_LEGS, 3)
 
 
 def stride(control_rate_hz: float, mcap_rate_hz: float | None) -> int:

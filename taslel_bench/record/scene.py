@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 from foxglove import messages as fm
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.parts import Box, FrictionStrips, Log, Plane
 from taslel_bench.terrain.terrain import Terrain
 
@@ -97,7 +97,7 @@ class BodyTree:
 
     def __init__(self, m: mujoco.MjModel) -> None:
         self.m, self._d = m, mujoco.MjData(m)
-        trunk = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        trunk = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         self.ids = [b for b in range(1, m.nbody) if m.body_rootid[b] == trunk]
         self.names = [m.body(b).name for b in self.ids]
         self.parents = [m.body_parentid[b] for b in self.ids]
@@ -195,7 +195,7 @@ def robot_scene(m: mujoco.MjModel, tree: BodyTree, stamp_ns: int) -> fm.SceneUpd
     for body, name in zip(tree.ids, tree.names):
         prims = Primitives()
         for g in range(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body]):
-            is_foot = m.geom(g).name in a1.FOOT_FRAMES
+            is_foot = m.geom(g).name in quad.FOOT_FRAMES
             prims.mj_geom(m, g, FOOT_RGBA if is_foot else ROBOT_RGBA)
         entities.append(prims.entity(name, name, stamp_ns, frame_locked=True))
     return fm.SceneUpdate(entities=entities)
@@ -288,13 +288,13 @@ def barrier_rgba(h_m: float) -> tuple[float, float, float, float]:
 
 def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np.ndarray,
                   grf_filter_w: np.ndarray, barrier_h: dict[str, np.ndarray]) -> fm.SceneUpdate:  # fmt: skip
-    """One tick: per foot (legs in :data:`a1.LEGS` order) the plant's and the filter's force arrows from the
+    """One tick: per foot (legs in :data:`quad.LEGS` order) the plant's and the filter's force arrows from the
     sphere's bottom point (``foot_w`` (4, 3) sphere centres [m], forces (4, 3) [N], world axes) and, for a
     swing foot with a barrier row, a sphere coloured by the smallest h [m] over ``barrier_h`` (name -> (4,))
     and a line from the sphere's bottom down by that h. The update first deletes the previous tick's
     entities of the topic."""
     entities = []
-    for i, leg in enumerate(a1.LEGS):
+    for i, leg in enumerate(quad.LEGS):
         prims = Primitives()
         bottom = foot_w[i] - np.array([0.0, 0.0, a1.FOOT_RADIUS_M])
         _force_arrow(prims, bottom, grf_plant_w[i], PLANT_FORCE_RGBA)

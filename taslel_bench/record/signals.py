@@ -15,10 +15,10 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.record.trace import TICK_PARTS
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 Spec = dict  # field -> column name (str) or a nested Spec
-JOINTS = [j.removesuffix("_joint") for j in a1.JOINT_NAMES]
+JOINTS = [j.removesuffix("_joint") for j in quad.JOINT_NAMES]
 BOOLEAN_SUFFIXES = ("_stance", "_contact", "qp_fallback", "_ready")
 
 
@@ -32,7 +32,7 @@ def _per_leg(fields: Spec) -> Spec:
         return spec.replace("{leg}", leg) if isinstance(spec, str) else {k: fill(v) for k, v in spec.items()}
 
     out = {}
-    for leg in a1.LEGS:
+    for leg in quad.LEGS:
         out[leg] = fill(fields)
     return out
 
@@ -90,7 +90,7 @@ def channels(barrier_names: Sequence[str] = ()) -> dict[str, Spec]:
     out = {topic: dict(spec) for topic, spec in CHANNELS.items()}
     out["/barrier"] = {leg: dict(fields) for leg, fields in out["/barrier"].items()}
     for name in barrier_names:
-        for leg in a1.LEGS:
+        for leg in quad.LEGS:
             out["/barrier"][leg][f"{name}_h_m"] = f"{leg}_barrier_{name}_h_m"
             out["/barrier"][leg][f"{name}_h_e_mps"] = f"{leg}_barrier_{name}_he_mps"
     return out

@@ -31,7 +31,7 @@ import pandas as pd
 
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT, ContactLog
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
@@ -46,19 +46,19 @@ class BarrierLog:
     episode by :mod:`taslel_bench.metrics.residuals`)."""
 
     def __init__(self, name: str, capacity: int) -> None:
-        shape = (capacity, a1.N_LEGS)
+        shape = (capacity, quad.N_LEGS)
         self.name = name
         self.h_m = np.full(shape, np.nan)
         self.he_mps = np.full(shape, np.nan)
         self.psi_planned_mps2 = np.full(shape, np.nan)
-        self.psi_realized_mps2 = np.zeros((0, a1.N_LEGS))
+        self.psi_realized_mps2 = np.zeros((0, quad.N_LEGS))
 
 
 class EpisodeTrace:
     """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`).
     ``barrier_names``: the filter's barrier families, in its order (one :class:`BarrierLog` each)."""
 
-    def __init__(self, capacity: int, filter_on: bool, nq: int = a1.NQ, nv: int = a1.NV,
+    def __init__(self, capacity: int, filter_on: bool, nq: int = quad.NQ, nv: int = quad.NV,
                  nsensordata: int = 0, barrier_names: Sequence[str] = ()) -> None:  # fmt: skip
         c = capacity
         self.n = 0  # ticks recorded in the episode (global count)
@@ -73,14 +73,14 @@ class EpisodeTrace:
         block_fills = {id(block): init for block, init in self._blocks}  # a block's rows reset to their init row
         self._raw = [(a, block_fills.get(id(a), fill))
                      for a, fill in _raw_arrays([self, self.contact_log, *self.barriers.values()], c)]
-        self._no_filter = (np.full(3 * a1.N_LEGS, np.nan), np.full(a1.NV, np.nan))  # (lambda, vdot) stand-ins
+        self._no_filter = (np.full(3 * quad.N_LEGS, np.nan), np.full(quad.NV, np.nan))  # (lambda, vdot) stand-ins
 
     def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
         """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts, the
         friction estimate and the tick's wall times. The float and the bool ones are column views of two
         blocks (``_FLOAT_ROW`` / ``_FLAG_ROW`` order: :meth:`record` copies one row of each in one compiled
         call, whose cost grows with the number of arrays it is handed)."""
-        nl, nan = a1.N_LEGS, np.nan
+        nl, nan = quad.N_LEGS, np.nan
         floats = _column_block(c, np.float64, (
             ((), 0.0),  # t_s [s]
             ((), 0.0),  # gait_phase
@@ -98,7 +98,7 @@ class EpisodeTrace:
             ((12,), 0.0),  # u
             ((nl,), 0.0),  # swing_phase
             ((nl, 3), nan),  # grf_filter_w
-            ((a1.NV,), nan),  # vdot_filter
+            ((quad.NV,), nan),  # vdot_filter
         ))  # fmt: skip
         (self.t_s, self.gait_phase, self.mu_hat, self.mu_true, self.tick_us, self.tick_parts_s, self.qp_build_us,
          self.qp_solve_us, self.ecbf_margin_mps2, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
@@ -126,7 +126,7 @@ class EpisodeTrace:
 
     def _allocate_contact_frames(self, c: int) -> None:
         """Per-foot contact-frame arrays, filled from ``contact_log`` by finalize()."""
-        nl = a1.N_LEGS
+        nl = quad.N_LEGS
         # derived from contact_log by finalize() (taslel_bench.plant.contact_frames; zero until then): every
         # foot-terrain contact in MuJoCo's contact frame, per tick, leg and slot (K slots, zero / False unused):
         # f_n [N], |f_t| [N], the contact's mu [-], the normal out of the terrain (world axes), the contact
@@ -154,9 +154,9 @@ class EpisodeTrace:
 
     def _allocate_derived(self) -> None:
         """Empty arrays filled after the loop: model residuals and the quantities finalize() derives."""
-        nl = a1.N_LEGS
+        nl = quad.N_LEGS
         # --- the controller model's residuals, filled after the episode by taslel_bench.metrics.residuals.compute
-        self.model_residual = np.zeros((0, a1.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
+        self.model_residual = np.zeros((0, quad.NV))  # [N, N·m] M vdot + h - S u - J'f (Pinocchio rows)
         self.foot_acc_error_w = np.zeros((0, nl, 3))  # [m/s²] predicted - realised foot acceleration
         # --- derived by finalize() (empty until then)
         self.tick_parts_us = np.zeros((0, len(TICK_PARTS)))  # [µs]
@@ -273,7 +273,7 @@ class EpisodeTrace:
             "mu_foot": friction_under_feet(terrain, foot_pos, self.mu_true[ticks]),
             "obstacle_clearance_m": obstacle_clearance(terrain, foot_pos),
         }
-        clearance = np.full((k1 - k0, a1.N_LEGS), np.nan)
+        clearance = np.full((k1 - k0, quad.N_LEGS), np.nan)
         if profile is not None and k1 > k0:
             swing = ~self.in_stance[ticks]
             z_obstacle = profile.evaluate(self.swing_phase[ticks][swing])[0]
@@ -332,7 +332,7 @@ class EpisodeTrace:
         _put(cols, "base_v{}_w_mps", "xyz", d["base_linvel_w"])
         _put(cols, "base_w{}_b_radps", "xyz", d["base_angvel_b"])
         _put(cols, "base_{}_rad", ("roll", "pitch", "yaw"), rpy_from_quat(d["base_quat_wxyz"]))
-        for j, jn in enumerate(a1.JOINT_NAMES):
+        for j, jn in enumerate(quad.JOINT_NAMES):
             short = jn.removesuffix("_joint")
             cols[f"q_{short}_rad"] = d["q"][:, j]
             cols[f"qd_{short}_radps"] = d["qd"][:, j]
@@ -344,7 +344,7 @@ class EpisodeTrace:
         """Per leg: schedule, plant contact, foot, forces (plant and filter), barrier values, clearance."""
         slip = np.hypot(d["slip_w"][..., 0], d["slip_w"][..., 1])
         h_min = self.barrier_h_min(t)
-        for i, leg in enumerate(a1.LEGS):
+        for i, leg in enumerate(quad.LEGS):
             cols[f"{leg}_stance"] = self.in_stance[t, i]
             cols[f"{leg}_scheduled_stance"] = self.scheduled_stance[t, i]
             cols[f"{leg}_contact"] = d["in_contact"][:, i]
@@ -380,14 +380,14 @@ class EpisodeTrace:
     def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
         """The controller model's residuals and barrier conditions (nan until computed after the episode)."""
         t = slice(k0, k1)
-        residual = _rows(self.model_residual, k0, k1, a1.NV)
+        residual = _rows(self.model_residual, k0, k1, quad.NV)
         cols["residual_trunk_force_n"] = np.linalg.norm(residual[:, :3], axis=1)
         cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
         cols["residual_joint_nm_max"] = np.abs(residual[:, 6:]).max(axis=1)
-        acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, a1.N_LEGS, 3), axis=2)
+        acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, quad.N_LEGS, 3), axis=2)
         psi_planned = _fmin([log.psi_planned_mps2[t] for log in self.barriers.values()], k1 - k0)
-        psi_real = _fmin([_rows(log.psi_realized_mps2, k0, k1, a1.N_LEGS) for log in self.barriers.values()], k1 - k0)
-        for i, leg in enumerate(a1.LEGS):
+        psi_real = _fmin([_rows(log.psi_realized_mps2, k0, k1, quad.N_LEGS) for log in self.barriers.values()], k1 - k0)
+        for i, leg in enumerate(quad.LEGS):
             cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
             cols[f"{leg}_barrier_psi_planned_mps2"] = psi_planned[:, i]
             cols[f"{leg}_barrier_psi_realized_mps2"] = psi_real[:, i]
@@ -483,7 +483,7 @@ def _put_row(F, k, c, src):  # pragma: no cover - compiled
 
 def _fmin(arrays: list[np.ndarray], n: int) -> np.ndarray:
     """Element-wise minimum ignoring nan of (n, 4) arrays (all nan when there are none)."""
-    out = np.full((n, a1.N_LEGS), np.nan)
+    out = np.full((n, quad.N_LEGS), np.nan)
     for a in arrays:
         out = np.fmin(out, a)
     return out
@@ -513,7 +513,7 @@ def friction_under_feet(terrain: Terrain | None, foot_pos_w: np.ndarray, mu_trun
     """(n, 4) true friction coefficient [-] of the terrain under each foot-sphere centre (the terrain's
     friction at the foot's world (x, y)); without a terrain the trunk's, for every foot."""
     if terrain is None:
-        return np.repeat(mu_trunk[:, None], a1.N_LEGS, axis=1)
+        return np.repeat(mu_trunk[:, None], quad.N_LEGS, axis=1)
     return terrain.friction_under(foot_pos_w[:, :, :2])
 
 
@@ -522,6 +522,6 @@ def obstacle_clearance(terrain: Terrain | None, foot_pos_w: np.ndarray) -> np.nd
     <= 0 means touching. NaN without obstacles."""
     n = foot_pos_w.shape[0]
     if terrain is None or not terrain.has_obstacles:
-        return np.full((n, a1.N_LEGS), np.nan)
+        return np.full((n, quad.N_LEGS), np.nan)
     d, _, _ = terrain.obstacle_distance(foot_pos_w.reshape(-1, 3), a1.FOOT_RADIUS_M)
-    return d.reshape(n, a1.N_LEGS)
+    return d.reshape(n, quad.N_LEGS)

@@ -25,7 +25,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from taslel_bench.record import run_files
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 VIDEO_NAME = "video.mp4"
 FORCE_SCALE_M_PER_N = 0.004  # [m/N] arrow length per newton (as in the Foxglove scene)
@@ -33,9 +33,9 @@ CAMERA = {"distance": 1.4, "azimuth": 130.0, "elevation": -18.0}  # [m], [deg], 
 HEADLIGHT = {"ambient": (0.45, 0.45, 0.45), "diffuse": (0.6, 0.6, 0.6)}
 EVENT_SHOW_S = 0.6  # [s] an event's text stays this long (a fall: to the end)
 STATE_COLUMNS = [*(f"base_{ax}_w_m" for ax in "xyz"), *(f"base_quat_{c}" for c in "wxyz"),
-                 *(f"q_{j.removesuffix('_joint')}_rad" for j in a1.JOINT_NAMES)]  # fmt: skip
-FOOT_COLUMNS = [f"{leg}_foot_{ax}_w_m" for leg in a1.LEGS for ax in "xyz"]
-FORCE_COLUMNS = [f"{leg}_grf_plant_{ax}_w_n" for leg in a1.LEGS for ax in "xyz"]
+                 *(f"q_{j.removesuffix('_joint')}_rad" for j in quad.JOINT_NAMES)]  # fmt: skip
+FOOT_COLUMNS = [f"{leg}_foot_{ax}_w_m" for leg in quad.LEGS for ax in "xyz"]
+FORCE_COLUMNS = [f"{leg}_grf_plant_{ax}_w_n" for leg in quad.LEGS for ax in "xyz"]
 
 
 class GLUnavailable(RuntimeError):
@@ -97,13 +97,13 @@ class RunFrames:
             raise GLUnavailable(_gl_help(os.environ.get("MUJOCO_GL", "egl"), exc)) from exc
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-        self.camera.trackbodyid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+        self.camera.trackbodyid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         self.camera.distance, self.camera.azimuth, self.camera.elevation = (
             CAMERA["distance"], CAMERA["azimuth"], CAMERA["elevation"])  # fmt: skip
         self._qadr = _qpos_addresses(model)
         self._state = steps[STATE_COLUMNS].to_numpy(float)
-        self._feet = steps[FOOT_COLUMNS].to_numpy(float).reshape(-1, a1.N_LEGS, 3)
-        self._forces = steps[FORCE_COLUMNS].to_numpy(float).reshape(-1, a1.N_LEGS, 3)
+        self._feet = steps[FOOT_COLUMNS].to_numpy(float).reshape(-1, quad.N_LEGS, 3)
+        self._forces = steps[FORCE_COLUMNS].to_numpy(float).reshape(-1, quad.N_LEGS, 3)
         self.t_s = steps["t_s"].to_numpy(float)
         self.dt_s = float(np.median(np.diff(self.t_s))) if len(self.t_s) > 1 else 1e-3
 
@@ -173,7 +173,7 @@ def _qpos_addresses(model) -> np.ndarray:
     import mujoco
 
     free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
-    joints = [model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)] for name in a1.JOINT_NAMES]
+    joints = [model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)] for name in quad.JOINT_NAMES]
     return np.array([*range(model.jnt_qposadr[free], model.jnt_qposadr[free] + 7), *joints])
 
 

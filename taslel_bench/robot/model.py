@@ -1,10 +1,10 @@
-"""The controller's model of the A1: Pinocchio, built from the same URDF as the plant.
+"""The controller's model of the robot: Pinocchio, built from the same URDF as the plant.
 
 All per-tick rigid-body quantities the nominal controller and the safety filter need are computed once
 by :meth:`A1Model.update` into preallocated arrays (no allocation per tick beyond Pinocchio's own).
 
 Frames and units: ``q`` is Pinocchio's (position of the trunk origin in world [m], quaternion xyzw,
-12 joint angles [rad] in :data:`a1.LEGS` order); ``v`` is (trunk linear velocity in the **trunk**
+12 joint angles [rad] in the core order of :mod:`taslel_bench.robot.quadruped`); ``v`` is (trunk linear velocity in the **trunk**
 frame [m/s], angular velocity in the trunk frame [rad/s], joint velocities [rad/s]). Foot quantities are
 expressed at the foot-sphere centre in LOCAL_WORLD_ALIGNED axes (world orientation).
 
@@ -17,13 +17,15 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from taslel_bench.robot import a1, model_options
+from taslel_bench.robot import model_options
+from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import RobotDescription, foot_frame, load_robot, pinocchio_model
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.jit import kernel
 
 
-class A1Model:
-    """Pinocchio model + data and the per-tick dynamics terms.
+class RobotModel:
+    """Pinocchio model + data of one robot (:class:`RobotDescription`) and the per-tick dynamics terms.
 
     After :meth:`update`:
       * ``M`` (18x18) mass matrix [kg, kg·m, kg·m²], full symmetric, armature on the joints' diagonal;
@@ -36,30 +38,27 @@ class A1Model:
       * ``foot_jdotv_in_world`` (4x3) classical acceleration at vdot = 0, i.e. J̇·v [m/s²].
     """
 
-    def __init__(self, options: ModelOptions | None = None) -> None:
+    def __init__(self, robot: RobotDescription | None = None, options: ModelOptions | None = None) -> None:
+        self.robot = robot = robot if robot is not None else load_robot("a1")
         self.options = options = options or ModelOptions()
-        self.urdf_path = options.urdf or str(a1.a1_urdf_path())
-        self.model = pin.buildModelFromUrdf(self.urdf_path, pin.JointModelFreeFlyer())
-        names = list(self.model.names)[2:]
-        if tuple(names) != a1.JOINT_NAMES:
-            raise ValueError(f"{self.urdf_path}: Pinocchio joint order {names} differs from "
-                             f"a1.JOINT_NAMES")
-        model_options.apply(self.model, options)
+        self.urdf_path = options.urdf or str(robot.urdf_path)
+        self.model = pinocchio_model(robot, options.urdf)
+        model_options.apply(self.model, options, robot.trunk_link)
         self.data = self.model.createData()
         # known joint losses added to h's joint rows each tick (skipped when all are 0: h is Pinocchio's nle)
         self.joint_damping = options.per_joint("joint_damping")  # [N·m·s/rad] core order
         self.joint_frictionloss = options.per_joint("joint_frictionloss")  # [N·m] core order
         self.frictionloss_smoothing_radps = float(options.frictionloss_smoothing_radps)  # [rad/s]
         self._joint_losses = bool(self.joint_damping.any() or self.joint_frictionloss.any())
-        self.foot_frame_ids = [self.model.getFrameId(f) for f in a1.FOOT_FRAMES]
+        self.foot_frame_ids = [self.model.getFrameId(foot_frame(robot, i)) for i in range(quad.N_LEGS)]
         self.total_mass_kg = float(pin.computeTotalMass(self.model))
         nv = self.model.nv
         self.M = np.zeros((nv, nv))
         self.h = np.zeros(nv)
-        self.foot_pos_in_world = np.zeros((a1.N_LEGS, 3))
-        self.foot_vel_in_world = np.zeros((a1.N_LEGS, 3))
-        self.foot_jac_in_world = np.zeros((a1.N_LEGS, 3, nv))
-        self.foot_jdotv_in_world = np.zeros((a1.N_LEGS, 3))
+        self.foot_pos_in_world = np.zeros((quad.N_LEGS, 3))
+        self.foot_vel_in_world = np.zeros((quad.N_LEGS, 3))
+        self.foot_jac_in_world = np.zeros((quad.N_LEGS, 3, nv))
+        self.foot_jdotv_in_world = np.zeros((quad.N_LEGS, 3))
         # velocity columns that move foot i: the free flyer's 6 and the leg's 3 (Pinocchio's support)
         cols = []
         for fid in self.foot_frame_ids:

@@ -16,7 +16,7 @@ the same physics (checked against MuJoCo in ``tests/test_model_options.py``):
 * ``payload_mass_kg`` at ``payload_pos_m`` [m, trunk frame]: a point mass fixed to the trunk.
 
 Joint values are one number for all 12 leg joints or 12 numbers in the core order
-(:data:`taslel_bench.robot.a1.JOINT_NAMES`: legs FL, FR, RL, RR; hip, thigh, calf).
+(:data:`taslel_bench.robot.quadruped.JOINT_NAMES`: legs FL, FR, RL, RR; hip, thigh, calf).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 JointValue = float | Sequence[float]
 ROOT_JOINT = 1  # Pinocchio index of the free flyer (0 is the universe)
@@ -37,7 +37,7 @@ ROOT_JOINT = 1  # Pinocchio index of the free flyer (0 is the universe)
 class ModelOptions:
     """The controller's model; the defaults are the URDF as is (see module doc for meanings and units)."""
 
-    urdf: str | None = None  # None: example-robot-data's a1.urdf (the file the default plant is built from)
+    urdf: str | None = None  # None: the robot's URDF (the file the default plant is built from)
     joint_damping: JointValue = 0.0  # [N·m·s/rad]
     armature: JointValue = 0.0  # [kg·m²]
     joint_frictionloss: JointValue = 0.0  # [N·m]
@@ -65,18 +65,18 @@ def joint_vector(value: JointValue, name: str = "value") -> np.ndarray:
     """One number -> 12 equal values; 12 numbers -> them (core joint order); anything else raises."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
-        return np.full(a1.N_JOINTS, float(arr))
-    if arr.shape != (a1.N_JOINTS,):
-        raise ValueError(f"{name}: one number or {a1.N_JOINTS} numbers (core joint order), got {value!r}")
+        return np.full(quad.N_JOINTS, float(arr))
+    if arr.shape != (quad.N_JOINTS,):
+        raise ValueError(f"{name}: one number or {quad.N_JOINTS} numbers (core joint order), got {value!r}")
     return arr.copy()
 
 
-def trunk_link_inertia(model: pin.Model) -> tuple[pin.SE3, pin.Inertia]:
+def trunk_link_inertia(model: pin.Model, trunk_link: str) -> tuple[pin.SE3, pin.Inertia]:
     """(placement of the trunk link's frame in the free flyer's frame, the trunk link's own inertia in its
     frame): the URDF ``trunk`` link alone, without the links fused into the free-flyer body (IMU, a massless
     root ``base``). With a root ``base`` link, Pinocchio keeps the trunk's inertia on the fixed joint that
     attaches it; when ``trunk`` is the root link, its inertia is the body's minus every fused fixed link's."""
-    body = model.frames[model.getFrameId(a1.TRUNK_BODY, pin.FrameType.BODY)]
+    body = model.frames[model.getFrameId(trunk_link, pin.FrameType.BODY)]
     parent = model.frames[body.parentFrame]
     if parent.type == pin.FrameType.FIXED_JOINT:
         return parent.placement, parent.inertia
@@ -87,11 +87,11 @@ def trunk_link_inertia(model: pin.Model) -> tuple[pin.SE3, pin.Inertia]:
     return body.placement, body.placement.actInv(pin.Inertia.FromDynamicParameters(params))
 
 
-def edit_trunk(model: pin.Model, options: ModelOptions) -> None:
+def edit_trunk(model: pin.Model, options: ModelOptions, trunk_link: str) -> None:
     """Replace the trunk link's share of the free-flyer body's inertia by the scaled and shifted one and add
     the payload point mass (in place). Inertias add as their 10 dynamic parameters (mass, first moment,
     inertia about the frame origin), which are linear in the edits."""
-    placement, own = trunk_link_inertia(model)
+    placement, own = trunk_link_inertia(model, trunk_link)
     s = options.trunk_mass_scale
     edited = pin.Inertia(
         own.mass * s, own.lever + np.asarray(options.trunk_com_shift_m, float), own.inertia * s
@@ -106,13 +106,13 @@ def edit_trunk(model: pin.Model, options: ModelOptions) -> None:
     model.inertias[ROOT_JOINT] = pin.Inertia.FromDynamicParameters(params)
 
 
-def apply(model: pin.Model, options: ModelOptions) -> None:
-    """All edits of ``options`` on a freshly built A1 Pinocchio model (joints in core order after the free
+def apply(model: pin.Model, options: ModelOptions, trunk_link: str) -> None:
+    """All edits of ``options`` on a freshly built Pinocchio model (joints in core order after the free
     flyer). Armature goes into Pinocchio's ``model.armature`` (its CRBA adds it to the diagonal of M);
     damping and friction are stored in ``model.damping`` / ``model.friction`` for the record (Pinocchio's
-    ``nle`` ignores them: :class:`taslel_bench.robot.model.A1Model` adds them to h)."""
+    ``nle`` ignores them: :class:`taslel_bench.robot.model.RobotModel` adds them to h)."""
     if options.edits_trunk:
-        edit_trunk(model, options)
+        edit_trunk(model, options, trunk_link)
     for attr, field in (
         ("armature", "armature"),
         ("damping", "joint_damping"),

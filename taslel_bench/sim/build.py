@@ -24,7 +24,7 @@ from taslel_bench.config.settings import (
 from taslel_bench.config.validate import validate
 from taslel_bench.filter.safety_filter import SafetyFilter
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
-from taslel_bench.plant.build import PlantOptions, a1_spec, compile_plant, mjcf_spec
+from taslel_bench.plant.build import PlantOptions, robot_spec, compile_plant, mjcf_spec
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.qp.reference_check import reference_check
 from taslel_bench.sim.episode import Episode
@@ -48,7 +48,7 @@ def build_plant(scenario: Scenario, options: PlantOptions | None = None, seed: i
     """The URDF plant (or the A1 MJCF ``mjcf``) with the scenario's terrain (drawn from its own stream of
     ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's other edits."""
     options = options if options is not None else PlantOptions()
-    spec = mjcf_spec(mjcf, options) if mjcf is not None else a1_spec(options)
+    spec = mjcf_spec(mjcf, options) if mjcf is not None else robot_spec(options=options)
     scenario.terrain.build(spec, terrain_rng(seed))
     scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))
     return compile_plant(spec, mjcf)

@@ -39,7 +39,7 @@ from taslel_bench.plant.contact_frames import ContactFrameReader
 from taslel_bench.plant.contacts import FootContactReader
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import EpisodeTrace
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 from taslel_bench.sim.imu import TrunkImu
 from taslel_bench.sim.terminations import Fall, FallRule, Terminations
@@ -132,16 +132,16 @@ class Episode:
         axes], trunk height set so the lowest foot-sphere bottom is INITIAL_PENETRATION_M below the terrain
         under it."""
         s, m, d = self.s, self.m, self.d
-        q = np.zeros(a1.NQ)
+        q = np.zeros(quad.NQ)
         q[6] = 1.0
         q[2] = self.controller.gait.p.stand_height_m + a1.FOOT_RADIUS_M
         q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
-        v = np.zeros(a1.NV)
+        v = np.zeros(quad.NV)
         v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)
         mujoco.mj_resetData(m, d)
         self.bridge.qpos_mj(q, d.qpos)
         mujoco.mj_kinematics(m, d)
-        feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in a1.FOOT_FRAMES]
+        feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
         ground = np.array([self.terrain.height_at(x, y) for x, y in d.geom_xpos[feet, :2]])
         lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0] - ground))
         q[2] -= lowest_bottom + INITIAL_PENETRATION_M
@@ -239,15 +239,15 @@ class Episode:
         trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain, self.contact_frames)
         # views of the plant's arrays, made once (MjData makes a new numpy wrapper on every attribute read)
         self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
-        self._q = np.zeros(a1.NQ)  # Pinocchio configuration, read from the plant every tick
+        self._q = np.zeros(quad.NQ)  # Pinocchio configuration, read from the plant every tick
         self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
-        self._v = np.zeros(a1.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
+        self._v = np.zeros(quad.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
         self._q_joints, self._qd_joints = self._q[7:], self._v[6:]  # [rad], [rad/s] core order (views, made once)
         self._plant_rows = (self._qpos, self._qvel, self._sensordata)  # what the trace copies after each tick
         a = self.bridge.free_qadr
         self._trunk_xy = slice(a, a + 2)  # the trunk's (x, y) in qpos: where the terrain's friction is read
         self._true_mu = self.terrain.uniform_friction  # [-] one coefficient everywhere (None: read it each tick)
-        self._tau_prev = np.zeros(a1.N_JOINTS)  # [N·m] the torque applied on the previous tick
+        self._tau_prev = np.zeros(quad.N_JOINTS)  # [N·m] the torque applied on the previous tick
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._v_trunk_w = self._qvel[self.bridge.free_dadr : self.bridge.free_dadr + 3]  # [m/s] view, world axes
         self._imu_on = bool(getattr(self.estimator, "reads_imu", False))

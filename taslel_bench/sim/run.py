@@ -28,7 +28,7 @@ from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
 from taslel_bench.util.provenance import code_version

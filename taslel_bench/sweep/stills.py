@@ -22,7 +22,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from taslel_bench.record import run_files
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 STILLS_DIR = "stills"
 STRIP_OFFSETS_S = (-1.0, -0.75, -0.5, -0.25, 0.0)  # [s] frame times relative to the event
@@ -49,10 +49,10 @@ def first_trip_s(run_dir: Path) -> float | None:
     """Simulated time [s] of the first walking tick with a swing foot or a lower leg on an obstacle (from
     steps.parquet, for summaries without ``first_trip_s``; it also counts a contact continuing from stance)."""
     cfg = OmegaConf.load(Path(run_dir) / "config.yaml")
-    legs = [*(f"{leg}_obstacle_contact" for leg in a1.LEGS), *(f"{leg}_stance" for leg in a1.LEGS)]
+    legs = [*(f"{leg}_obstacle_contact" for leg in quad.LEGS), *(f"{leg}_stance" for leg in quad.LEGS)]
     steps = pd.read_parquet(Path(run_dir) / run_files.STEPS, columns=["t_s", "nonfoot_obstacle_contact", *legs])
     touch = steps["nonfoot_obstacle_contact"].to_numpy(bool).copy()
-    for leg in a1.LEGS:
+    for leg in quad.LEGS:
         touch |= steps[f"{leg}_obstacle_contact"].to_numpy(bool) & ~steps[f"{leg}_stance"].to_numpy(bool)
     touch &= steps["t_s"].to_numpy() >= float(cfg.controller.stand_duration)
     hits = np.flatnonzero(touch)

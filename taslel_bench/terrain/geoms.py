@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import mujoco
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 TERRAIN_PRIORITY = 1
 OBSTACLE_BODY = "obstacles"  # static (mocap) body holding every obstacle geom
@@ -61,7 +61,7 @@ def obstacle_body(spec: mujoco.MjSpec) -> mujoco.MjsBody:
 def add_obstacle_sensors(spec: mujoco.MjSpec) -> None:
     """Per foot, a contact sensor counting the foot sphere's contacts with :data:`OBSTACLE_BODY`
     (read by :class:`taslel_bench.plant.contacts.FootContactReader`)."""
-    for foot in a1.FOOT_FRAMES:
+    for foot in quad.FOOT_FRAMES:
         sensor = spec.add_sensor(name=f"{foot}_{OBSTACLE_SENSOR_SUFFIX}", type=mujoco.mjtSensor.mjSENS_CONTACT,
                                  objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=foot, reftype=mujoco.mjtObj.mjOBJ_BODY,
                                  refname=OBSTACLE_BODY)  # fmt: skip

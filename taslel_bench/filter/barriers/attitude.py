@@ -15,7 +15,7 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.layout import INACTIVE_RHS, TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 
 class TrunkAttitude(Barrier):
@@ -35,8 +35,8 @@ class TrunkAttitude(Barrier):
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         r0 = self.start
-        qp.G[r0 : r0 + a1.N_LEGS] = 0.0
-        qp.h[r0 : r0 + a1.N_LEGS] = INACTIVE_RHS
+        qp.G[r0 : r0 + quad.N_LEGS] = 0.0
+        qp.h[r0 : r0 + quad.N_LEGS] = INACTIVE_RHS
         self.h[:], self.h_e[:] = np.nan, np.nan
         rot = np.asarray(x.model.data.oMi[1].rotation)  # trunk -> world
         pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))

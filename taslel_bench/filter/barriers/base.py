@@ -17,7 +17,7 @@ import numpy as np
 
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, VDOT, TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
@@ -44,16 +44,16 @@ class Barrier:
     (``FL_<name>``), and the middle of its trace columns (``FL_barrier_<name>_h_m``). Subclasses override
     :meth:`write`, and :meth:`applies` when they need something of the world (a profile, obstacles)."""
 
-    n_rows = a1.N_LEGS
+    n_rows = quad.N_LEGS
 
     def __init__(self, world: BarrierWorld, name: str) -> None:
         self.name = name
         self.alpha1, self.alpha2 = world.alpha1, world.alpha2
         self.start = 0  # first row in the QP's inequality block (set by the filter)
         self.margin_mps2 = 0.0  # [m/s²] robust margin on psi (set per tick by the filter when robust)
-        self.h = np.full(a1.N_LEGS, np.nan)  # [m] barrier value per leg (nan where inactive)
-        self.h_e = np.full(a1.N_LEGS, np.nan)  # [m/s]
-        self.psi_planned = np.full(a1.N_LEGS, np.nan)  # [m/s²] hdot_e + a2 h_e at the solution
+        self.h = np.full(quad.N_LEGS, np.nan)  # [m] barrier value per leg (nan where inactive)
+        self.h_e = np.full(quad.N_LEGS, np.nan)  # [m/s]
+        self.psi_planned = np.full(quad.N_LEGS, np.nan)  # [m/s²] hdot_e + a2 h_e at the solution
 
     @classmethod
     def applies(cls, world: BarrierWorld) -> bool:
@@ -66,19 +66,19 @@ class Barrier:
         raise NotImplementedError
 
     def pattern(self, mask: np.ndarray) -> None:
-        mask[self.start : self.start + a1.N_LEGS, VDOT] = True
+        mask[self.start : self.start + quad.N_LEGS, VDOT] = True
 
     def labels(self) -> list[str]:
-        return [f"{leg}_{self.name}" for leg in a1.LEGS]
+        return [f"{leg}_{self.name}" for leg in quad.LEGS]
 
     def init(self, qp: QPProblem) -> None:
-        qp.G[self.start : self.start + a1.N_LEGS] = 0.0
-        qp.h[self.start : self.start + a1.N_LEGS] = INACTIVE_RHS
+        qp.G[self.start : self.start + quad.N_LEGS] = 0.0
+        qp.h[self.start : self.start + quad.N_LEGS] = INACTIVE_RHS
 
     def tighten(self, qp: QPProblem) -> None:
         """Subtract the robust margin from the active rows' right-hand sides (call at the end of write)."""
         if self.margin_mps2 > 0.0:
-            rows = slice(self.start, self.start + a1.N_LEGS)
+            rows = slice(self.start, self.start + quad.N_LEGS)
             qp.h[rows] -= np.where(np.isfinite(self.h), self.margin_mps2, 0.0)
 
     def planned(self, qp: QPProblem, vdot: np.ndarray) -> None:

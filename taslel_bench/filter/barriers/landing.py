@@ -9,7 +9,7 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 
 MIN_TANGENTIAL_SPEED_MPS = 1e-3  # [m/s] below this the direction of the tangential velocity is undefined: no row
 
@@ -30,8 +30,8 @@ class LandingVelocity(Barrier):
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m, r0 = x.model, self.start
-        qp.G[r0 : r0 + a1.N_LEGS] = 0.0
-        qp.h[r0 : r0 + a1.N_LEGS] = INACTIVE_RHS
+        qp.G[r0 : r0 + quad.N_LEGS] = 0.0
+        qp.h[r0 : r0 + quad.N_LEGS] = INACTIVE_RHS
         self.h[:], self.h_e[:] = np.nan, np.nan
         legs = np.flatnonzero(~np.asarray(x.in_stance, bool) & (np.asarray(x.swing_phase) >= self.min_phase))
         if legs.size == 0:

@@ -10,7 +10,7 @@ from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.barriers.leg_points import LegPoints, _point_terms
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.packed import terrain_distance_within
 from taslel_bench.util.jit import kernel
 
@@ -48,8 +48,8 @@ class LegClearance(Barrier):
         # the compiled write's inputs and per-tick scratch: axis points [m], their distances [m], normals, closest
         # terrain points [m], the legs with rows
         self._knee_only, self._fraction_list = part == "knee", np.ascontiguousarray(self._fractions.ravel())
-        n = a1.N_LEGS * (1 if self._knee_only else SHIN_SAMPLES)
-        self._scratch = (np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty(a1.N_LEGS, bool))
+        n = quad.N_LEGS * (1 if self._knee_only else SHIN_SAMPLES)
+        self._scratch = (np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty(quad.N_LEGS, bool))
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         m = x.model
@@ -88,7 +88,7 @@ class LegClearance(Barrier):
         points = np.ascontiguousarray(axis.reshape(-1, 3))
         dist, normal, _ = self.terrain.near_distance(points, self.radius_m, role=self.role)
         d = m.data
-        legs = ~np.asarray(x.in_stance, bool) if self.swing_only else np.ones(a1.N_LEGS, bool)
+        legs = ~np.asarray(x.in_stance, bool) if self.swing_only else np.ones(quad.N_LEGS, bool)
         _leg_rows(qp.G, qp.h, r0, dist, normal, points, axis.shape[1], d.J, d.dJ, self._points.cols_array, x.v,
                   self.alpha1, self.alpha2, self.activation_m, legs, self.h, self.h_e)  # fmt: skip
         self.tighten(qp)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import A1Model
 from taslel_bench.util.jit import kernel
 
@@ -19,7 +19,7 @@ class LegPoints:
     def __init__(self, model: A1Model) -> None:
         self.model = model
         pm = model.model
-        self.knee_joints = [pm.getJointId(f"{leg}_calf_joint") for leg in a1.LEGS]
+        self.knee_joints = [pm.getJointId(f"{leg}_calf_joint") for leg in quad.LEGS]
         self.cols = []
         for j in self.knee_joints:
             support = pm.supports[j][1:]

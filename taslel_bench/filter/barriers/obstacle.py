@@ -8,7 +8,7 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_barrier_row
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_barrier_row
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.interfaces import OBSTACLE, QPProblem
-from taslel_bench.robot import a1
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.packed import terrain_distance
 from taslel_bench.util.fields import number
 from taslel_bench.util.jit import kernel
@@ -52,8 +52,8 @@ class TerrainClearance(Barrier):
         self.touchdown_allowance_m = float(touchdown_allowance_m)  # [m]
         # [-] rows only where the terrain normal's z is below this (1: every swing foot)
         self.max_normal_z = number(f"filter.barriers.{name}.max_normal_z", max_normal_z, -1.0, 1.0)
-        self._dist = np.empty(a1.N_LEGS)  # [m] per-tick scratch of the compiled write: distance, normal, point
-        self._normal, self._point = np.empty((a1.N_LEGS, 3)), np.empty((a1.N_LEGS, 3))
+        self._dist = np.empty(quad.N_LEGS)  # [m] per-tick scratch of the compiled write: distance, normal, point
+        self._normal, self._point = np.empty((quad.N_LEGS, 3)), np.empty((quad.N_LEGS, 3))
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         if not self._has_parts:  # nothing of its role in this world: the rows stay inactive (init)
