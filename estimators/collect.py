@@ -55,7 +55,7 @@ from estimators.randomisation import (
     shifted_ranges,
 )
 from taslel_bench import api
-from taslel_bench.interfaces import FrictionEstimate, FrictionStrips, Plane, Proprioception, Terrain, a1
+from taslel_bench.interfaces import FrictionEstimate, FrictionStrips, Plane, Proprioception, Terrain, quad
 
 LOOPS = ("fast", "core")  # how nominal episodes run (filtered ones always run Episode.run)
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
@@ -87,8 +87,8 @@ class EpisodeResult:
     # per window, at its last sample: friction under the trunk (the loop's true_friction) [-], under each foot
     # (LEGS order) [-], and whether each foot touched the floor (its contact sensor found a contact)
     y: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
-    y_foot: np.ndarray = field(default_factory=lambda: np.zeros((0, a1.N_LEGS), np.float32))
-    foot_loaded: np.ndarray = field(default_factory=lambda: np.zeros((0, a1.N_LEGS), bool))
+    y_foot: np.ndarray = field(default_factory=lambda: np.zeros((0, quad.N_LEGS), np.float32))
+    foot_loaded: np.ndarray = field(default_factory=lambda: np.zeros((0, quad.N_LEGS), bool))
     patch: SurfacePatch | None = None  # the floor's patch (None: uniform floor)
 
 

@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from taslel_bench.interfaces import a1
+from taslel_bench import api
+from taslel_bench.interfaces import quad
 
-L1, L2, L3 = a1.HIP_OFFSET_Y_M, a1.THIGH_LENGTH_M, a1.CALF_LENGTH_M
-HIPS_IN_TRUNK = np.asarray(a1.HIP_POSITIONS_IN_TRUNK, float)  # (4, 3) [m]
-SIDES = np.asarray(a1.LEG_SIDE, float)  # (4,) +1 left, -1 right
+# the shipped estimators were trained on the A1: its chain, from its description (conf/robot/a1.yaml + URDF)
+_A1 = api.load_robot("a1")
+L1, L2, L3 = abs(_A1.legs[0].lateral_m), _A1.legs[0].thigh_length_m, _A1.legs[0].calf_length_m
+HIPS_IN_TRUNK = _A1.hip_positions_in_trunk  # (4, 3) [m]
+SIDES = np.asarray(quad.LEG_SIDE, float)  # (4,) +1 left, -1 right
 
 
 def feet_and_jacobians(q_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

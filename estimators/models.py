@@ -31,7 +31,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
-from taslel_bench.interfaces import a1
+from taslel_bench import api
+from taslel_bench.interfaces import quad
 
 VARIANTS = ("mlp", "attention", "linformer")
 TOKENISATIONS = ("joint", "step", "foot")
@@ -107,7 +108,7 @@ class ModelConfig:
     @property
     def n_estimates(self) -> int:
         """Estimates per window: 4 (one per foot) with ``per_foot``, else 1."""
-        return a1.N_LEGS if self.per_foot else 1
+        return quad.N_LEGS if self.per_foot else 1
 
     @property
     def n_raw(self) -> int:
@@ -124,7 +125,7 @@ class ModelConfig:
     @property
     def n_tokens(self) -> int:
         """Sequence length seen by attention (CLS included)."""
-        n = self.window_steps * {"joint": N_JOINTS, "step": 1, "foot": a1.N_LEGS}[self.tokens]
+        n = self.window_steps * {"joint": N_JOINTS, "step": 1, "foot": quad.N_LEGS}[self.tokens]
         return n + (1 if self.pooling == "cls" else 0)
 
     def to_dict(self) -> dict[str, object]:
@@ -157,8 +158,9 @@ def window_features(x: torch.Tensor, mode: str) -> torch.Tensor:
 
 
 N_KIN_FEATURES = 24  # foot positions (4 x 3) and velocities (4 x 3)
-_HIPS = torch.tensor(a1.HIP_POSITIONS_IN_TRUNK, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
-_SIDES = torch.tensor(a1.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
+_A1 = api.load_robot("a1")  # the shipped estimators were trained on the A1: its chain, from its description
+_HIPS = torch.tensor(_A1.hip_positions_in_trunk, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
+_SIDES = torch.tensor(quad.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
 
 
 def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
@@ -167,7 +169,7 @@ def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
     velocity relative to the trunk, not in the world). Same chain as :func:`taslel_bench.robot.kinematics.leg_fk`.
     A stance foot that holds has v_foot = -(v_trunk + omega x p_foot); feet of one stance pair that disagree
     beyond the rotation term are slipping, whatever the payload or motor strength."""
-    l1, l2, l3 = a1.HIP_OFFSET_Y_M, a1.THIGH_LENGTH_M, a1.CALF_LENGTH_M
+    l1, l2, l3 = abs(_A1.legs[0].lateral_m), _A1.legs[0].thigh_length_m, _A1.legs[0].calf_length_m
     b, t, _ = x.shape
     q = x[..., :12].reshape(b, t, 4, 3)
     qd = x[..., 12:24].reshape(b, t, 4, 3)
@@ -218,7 +220,7 @@ def foot_token_index(cfg: ModelConfig) -> torch.Tensor:
     kin0 = N_FEATURES
     slip0 = kin0 + (N_KIN_FEATURES if cfg.kinematic_features else 0)
     filt0 = slip0 + (N_SLIP_FEATURES if cfg.slip_features else 0)
-    for leg in range(a1.N_LEGS):
+    for leg in range(quad.N_LEGS):
         j = [3 * leg + i for i in range(3)]
         idx = j + [12 + i for i in j] + [24 + i for i in j]
         if cfg.kinematic_features:
@@ -354,7 +356,7 @@ class MLPModel(FrictionModel):
         self.net = nn.Sequential(*layers)
 
     def _shape(self, out: torch.Tensor) -> torch.Tensor:
-        return out.reshape(out.shape[0], a1.N_LEGS, -1) if self.cfg.per_foot else out
+        return out.reshape(out.shape[0], quad.N_LEGS, -1) if self.cfg.per_foot else out
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
         return self._shape(self.net(x.flatten(1)))
@@ -432,7 +434,7 @@ class TransformerModel(FrictionModel):
         in_dim = in_dim or int(self.foot_index.shape[1])  # type: ignore[union-attr]
         self.embed = nn.Linear(in_dim, d)
         self.pos_time = nn.Parameter(torch.randn(t, 1, d) * 0.02)  # (T, 1, d)
-        n_space = {"joint": N_JOINTS, "step": 1, "foot": a1.N_LEGS}[cfg.tokens]
+        n_space = {"joint": N_JOINTS, "step": 1, "foot": quad.N_LEGS}[cfg.tokens]
         self.pos_space = nn.Parameter(torch.randn(1, n_space, d) * 0.02)  # (1, J, d)
         self.cls = nn.Parameter(torch.zeros(1, 1, d)) if cfg.pooling == "cls" else None
         self.blocks = nn.ModuleList(Block(cfg) for _ in range(cfg.n_layers))
@@ -467,7 +469,7 @@ class TransformerModel(FrictionModel):
         if self.cfg.tokens == "foot":
             cls = h[:, :1] if self.cls is not None else 0.0
             body = h[:, 1:] if self.cls is not None else h
-            per_foot = body.reshape(h.shape[0], self.cfg.window_steps, a1.N_LEGS, -1).mean(1)  # (B, 4, d)
+            per_foot = body.reshape(h.shape[0], self.cfg.window_steps, quad.N_LEGS, -1).mean(1)  # (B, 4, d)
             return self.head(per_foot + cls)
         pooled = h[:, 0] if self.cls is not None else h.mean(1)
         return self.head(pooled)

@@ -35,7 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators import slip_kernel
-from taslel_bench.interfaces import ImuSample, Proprioception, a1, integer, number
+from taslel_bench import api
+from taslel_bench.interfaces import ImuSample, Proprioception, integer, number
 
 
 @dataclass
@@ -103,7 +104,7 @@ class LegGravity:
         import pinocchio as pin
 
         self._pin = pin
-        self.model = pin.buildModelFromUrdf(str(a1.a1_urdf_path()), pin.JointModelFreeFlyer())
+        self.model = pin.buildModelFromUrdf(str(api.load_robot("a1").urdf_path), pin.JointModelFreeFlyer())
         self.data = self.model.createData()
         self._q = np.zeros(self.model.nq)
 

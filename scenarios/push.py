@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 
 from scenarios.flat import FlatGround
-from taslel_bench.interfaces import a1, fail, number, numbers
+from taslel_bench.interfaces import fail, number, numbers, quad
 
 MAX_FORCE_N = 1000.0  # [N] per axis (about 8 times the A1's weight)
 MAX_TIME_S = 3600.0  # [s] push start and duration
@@ -31,7 +31,7 @@ class Pushes(FlatGround):
 
     def on_tick(self, model: mujoco.MjModel, data: mujoco.MjData, t_s: float) -> None:
         if self._trunk < 0:
-            self._trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, a1.TRUNK_BODY)
+            self._trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         wrench = data.xfrc_applied[self._trunk]
         wrench[:] = 0.0
         for t0, t1, force in self.pushes:

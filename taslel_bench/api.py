@@ -22,7 +22,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from taslel_bench.config.compose import compose
-from taslel_bench.config.settings import build_barriers, build_controller, episode_settings, filter_settings
+from taslel_bench.config import settings
+from taslel_bench.config.settings import build_barriers, filter_settings, robot_description
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.filter.layout import TickInputs
@@ -34,14 +35,15 @@ from taslel_bench.record.qpset import QPRecorder, QPSet, active_sets, binding_ta
 from taslel_bench.record.qpset import load as load_qpset
 from taslel_bench.record.qpset import save as save_qpset
 from taslel_bench.record.result import EpisodeResult
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.description import RobotDescription, load_robot
+from taslel_bench.robot.kinematics import LegKinematics
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.build import build_plant
 from taslel_bench.sim.episode import Episode, EpisodeSettings
 from taslel_bench.sim.world import StaticWorld
 from taslel_bench.util.machine import machine_info
 
 __all__ = [
-    "A1Model",
     "Episode",
     "EpisodeResult",
     "EpisodeSettings",
@@ -49,9 +51,12 @@ __all__ = [
     "GaitParams",
     "NominalController",
     "PDGains",
+    "LegKinematics",
     "PlantOptions",
     "QPRecorder",
     "QPSet",
+    "RobotDescription",
+    "RobotModel",
     "SafetyFilter",
     "StateBridge",
     "StaticWorld",
@@ -65,6 +70,8 @@ __all__ = [
     "episode_settings",
     "from_problems",
     "load_qpset",
+    "load_robot",
+    "robot_description",
     "machine_info",
     "save_qpset",
 ]
@@ -76,9 +83,22 @@ def build_safety_filter(cfg: DictConfig, terrain: Terrain | None = None,
     barrier families of ``cfg.filter.barriers`` that apply to ``terrain`` (default: the flat floor) and the
     virtual ``profile`` (None: no phase-profile rows). Per tick:
     ``safety_filter.filter(TickInputs(model, v, in_stance, mu, swing_phase, swing_phase_rate), u_nom)``
-    with ``model`` an :class:`A1Model` updated at the plant state (see :mod:`taslel_bench.sim.episode`)."""
-    fs = filter_settings(cfg)
+    with ``model`` a :class:`RobotModel` updated at the plant state (see :mod:`taslel_bench.sim.episode`). The
+    terrain also reaches the filter itself: ``filter=terrain``'s cone about the terrain normal reads it."""
+    robot = robot_description(cfg)
+    fs = filter_settings(cfg, robot)
     if not fs.enabled:
         raise ValueError("build_safety_filter: cfg.filter.enabled is false")
-    barriers = build_barriers(cfg, terrain if terrain is not None else Terrain(), profile)
-    return SafetyFilter(fs, instantiate(cfg.solver), barriers)
+    terrain = terrain if terrain is not None else Terrain()
+    barriers = build_barriers(cfg, robot, terrain, profile)
+    return SafetyFilter(fs, instantiate(cfg.solver), barriers, terrain)
+
+
+def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> NominalController:
+    """The nominal controller of ``cfg.controller`` for the robot ``cfg.robot``."""
+    return settings.build_controller(cfg, robot_description(cfg), terrain)
+
+
+def episode_settings(cfg: DictConfig) -> EpisodeSettings:
+    """The episode's settings (duration, rates, the robot's fall rule and initial noise) of ``cfg``."""
+    return settings.episode_settings(cfg, robot_description(cfg))

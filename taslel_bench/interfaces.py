@@ -5,7 +5,7 @@ The axis packages import from the core only this module (types, protocols, the t
 A1's constants, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
 the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
 
-Joint vectors are in the core order (:data:`taslel_bench.robot.quad.JOINT_NAMES`, legs FL, FR, RL, RR).
+Joint vectors are in the core order (:data:`taslel_bench.robot.quadruped.JOINT_NAMES`, legs FL, FR, RL, RR).
 """
 
 from __future__ import annotations
@@ -221,5 +221,5 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     # the plant's perturbations
     "ActuatorDelay", "PlantPerturbation",
     # the robot and config values
-    "ConfigError", "a1", "choice", "fail", "flag", "integer", "is_number", "number", "number_or_list", "numbers",
+    "ConfigError", "quad", "choice", "fail", "flag", "integer", "is_number", "number", "number_or_list", "numbers",
 ]  # fmt: skip

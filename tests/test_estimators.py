@@ -435,17 +435,19 @@ def test_model_without_tau_ignores_torques() -> None:
 def test_foot_kinematics_match_leg_fk_and_its_finite_difference() -> None:
     torch = pytest.importorskip("torch")
     from estimators.models import foot_kinematics
-    from taslel_bench.robot import a1, kinematics
+    from taslel_bench.robot.description import load_robot
+    from taslel_bench.robot.kinematics import LegKinematics
 
     rng = np.random.default_rng(4)
     q, qd = rng.uniform(-1.0, 1.0, 12), rng.normal(size=12)
     x = torch.from_numpy(np.concatenate([q, qd, np.zeros(12)])[None, None]).double()
     out = foot_kinematics(x)[0, 0].numpy()
     h = 1e-6
+    kin = LegKinematics(load_robot("a1"))
     for leg in range(4):
-        ql, dl, side = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3], quad.LEG_SIDE[leg]
-        p = kinematics.leg_fk(ql, side) + a1.HIP_POSITIONS_IN_TRUNK[leg]
-        v = (kinematics.leg_fk(ql + h * dl, side) - kinematics.leg_fk(ql - h * dl, side)) / (2 * h)
+        ql, dl = q[3 * leg : 3 * leg + 3], qd[3 * leg : 3 * leg + 3]
+        p = kin.leg_fk(leg, ql) + load_robot("a1").hip_positions_in_trunk[leg]
+        v = (kin.leg_fk(leg, ql + h * dl) - kin.leg_fk(leg, ql - h * dl)) / (2 * h)
         np.testing.assert_allclose(out[3 * leg : 3 * leg + 3], p, atol=1e-6)
         np.testing.assert_allclose(out[12 + 3 * leg : 15 + 3 * leg], v, atol=1e-6)
 

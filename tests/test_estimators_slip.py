@@ -10,7 +10,7 @@ from estimators.simple import FixedEstimator
 from estimators.slip import SlipDetector, SlipSettings
 from estimators.slip_bound import SlipBoundEstimator
 from taslel_bench.interfaces import ImuSample, Proprioception
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 
 STAND = np.array([0.0, 0.8, -1.6] * 4)  # [rad] standing A1
 
@@ -21,7 +21,7 @@ def test_leg_kinematics_match_pinocchio() -> None:
     q = np.zeros(19)
     q[6] = 1.0
     q[7:] = STAND + rng.normal(0, 0.3, 12)
-    model = A1Model()
+    model = RobotModel()
     model.update(q, np.zeros(18))
     p, jac = feet_and_jacobians(q[7:])
     assert np.allclose(p, model.foot_pos_in_world, atol=1e-9)

@@ -15,7 +15,10 @@ import pytest
 from scenarios.flat import FlatGround
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.layout import VDOT
-from taslel_bench.interfaces import OBSTACLE, Plane, QPProblem, Terrain, a1
+from taslel_bench.interfaces import OBSTACLE, Plane, QPProblem, Terrain, quad
+from taslel_bench.robot.description import load_robot
+
+FOOT_RADIUS_M = load_robot("a1").foot_radius_m  # [m]
 from taslel_bench.record.mcap import read_messages
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
@@ -39,7 +42,7 @@ class FootCeiling(Barrier):
             if x.in_stance[i]:
                 qp.G[r], qp.h[r], self.h[i], self.h_e[i] = 0.0, 1e6, np.nan, np.nan
                 continue
-            h = self.ceiling_m - (m.foot_pos_in_world[i, 2] - a1.FOOT_RADIUS_M)
+            h = self.ceiling_m - (m.foot_pos_in_world[i, 2] - self.foot_radius_m)
             hdot = -m.foot_vel_in_world[i, 2]
             h_e = hdot + self.alpha1 * h
             qp.G[r, VDOT] = m.foot_jac_in_world[i, 2]
@@ -60,7 +63,7 @@ def test_a_barrier_family_is_one_class_and_one_config_entry(tmp_path):
     h = walking[[f"{leg}_barrier_ceiling_h_m" for leg in quad.LEGS]].to_numpy()
     assert np.isfinite(h).any() and np.nanmin(h) > -5e-3  # the swing feet were kept (nearly) below 4 cm
     plain_steps = pd.read_parquet(tmp_path / "plain" / "steps.parquet")
-    apex = {name: (s[s.t_s >= 0.5]["FL_foot_z_w_m"] - a1.FOOT_RADIUS_M).max()
+    apex = {name: (s[s.t_s >= 0.5]["FL_foot_z_w_m"] - FOOT_RADIUS_M).max()
             for name, s in (("toy", steps), ("plain", plain_steps))}
     assert apex["plain"] > 0.05 and apex["toy"] < 0.045  # the trot lifts the feet ~6 cm without it
     fields = next(msg for topic, _, msg in read_messages(tmp_path / "toy" / "episode.mcap") if topic == "/barrier")

@@ -22,7 +22,10 @@ from taslel_bench.interfaces import ClearanceProfile, Plane, QPSolution, Terrain
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import PlantOptions, build_plant
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.model import RobotModel
+
+A1 = load_robot("a1")
 
 
 class TightReference:
@@ -81,10 +84,10 @@ def clearance_rows(profile: ClearanceProfile = BUMP) -> list:
 def walking_states(n_states: int, t_start: float = 1.0, friction: float = 1.0):
     """(TickInputs-ready) plant states of the nominal trot after t_start, every 37 ms."""
     m = build_plant(PlantOptions(floor_friction=friction))
-    d, br, pm = mujoco.MjData(m), StateBridge(m), A1Model()
+    d, br, pm = mujoco.MjData(m), StateBridge(m), RobotModel()
     ctl = NominalController(GaitParams(), PDGains())
     q0 = pin.neutral(pm.model)
-    q0[2] = 0.27 + a1.FOOT_RADIUS_M
+    q0[2] = 0.27 + A1.foot_radius_m
     q0[7:] = ctl.stand_configuration()
     br.qpos_mj(q0, d.qpos)
     mujoco.mj_forward(m, d)
@@ -160,7 +163,7 @@ def test_solution_satisfies_dynamics_and_cones(states):
                 assert np.abs(acc).max() < 1e-6
             else:
                 assert np.abs(lam[i]).max() < 1e-8
-        assert np.all(np.abs(res.u) <= a1.TORQUE_LIMIT_NM + 1e-9)
+        assert np.all(np.abs(res.u) <= A1.torque_limit_nm[0] + 1e-9)
 
 
 def test_ecbf_rows_hold_at_the_solution(states):
@@ -181,7 +184,7 @@ def test_ecbf_rows_hold_at_the_solution(states):
             if not s[2].in_stance[i]:
                 z, dz, ddz = BUMP(float(s[2].swing_phase[i]))
                 sd = s[2].swing_phase_rate
-                h = pm.foot_pos_in_world[i, 2] - a1.FOOT_RADIUS_M - z
+                h = pm.foot_pos_in_world[i, 2] - A1.foot_radius_m - z
                 hdot = pm.foot_vel_in_world[i, 2] - dz * sd
                 acc_z = pm.foot_jac_in_world[i, 2] @ res.vdot + pm.foot_jdotv_in_world[i, 2]
                 hddot = acc_z - ddz * sd**2
@@ -220,7 +223,7 @@ def test_obstacle_rows_hold_and_follow_the_geometry(states):
 
         def clearance(t: float, p0=p0, v0=v0, a0=a0, log=log) -> float:
             pt = p0 + v0 * t + 0.5 * a0 * t * t
-            return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - a1.FOOT_RADIUS_M)
+            return float(np.hypot(pt[0] - log.x_m, pt[2] - log.z_m) - log.radius_m - A1.foot_radius_m)
 
         dt = 1e-4
         h, hdot = clearance(0.0), (clearance(dt) - clearance(-dt)) / (2 * dt)

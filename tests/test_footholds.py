@@ -14,11 +14,14 @@ from taslel_bench.control.nominal import PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, Ramp, Terrain
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.kinematics import leg_ik, leg_knee_and_foot
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.kinematics import LegKinematics
+from taslel_bench.robot.model import RobotModel
 from tests.conftest import compose_cfg
 
 HEADING = (1.0, 0.0)
+A1 = load_robot("a1")
+KIN = LegKinematics(A1)
 STAND_M = GaitParams().stand_height_m
 HALF = 0.5 * GaitParams().speed_mps * GaitParams().period_s * GaitParams().duty  # half the stance stroke [m]
 LOG = Log(x_m=0.6, z_m=-0.04, radius_m=0.1, half_width_m=0.5, friction=1.0)  # the logs world's first log
@@ -26,23 +29,23 @@ FL = quad.LEGS.index("FL")
 
 
 def _target(leg: int) -> list[float]:
-    return [HALF, float(quad.LEG_SIDE[leg]) * a1.HIP_OFFSET_Y_M, -STAND_M]
+    return [HALF, A1.legs[leg].lateral_m, -STAND_M]
 
 
 def test_knee_and_foot_match_pinocchio():
     """The planner's knee (calf joint) and foot in the hip frame against Pinocchio's joint placements."""
-    model = A1Model()
+    model = RobotModel()
     rng = np.random.default_rng(7)
     knees = [model.model.getJointId(f"{leg}_calf_joint") for leg in quad.LEGS]
     for _ in range(20):
-        targets = [np.array([rng.uniform(-0.1, 0.1), quad.LEG_SIDE[i] * a1.HIP_OFFSET_Y_M + rng.uniform(-0.03, 0.03),
+        targets = [np.array([rng.uniform(-0.1, 0.1), A1.legs[i].lateral_m + rng.uniform(-0.03, 0.03),
                              rng.uniform(-0.32, -0.2)]) for i in range(4)]
         q = pin.neutral(model.model)
-        q[7:] = np.concatenate([leg_ik(t, quad.LEG_SIDE[i]) for i, t in enumerate(targets)])
+        q[7:] = np.concatenate([KIN.leg_ik(i, t) for i, t in enumerate(targets)])
         model.update(q, np.zeros(quad.NV))
         for i, t in enumerate(targets):
-            knee, foot = leg_knee_and_foot(*t, float(quad.LEG_SIDE[i]))
-            hip = a1.HIP_POSITIONS_IN_TRUNK[i]
+            knee, foot = KIN.knee_and_foot(i, *t)
+            hip = A1.hip_positions_in_trunk[i]
             np.testing.assert_allclose(np.array(knee) + hip, model.data.oMi[knees[i]].translation, atol=1e-9)
             np.testing.assert_allclose(np.array(foot) + hip, model.foot_pos_in_world[i], atol=1e-9)
             np.testing.assert_allclose(foot, t, atol=1e-9)
@@ -61,13 +64,13 @@ def _shin_clearance(terrain: Terrain, foot_xy: tuple[float, float], leg: int, de
     """Smallest distance [m] of the shin capsule to the terrain over the planned stance, by the slow reference
     query (Terrain.capsule_distance, every part in Python) -- an independent path from the planner's."""
     h = terrain.height_at(*foot_xy)
-    foot_w = np.array([*foot_xy, h + a1.FOOT_RADIUS_M])
+    foot_w = np.array([*foot_xy, h + A1.foot_radius_m])
     out = np.inf
     for progress in STANCE_POSES:
-        knee, foot = leg_knee_and_foot(HALF + delta - progress * 2 * HALF, _target(leg)[1], -STAND_M + h, 1.0)
+        knee, foot = KIN.knee_and_foot(leg, HALF + delta - progress * 2 * HALF, _target(leg)[1], -STAND_M + h)
         knee_w = foot_w + np.subtract(knee, foot)
-        end = knee_w + a1.SHIN_AXIS_FRACTION * (foot_w - knee_w)
-        out = min(out, terrain.capsule_distance(knee_w, end, a1.SHIN_RADIUS_M)[0])
+        end = knee_w + A1.shin_axis_fraction * (foot_w - knee_w)
+        out = min(out, terrain.capsule_distance(knee_w, end, A1.shin_radius_m)[0])
     return out
 
 
@@ -204,7 +207,7 @@ def test_swing_heights_from_measured_hips_lift_a_sagging_trunks_swing_feet_by_th
     hip frame once the correction has eased in (they land at swing phase 1, not where the gait's half-sine lift
     is 2 cm: phase ~0.9), stance feet unchanged."""
     flat = Terrain((Plane(),))
-    at_height = np.array([0.0, 0.0, a1.FOOT_RADIUS_M + STAND_M, 0.0, 0.0, 0.0, 1.0])
+    at_height = np.array([0.0, 0.0, A1.foot_radius_m + STAND_M, 0.0, 0.0, 0.0, 1.0])
     times = np.arange(0.0, 1.0, 1e-3)
     plain = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat)
     measured = TerrainFollowingController(GaitParams(), PDGains(), terrain=flat, swing_from_measured_hips=True)
@@ -220,7 +223,7 @@ def test_swing_heights_from_measured_hips_lift_a_sagging_trunks_swing_feet_by_th
     rows = fresh.gait.foot_targets_list(fresh.gait_time(t))
     for i in range(4):
         lifted = rows[i][2] + (0.0 if gs.in_stance[i] else fresh.sag_m)
-        expected = leg_ik([rows[i][0], rows[i][1], lifted], quad.LEG_SIDE[i])
+        expected = KIN.leg_ik(i, [rows[i][0], rows[i][1], lifted])
         np.testing.assert_allclose(fresh.q_des[3 * i:3 * i + 3], expected, atol=1e-9)
     assert not gs.in_stance[quad.LEGS.index("FR")] and gs.in_stance[FL]
 

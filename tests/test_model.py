@@ -10,24 +10,29 @@ import pytest
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
 from taslel_bench.plant.build import PlantOptions, robot_spec, build_plant, compile_plant
 from taslel_bench.plant.contacts import FootContactReader, foot_geom_ids, measure_contact_friction
-from taslel_bench.robot import a1, kinematics
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.kinematics import LegKinematics
+
+A1 = load_robot("a1")
+KIN = LegKinematics(A1)
+from taslel_bench.robot.model import RobotModel
 
 
 @pytest.fixture(scope="module")
 def setup():
     m = build_plant()
-    return m, mujoco.MjData(m), StateBridge(m), A1Model()
+    return m, mujoco.MjData(m), StateBridge(m), RobotModel()
 
 
-def random_state(pm: A1Model, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def random_state(pm: RobotModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     q = pin.randomConfiguration(pm.model, -np.ones(quad.NQ), np.ones(quad.NQ))
     q[7:] = rng.uniform(-0.8, 0.8, 12)
     q[9::3] = rng.uniform(-2.6, -1.0, 4)  # calf range
     return q, rng.normal(0.0, 2.0, quad.NV)
 
 
-def same_random_state(m, d, br: StateBridge, pm: A1Model, rng: np.random.Generator):
+def same_random_state(m, d, br: StateBridge, pm: RobotModel, rng: np.random.Generator):
     """A random state set in both MuJoCo (forward dynamics run) and the model (updated); returns (q, v)."""
     q, v = random_state(pm, rng)
     br.qpos_mj(q, d.qpos)
@@ -160,9 +165,9 @@ def test_leg_ik_inverts_fk_and_matches_pinocchio(setup):
         q[7:] = qj
         pm.update(q, np.zeros(quad.NV))
         for i in range(quad.N_LEGS):
-            p = kinematics.leg_fk(qj[3 * i : 3 * i + 3], quad.LEG_SIDE[i])
-            assert np.allclose(p + a1.HIP_POSITIONS_IN_TRUNK[i], pm.foot_pos_in_world[i], atol=1e-12)
-            assert np.allclose(kinematics.leg_ik(p, quad.LEG_SIDE[i]), qj[3 * i : 3 * i + 3], atol=1e-9)
+            p = KIN.leg_fk(i, qj[3 * i : 3 * i + 3])
+            assert np.allclose(p + A1.hip_positions_in_trunk[i], pm.foot_pos_in_world[i], atol=1e-12)
+            assert np.allclose(KIN.leg_ik(i, p), qj[3 * i : 3 * i + 3], atol=1e-9)
 
 
 def test_plant_limits_and_friction(setup):
@@ -173,9 +178,9 @@ def test_plant_limits_and_friction(setup):
     m2 = compile_plant(spec)
     assert m2.opt.timestep == 0.002
     d2 = mujoco.MjData(m2)
-    q = pin.neutral(A1Model().model)
+    q = pin.neutral(RobotModel().model)
     q[2] = 0.3
-    q[7:] = kinematics.legs_ik([[0.0, s * a1.HIP_OFFSET_Y_M, -0.28] for s in quad.LEG_SIDE])
+    q[7:] = KIN.legs_ik([[0.0, g.lateral_m, -0.28] for g in A1.legs])
     StateBridge(m2).qpos_mj(q, d2.qpos)
     for _ in range(300):
         mujoco.mj_step(m2, d2)

@@ -14,7 +14,8 @@ from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
 from taslel_bench.plant.build import robot_spec, compile_plant
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.build import Built
 from taslel_bench.util.fields import ConfigError
@@ -31,7 +32,7 @@ def perturbed_plant(**kw) -> mujoco.MjModel:
     return compile_plant(spec)
 
 
-def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) -> tuple[float, float]:
+def worst_difference(m: mujoco.MjModel, pm: RobotModel, n: int = 8, seed: int = 0) -> tuple[float, float]:
     """max |M_model - M_plant|, max |h_model - h_plant| over ``n`` random states (trunk 2 m up: no contact),
     both in Pinocchio's coordinates. Plant: M from mj_fullM; h = qfrc_bias - qfrc_passive (MuJoCo's passive
     damping force is -d qdot, the model's h carries +d qdot) + M Tdot v (the frame change of the trunk's
@@ -57,9 +58,9 @@ def worst_difference(m: mujoco.MjModel, pm: A1Model, n: int = 8, seed: int = 0) 
 
 def test_default_model_is_bit_identical_to_the_plain_urdf_model():
     """Default options (in code, from the default config) give exactly Pinocchio's M and nle of the URDF."""
-    ref = pin.buildModelFromUrdf(str(a1.a1_urdf_path()), pin.JointModelFreeFlyer())
+    ref = pin.buildModelFromUrdf(str(load_robot("a1").urdf_path), pin.JointModelFreeFlyer())
     ref_data = ref.createData()
-    models = [A1Model(), A1Model(ModelOptions()), A1Model(model_options(compose_cfg()))]
+    models = [RobotModel(), RobotModel(ModelOptions()), RobotModel(model_options(compose_cfg()))]
     rng = np.random.default_rng(5)
     for _ in range(5):
         q, v = random_state(models[0], rng)
@@ -93,7 +94,7 @@ MATCHED = {
 @pytest.mark.parametrize("options", MATCHED.values(), ids=MATCHED.keys())
 def test_model_matches_a_plant_perturbed_the_same_way(options):
     m = perturbed_plant(**options)
-    pm = A1Model(ModelOptions(**options))
+    pm = RobotModel(ModelOptions(**options))
     worst_m, worst_h = worst_difference(m, pm)
     assert worst_m < AGREE and worst_h < AGREE, (worst_m, worst_h)
     assert pm.total_mass_kg == pytest.approx(float(m.body_mass.sum()), abs=1e-12)
@@ -109,7 +110,7 @@ MISMATCHED = {  # plant perturbation the nominal model does not know -> (min M d
 
 @pytest.mark.parametrize(("plant_kw", "dm", "dh"), MISMATCHED.values(), ids=MISMATCHED.keys())
 def test_a_mismatched_model_differs_clearly(plant_kw, dm, dh):
-    worst_m, worst_h = worst_difference(perturbed_plant(**plant_kw), A1Model())
+    worst_m, worst_h = worst_difference(perturbed_plant(**plant_kw), RobotModel())
     assert worst_m >= dm and worst_h >= dh, (worst_m, worst_h)
     assert worst_m > 1e-3 or worst_h > 1e-3  # many orders above the matched agreement
 
@@ -121,7 +122,7 @@ def test_coulomb_frictionloss_disturbance_against_mujoco():
     F = 0.2  # [N·m]
     m = perturbed_plant(joint_frictionloss=F)
     d, br = mujoco.MjData(m), StateBridge(m)
-    pm, nominal = A1Model(ModelOptions(joint_frictionloss=F)), A1Model()
+    pm, nominal = RobotModel(ModelOptions(joint_frictionloss=F)), RobotModel()
     rng = np.random.default_rng(3)
     saturated = 0
     for _ in range(10):

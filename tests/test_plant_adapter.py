@@ -19,7 +19,7 @@ from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import robot_spec, build_plant, compile_plant
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
 from taslel_bench.terrain.geoms import TERRAIN_PRIORITY
@@ -236,7 +236,7 @@ def test_overrides_are_applied_and_reported(tmp_path):
 
 
 def test_report_default_plant_agrees_with_the_model():
-    r = plant_vs_model(build_plant(), A1Model(), STAND)
+    r = plant_vs_model(build_plant(), RobotModel(), STAND)
     assert r["plant_total_mass_kg"] == pytest.approx(13.741, abs=1e-9) == r["model_total_mass_kg"]
     assert r["plant_trunk_mass_kg"] == pytest.approx(6.001, abs=1e-12) == r["model_trunk_mass_kg"]
     assert r["model_minus_plant_com_stand_m"] < 1e-12 and r["model_minus_plant_foot_pos_stand_max_m"] < 1e-12
@@ -267,7 +267,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
     spec = robot_spec()
     PlantPerturbation.checked("scenario", **kw).apply(spec)  # the one implementation of the plant edits
     m = compile_plant(spec)
-    nominal = plant_vs_model(m, A1Model(), STAND)
+    nominal = plant_vs_model(m, RobotModel(), STAND)
     assert (
         nominal["plant_joint_damping_nms_per_rad_min"] == 1.5
         and nominal["model_joint_damping_nms_per_rad_max"] == 0
@@ -279,7 +279,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
     assert nominal["model_minus_plant_com_stand_m"] > 1e-3
     from taslel_bench.robot.model_options import ModelOptions
 
-    matched = plant_vs_model(m, A1Model(ModelOptions(**kw)), STAND)
+    matched = plant_vs_model(m, RobotModel(ModelOptions(**kw)), STAND)
     assert (
         matched["model_joint_damping_nms_per_rad_min"] == 1.5
         and matched["model_joint_armature_kgm2_max"] == 0.01

@@ -11,7 +11,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
 from taslel_bench.control.footholds import FootholdPlanner
-from taslel_bench.control.gait import GaitParams
+from taslel_bench.control.gait import GaitParams, trot_defaults
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
@@ -20,7 +20,9 @@ from taslel_bench.filter.safety_filter import FilterSettings
 from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides
 from taslel_bench.plant.build import PlantOptions
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.description import RobotDescription, describe_robot
+from taslel_bench.robot.kinematics import LegKinematics
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.episode import EpisodeSettings
 from taslel_bench.sim.terminations import FallRule
@@ -33,33 +35,49 @@ def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
     return OmegaConf.select(cfg, path, default=default, throw_on_missing=True)
 
 
-def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> NominalController:
-    """The nominal trot of ``cfg.controller``; ``controller.terrain_following=true`` (needs ``terrain``) gives
-    :class:`~taslel_bench.control.terrain_following.TerrainFollowingController`."""
+def robot_description(cfg: DictConfig) -> RobotDescription:
+    """The run's robot (``cfg.robot``, one of ``conf/robot/``) as a :class:`RobotDescription`."""
+    return describe_robot(OmegaConf.to_container(cfg.robot, resolve=True))
+
+
+def trot_values(cfg: DictConfig, robot: RobotDescription) -> dict[str, float]:
+    """The trot's speed, swing and stand height and PD gains: the ``controller`` group's where it sets them,
+    else the robot's (:func:`taslel_bench.control.gait.trot_defaults`)."""
     c = cfg.controller
+    defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
+    return {key: float(c[key]) if c.get(key) is not None else value for key, value in defaults.items()}
+
+
+def build_controller(cfg: DictConfig, robot: RobotDescription, terrain: Terrain | None = None) -> NominalController:
+    """The nominal trot of ``cfg.controller`` for ``robot``; ``controller.terrain_following=true`` (needs
+    ``terrain``) gives :class:`~taslel_bench.control.terrain_following.TerrainFollowingController`."""
+    c = cfg.controller
+    trot = trot_values(cfg, robot)
     gait = GaitParams(
         period_s=float(c.period),
         duty=float(c.duty),
-        swing_height_m=float(c.swing_height),
-        stand_height_m=float(c.stand_height),
-        speed_mps=float(c.speed),
+        swing_height_m=trot["swing_height"],
+        stand_height_m=trot["stand_height"],
+        speed_mps=trot["speed"],
     )
-    kwargs = {"stand_duration_s": float(c.stand_duration), "torque_limit_nm": float(cfg.robot.torque_limit_nm),
-              "fd_dt_s": 1.0 / float(cfg.control_rate_hz)}
+    gains = PDGains(kp=trot["kp"], kd=trot["kd"])
+    kwargs = {"stand_duration_s": float(c.stand_duration), "fd_dt_s": 1.0 / float(cfg.control_rate_hz),
+              "robot": robot}
     if bool(c.get("terrain_following", False)):
         if terrain is None:
-            raise ValueError("controller.terrain_following=true needs the scenario's terrain: build_controller(cfg, terrain)")
+            raise ValueError("controller.terrain_following=true needs the scenario's terrain: build_controller(cfg, "
+                             "robot, terrain)")
         search = float(c.get("foothold_search", 0.0))
-        footholds = FootholdPlanner(terrain, search) if search > 0.0 else None
-        return TerrainFollowingController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), terrain=terrain,
+        footholds = FootholdPlanner(terrain, search, kinematics=LegKinematics(robot)) if search > 0.0 else None
+        return TerrainFollowingController(gait, gains, terrain=terrain,
                                           footholds=footholds, replan_phase=float(c.get("foothold_replan_phase", 0.0)),
                                           swing_from_measured_hips=bool(c.get("swing_from_measured_hips", False)),
                                           touchdown_height_m=float(c.get("touchdown_height", 0.0)),
                                           **kwargs)
-    return NominalController(gait, PDGains(kp=float(c.kp), kd=float(c.kd)), **kwargs)
+    return NominalController(gait, gains, **kwargs)
 
 
-def filter_settings(cfg: DictConfig) -> FilterSettings:
+def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
     f = cfg.filter
     return FilterSettings(
         enabled=bool(f.enabled),
@@ -67,7 +85,7 @@ def filter_settings(cfg: DictConfig) -> FilterSettings:
         regularization_target=str(f.get("regularization_target", "nominal")),
         lambda_min_n=float(f.lambda_min_n),
         contact_velocity_gain=float(f.get("contact_velocity_gain", 0.0)),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        torque_limit_nm=robot.torque_limit_nm,
         ecbf_enabled=bool(f.ecbf.enabled),
         ecbf_alpha1=float(f.ecbf.alpha1),
         ecbf_alpha2=float(f.ecbf.alpha2),
@@ -98,14 +116,14 @@ def robust_settings(node) -> RobustSettings:
                           **{k: float(v) for k, v in node.items() if k != "enabled"})
 
 
-def episode_settings(cfg: DictConfig) -> EpisodeSettings:
+def episode_settings(cfg: DictConfig, robot: RobotDescription) -> EpisodeSettings:
     return EpisodeSettings(
         duration_s=float(cfg.duration),
         physics_dt_s=1.0 / float(cfg.physics_rate_hz),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
-        fall=FallRule(height_m=float(cfg.robot.fall_height_m), tilt_deg=float(cfg.robot.fall_tilt_deg)),
-        init_joint_noise_rad=float(cfg.robot.init_joint_noise_rad),
-        init_base_vel_noise_mps=float(cfg.robot.init_base_vel_noise_mps),
+        fall=FallRule(height_m=robot.fall_height_m, tilt_deg=robot.fall_tilt_deg),
+        init_joint_noise_rad=robot.init_joint_noise_rad,
+        init_base_vel_noise_mps=robot.init_base_vel_noise_mps,
         filter_start_s=float(cfg.filter.get("start_time", 0.0)),
     )
 
@@ -130,27 +148,27 @@ def model_options(cfg: DictConfig) -> ModelOptions:
     return ModelOptions(**{k: _plain(v) for k, v in group.items()})
 
 
-def build_model(cfg: DictConfig) -> A1Model:
-    """The controller's model; a URDF Pinocchio cannot read or that lacks the A1's joints raises a
-    :class:`ConfigError` naming ``model.urdf``."""
+def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:
+    """The controller's model of ``robot``; a URDF Pinocchio cannot read or that lacks the robot's joints raises
+    a :class:`ConfigError` naming ``model.urdf``."""
     options = model_options(cfg)
     try:
-        return A1Model(options)
+        return RobotModel(robot, options)
     except (ValueError, RuntimeError) as exc:
         if options.urdf is None:
             raise
         reason = " ".join(str(exc).split())
-        raise fail("model.urdf", options.urdf, f"not an A1 URDF for the controller's model: {reason}") \
+        raise fail("model.urdf", options.urdf, f"not a URDF of robot={robot.name} for the controller's model: {reason}") \
             from exc
 
 
-def plant_options(cfg: DictConfig) -> PlantOptions:
+def plant_options(cfg: DictConfig, robot: RobotDescription) -> PlantOptions:
     """The plant builder's options from the validated config (time step, torque limit, names, overrides)."""
     names = _get(cfg, "robot.plant_names")
     overrides = _get(cfg, "robot.plant_overrides")
     return PlantOptions(
         timestep_s=1.0 / float(cfg.physics_rate_hz),
-        torque_limit_nm=float(cfg.robot.torque_limit_nm),
+        torque_limit_nm=robot.torque_limit_nm,
         names=PlantNames(**{k: _plain(v) for k, v in names.items()}) if names is not None else PlantNames(),
         overrides=(PlantOverrides(**{k: _plain(v) for k, v in overrides.items()}) if overrides is not None
                    else PlantOverrides()),
@@ -158,12 +176,13 @@ def plant_options(cfg: DictConfig) -> PlantOptions:
 
 
 
-def build_barriers(cfg: DictConfig, terrain: Terrain, profile: ClearanceProfile | None) -> list[Barrier]:
+def build_barriers(cfg: DictConfig, robot: RobotDescription, terrain: Terrain, profile: ClearanceProfile | None
+                   ) -> list[Barrier]:
     """The barrier families of ``filter.barriers`` (name -> ``{_target_: <Barrier subclass>, ...options}``,
     null to drop one) that apply to this world, in config order; none when ``filter.ecbf.enabled`` is off."""
     if not bool(_get(cfg, "filter.ecbf.enabled", True)):
         return []
-    world = BarrierWorld(terrain, profile, float(cfg.filter.ecbf.alpha1), float(cfg.filter.ecbf.alpha2))
+    world = BarrierWorld(terrain, profile, float(cfg.filter.ecbf.alpha1), float(cfg.filter.ecbf.alpha2), robot)
     barriers = []
     for name, node in (_get(cfg, "filter.barriers") or {}).items():
         if node is None:

@@ -41,11 +41,13 @@ from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import quadruped as quad
+from taslel_bench.control.gait import trot_defaults
+from taslel_bench.robot.description import RobotDescription, describe_robot
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
 AXES = ("scenario", "solver", "estimator")
-MAX_LEG_REACH_M = 0.38  # [m] thigh + calf minus a margin
+LEG_REACH_FRACTION = 0.95  # [-] of the robot's thigh + calf: the farthest a foot target may be from the hip
 MAX_SEED = 2**63 - 1
 MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
 PHYSICS_RATE_RANGE_HZ = (100, 100_000)  # MuJoCo is unstable on this robot beyond 10 ms steps
@@ -59,7 +61,7 @@ MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
 MAX_FOOTHOLD_SEARCH_M = 0.08  # [m] half the 0.16 m between touchdowns of one foot at the default gait
 MAX_TOUCHDOWN_HEIGHT_M = 0.03  # [m] a swing that ends this far above the expected ground still lands within the stance's first 30 ms at ~0.9 m/s
 MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
-MAX_TORQUE_LIMIT_NM = 200.0  # [N·m] the A1's motors give 33.5
+MAX_TORQUE_LIMIT_NM = 500.0  # [N·m] per joint (the A1's motors give 33.5, ANYmal C's 80)
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
 MAX_BASE_VEL_NOISE_MPS = 2.0  # [m/s]
 # the controller's model: the fields it shares with the plant are checked by taslel_bench/plant/perturbation.py
@@ -131,11 +133,13 @@ def _validate(cfg: DictConfig) -> None:
     """The generic pass, the core groups' rules, the axes' ``_target_``."""
     check_finite(cfg)
     control_rate_hz = _top_level(cfg)
-    stand_height_m = _controller(cfg, control_rate_hz)
+    robot = _robot(cfg)
+    stand_height_m = _controller(cfg, control_rate_hz, robot)
+    number("robot.fall_height_m", robot.fall_height_m, 0.0, stand_height_m, hi_open=True, unit="m",
+           why="below the stand height (controller.stand_height, else robot.stand_height_m), else the stand is a fall")
     _filter(cfg, control_rate_hz)
     _meaningful(cfg)
     _memory(cfg, control_rate_hz)
-    _robot(cfg, stand_height_m)
     _model(cfg)
     safety_limits(cfg)  # the verdict's limits (taslel_bench/config/safety.py)
     for group in AXES:
@@ -220,18 +224,25 @@ def _video(cfg: DictConfig) -> None:
         integer(key, _get(cfg, key, 480), 16, 4096, unit="px")
 
 
-def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
-    """Trot parameters; returns the stand height [m]."""
+def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) -> float:
+    """Trot parameters (null: the robot's, :func:`taslel_bench.control.gait.trot_defaults`); returns the stand
+    height [m]."""
     c = "controller"
-    stand = number(
-        f"{c}.stand_height", _get(cfg, f"{c}.stand_height"), 0.1, MAX_LEG_REACH_M, unit="m", why="leg reach"
-    )
-    swing = number(f"{c}.swing_height", _get(cfg, f"{c}.swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
-    if stand + swing > MAX_LEG_REACH_M + 0.1:
+    reach = LEG_REACH_FRACTION * robot.leg_length_m  # [m]
+    defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
+
+    def value(key: str) -> Any:
+        got = _get(cfg, f"{c}.{key}")
+        return defaults[key] if got is None else got
+
+    stand = number(f"{c}.stand_height", value("stand_height"), 0.25 * reach, reach, unit="m",
+                   why=f"leg reach of robot={robot.name} ({reach:.3g} m)")
+    swing = number(f"{c}.swing_height", value("swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
+    if stand + swing > reach + 0.1:
         raise fail(
             f"{c}.swing_height",
             swing,
-            f"too high for the leg: stand_height + swing_height must be <= {MAX_LEG_REACH_M + 0.1:g} m",
+            f"too high for the leg: stand_height + swing_height must be <= {reach + 0.1:g} m",
         )
     period = number(f"{c}.period", _get(cfg, f"{c}.period"), 0.0, MAX_PERIOD_S, lo_open=True, unit="s")
     duty = number(f"{c}.duty", _get(cfg, f"{c}.duty"), 0.0, 1.0, lo_open=True, hi_open=True)
@@ -245,10 +256,10 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
             f"and swing lasts {shortest_s:g} s; it must last >= {MIN_PHASE_TICKS} control periods "
             f"({MIN_PHASE_TICKS / control_rate_hz:g} s)",
         )
-    max_speed = 2.0 * math.sqrt(MAX_LEG_REACH_M**2 - stand**2) / (period * duty)
+    max_speed = 2.0 * math.sqrt(max(reach**2 - stand**2, 0.0)) / (period * duty)
     number(
         f"{c}.speed",
-        _get(cfg, f"{c}.speed"),
+        value("speed"),
         0.0,
         max_speed,
         unit="m/s",
@@ -256,8 +267,8 @@ def _controller(cfg: DictConfig, control_rate_hz: int) -> float:
         f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
     )
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
-    number(f"{c}.kp", _get(cfg, f"{c}.kp"), 0.0, MAX_KP, unit="N·m/rad")
-    number(f"{c}.kd", _get(cfg, f"{c}.kd"), 0.0, MAX_KD, unit="N·m·s/rad")
+    number(f"{c}.kp", value("kp"), 0.0, MAX_KP, unit="N·m/rad")
+    number(f"{c}.kd", value("kd"), 0.0, MAX_KD, unit="N·m·s/rad")
     following = flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
     search = number(f"{c}.foothold_search", _get(cfg, f"{c}.foothold_search", 0.0), 0.0, MAX_FOOTHOLD_SEARCH_M,
                     unit="m", why="touchdown offsets along the heading, within the stance stroke's reach")
@@ -344,41 +355,17 @@ def _robust(cfg: DictConfig) -> None:
            unit="s", why="0: no disturbance observer")
 
 
-def _robot(cfg: DictConfig, stand_height_m: float) -> None:
-    """Torque limit, fall thresholds, initial-state noise, the plant MJCF path (read at build time)."""
+def _robot(cfg: DictConfig) -> RobotDescription:
+    """The robot's description (its YAML and URDF: names, limits, stand height, fall rule), the initial-state
+    noise, the plant MJCF path (read at build time); returns the description."""
     r = "robot"
-    number(
-        f"{r}.torque_limit_nm",
-        _get(cfg, f"{r}.torque_limit_nm"),
-        0.0,
-        MAX_TORQUE_LIMIT_NM,
-        lo_open=True,
-        unit="N·m",
-    )
-    number(
-        f"{r}.fall_height_m",
-        _get(cfg, f"{r}.fall_height_m"),
-        0.0,
-        stand_height_m,
-        hi_open=True,
-        unit="m",
-        why="below controller.stand_height, else the stand is a fall",
-    )
-    number(f"{r}.fall_tilt_deg", _get(cfg, f"{r}.fall_tilt_deg"), 0.0, 180.0, lo_open=True, unit="deg")
-    number(
-        f"{r}.init_joint_noise_rad",
-        _get(cfg, f"{r}.init_joint_noise_rad"),
-        0.0,
-        MAX_JOINT_NOISE_RAD,
-        unit="rad",
-    )
-    number(
-        f"{r}.init_base_vel_noise_mps",
-        _get(cfg, f"{r}.init_base_vel_noise_mps"),
-        0.0,
-        MAX_BASE_VEL_NOISE_MPS,
-        unit="m/s",
-    )
+    if not isinstance(_get(cfg, r), DictConfig):
+        raise fail(r, _get(cfg, r), "must be a robot config (conf/robot/<name>.yaml)")
+    robot = describe_robot(OmegaConf.to_container(cfg.robot, resolve=True))
+    numbers(f"{r}.torque_limit_nm", list(robot.torque_limit_nm), 0.0, MAX_TORQUE_LIMIT_NM, unit="N·m")
+    number(f"{r}.fall_tilt_deg", robot.fall_tilt_deg, 0.0, 180.0, lo_open=True, unit="deg")
+    number(f"{r}.init_joint_noise_rad", robot.init_joint_noise_rad, 0.0, MAX_JOINT_NOISE_RAD, unit="rad")
+    number(f"{r}.init_base_vel_noise_mps", robot.init_base_vel_noise_mps, 0.0, MAX_BASE_VEL_NOISE_MPS, unit="m/s")
     mjcf = _get(cfg, f"{r}.plant_mjcf")
     if mjcf is not None and not (isinstance(mjcf, str) and mjcf.strip()):
         raise fail(f"{r}.plant_mjcf", mjcf, "must be null or the path of an MJCF file")
@@ -386,6 +373,7 @@ def _robot(cfg: DictConfig, stand_height_m: float) -> None:
     _known_keys(f"{r}.plant_overrides", _get(cfg, f"{r}.plant_overrides"), PlantOverrides)
     _plant_names(cfg, has_file=mjcf is not None)
     _plant_overrides(cfg)
+    return robot
 
 
 def _optional_name(path: str, value: Any) -> None:

@@ -6,8 +6,8 @@ the foot during stance, or on an edge itself, where the foot slides off. This pl
 along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen at
 lift-off (and again at mid-swing with the controller's ``replan_phase``) from the terrain object:
 
-* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to :data:`quad.SHIN_AXIS_FRACTION` of the
-  way to the foot centre, radius :data:`quad.SHIN_RADIUS_M`) at the touchdown, mid-stance and lift-off poses of the
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to the robot's ``shin_axis_fraction`` of the
+  way to the foot centre, radius ``shin_radius_m``) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
   height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far
   ahead left the calf nearly level and the shin still met the log in stance: 1.1 against 0.8 strikes per run on
@@ -33,8 +33,8 @@ import math
 
 import numpy as np
 
-from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.kinematics import leg_knee_and_foot
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.terrain.terrain import Terrain
 
 CAPSULE_POINTS = 7  # points along the shin capsule's axis per pose
@@ -47,8 +47,12 @@ class FootholdPlanner:
 
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01, riser_ahead_m: float = 0.045,
-                 riser_rise_m: float = 0.03) -> None:
+                 riser_rise_m: float = 0.03, kinematics: LegKinematics | None = None) -> None:
+        """``kinematics``: the robot's legs (None: the A1's); its foot radius and shin capsule are checked."""
         self.terrain = terrain
+        self.kinematics = kinematics if kinematics is not None else LegKinematics(load_robot("a1"))
+        robot = self.kinematics.robot
+        self._foot_radius_m, self._shin_radius_m = robot.foot_radius_m, robot.shin_radius_m
         n = round(search_m / step_m)
         offsets = step_m * np.arange(-n, n + 1)
         self.offsets_m = offsets[np.argsort(np.abs(offsets), kind="stable")]  # 0, -s, +s, -2s, ... (ties: nearest)
@@ -57,7 +61,7 @@ class FootholdPlanner:
         self.edge_rise_m = edge_rise_m
         self.riser_ahead_m = riser_ahead_m
         self.riser_rise_m = riser_rise_m
-        s = np.linspace(0.0, a1.SHIN_AXIS_FRACTION, CAPSULE_POINTS)
+        s = np.linspace(0.0, robot.shin_axis_fraction, CAPSULE_POINTS)
         self._axis_s = s[None, :, None]  # (1, points, 1) knee -> foot fractions
 
     def offset(self, leg: int, touchdown_xy_w: tuple[float, float], heading: tuple[float, float],
@@ -77,24 +81,23 @@ class FootholdPlanner:
         px = x0 + c * self.offsets_m
         py = y0 + s * self.offsets_m
         h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py)])
-        feet_w = np.stack([px, py, h + a1.FOOT_RADIUS_M], axis=1)  # (n, 3) foot centres resting on the ground
+        feet_w = np.stack([px, py, h + self._foot_radius_m], axis=1)  # (n, 3) foot centres resting on the ground
         return (self._shin_violation(leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m)
                 + self._edge_violation(feet_w, h, heading) + SIZE_TIE * np.abs(self.offsets_m))
 
     def _shin_violation(self, leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m) -> np.ndarray:
         c, s = heading
-        side = float(quad.LEG_SIDE[leg])
         x_td, y_hip, z_stand = foot_in_hip_td
         points = []
         for k, delta in enumerate(self.offsets_m):
             z = z_stand + float(h[k]) - ground_ref_m  # the terrain-following shift of this foothold
             for progress in STANCE_POSES:
-                knee, foot = leg_knee_and_foot(x_td + float(delta) - progress * stroke_m, y_hip, z, side)
+                knee, foot = self.kinematics.knee_and_foot(leg, x_td + float(delta) - progress * stroke_m, y_hip, z)
                 dx, dy, dz = knee[0] - foot[0], knee[1] - foot[1], knee[2] - foot[2]  # hip (= level trunk) axes
                 knee_w = feet_w[k] + (c * dx - s * dy, s * dx + c * dy, dz)
                 points.append(knee_w + self._axis_s[0] * (feet_w[k] - knee_w))
         pts = np.concatenate(points).reshape(-1, 3)
-        d = self.terrain.near_distance(pts, a1.SHIN_RADIUS_M)[0].reshape(len(self.offsets_m), -1)
+        d = self.terrain.near_distance(pts, self._shin_radius_m)[0].reshape(len(self.offsets_m), -1)
         return np.maximum(0.0, self.shin_clearance_m - d.min(axis=1))
 
     def _edge_violation(self, feet_w, h, heading) -> np.ndarray:

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.robot import quadruped as quad
 
 TROT_OFFSETS = np.array([0.0, 0.5, 0.5, 0.0])  # LEGS order: FL, FR, RL, RR
 TROT_OFFSETS_LIST = TROT_OFFSETS.tolist()  # plain floats for the control tick
@@ -26,6 +25,28 @@ class GaitParams:
     swing_height_m: float = 0.06  # [m] apex of the nominal swing above the stance height
     stand_height_m: float = 0.27  # [m] hip joint -> foot-sphere centre, vertical, during stance
     speed_mps: float = 0.4  # [m/s] commanded forward speed (trunk x)
+
+
+# The trot's values where the controller config leaves them null, scaled from the A1's tuned ones (mass 13.741 kg,
+# thigh + calf 0.4 m): speed and swing height with the leg length (speed as the square root: equal Froude number),
+# the joint gains with m g L (the torques that hold the robot up) and its square root (damping).
+REFERENCE_MASS_KG = 13.741  # [kg]
+REFERENCE_LEG_M = 0.4  # [m]
+REFERENCE_TROT = {"speed": 0.4, "swing_height": 0.06, "kp": 100.0, "kd": 3.0}
+
+
+def trot_defaults(mass_kg: float, leg_length_m: float, stand_height_m: float) -> dict[str, float]:
+    """Speed [m/s], swing height [m], stand height [m], kp [N·m/rad], kd [N·m·s/rad] of a robot of this mass and
+    leg length (rounded: the A1 gets the tuned values exactly)."""
+    length = leg_length_m / REFERENCE_LEG_M
+    load = mass_kg * leg_length_m / (REFERENCE_MASS_KG * REFERENCE_LEG_M)
+    return {
+        "speed": round(REFERENCE_TROT["speed"] * math.sqrt(length), 3),
+        "swing_height": round(REFERENCE_TROT["swing_height"] * length, 4),
+        "stand_height": stand_height_m,
+        "kp": round(REFERENCE_TROT["kp"] * load, 1),
+        "kd": round(REFERENCE_TROT["kd"] * math.sqrt(load), 2),
+    }
 
 
 @dataclass
@@ -42,10 +63,11 @@ class GaitState:
 class TrotGait:
     """Gait clock + foot targets. ``t`` is time since walking started [s]; t < 0 means standing."""
 
-    def __init__(self, params: GaitParams) -> None:
+    def __init__(self, params: GaitParams, lateral_m: np.ndarray) -> None:
+        """``lateral_m`` (4,) [m]: each foot's nominal y in its hip frame (the leg's lateral offset, + left)."""
         self.p = params
         self.nominal_foot_in_hip = np.stack(
-            [np.zeros(4), quad.LEG_SIDE * a1.HIP_OFFSET_Y_M, -params.stand_height_m * np.ones(4)], axis=1
+            [np.zeros(4), np.asarray(lateral_m, dtype=float), -params.stand_height_m * np.ones(4)], axis=1
         )
         self._nominal_rows = self.nominal_foot_in_hip.tolist()
 

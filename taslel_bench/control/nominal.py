@@ -1,4 +1,5 @@
-"""Nominal controller (paper, "Quadruped Implementation"): trot, open-loop feet, analytic IK, joint PD."""
+"""Nominal controller (paper, "Quadruped Implementation"): trot, open-loop feet, analytic IK, joint PD, for any
+described robot (the IK from :class:`taslel_bench.robot.kinematics.LegKinematics`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import numpy as np
 
 from taslel_bench.control.gait import GaitParams, GaitState, TrotGait
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.kinematics import legs_ik, legs_ik_list
+from taslel_bench.robot.description import RobotDescription, load_robot
+from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.util.jit import kernel
 
 
@@ -36,14 +38,18 @@ class NominalController:
         gait: GaitParams,
         gains: PDGains,
         stand_duration_s: float = 0.5,
-        torque_limit_nm: float = a1.TORQUE_LIMIT_NM,
         fd_dt_s: float = 1e-3,
+        robot: RobotDescription | None = None,
     ) -> None:
-        self.gait = TrotGait(gait)
+        """``robot``: whose legs (None: the A1); its torque limits clip the PD law."""
+        self.robot = robot = robot if robot is not None else load_robot("a1")
+        self.kinematics = LegKinematics(robot)
+        self._legs_ik_list = self.kinematics.legs_ik_list
+        self.gait = TrotGait(gait, self.kinematics.lateral_offsets_m())
         self.gains = gains
         self._kp, self._kd = float(gains.kp), float(gains.kd)  # [N·m/rad], [N·m·s/rad] read every tick
         self.stand_duration_s = stand_duration_s
-        self.torque_limit_nm = torque_limit_nm
+        self.torque_limit_nm = robot.torque_limits  # [N·m] (12,) core order
         self.fd_dt_s = fd_dt_s
         # (q_des [rad], qd_des [rad/s]) in one array: a table row is copied in one operation; the two are its
         # rows (views: write them in place, never rebind them)
@@ -94,7 +100,7 @@ class NominalController:
         return np.array(self._desired_list(t))
 
     def _desired_list(self, t: float) -> list[float]:
-        return legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
+        return self._legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
                 base_pose: np.ndarray | None = None) -> np.ndarray:
@@ -149,11 +155,12 @@ class NominalController:
 
     def stand_configuration(self) -> np.ndarray:
         """Joint angles [rad] of the initial stand (nominal feet under the hips)."""
-        return legs_ik(self.gait.nominal_foot_in_hip)
+        return self.kinematics.legs_ik(self.gait.nominal_foot_in_hip)
 
 
 @kernel
 def _pd(references, q, qd, kp, kd, limit, u):
-    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m] with (q_des, qd_des) = ``references``."""
+    """u = clip(kp (q_des - q) + kd (qd_des - qd), -limit, limit) [N·m] with (q_des, qd_des) = ``references`` and
+    ``limit`` (12,) per joint."""
     for j in range(u.shape[0]):
-        u[j] = min(max(kp * (references[0, j] - q[j]) + kd * (references[1, j] - qd[j]), -limit), limit)
+        u[j] = min(max(kp * (references[0, j] - q[j]) + kd * (references[1, j] - qd[j]), -limit[j]), limit[j])

@@ -48,7 +48,6 @@ from taslel_bench.control.footholds import FootholdPlanner, heading_of
 from taslel_bench.control.gait import TROT_OFFSETS_LIST
 from taslel_bench.control.nominal import NominalController
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.kinematics import legs_ik_list
 from taslel_bench.terrain.terrain import Terrain
 
 PATH_SAMPLES = 8  # ground heights sampled between a swing foot and its predicted touchdown point
@@ -90,7 +89,7 @@ class TerrainFollowingController(NominalController):
         self._td_m = np.zeros(4)  # [m] swing feet: ground height at the predicted touchdown
         self._was_stance = np.ones(4, bool)
         self._has_swung = np.zeros(4, bool)  # touchdown_height_m: the leg has swung since the walk began
-        self._hips_xy = a1.HIP_POSITIONS_IN_TRUNK[:, :2].tolist()  # [m] trunk axes, plain floats for the tick
+        self._hips_xy = self.robot.hip_positions_in_trunk[:, :2].tolist()  # [m] trunk axes, plain floats for the tick
         self._base_pose: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -125,7 +124,7 @@ class TerrainFollowingController(NominalController):
             self._lift_from_measured_hips(gs, rows, ground)
         if self.touchdown_height_m > 0.0 and self.gait_time(t) >= 0.0:
             self._aim_above_touchdown(gs, rows)
-        self.q_des[:] = legs_ik_list(rows)
+        self.q_des[:] = self._legs_ik_list(rows)
 
     def _aim_above_touchdown(self, gs, rows: list[list[float]]) -> None:
         """Foot target z (hip frame) += ``touchdown_height_m`` x a bump that eases in over the swing's second half
@@ -151,7 +150,7 @@ class TerrainFollowingController(NominalController):
         pose = self._base_pose
         qx, qy, qz, qw = (float(v) for v in pose[3:7])
         r20, r21 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx)  # trunk x, y axes' world z components
-        heights = [float(pose[2]) + r20 * hx + r21 * hy - float(ground[i]) - a1.FOOT_RADIUS_M
+        heights = [float(pose[2]) + r20 * hx + r21 * hy - float(ground[i]) - self.robot.foot_radius_m
                    for i, (hx, hy) in enumerate(self._hips_xy) if gs.in_stance[i]]
         if heights:
             sag = self.gait.p.stand_height_m - sum(heights) / len(heights)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 
 NV, NU, NL = quad.NV, quad.N_JOINTS, 3 * quad.N_LEGS
 VDOT, U, LAM = slice(0, NV), slice(NV, NV + NU), slice(NV + NU, NV + NU + NL)
@@ -29,7 +29,7 @@ INACTIVE_RHS = 1e6  # right-hand side of an inactive inequality row (0 <= 1e6); 
 class TickInputs:
     """What the constraint families read each tick (model already updated at (q, v))."""
 
-    model: A1Model
+    model: RobotModel
     v: np.ndarray  # Pinocchio velocity (18)
     in_stance: np.ndarray  # bool (4,)
     mu: float  # [-] friction coefficient the filter assumes

@@ -62,7 +62,7 @@ class FilterSettings:
     regularization_target: str = "nominal"  # "nominal" (vdot_nom, lambda_nom) or "zero"
     lambda_min_n: float = 1.0  # [N] minimum normal force of a stance foot
     contact_velocity_gain: float = 0.0  # [1/s] k_v in J vdot + J̇v = -k_v J v (0 = paper's eq. 3)
-    torque_limit_nm: float = a1.TORQUE_LIMIT_NM  # [N·m]
+    torque_limit_nm: tuple[float, ...] = (33.5,) * quad.N_JOINTS  # [N·m] per joint, core order (the robot's)
     ecbf_enabled: bool = True  # only used when the scenario provides a clearance profile
     ecbf_alpha1: float = 20.0  # [1/s]
     ecbf_alpha2: float = 20.0  # [1/s]
@@ -102,6 +102,7 @@ class SafetyFilter:
         """``barriers``: the barrier families (rows in this order after the friction rows, which is also
         their priority: ``relaxation: priority`` drops the last first); with ``settings.ecbf_enabled`` false
         the filter has none. ``terrain``: the world's geometry (needed by ``friction_cone: terrain``)."""
+        self.torque_limit_nm = np.array(settings.torque_limit_nm, dtype=float)  # [N·m] (12,) core order
         if settings.fallback not in FALLBACKS:
             raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
         if settings.regularization_target not in REGULARIZATION_TARGETS:
@@ -163,7 +164,7 @@ class SafetyFilter:
         P[U, U] = np.eye(quad.N_JOINTS)
         lb = np.full(N_VARS, -np.inf)
         ub = np.full(N_VARS, np.inf)
-        lb[U], ub[U] = -s.torque_limit_nm, s.torque_limit_nm
+        lb[U], ub[U] = -self.torque_limit_nm, self.torque_limit_nm
         A_pattern = np.zeros((m_eq, N_VARS), bool)
         G_pattern = np.zeros((m_in, N_VARS), bool)
         for fam in self.eq_families:
@@ -193,7 +194,7 @@ class SafetyFilter:
         return self.condensed if self.condensed is not None else self.problem
 
     def _allocate_condensed(self, m_eq: int, m_in: int) -> None:
-        s, nu = self.settings, quad.N_JOINTS
+        nu = quad.N_JOINTS
         self.condensed = QPProblem(
             P=np.eye(nu),
             q=np.zeros(nu),
@@ -201,8 +202,8 @@ class SafetyFilter:
             b=np.zeros(0),
             G=np.zeros((m_in, nu)),
             h=np.zeros(m_in),
-            lb=np.full(nu, -s.torque_limit_nm),
-            ub=np.full(nu, s.torque_limit_nm),
+            lb=-self.torque_limit_nm.copy(),
+            ub=self.torque_limit_nm.copy(),
             P_pattern=np.ones((nu, nu), bool),
             A_pattern=np.zeros((0, nu), bool),
             G_pattern=np.ones((m_in, nu), bool),
@@ -312,7 +313,7 @@ class SafetyFilter:
             u, lam, vdot = np.empty(quad.N_JOINTS), np.empty(NL), np.empty(NV)
             # condensed: recover (vdot, lambda) = z0 - Z u; u clipped to the torque limit (the QP's bounds
             # hold to solver tolerance)
-            _split_solution(sol.x, self.condensed is not None, self._rhs, self.settings.torque_limit_nm, u, lam,
+            _split_solution(sol.x, self.condensed is not None, self._rhs, self.torque_limit_nm, u, lam,
                             vdot)  # fmt: skip
             for barrier in self.barriers:  # the ECBF conditions the filter believes it planned
                 barrier.planned(qp, vdot)
@@ -406,9 +407,9 @@ def _condense(A, b, G, h, u_nom, eps, nominal_target, rows, ws, rhs, Pc, qc, Gc,
 @kernel
 def _split_solution(x, condensed, rhs, torque_limit, u, lam, vdot):
     """(u, lambda, vdot) of a backend's solution ``x``: the blocks of X, or for the condensed QP u = x and
-    (vdot, lambda) = z0 - Z u from ``rhs`` = [z0, Z]; u clipped to +-torque_limit."""
+    (vdot, lambda) = z0 - Z u from ``rhs`` = [z0, Z]; u clipped to +-torque_limit (12,) per joint."""
     for j in range(NU):
-        u[j] = min(max(x[j] if condensed else x[NV + j], -torque_limit), torque_limit)
+        u[j] = min(max(x[j] if condensed else x[NV + j], -torque_limit[j]), torque_limit[j])
     for k in range(NV + NL):
         if condensed:
             z = rhs[k, 0]

@@ -36,12 +36,12 @@ CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upwar
 CONTACT_TOL_M = 0.005  # [m] a foot farther than this from the terrain takes the normal of the surface under it
 
 
-def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray) -> np.ndarray:
+def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray, foot_radius_m: float) -> np.ndarray:
     """(4, 3) unit normals of the terrain at the foot spheres: for a foot within CONTACT_TOL_M of the terrain
     the gradient of its distance to it (of two parts within CORNER_TOL_M, the more upward one: a foot on the
     floor against a log's side stands on the floor); for a foot farther away (a stance foot that has not
     landed yet) the normal of the surface under it -- the nearest part could be a log's side beside it."""
-    dist, normal, _ = terrain.near_distance(foot_pos_in_world, a1.FOOT_RADIUS_M, CORNER_TOL_M)
+    dist, normal, _ = terrain.near_distance(foot_pos_in_world, foot_radius_m, CORNER_TOL_M)
     for i in np.flatnonzero(dist > CONTACT_TOL_M):
         normal[i] = terrain.normal_at(float(foot_pos_in_world[i, 0]), float(foot_pos_in_world[i, 1]))
     return normal
@@ -98,7 +98,7 @@ class TerrainFrictionCone(FrictionCone):
             return
         mu = self._feet_mu(x)
         _cone_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, packed.surface_rows,
-                   x.model.foot_pos_in_world, self.flat, self.edge_downhill, x.in_stance, mu, self.lambda_min_n,
+                   x.model.foot_pos_in_world, x.model.robot.foot_radius_m, self.flat, self.edge_downhill, x.in_stance, mu, self.lambda_min_n,
                    self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written, self._dist,
                    self._point)  # fmt: skip
 
@@ -112,7 +112,7 @@ class TerrainFrictionCone(FrictionCone):
         """:meth:`write` with the normals from :func:`contact_normals` and each foot's rows in numpy (a part the
         compiled query does not know; the reference of the compiled write in the tests)."""
         if not self.flat:
-            self.normals[:] = contact_normals(self.terrain, x.model.foot_pos_in_world)
+            self.normals[:] = contact_normals(self.terrain, x.model.foot_pos_in_world, x.model.robot.foot_radius_m)
         mu = self._feet_mu(x)
         for i in range(quad.N_LEGS):
             if x.in_stance[i]:
@@ -195,9 +195,10 @@ def _foot_rows_about(G, hvec, r, c, n, mu, lambda_min, downhill):
 
 
 @kernel
-def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, normals, dist, point):
+def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, normals, dist,
+                  point):  # fmt: skip
     """:func:`contact_normals` into ``normals`` (4, 3) (``dist``, ``point``: scratch)."""
-    terrain_distance(rows, field_heights, field_grid, has_field, foot_pos, a1.FOOT_RADIUS_M, CORNER_TOL_M, dist,
+    terrain_distance(rows, field_heights, field_grid, has_field, foot_pos, foot_radius, CORNER_TOL_M, dist,
                      normals, point)  # fmt: skip
     for i in range(foot_pos.shape[0]):
         if dist[i] > CONTACT_TOL_M:
@@ -205,13 +206,14 @@ def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot
 
 
 @kernel
-def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, flat, downhill, in_stance, mu,
+def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, flat, downhill, in_stance, mu,
                lambda_min, r0, G, hvec, normals, stance, mu_written, written, dist, point):  # fmt: skip
     """:meth:`TerrainFrictionCone.write_python` in one call: the normals (unless ``flat``), then per foot its rows
     rewritten when its mode, normal or mu changed (``stance``, ``mu_written``, ``written``: what they were written
     with)."""
     if not flat:
-        _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, normals, dist, point)
+        _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, normals, dist,
+                      point)
     for i in range(foot_pos.shape[0]):
         r, c = r0 + 5 * i, NV + NU + 3 * i
         if in_stance[i]:

@@ -29,13 +29,13 @@ from taslel_bench.metrics.stream import Reducer
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 
 
 @dataclass(frozen=True)
 class ResidualSetup:
     bridge: StateBridge
-    model: A1Model  # the controller's model (the filter's equations of motion)
+    model: RobotModel  # the controller's model (the filter's equations of motion)
     initial_qpos: np.ndarray  # MuJoCo state before tick 0
     initial_qvel: np.ndarray
     control_dt_s: float  # [s]

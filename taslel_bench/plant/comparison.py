@@ -19,7 +19,7 @@ import pinocchio as pin
 from taslel_bench.plant.adapter import FLOOR, read_record
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 
 STAND_PENETRATION_M = 1e-4  # [m] lowest foot-sphere bottom below the floor for the contact read-out
 
@@ -45,7 +45,7 @@ def _stand_q(stand_joints_rad: np.ndarray) -> np.ndarray:
 
 
 def plant_vs_model(
-    mj_model: mujoco.MjModel, model: A1Model, stand_joints_rad: np.ndarray
+    mj_model: mujoco.MjModel, model: RobotModel, stand_joints_rad: np.ndarray
 ) -> dict[str, object]:
     """The report (module doc) for a compiled plant and the controller's model; ``stand_joints_rad`` (12,
     core order) is the stand pose's joint angles [rad]."""
@@ -58,7 +58,7 @@ def plant_vs_model(
     return out
 
 
-def _masses_com_feet(m: mujoco.MjModel, pm: A1Model, qj: np.ndarray) -> dict[str, object]:
+def _masses_com_feet(m: mujoco.MjModel, pm: RobotModel, qj: np.ndarray) -> dict[str, object]:
     """Total and trunk mass [kg], whole-robot CoM and foot centres at the stand pose [m, trunk frame]."""
     trunk = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
     root = m.body_rootid[trunk]
@@ -91,7 +91,7 @@ def _masses_com_feet(m: mujoco.MjModel, pm: A1Model, qj: np.ndarray) -> dict[str
     return out
 
 
-def _joints(m: mujoco.MjModel, pm: A1Model) -> dict[str, object]:
+def _joints(m: mujoco.MjModel, pm: RobotModel) -> dict[str, object]:
     """Joint damping [N·m·s/rad], armature [kg·m²], friction loss [N·m] (min and max over the 12 joints) of
     both; the plant's higher-order damping coefficients and its torque limit per joint [N·m]."""
     br = StateBridge(m)

@@ -22,6 +22,11 @@ def obstacle_geom_mask(model: mujoco.MjModel) -> np.ndarray:
 
 
 
+def foot_radius_m(model: mujoco.MjModel) -> float:
+    """[m] radius of the plant's foot spheres (the core's ``FL_foot`` geom; every robot has one radius)."""
+    return float(model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, quad.FOOT_FRAMES[0]), 0])
+
+
 def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
     """MuJoCo geom ids of the four foot spheres, in :data:`quad.LEGS` order."""
     return np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES])
@@ -80,7 +85,8 @@ class FootContactReader:
         self._pos_rows = sensor_adr("pos")[:, None] + np.arange(3)
         self._lin_rows = sensor_adr("linvel")[:, None] + np.arange(2)  # vx, vy
         self._ang_rows = sensor_adr("angvel")[:, None] + np.array([1, 0])  # wy, wx
-        self._radius_sign = a1.FOOT_RADIUS_M * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
+        self.foot_radius_m = float(model.geom_size[self.foot_geoms[0], 0])  # [m] the plant's foot spheres
+        self._radius_sign = self.foot_radius_m * np.array([-1.0, 1.0])  # v_x - r w_y, v_y + r w_x
         self._is_foot = np.zeros(model.ngeom, bool)
         self._is_foot[self.foot_geoms] = True
         robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)

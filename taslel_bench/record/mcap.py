@@ -40,6 +40,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
+from taslel_bench.plant.contacts import foot_radius_m
 from taslel_bench.record import scene, signals
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import quadruped as quad
@@ -156,10 +157,12 @@ class McapStream:
         feet = _leg_array(frame, "{leg}_foot_{ax}_w_m")
         plant_f, filter_f = _leg_array(frame, "{leg}_grf_plant_{ax}_w_n"), _leg_array(frame, "{leg}_grf_filter_{ax}_w_n")
         h = {name: frame[[f"{leg}_barrier_{name}_h_m" for leg in quad.LEGS]].to_numpy() for name in self.barrier_names}
+        radius = foot_radius_m(p.model)  # [m]
         for i, t in enumerate(times):
             ns = self.log_ns(float(t))
             self._put("/tf", float(t), scene.body_transforms(p.tree, ns, pos[i], quat[i]).encode())
-            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()})
+            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()},
+                                         radius)
             self._put("/scene/contact", float(t), update.encode())
 
     def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:

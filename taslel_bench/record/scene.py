@@ -287,16 +287,17 @@ def barrier_rgba(h_m: float) -> tuple[float, float, float, float]:
 
 
 def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np.ndarray,
-                  grf_filter_w: np.ndarray, barrier_h: dict[str, np.ndarray]) -> fm.SceneUpdate:  # fmt: skip
+                  grf_filter_w: np.ndarray, barrier_h: dict[str, np.ndarray], foot_radius_m: float
+                  ) -> fm.SceneUpdate:  # fmt: skip
     """One tick: per foot (legs in :data:`quad.LEGS` order) the plant's and the filter's force arrows from the
     sphere's bottom point (``foot_w`` (4, 3) sphere centres [m], forces (4, 3) [N], world axes) and, for a
     swing foot with a barrier row, a sphere coloured by the smallest h [m] over ``barrier_h`` (name -> (4,))
-    and a line from the sphere's bottom down by that h. The update first deletes the previous tick's
+    and a line from the sphere's bottom down by that h (``foot_radius_m`` [m]: the plant's foot spheres). The update first deletes the previous tick's
     entities of the topic."""
     entities = []
     for i, leg in enumerate(quad.LEGS):
         prims = Primitives()
-        bottom = foot_w[i] - np.array([0.0, 0.0, a1.FOOT_RADIUS_M])
+        bottom = foot_w[i] - np.array([0.0, 0.0, foot_radius_m])
         _force_arrow(prims, bottom, grf_plant_w[i], PLANT_FORCE_RGBA)
         _force_arrow(prims, bottom, grf_filter_w[i], FILTER_FORCE_RGBA)
         meta = {"t_s": f"{t_s:.3f}",
@@ -305,7 +306,7 @@ def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np
         h = {name: float(v[i]) for name, v in barrier_h.items() if np.isfinite(v[i])}
         if h:
             h_min = min(h.values())
-            prims.sphere(foot_w[i], a1.FOOT_RADIUS_M + 0.01, barrier_rgba(h_min))
+            prims.sphere(foot_w[i], foot_radius_m + 0.01, barrier_rgba(h_min))
             end = bottom - np.array([0.0, 0.0, h_min])
             prims.lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, pose=_pose((0, 0, 0), _IDENTITY),
                                                 thickness=0.004, scale_invariant=False,

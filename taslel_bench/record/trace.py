@@ -271,13 +271,13 @@ class EpisodeTrace:
             "slip_w": plant_side["slip_velocity_in_world"],
             "obstacle_contact": plant_side["obstacle_contact"],
             "mu_foot": friction_under_feet(terrain, foot_pos, self.mu_true[ticks]),
-            "obstacle_clearance_m": obstacle_clearance(terrain, foot_pos),
+            "obstacle_clearance_m": obstacle_clearance(terrain, foot_pos, contacts.foot_radius_m),
         }
         clearance = np.full((k1 - k0, quad.N_LEGS), np.nan)
         if profile is not None and k1 > k0:
             swing = ~self.in_stance[ticks]
             z_obstacle = profile.evaluate(self.swing_phase[ticks][swing])[0]
-            clearance[swing] = foot_pos[..., 2][swing] - a1.FOOT_RADIUS_M - z_obstacle
+            clearance[swing] = foot_pos[..., 2][swing] - contacts.foot_radius_m - z_obstacle
         out["clearance_m"] = clearance
         if frames is not None:
             out.update(frames.frames(self.contact_log, k0, k1, foot_pos))
@@ -517,11 +517,12 @@ def friction_under_feet(terrain: Terrain | None, foot_pos_w: np.ndarray, mu_trun
     return terrain.friction_under(foot_pos_w[:, :, :2])
 
 
-def obstacle_clearance(terrain: Terrain | None, foot_pos_w: np.ndarray) -> np.ndarray:
-    """(n, 4) signed distance [m] from each foot sphere to the nearest obstacle of the terrain (a log, ...):
+def obstacle_clearance(terrain: Terrain | None, foot_pos_w: np.ndarray, foot_radius_m: float) -> np.ndarray:
+    """(n, 4) signed distance [m] from each foot sphere (radius ``foot_radius_m``) to the nearest obstacle of the
+    terrain (a log, ...):
     <= 0 means touching. NaN without obstacles."""
     n = foot_pos_w.shape[0]
     if terrain is None or not terrain.has_obstacles:
         return np.full((n, quad.N_LEGS), np.nan)
-    d, _, _ = terrain.obstacle_distance(foot_pos_w.reshape(-1, 3), a1.FOOT_RADIUS_M)
+    d, _, _ = terrain.obstacle_distance(foot_pos_w.reshape(-1, 3), foot_radius_m)
     return d.reshape(n, quad.N_LEGS)

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 from omegaconf import OmegaConf
 
+from taslel_bench.plant.contacts import foot_radius_m
 from taslel_bench.record import run_files
 from taslel_bench.robot import quadruped as quad
 
@@ -135,7 +136,7 @@ class RunFrames:
             norm = float(np.linalg.norm(force))
             if not np.isfinite(norm) or norm < 1.0 or scene.ngeom >= scene.maxgeom:
                 continue
-            tail = foot - np.array([0.0, 0.0, a1.FOOT_RADIUS_M])
+            tail = foot - np.array([0.0, 0.0, foot_radius_m(self.m)])
             geom = scene.geoms[scene.ngeom]
             mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_ARROW, np.zeros(3), np.zeros(3), np.zeros(9),
                                 np.array([0.15, 0.45, 0.95, 1.0], np.float32))  # fmt: skip

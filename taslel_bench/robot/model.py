@@ -1,7 +1,7 @@
 """The controller's model of the robot: Pinocchio, built from the same URDF as the plant.
 
 All per-tick rigid-body quantities the nominal controller and the safety filter need are computed once
-by :meth:`A1Model.update` into preallocated arrays (no allocation per tick beyond Pinocchio's own).
+by :meth:`RobotModel.update` into preallocated arrays (no allocation per tick beyond Pinocchio's own).
 
 Frames and units: ``q`` is Pinocchio's (position of the trunk origin in world [m], quaternion xyzw,
 12 joint angles [rad] in the core order of :mod:`taslel_bench.robot.quadruped`); ``v`` is (trunk linear velocity in the **trunk**

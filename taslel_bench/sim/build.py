@@ -20,6 +20,7 @@ from taslel_bench.config.settings import (
     episode_settings,
     filter_settings,
     plant_options,
+    robot_description,
 )
 from taslel_bench.config.validate import validate
 from taslel_bench.filter.safety_filter import SafetyFilter
@@ -27,6 +28,7 @@ from taslel_bench.interfaces import Estimator, QPBackend, Scenario
 from taslel_bench.plant.build import PlantOptions, robot_spec, compile_plant, mjcf_spec
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.qp.reference_check import reference_check
+from taslel_bench.robot.description import RobotDescription
 from taslel_bench.sim.episode import Episode
 
 FRICTION_CHECK_TOL = 1e-9
@@ -36,19 +38,22 @@ class FrictionMismatch(RuntimeError):
     """The plant's foot contacts do not get the friction the scenario configured."""
 
 
-def build_plant_model(cfg: DictConfig, scenario: Scenario, rng: np.random.Generator) -> mujoco.MjModel:
-    """The MuJoCo plant of a run: the URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its other
-    edits (:func:`build_plant`)."""
+def build_plant_model(cfg: DictConfig, robot: RobotDescription, scenario: Scenario, rng: np.random.Generator
+                      ) -> mujoco.MjModel:
+    """The MuJoCo plant of a run: the robot's URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its
+    other edits (:func:`build_plant`)."""
     mjcf = cfg.robot.get("plant_mjcf")
-    return build_plant(scenario, plant_options(cfg), int(cfg.seed), rng, Path(mjcf) if mjcf else None)
+    return build_plant(scenario, plant_options(cfg, robot), int(cfg.seed), rng, Path(mjcf) if mjcf else None, robot)
 
 
 def build_plant(scenario: Scenario, options: PlantOptions | None = None, seed: int = 0,
-                rng: np.random.Generator | None = None, mjcf: Path | None = None) -> mujoco.MjModel:
-    """The URDF plant (or the A1 MJCF ``mjcf``) with the scenario's terrain (drawn from its own stream of
-    ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's other edits."""
+                rng: np.random.Generator | None = None, mjcf: Path | None = None,
+                robot: RobotDescription | None = None) -> mujoco.MjModel:
+    """The robot's URDF plant (default: the A1), or the MJCF ``mjcf`` of it, with the scenario's terrain (drawn
+    from its own stream of ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's
+    other edits."""
     options = options if options is not None else PlantOptions()
-    spec = mjcf_spec(mjcf, options) if mjcf is not None else robot_spec(options=options)
+    spec = mjcf_spec(mjcf, options) if mjcf is not None else robot_spec(robot, options)
     scenario.terrain.build(spec, terrain_rng(seed))
     scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))
     return compile_plant(spec, mjcf)
@@ -90,18 +95,19 @@ class Built:
         self.rng = np.random.default_rng(int(cfg.seed))
         self.scenario: Scenario = build_axis(cfg, "scenario")  # each axis checks its arguments (ConfigError)
         self.estimator: Estimator = build_axis(cfg, "estimator")
-        fs = filter_settings(cfg)
+        self.robot = robot_description(cfg)
+        fs = filter_settings(cfg, self.robot)
         self.backend: QPBackend | None = build_backend(cfg) if fs.enabled else None
-        self.mj_model = build_plant_model(cfg, self.scenario, self.rng)
-        self.controller = build_controller(cfg, self.scenario.terrain)
+        self.mj_model = build_plant_model(cfg, self.robot, self.scenario, self.rng)
+        self.controller = build_controller(cfg, self.robot, self.scenario.terrain)
+        barriers = build_barriers(cfg, self.robot, self.scenario.terrain, self.scenario.clearance_profile())
         self.filter = (
-            SafetyFilter(fs, self.backend, build_barriers(cfg, self.scenario.terrain, self.scenario.clearance_profile()),
-                         self.scenario.terrain)
+            SafetyFilter(fs, self.backend, barriers, self.scenario.terrain)
             if self.backend is not None
             else None
         )
         self.episode = Episode(
-            episode_settings(cfg),
+            episode_settings(cfg, self.robot),
             self.scenario,
             self.mj_model,
             self.controller,
@@ -109,7 +115,7 @@ class Built:
             self.estimator,
             self.rng,
             stance_from_contact=fs.stance_source == "contact",
-            model=build_model(cfg),
+            model=build_model(cfg, self.robot),
             contact_estimate=contact_estimate(cfg) if self.filter is not None and fs.stance_source == "estimate" else None,
         )
         # record.reference_every: the backend's answers checked against the tight reference (None: off)

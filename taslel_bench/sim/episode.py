@@ -40,7 +40,7 @@ from taslel_bench.plant.contacts import FootContactReader
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.imu import TrunkImu
 from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 
@@ -77,7 +77,7 @@ class Episode:
         estimator: Estimator,
         rng: np.random.Generator,
         stance_from_contact: bool = False,
-        model: A1Model | None = None,  # the controller's model (None: the URDF as is)
+        model: RobotModel | None = None,  # the controller's model (None: the URDF as is)
         contact_estimate: ContactEstimate | None = None,  # filter.stance_source=estimate: the stance set
     ) -> None:
         self.s = settings
@@ -86,7 +86,7 @@ class Episode:
         self.m = mj_model
         self.d = mujoco.MjData(mj_model)
         self.bridge = StateBridge(mj_model)
-        self.model = model if model is not None else A1Model()
+        self.model = model if model is not None else RobotModel()
         self.controller = controller
         self.filter = safety_filter
         self.estimator = estimator
@@ -134,7 +134,7 @@ class Episode:
         s, m, d = self.s, self.m, self.d
         q = np.zeros(quad.NQ)
         q[6] = 1.0
-        q[2] = self.controller.gait.p.stand_height_m + a1.FOOT_RADIUS_M
+        q[2] = self.controller.gait.p.stand_height_m + self.model.robot.foot_radius_m
         q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
         v = np.zeros(quad.NV)
         v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)

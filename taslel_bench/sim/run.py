@@ -18,7 +18,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.safety import safety_limits
-from taslel_bench.config.settings import health_limits
+from taslel_bench.config.settings import health_limits, robot_description
 from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.summary import SummaryStream, summarize
 from taslel_bench.plant.comparison import plant_vs_model
@@ -28,7 +28,6 @@ from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
-from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
 from taslel_bench.util.provenance import code_version
@@ -43,7 +42,7 @@ def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
     example-robot-data or ``robot.plant_mjcf``) and the controller model's URDF, with their content hashes
     (masses, inertias, joint losses: :func:`taslel_bench.plant.comparison.plant_vs_model`)."""
     mjcf = cfg.robot.get("plant_mjcf")
-    plant_src = Path(mjcf) if mjcf else a1.a1_urdf_path()
+    plant_src = Path(mjcf) if mjcf else built.robot.urdf_path
     model_src = Path(built.episode.model.urdf_path)
     return {
         "plant_source": str(plant_src),
@@ -91,8 +90,9 @@ def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
     plain.get("record", {}).pop("chunk_ticks", None)  # how the trace is processed, not what it holds
     h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
     mjcf = cfg.robot.get("plant_mjcf")
-    hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [a1.a1_urdf_path()])
-    hash_files(h, [Path(cfg.get("model", {}).get("urdf") or a1.a1_urdf_path())])
+    robot_urdf = robot_description(cfg).urdf_path
+    hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [robot_urdf])
+    hash_files(h, [Path(cfg.get("model", {}).get("urdf") or robot_urdf)])
     hash_files(h, sorted(Path(p).resolve() for p in input_files))
     h.update(code_identity().encode())
     return h.hexdigest()
@@ -215,10 +215,10 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     return summary
 
 
-def _stance_and_swing_s(cfg: DictConfig) -> tuple[float, float]:
-    """[s] the gait's scheduled stance and swing durations (period x duty, period x (1 - duty))."""
-    period, duty = float(cfg.controller.period), float(cfg.controller.duty)
-    return period * duty, period * (1.0 - duty)
+def _stance_and_swing_s(built: Built) -> tuple[float, float]:
+    """[s] the controller's scheduled stance and swing durations (period x duty, period x (1 - duty))."""
+    gait = built.controller.gait.p
+    return gait.period_s * gait.duty, gait.period_s * (1.0 - gait.duty)
 
 
 def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
@@ -228,7 +228,7 @@ def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
     episode = built.episode
     episode.chunk_ticks = int(chunk) if chunk is not None else None
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = _stance_and_swing_s(cfg)
+    stance_s, swing_s = _stance_and_swing_s(built)
     episode.metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), swing_s,
                                     safety_limits(cfg).trip_touchdown_tolerance_s)  # fmt: skip
     writer = StepsWriter(out_dir / run_files.STEPS)
@@ -253,7 +253,8 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
         "duration_s": float(cfg.duration),
         "control_rate_hz": float(cfg.control_rate_hz),
         "physics_rate_hz": float(cfg.physics_rate_hz),
-        "commanded_speed_mps": float(cfg.controller.speed),
+        "robot": built.robot.name,
+        "commanded_speed_mps": float(built.controller.gait.p.speed_mps),
         "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,
@@ -269,7 +270,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     """The episode's metrics (:func:`taslel_bench.metrics.summary.summarize`), the estimator's own
     diagnostics (optional ``diagnostics()``) and the backend's settings."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = _stance_and_swing_s(cfg)
+    stance_s, swing_s = _stance_and_swing_s(built)
     out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg),
                     swing_s)  # fmt: skip
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))

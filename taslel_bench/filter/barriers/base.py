@@ -11,13 +11,14 @@ any obstacle). Adding a barrier = one subclass + one ``filter.barriers.<name>`` 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, VDOT, TickInputs
 from taslel_bench.interfaces import QPProblem
 from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import RobotDescription, load_robot
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
@@ -31,6 +32,7 @@ class BarrierWorld:
     profile: ClearanceProfile | None  # the paper's virtual obstacle z(s) (None: the scenario has none)
     alpha1: float  # [1/s]
     alpha2: float  # [1/s]
+    robot: RobotDescription = field(default_factory=lambda: load_robot("a1"))  # whose feet and shins
 
 
 class Barrier:
@@ -49,6 +51,7 @@ class Barrier:
     def __init__(self, world: BarrierWorld, name: str) -> None:
         self.name = name
         self.alpha1, self.alpha2 = world.alpha1, world.alpha2
+        self.foot_radius_m = world.robot.foot_radius_m  # [m] the robot's foot spheres
         self.start = 0  # first row in the QP's inequality block (set by the filter)
         self.margin_mps2 = 0.0  # [m/s²] robust margin on psi (set per tick by the filter when robust)
         self.h = np.full(quad.N_LEGS, np.nan)  # [m] barrier value per leg (nan where inactive)

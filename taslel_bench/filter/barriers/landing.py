@@ -36,7 +36,7 @@ class LandingVelocity(Barrier):
         legs = np.flatnonzero(~np.asarray(x.in_stance, bool) & (np.asarray(x.swing_phase) >= self.min_phase))
         if legs.size == 0:
             return
-        dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world[legs], a1.FOOT_RADIUS_M)
+        dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world[legs], self.foot_radius_m)
         for d, n, i in zip(dist, normal, legs):
             if not np.isfinite(d) or d >= self.activation_m:
                 continue

@@ -32,14 +32,17 @@ class LegClearance(Barrier):
     hdot = n . v_p, hddot >= n . (J_p vdot + J̇_p v) (the distance's Hessian, positive semi-definite, dropped:
     conservative): -n'J_p vdot <= a2 h_e + a1 hdot + n . J̇_p v."""
 
-    def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float = a1.SHIN_RADIUS_M,
-                 axis_fraction: float = a1.SHIN_AXIS_FRACTION, activation_m: float = 0.08, role: str | None = OBSTACLE,
+    def __init__(self, world: BarrierWorld, name: str = "shin", part: str = "shin", radius_m: float | None = None,
+                 axis_fraction: float | None = None, activation_m: float = 0.08, role: str | None = OBSTACLE,
                  swing_only: bool = False) -> None:  # fmt: skip
         super().__init__(world, name)
         if part not in PARTS:
             raise ValueError(f"filter.barriers.{name}.part={part!r}; valid: {', '.join(PARTS)}")
         self.terrain, self.part = world.terrain, part
-        self.radius_m, self.axis_fraction, self.activation_m = float(radius_m), float(axis_fraction), float(activation_m)
+        robot = world.robot  # radius and axis fraction default to the robot's shin capsule
+        self.radius_m = float(radius_m if radius_m is not None else robot.shin_radius_m)  # [m]
+        self.axis_fraction = float(axis_fraction if axis_fraction is not None else robot.shin_axis_fraction)  # [-]
+        self.activation_m = float(activation_m)  # [m]
         self.role = role  # the terrain parts it keeps clear of (default the obstacles; None: every part)
         self._has_parts = any(role is None or part.role == role for part in world.terrain.parts)
         self.swing_only = bool(swing_only)  # rows for swing legs only (a stance leg's rows constrain the trunk)

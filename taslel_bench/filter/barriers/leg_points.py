@@ -1,7 +1,7 @@
 """Kinematics of points on a lower leg for the whole-leg barriers: position of the knee (the calf joint), and
 for any world point p rigidly attached to a leg's calf body its translational Jacobian (world axes), velocity
 and J̇v, from the controller model's joint Jacobians at the current (q, v) (Pinocchio ``data.J``/``data.dJ``,
-filled by :meth:`taslel_bench.robot.model.A1Model.update`). Same formula as the foot terms of the model:
+filled by :meth:`taslel_bench.robot.model.RobotModel.update`). Same formula as the foot terms of the model:
 J_p = J_lin + omega x p on the columns that move the leg (free flyer + the leg's three joints)."""
 
 from __future__ import annotations
@@ -9,17 +9,17 @@ from __future__ import annotations
 import numpy as np
 
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.model import A1Model
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.util.jit import kernel
 
 
 class LegPoints:
-    """Per-episode lookup of the calf joints and the leg columns of one :class:`A1Model`."""
+    """Per-episode lookup of the calf joints and the leg columns of one :class:`RobotModel`."""
 
-    def __init__(self, model: A1Model) -> None:
+    def __init__(self, model: RobotModel) -> None:
         self.model = model
         pm = model.model
-        self.knee_joints = [pm.getJointId(f"{leg}_calf_joint") for leg in quad.LEGS]
+        self.knee_joints = [pm.getJointId(model.robot.joint_names[3 * leg + 2]) for leg in range(quad.N_LEGS)]
         self.cols = []
         for j in self.knee_joints:
             support = pm.supports[j][1:]

@@ -8,7 +8,6 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_barrier_row
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 
@@ -39,7 +38,7 @@ class ObstacleClearance(Barrier):
         m = x.model
         _obstacle_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
                        m.foot_jdotv_in_world, x.in_stance, self._geometry, self.alpha1, self.alpha2,
-                       a1.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+                       self.foot_radius_m, self.h, self.h_e)  # fmt: skip
         self.tighten(qp)
 
 

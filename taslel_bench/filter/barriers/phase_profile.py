@@ -5,7 +5,6 @@ from __future__ import annotations
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld, _inactive_barrier_row
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
 
@@ -34,7 +33,7 @@ class PhaseProfileClearance(Barrier):
         m = x.model
         _ecbf_rows(qp.G, qp.h, self.start, m.foot_pos_in_world, m.foot_vel_in_world, m.foot_jac_in_world,
                    m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, self._c, self._c1,
-                   self._c2, self.alpha1, self.alpha2, a1.FOOT_RADIUS_M, self.h, self.h_e)  # fmt: skip
+                   self._c2, self.alpha1, self.alpha2, self.foot_radius_m, self.h, self.h_e)  # fmt: skip
         self.tighten(qp)
 
 

@@ -63,7 +63,7 @@ class TerrainClearance(Barrier):
             self.write_python(qp, x)
             return
         _terrain_distance_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field,
-                               m.foot_pos_in_world, a1.FOOT_RADIUS_M, self._dist, self._normal, self._point, qp.G,
+                               m.foot_pos_in_world, self.foot_radius_m, self._dist, self._normal, self._point, qp.G,
                                qp.h, self.start, m.foot_vel_in_world, m.foot_jac_in_world, m.foot_jdotv_in_world,
                                x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
                                self.touchdown_allowance_m, self.max_normal_z, self.alpha1, self.alpha2, self.h,
@@ -74,7 +74,7 @@ class TerrainClearance(Barrier):
         """:meth:`write` with the terrain measured through :meth:`Terrain.near_distance` (a part the compiled
         query does not know; the reference of the compiled write in the tests)."""
         m = x.model
-        dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world, a1.FOOT_RADIUS_M, role=self.role)
+        dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world, self.foot_radius_m, role=self.role)
         _terrain_rows(qp.G, qp.h, self.start, dist, normal, m.foot_vel_in_world, m.foot_jac_in_world,
                       m.foot_jdotv_in_world, x.in_stance, x.swing_phase, x.swing_phase_rate, 16.0 * self.lift_m,
                       self.touchdown_allowance_m, self.max_normal_z, self.alpha1, self.alpha2, self.h,
