@@ -166,7 +166,7 @@ _SIDES = torch.tensor(quad.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 ri
 def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 24): ``[p_foot (4 x 3) [m], v_foot (4 x 3) [m/s]]``, legs FL, FR, RL,
     RR, foot-sphere centres relative to the trunk origin, in trunk axes; v_foot = J_leg(q) qdot (the foot's
-    velocity relative to the trunk, not in the world). Same chain as :func:`taslel_bench.robot.kinematics.leg_fk`.
+    velocity relative to the trunk, not in the world). Same chain as :meth:`taslel_bench.robot.kinematics.LegKinematics.leg_fk`.
     A stance foot that holds has v_foot = -(v_trunk + omega x p_foot); feet of one stance pair that disagree
     beyond the rotation term are slipping, whatever the payload or motor strength."""
     l1, l2, l3 = abs(_A1.legs[0].lateral_m), _A1.legs[0].thigh_length_m, _A1.legs[0].calf_length_m

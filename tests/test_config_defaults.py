@@ -31,15 +31,16 @@ def _differences(built, default) -> list[str]:
 
 def test_core_settings_defaults_are_the_configs():
     cfg = compose()
-    controller = settings.build_controller(cfg)
+    robot = settings.robot_description(cfg)
+    controller = settings.build_controller(cfg, robot)
     pairs = {
-        "filter": (settings.filter_settings(cfg), FilterSettings()),
+        "filter": (settings.filter_settings(cfg, robot), FilterSettings()),
         "filter.robust": (settings.robust_settings(cfg.filter.robust), RobustSettings()),
-        "episode": (settings.episode_settings(cfg), EpisodeSettings()),
+        "episode": (settings.episode_settings(cfg, robot), EpisodeSettings()),
         "health": (settings.health_limits(cfg), HealthLimits()),
         "safety": (safety_limits(cfg), SafetyLimits()),
         "model": (settings.model_options(cfg), ModelOptions()),
-        "plant": (settings.plant_options(cfg), PlantOptions()),
+        "plant": (settings.plant_options(cfg, robot), PlantOptions()),
         "controller gait": (controller.gait.p, GaitParams()),
         "controller gains": (controller.gains, PDGains()),
     }

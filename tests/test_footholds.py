@@ -148,7 +148,7 @@ def test_the_planner_changes_nothing_on_flat_ground_and_moves_a_touchdown_off_a_
 
 
 def test_foothold_search_is_checked_and_needs_terrain_following():
-    from taslel_bench.config.settings import build_controller
+    from taslel_bench.api import build_controller
     from taslel_bench.config.validate import validate
     from taslel_bench.util.fields import ConfigError
 

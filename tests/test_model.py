@@ -8,7 +8,7 @@ import pinocchio as pin
 import pytest
 
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
-from taslel_bench.plant.build import PlantOptions, robot_spec, build_plant, compile_plant
+from taslel_bench.plant.build import PlantOptions, build_plant, compile_plant, robot_spec
 from taslel_bench.plant.contacts import FootContactReader, foot_geom_ids, measure_contact_friction
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot

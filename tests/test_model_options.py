@@ -12,7 +12,7 @@ import pytest
 from taslel_bench.config.settings import model_options
 from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
-from taslel_bench.plant.build import robot_spec, compile_plant
+from taslel_bench.plant.build import compile_plant, robot_spec
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.model import RobotModel
@@ -60,7 +60,7 @@ def test_default_model_is_bit_identical_to_the_plain_urdf_model():
     """Default options (in code, from the default config) give exactly Pinocchio's M and nle of the URDF."""
     ref = pin.buildModelFromUrdf(str(load_robot("a1").urdf_path), pin.JointModelFreeFlyer())
     ref_data = ref.createData()
-    models = [RobotModel(), RobotModel(ModelOptions()), RobotModel(model_options(compose_cfg()))]
+    models = [RobotModel(), RobotModel(options=ModelOptions()), RobotModel(options=model_options(compose_cfg()))]
     rng = np.random.default_rng(5)
     for _ in range(5):
         q, v = random_state(models[0], rng)
@@ -94,7 +94,7 @@ MATCHED = {
 @pytest.mark.parametrize("options", MATCHED.values(), ids=MATCHED.keys())
 def test_model_matches_a_plant_perturbed_the_same_way(options):
     m = perturbed_plant(**options)
-    pm = RobotModel(ModelOptions(**options))
+    pm = RobotModel(options=ModelOptions(**options))
     worst_m, worst_h = worst_difference(m, pm)
     assert worst_m < AGREE and worst_h < AGREE, (worst_m, worst_h)
     assert pm.total_mass_kg == pytest.approx(float(m.body_mass.sum()), abs=1e-12)
@@ -122,7 +122,7 @@ def test_coulomb_frictionloss_disturbance_against_mujoco():
     F = 0.2  # [N·m]
     m = perturbed_plant(joint_frictionloss=F)
     d, br = mujoco.MjData(m), StateBridge(m)
-    pm, nominal = RobotModel(ModelOptions(joint_frictionloss=F)), RobotModel()
+    pm, nominal = RobotModel(options=ModelOptions(joint_frictionloss=F)), RobotModel()
     rng = np.random.default_rng(3)
     saturated = 0
     for _ in range(10):

@@ -16,9 +16,10 @@ from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.interfaces import PlantPerturbation
 from taslel_bench.plant.adapter import read_record
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.plant.build import robot_spec, build_plant, compile_plant
+from taslel_bench.plant.build import build_plant, compile_plant, robot_spec
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
@@ -33,6 +34,7 @@ MENAGERIE_LIKE = [  # Menagerie-style names as robot.plant_names overrides (Hydr
     "robot.plant_names.trunk=torso",
 ]
 STAND = NominalController(GaitParams(), PDGains()).stand_configuration()
+A1 = load_robot("a1")
 
 
 def third_party_a1(
@@ -226,12 +228,12 @@ def test_overrides_are_applied_and_reported(tmp_path):
     ):
         assert text in report["plant_overrides"], report["plant_overrides"]
     # the URDF plant takes the same overrides; with the defaults nothing changes and nothing is recorded
-    urdf_plant = build_plant(plant_options(compose_cfg(overrides)))
+    urdf_plant = build_plant(plant_options(compose_cfg(overrides), A1))
     assert (
         urdf_plant.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
         and "cone" in read_record(urdf_plant)["overrides"]
     )
-    default = build_plant(plant_options(compose_cfg()))
+    default = build_plant(plant_options(compose_cfg(), A1))
     assert default.ntext == 0 and default.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
 
 
@@ -279,7 +281,7 @@ def test_report_shows_a_perturbed_plant_and_a_matching_model():
     assert nominal["model_minus_plant_com_stand_m"] > 1e-3
     from taslel_bench.robot.model_options import ModelOptions
 
-    matched = plant_vs_model(m, RobotModel(ModelOptions(**kw)), STAND)
+    matched = plant_vs_model(m, RobotModel(options=ModelOptions(**kw)), STAND)
     assert (
         matched["model_joint_damping_nms_per_rad_min"] == 1.5
         and matched["model_joint_armature_kgm2_max"] == 0.01

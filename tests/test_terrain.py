@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from taslel_bench.interfaces import Box, FrictionStrips, Log, Plane, Terrain
-from taslel_bench.plant.build import robot_spec, compile_plant
+from taslel_bench.plant.build import compile_plant, robot_spec
 
 PROBE_RADIUS_M = 0.02
 

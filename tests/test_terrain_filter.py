@@ -16,6 +16,7 @@ from taslel_bench.filter.layout import LAM, NV, TickInputs
 from taslel_bench.filter.safety_filter import FilterSettings, SafetyFilter
 from taslel_bench.filter.terrain_cone import TerrainFrictionCone, downhill_edge_basis, tangent_basis
 from taslel_bench.interfaces import OBSTACLE, Box, Log, Plane, QPSolution, Ramp, Terrain
+from taslel_bench.robot.description import load_robot
 from taslel_bench.terrain.packed import PackedTerrain
 from tests.conftest import compose_cfg
 from tests.test_filter import TightReference, inputs_for, walking_states, world
@@ -255,7 +256,7 @@ def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
     from taslel_bench.config.settings import filter_settings
 
     assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is True  # the preset turns it
-    assert filter_settings(compose_cfg([])).cone_edge_downhill is False  # the paper's filter does not have it
+    assert filter_settings(compose_cfg([]), load_robot("a1")).cone_edge_downhill is False  # the paper's filter does not have it
     with pytest.raises(Exception, match="cone_edge_downhill"):
         from taslel_bench.config.validate import validate
         validate(compose_cfg(["filter=terrain", "filter.cone_edge_downhill=maybe"]))

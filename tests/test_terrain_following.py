@@ -11,7 +11,10 @@ from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.interfaces import OBSTACLE, Box, Plane, Terrain
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.kinematics import leg_fk
+from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.kinematics import LegKinematics
+
+KIN = LegKinematics(load_robot("a1"))
 from tests.conftest import compose_cfg
 
 LEVEL_POSE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])  # trunk at the origin, level, heading +x
@@ -20,7 +23,7 @@ STEP_M = 0.05
 
 def _feet_z(q_des: np.ndarray) -> np.ndarray:
     """Foot-centre z [m] in each hip frame of joint angles ``q_des`` (12,)."""
-    return np.array([leg_fk(q_des[3 * i : 3 * i + 3], quad.LEG_SIDE[i])[2] for i in range(4)])
+    return np.array([KIN.leg_fk(i, q_des[3 * i : 3 * i + 3])[2] for i in range(4)])
 
 
 def _controllers(terrain: Terrain) -> tuple[NominalController, TerrainFollowingController]:
@@ -71,7 +74,7 @@ def test_a_swing_toward_a_step_rises_to_its_top_by_mid_swing_and_lands_on_it():
 
 
 def test_terrain_following_is_a_config_switch_refused_unless_boolean():
-    from taslel_bench.config.settings import build_controller
+    from taslel_bench.api import build_controller
     from taslel_bench.config.validate import validate
     from taslel_bench.util.fields import ConfigError
 

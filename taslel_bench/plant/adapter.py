@@ -141,7 +141,7 @@ def _available(names) -> str:
 
 
 def adapt(
-    spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: float, where: str
+    spec: mujoco.MjSpec, names: PlantNames, torque_limit_nm: tuple[float, ...], where: str
 ) -> tuple[mujoco.MjsGeom | None, dict]:
     """Rename the file's joints, actuators, foot geoms and trunk to the core's names, make the 12 actuators
     torque motors, find the floor. Returns (the floor geom or None, record). Raises :class:`ConfigError`
@@ -375,11 +375,11 @@ def _actuator_type_problems(chosen: dict[str, mujoco.MjsActuator]) -> list[str]:
 
 
 def _torque_motors(
-    spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], torque_limit_nm: float
+    spec: mujoco.MjSpec, chosen: dict[str, mujoco.MjsActuator], torque_limit_nm: tuple[float, ...]
 ) -> dict:
     """Make each chosen actuator a torque motor taking joint torque [N·m] as ctrl (gain 1, gear 1); delete
     other actuators on the 12 joints. A servo (affine bias: tau = kp (ctrl - q) - kv qdot) becomes a motor
-    with ctrlrange +-``torque_limit_nm`` (the URDF effort limit by default); a motor with gear x gain g != 1
+    with ctrlrange +- its joint's ``torque_limit_nm`` (12, core order; the robot's by default); a motor with gear x gain g != 1
     gets gear 1 and its ctrlrange scaled by g. Returns the record: ``actuators_converted`` [[core joint,
     what], ...], ``actuators_removed`` [names]."""
     converted, removed = [], []
@@ -387,11 +387,12 @@ def _torque_motors(
         gain = float(act.gainprm[0]) * float(act.gear[0])
         if act.biastype == mujoco.mjtBias.mjBIAS_AFFINE:
             kp, kv = float(act.gainprm[0]), -float(act.biasprm[2])
-            converted.append([core, f"servo kp={kp:g} kv={kv:g} -> motor +-{torque_limit_nm:g} N·m"])
+            limit = float(torque_limit_nm[quad.JOINT_NAMES.index(core)])  # [N·m]
+            converted.append([core, f"servo kp={kp:g} kv={kv:g} -> motor +-{limit:g} N·m"])
             act.set_to_motor()
             act.gear = [1.0, 0, 0, 0, 0, 0]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.ctrlrange = [-torque_limit_nm, torque_limit_nm]
+            act.ctrlrange = [-limit, limit]
         elif gain != 1.0:
             converted.append([core, f"motor gear x gain {gain:g} -> 1 (ctrlrange scaled)"])
             act.ctrlrange = np.asarray(act.ctrlrange) * gain

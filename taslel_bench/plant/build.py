@@ -36,7 +36,7 @@ class PlantOptions:
 
     timestep_s: float = 0.001  # [s] physics step
     floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
-    torque_limit_nm: tuple[float, ...] | None = None  # [N·m] per joint (core order) motor ctrlrange; None: robot's
+    torque_limit_nm: tuple[float, ...] = (33.5,) * quad.N_JOINTS  # [N·m] motor ctrlrange per joint, core order
     names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
     overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
 
@@ -75,13 +75,15 @@ def _package_file(urdf: Path, package: str, inner: str) -> str:
     return f"package://{package}/{inner}"  # left as it was: MuJoCo's compile error names the file
 
 
-def robot_spec(robot: RobotDescription | None = None, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+def robot_spec(robot: RobotDescription | None = None, options: PlantOptions | None = None) -> mujoco.MjSpec:
     """Uncompiled plant of ``robot`` (default: the A1): its URDF's collision geometry under the core's names, a
-    free joint on the trunk, a floor, 12 torque motors at the robot's limits, foot sites and sensors.
+    free joint on the trunk, a floor, 12 torque motors at ``options.torque_limit_nm``, foot sites and sensors
+    (``options`` None: the defaults with the robot's torque limits).
 
     Scenarios edit the returned spec (terrain, obstacles, perturbations) before :func:`compile_plant`.
     """
     robot = robot if robot is not None else load_robot("a1")
+    options = options if options is not None else PlantOptions(torque_limit_nm=robot.torque_limit_nm)
     spec = mujoco.MjSpec.from_string(_urdf_text(robot))
     _strip_unloadable_meshes(spec)
     spec.compiler.fusestatic = True  # massless roots and fixed links are fused away
@@ -111,8 +113,7 @@ def robot_spec(robot: RobotDescription | None = None, options: PlantOptions = Pl
         friction=options.floor_friction,
     )
     add_foot_contact_sensors(spec)
-    limits = options.torque_limit_nm if options.torque_limit_nm is not None else robot.torque_limit_nm
-    for name, limit in zip(quad.JOINT_NAMES, limits, strict=True):
+    for name, limit in zip(quad.JOINT_NAMES, options.torque_limit_nm, strict=True):
         act = spec.add_actuator(name=name, target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.set_to_motor()
@@ -264,6 +265,6 @@ def compile_error_message(source: Path, exc: BaseException) -> str:
     return message
 
 
-def build_plant(options: PlantOptions = PlantOptions(), robot: RobotDescription | None = None) -> mujoco.MjModel:
+def build_plant(options: PlantOptions | None = None, robot: RobotDescription | None = None) -> mujoco.MjModel:
     """The flat-floor plant of ``robot`` (default: the A1)."""
     return compile_plant(robot_spec(robot, options))

@@ -442,9 +442,11 @@ def _core_ordered_urdf(text: str, robot: RobotDescription) -> str:
     root = ET.fromstring(text)
     parent_joint = {j.find("child").get("link"): j for j in root.findall("joint")}
     for leg in range(quad.N_LEGS):
-        joint = next(j for j in root.findall("joint") if j.get("name") == robot.joint_names[3 * leg])
-        while joint.find("parent").get("link") != robot.trunk_link:
-            joint = parent_joint[joint.find("parent").get("link")]
+        joint = next((j for j in root.findall("joint") if j.get("name") == robot.joint_names[3 * leg]), None)
+        while joint is not None and joint.find("parent").get("link") != robot.trunk_link:
+            joint = parent_joint.get(joint.find("parent").get("link"))
+        if joint is None:  # not the robot's URDF: the caller names the joint order it finds
+            return text
         name = joint.get("name")
         text = text.replace(f'name="{name}"', f'name="{leg}_{name}"', 1)
     return text
