@@ -67,7 +67,7 @@ def references(controller, n_ticks: int, dt_s: float) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def _tick(qpos, qvel, q_adr, v_adr, act_ids, ref_q, ref_qd, kp, kd, limit, tau_prev, sample, do_sample, ctrl):
     """One tick before the physics step: the sample (q, qdot, previous tau) if ``do_sample``, then the PD law
-    u = clip(kp (q_des - q) + kd (qd_des - qdot)) written into ``ctrl`` and ``tau_prev`` (the core's
+    u = clip(kp (q_des - q) + kd (qd_des - qdot), +-limit[j]) written into ``ctrl`` and ``tau_prev`` (the core's
     :func:`taslel_bench.control.nominal._pd` arithmetic)."""
     for j in range(12):
         q = qpos[q_adr[j]]
@@ -76,7 +76,7 @@ def _tick(qpos, qvel, q_adr, v_adr, act_ids, ref_q, ref_qd, kp, kd, limit, tau_p
             sample[j] = q
             sample[12 + j] = qd
             sample[24 + j] = tau_prev[j]
-        u = min(max(kp * (ref_q[j] - q) + kd * (ref_qd[j] - qd), -limit), limit)
+        u = min(max(kp * (ref_q[j] - q) + kd * (ref_qd[j] - qd), -limit[j]), limit[j])
         tau_prev[j] = u
         ctrl[act_ids[j]] = u
 
@@ -94,7 +94,7 @@ def run_nominal(episode, every_ticks: int) -> FastResult:
     refs = references(ctl, n, dt)
     q_adr, v_adr = np.asarray(br.joint_qadr), np.asarray(br.joint_dadr)
     act = np.asarray(br.actuator_ids)
-    kp, kd, lim = float(ctl.gains.kp), float(ctl.gains.kd), float(ctl.torque_limit_nm)
+    kp, kd, lim = float(ctl.gains.kp), float(ctl.gains.kd), np.asarray(ctl.torque_limit_nm, float)
     qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
     n_max = n // every_ticks + 1
     samples, mu_trunk = np.zeros((n_max, N_FEATURES), np.float32), np.zeros(n_max)

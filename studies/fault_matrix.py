@@ -15,6 +15,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -96,9 +97,8 @@ def scene(folder: Path) -> Path:
 
     (folder / "assets").mkdir(parents=True, exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA)
-    xml = robot_spec().to_xml().replace(
-        '<compiler angle="radian"/>',
-        '<compiler angle="radian" meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>')
+    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>',
+                 robot_spec().to_xml(), count=1)
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
                                             'conaffinity="0" density="0" group="3"/>', 1)  # fmt: skip
     (folder / "robot.xml").write_text(xml)

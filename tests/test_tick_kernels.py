@@ -148,7 +148,7 @@ def test_after_step_gives_the_fall_and_flags_of_the_old_two_call_check():
 def test_pd_on_stacked_references_equals_the_clipped_pd_law():
     rng = np.random.default_rng(6)
     refs, q, qd, u = rng.normal(size=(2, 12)), rng.normal(size=12), rng.normal(size=12) * 10, np.empty(12)
-    _pd(refs, q, qd, 100.0, 3.0, 20.0, u)
+    _pd(refs, q, qd, 100.0, 3.0, np.full(12, 20.0), u)
     want = np.clip(100.0 * (refs[0] - q) + 3.0 * (refs[1] - qd), -20.0, 20.0)
     np.testing.assert_array_equal(u, want)
     assert np.any(np.abs(want) == 20.0) and np.any(np.abs(want) < 20.0)  # both branches of the clip

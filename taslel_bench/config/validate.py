@@ -362,7 +362,9 @@ def _robot(cfg: DictConfig) -> RobotDescription:
     if not isinstance(_get(cfg, r), DictConfig):
         raise fail(r, _get(cfg, r), "must be a robot config (conf/robot/<name>.yaml)")
     robot = describe_robot(OmegaConf.to_container(cfg.robot, resolve=True))
-    numbers(f"{r}.torque_limit_nm", list(robot.torque_limit_nm), 0.0, MAX_TORQUE_LIMIT_NM, unit="N·m")
+    if max(robot.torque_limit_nm) > MAX_TORQUE_LIMIT_NM:
+        raise fail(f"{r}.torque_limit_nm", _get(cfg, f"{r}.torque_limit_nm"),
+                   f"every joint's limit must be in (0, {MAX_TORQUE_LIMIT_NM:g}] N·m")
     number(f"{r}.fall_tilt_deg", robot.fall_tilt_deg, 0.0, 180.0, lo_open=True, unit="deg")
     number(f"{r}.init_joint_noise_rad", robot.init_joint_noise_rad, 0.0, MAX_JOINT_NOISE_RAD, unit="rad")
     number(f"{r}.init_base_vel_noise_mps", robot.init_base_vel_noise_mps, 0.0, MAX_BASE_VEL_NOISE_MPS, unit="m/s")

@@ -238,10 +238,12 @@ def _fit(draw, text: str, font, width_px: int) -> str:
 def plant_of_run(run_dir: Path):
     """The run's MuJoCo plant, rebuilt from its config.yaml (the scenario's terrain and edits)."""
     from taslel_bench.config.axes import build_axis
+    from taslel_bench.config.settings import robot_description
     from taslel_bench.sim.build import build_plant_model
 
     cfg = OmegaConf.load(Path(run_dir) / "config.yaml")
-    return build_plant_model(cfg, build_axis(cfg, "scenario"), np.random.default_rng(int(cfg.seed)))
+    return build_plant_model(cfg, robot_description(cfg), build_axis(cfg, "scenario"),
+                             np.random.default_rng(int(cfg.seed)))
 
 
 def run_record(run_dir: Path) -> tuple[pd.DataFrame, dict, list[dict]]:
