@@ -26,8 +26,6 @@ from taslel_bench.config.compose import CONF_DIR
 REPO = CONF_DIR.parent
 SOURCE_DIRS = ("taslel_bench", "scenarios", "solvers", "estimators")
 RENAMED_TARGET = "solvers.registry.renamed"  # conf/solver/<name>_persistent.yaml: old names, refused when used
-# groups whose options select Hydra's own machinery (conf/hydra/<group>/)
-HYDRA_GROUPS = ("hydra/launcher", "hydra/help")
 
 
 class CliError(ValueError):
@@ -152,13 +150,12 @@ def check_overrides(argv: Sequence[str]) -> None:
         key = o.key_or_group
         if o.is_delete():
             continue
-        if key in groups or key in HYDRA_GROUPS:
+        if key.startswith(("hydra.", "hydra/")):
+            continue  # Hydra's own groups also hold its plugins' options (submitit_local, joblib ...): Hydra checks them
+        if key in groups:
             values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [str(o.value())]
             _check_group(o.input_line, key, values, groups)
-            if key not in HYDRA_GROUPS:
-                group_args.append(f"{'+' if o.is_add() else ''}{key}={values[0]}")
-        elif key.startswith(("hydra.", "hydra/")):
-            continue
+            group_args.append(f"{'+' if o.is_add() else ''}{key}={values[0]}")
         else:
             key_overrides.append(o)
     if not key_overrides:
