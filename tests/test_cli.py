@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -122,3 +124,32 @@ def test_unloadable_gl_library_gives_the_hint_not_a_traceback(tmp_path):
     out = _cli(tmp_path, "duration=0.1", env={"MUJOCO_GL": "no_such_gl"})
     assert out.returncode == 1
     assert out.stderr.startswith("error: MUJOCO_GL=no_such_gl: MuJoCo could not load it") and "Traceback" not in out.stderr
+
+
+def test_added_barrier_family_passes():
+    check_overrides(["+filter.barriers.mine={_target_: my.module.MyBarrier}"])  # the filter builds every entry
+
+
+def test_report_opens_with_contents_and_verdicts_and_keeps_heading_order():
+    import pandas as pd
+
+    from taslel_bench.sweep.claims import paper_claims
+    from taslel_bench.sweep.report import answers_section, contents
+
+    frame = pd.DataFrame({"scenario": ["flat", "flat", "logs"], "solver": ["daqp"] * 3, "filter_enabled": [True] * 3,
+                          "status": ["ok", "ok", "degraded"], "safe": [True, False, False],
+                          "unsafe_reasons": ["", "fell: at 3.00 s (tilt)", "tripped: trips=2 > 0 (x)"]})
+    text = answers_section(frame, None)
+    assert text.startswith("## Verdicts")
+    assert "2 of 3 judged runs are unsafe" in text
+    assert "- scenario=flat, solver=daqp: 1/2 (fell 1) unsafe" in text
+    assert "- scenario=logs, solver=daqp: 1/1 (tripped 1) unsafe" in text
+    toc = contents(["## Verdicts\n", "## Solver verdict: which backend to ship\n"])
+    assert "- [Solver verdict: which backend to ship](#solver-verdict-which-backend-to-ship)" in toc
+    # a committed sweep's runs with the filter on only (no nominal runs): the sentence names what it has
+    paper = pd.read_parquet(REPO / "results" / "paper" / "summary.parquet")
+    claims = paper_claims(paper[paper["filter_enabled"].astype(bool)])
+    assert "Claim by claim" in claims and "flat — nominal" not in claims and "(verdict) — nominal" not in claims
+    assert re.search(r"unsafe runs of the judged ones: flat: \d+/\d+ .*filtered", claims)
+    levels = [len(line) - len(line.lstrip("#")) for line in claims.splitlines() if line.startswith("#")]
+    assert levels and all(b - a <= 1 for a, b in itertools.pairwise(levels))
