@@ -65,12 +65,35 @@ PHRASES: list[tuple[str, str]] = [
      "attention_step and\nlinformer_step trained on 11 400 episodes in f2f4fa4, mlp on 9 000 in 988f443)"),
     ("round 8's `slip_fixed`", "the `slip_fixed` of 8a353b7"),
 ]
+# estimator generations (estimators/README.md): each named by the commit that made it
+GENERATIONS: list[tuple[str, str]] = [
+    (r"## Round 7: one-sided targets per friction band \(issue 19\)", "## One-sided targets per friction band (commit c74fe88)"),
+    (r"## Round 8: collection speed, surface patches, per-foot estimates \(issue 27\)",
+     "## Collection speed, surface patches, per-foot estimates (commit 075da76)"),
+    (r"\*\*Round 9: the legs' weight, and proofs of friction\*\*",
+     "**The legs' weight, and proofs of friction (commit b178982)**"),
+    (r"^Round 5 \(not shipped;", "The 803c5c4 re-collection (not shipped;"),
+    (r"^Round 6 \(not shipped;", "The 95c29f7 re-training (not shipped;"),
+    (r"\(rounds 3-8, seeds fixed\)", "(the generations of 988f443 to 075da76, seeds fixed)"),
+    (r"the checkpoints are round 3/4's", "the checkpoints are those of 988f443 (mlp) and f2f4fa4"),
+    (r"# stop 46 regenerated the committed files with these commands", "# the committed files were regenerated with these commands (runs of bbeaff8)"),
+    (r"\bround[- ]3 nominal", "988f443's nominal"),
+    (r"\b[Rr]ound[- ]4's", "f2f4fa4's"),
+    (r"\b[Rr]ound[- ]8's", "075da76's"),
+    (r"\b[Rr]ound[- ]3\b", "the 988f443 generation"),
+    (r"\b[Rr]ound[- ]4\b", "the f2f4fa4 generation"),
+    (r"\b[Rr]ound[- ]7\b", "the one-sided targets (c74fe88)"),
+    (r"\b[Rr]ound[- ]8\b", "the per-foot work (075da76)"),
+    (r"\b[Rr]ound[- ]9\b", "the leg-gravity work (b178982)"),
+]
 LEFT = re.compile(r"\b([Ss]tops?|[Rr]ounds?|[Ii]ssues?)[ -][0-9]+")
 
 
 def scrub(text: str) -> str:
     for old, new in PHRASES:
         text = text.replace(old, new)
+    for pattern, new in GENERATIONS:
+        text = re.sub(pattern, new, text, flags=re.M)
     return text
 
 
