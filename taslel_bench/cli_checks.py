@@ -2,8 +2,10 @@
 
 * ``group=option`` with an option that does not exist: refused with the closest options ("did you mean").
 * ``key=value`` with a key the config does not have: refused with the closest keys.
-* ``+key=value`` (Hydra's "append"): refused when no part of the run reads the key. A key is read when the
-  config node holding it is built by a ``_target_`` whose constructor takes that argument (or ``**kwargs``),
+* ``+key=value`` (Hydra's "append"): refused when no part of the run reads the key. A key is read when its
+  value is an object with a ``_target_``, when it is an entry of a node the run reads whole
+  (:data:`WHOLE_NODES`, e.g. ``filter.barriers``), when the config node holding it is built by a ``_target_``
+  whose constructor takes that argument (or ``**kwargs``),
   or when the harness reads it by name as an optional key (``node.get("key")``, ``_get(cfg, "a.b.key")``,
   ``OmegaConf.select(cfg, "a.b.key")``) in the source of ``taslel_bench`` or of the axis packages.
 
@@ -25,6 +27,8 @@ from taslel_bench.config.compose import CONF_DIR
 
 REPO = CONF_DIR.parent
 SOURCE_DIRS = ("taslel_bench", "scenarios", "solvers", "estimators")
+# nodes whose every entry the run reads (built as a list, or handed on whole): a key added under them is read
+WHOLE_NODES = ("filter.barriers", "robot.plant_names", "robot.plant_overrides")
 RENAMED_TARGET = "solvers.registry.renamed"  # conf/solver/<name>_persistent.yaml: old names, refused when used
 
 
@@ -179,6 +183,9 @@ def check_overrides(argv: Sequence[str]) -> None:
         if exists:
             continue  # Hydra refuses to append an existing key itself; ++ sets it
         parent, _, leaf = key.rpartition(".")
+        value = o.value()
+        if parent in WHOLE_NODES or (isinstance(value, dict) and "_target_" in value):
+            continue  # an entry of a node read whole, or an object built from its _target_
         node = OmegaConf.select(cfg, parent) if parent else cfg
         target = node.get("_target_") if node is not None and OmegaConf.is_dict(node) else None
         if target is not None and _target_accepts(str(target), leaf):
