@@ -184,13 +184,22 @@ def _source_definitions() -> dict[str, tuple[str, str]]:
 
 
 def _guide_definitions() -> dict[str, str]:
-    """key -> the sentence of the metrics guide that names it (docs/guides/safety-verdict.md)."""
-    text = (DOCS / "guides" / "safety-verdict.md").read_text()
+    """key -> the paragraph of a guide that names it (the metrics guide first, then the other guides); a
+    pattern such as ``clearance_*_unloaded`` or ``tick_<part>_us_median`` names every key it matches."""
+    guides = [DOCS / "guides" / "safety-verdict.md", *sorted((DOCS / "guides").glob("*.md"))]
     out: dict[str, str] = {}
-    for para in re.split(r"\n- |\n\n", text):
-        para = " ".join(para.split())
-        for key in re.findall(r"`([a-z][a-z0-9_]*)`", para):
-            out.setdefault(key, para)
+    patterns: list[tuple[re.Pattern, str]] = []
+    for path in guides:
+        for para in re.split(r"\n- |\n\n", path.read_text()):
+            para = " ".join(para.split())
+            for key in re.findall(r"`([a-z][a-z0-9_*<>]*)`", para):
+                if "*" in key or "<" in key:
+                    rx = re.escape(key).replace(r"\*", "[a-z0-9_]+")
+                    rx = re.sub(r"<[a-z]+>", "[a-z0-9]+", rx.replace(r"\<", "<").replace(r"\>", ">"))
+                    patterns.append((re.compile(rx + "$"), para))
+                else:
+                    out.setdefault(key, para)
+    out["__patterns__"] = patterns  # type: ignore[assignment]
     return out
 
 
@@ -219,7 +228,8 @@ def summary_keys_page() -> str:
     missing = 0
     for key in keys:
         where_set, comment = src.get(key, ("", ""))
-        definition = comment or guide.get(key, "")
+        definition = comment or guide.get(key, "") or next(
+            (para for rx, para in guide["__patterns__"] if rx.match(key)), "")
         if not definition:
             missing += 1
         value = summary[key]
