@@ -129,6 +129,10 @@ def _keys(node, prefix: str = "") -> list[str]:
 def _check_group(line: str, key: str, values: list[str], groups: dict[str, tuple[str, ...]]) -> None:
     options = groups[key]
     for v in values:
+        path = CONF_DIR / key / f"{v}.yaml"
+        if v in options and _yaml_target(path) == RENAMED_TARGET:
+            note = " ".join(ln.lstrip("# ").strip() for ln in path.read_text().splitlines() if ln.startswith("#"))
+            raise CliError(f"{line}: '{v}' is an old name, refused. {note}")
         if v not in options:
             shown = group_options(include_renamed=False).get(key, options)
             raise CliError(f"{line}: '{v}' is not an option of the config group '{key}'"

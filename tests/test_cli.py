@@ -153,3 +153,11 @@ def test_report_opens_with_contents_and_verdicts_and_keeps_heading_order():
     assert re.search(r"unsafe runs of the judged ones: flat: \d+/\d+ .*filtered", claims)
     levels = [len(line) - len(line.lstrip("#")) for line in claims.splitlines() if line.startswith("#")]
     assert levels and all(b - a <= 1 for a, b in itertools.pairwise(levels))
+
+
+def test_old_solver_name_is_refused_with_the_new_one_before_any_folder(tmp_path):
+    out = _cli(tmp_path, "solver=osqp_persistent")
+    assert out.returncode == 2
+    assert "solver=osqp_persistent: 'osqp_persistent' is an old name, refused" in out.stderr
+    assert "solver=osqp is now the persistent osqp" in out.stderr
+    assert list(tmp_path.iterdir()) == []
