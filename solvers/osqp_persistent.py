@@ -28,7 +28,7 @@ from solvers.settings import check_settings
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem, flag
 
-# Accurate u (DESIGN.md: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
+# Accurate u (docs/concepts.md, measured facts: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
 # Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
 # * condensed QPs (12 variables in u, no equality rows, P ~ I: well scaled): eps_abs 1e-6 without Ruiz
 #   scaling, rho adapted every 25 iterations -> max |du| 1e-6 N·m in 35 iterations, 28 % less time than

@@ -12,9 +12,9 @@ timings excluded), the largest |difference| of the applied torques and the trunk
 tick, and the number of ``steps.parquet`` columns that are not bit-identical (every column but the timers,
 names ending ``_us``: trunk, joints, torques, contact forces and flags, QP status and iterations, metrics;
 NaN equal to NaN; columns present in both). A refactor that preserves
-behaviour shows 0 differing keys, 0.0 and 0 columns there. ``--set all`` (default) is the issue 22 set that
-produced the core redesign's identity table; ``--set speed`` the issue 25 tick-speed set (10 s runs);
-``--set terrain`` ``filter=terrain`` on the terrain worlds (issue 28's cost work, 5 s runs).
+behaviour shows 0 differing keys, 0.0 and 0 columns there. ``--set all`` (default) is the set that
+produced the core redesign's identity table; ``--set speed`` the tick-speed set (10 s runs);
+``--set terrain`` ``filter=terrain`` on the terrain worlds (the terrain filter's cost work, 5 s runs).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ CASES: dict[str, list[str]] = {
     "contact_gain": ["scenario=low_friction", "filter.contact_velocity_gain=50"],
     "filter_late": ["scenario=obstacle", "filter.start_time=3"],
 }
-# the tick-speed set (issue 25): worlds x {default backend, osqp}, 10 s each, one seed
+# the tick-speed set: worlds x {default backend, osqp}, 10 s each, one seed
 SPEED_WORLDS: dict[str, list[str]] = {
     "flat": ["scenario=flat"],
     "obstacle": ["scenario=obstacle"],
@@ -71,7 +71,7 @@ SPEED_CASES: dict[str, list[str]] = {
     **{f"{name}_osqp": [*o, "duration=10", "solver=osqp"] for name, o in SPEED_WORLDS.items()
        if "filter.enabled=false" not in o},
 }
-# the terrain-filter set (issue 28's cost work): filter=terrain on the terrain worlds under the preset's nominal
+# the terrain-filter set (the terrain filter's cost work): filter=terrain on the terrain worlds under the preset's nominal
 # (terrain following, foothold choice) and under the paper's flat-ground nominal, the landing barrier switched on,
 # the paper's filter under the preset's nominal; 5 s each, seeds 0 and 1
 FLAT_GROUND_NOMINAL = ["controller.terrain_following=false", "controller.foothold_search=0.0",

@@ -1,7 +1,7 @@
 """How much friction the trot uses, and how well proprioception measures it: the signal an active friction
 probe would read (``python -m studies.estimator_probe_signal [--out FILE.md]``).
 
-Round 8 found that under ``filter=terrain`` no passive estimator can be useful above the friction the filter
+The per-foot work (075da76) found that under ``filter=terrain`` no passive estimator can be useful above the friction the filter
 plans with. An active probe (a foot deliberately loaded towards a higher force ratio, with an internal force
 between two stance feet so the trunk feels nothing) would need two things this study measures on flat floors:
 

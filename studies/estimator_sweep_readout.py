@@ -1,8 +1,8 @@
 """Estimator error of a sweep's runs after the first window is full (``python -m studies.estimator_sweep_readout``).
 
 The sweep report's ``estimator_*`` columns count every tick, including the first 1.17 s in which a learned
-estimator returns its prior (``prior_mu``; 0.5 up to round 6, where on a mu = 0.2 floor that alone was ~12 %
-over-estimation; the safe floor 0.2 since round 7)
+estimator returns its prior (``prior_mu``; 0.5 before c74fe88, where on a mu = 0.2 floor that alone was ~12 %
+over-estimation; the safe floor 0.2 since c74fe88)
 in a 10 s run. This reads each run's ``steps.parquet`` (``mu_hat`` = the friction the filter used,
 ``mu_true`` = the floor under the trunk) and reports, per scenario x estimator over the runs (seeds), the
 mean mu_hat, MAE, bias and over-estimation rate (mu_hat > mu + 0.05) over ticks with t >= ``--t-min``,

@@ -1,4 +1,4 @@
-"""Issue 24's fault matrix: bad input, interruption, concurrency and corrupted files, each case tried on the
+"""The fault matrix: bad input, interruption, concurrency and corrupted files, each case tried on the
 importable taslel_bench and judged "well" (refused naming the field/file, result kept, table complete, exit
 code truthful) or "badly". Runs on any checkout (it only uses ``run``, ``config_sha256``, the CLIs and the
 fault injector of tests/fault_injection/), so the same matrix measures the main of before and after:

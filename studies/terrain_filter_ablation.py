@@ -1,4 +1,4 @@
-"""Which part of ``filter=terrain`` makes the A1 fall on real terrain (issue 28): run the terrain filter with
+"""Which part of ``filter=terrain`` makes the A1 fall on real terrain: run the terrain filter with
 subsets of its four parts switched on, per world and seed, and print one line per run and a falls table.
 
 Parts (each an override of ``conf/filter/terrain.yaml``; a part not listed is switched off):

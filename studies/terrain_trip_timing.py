@@ -1,7 +1,7 @@
 """How early are the swing-foot "trips" of the terrain worlds? (``python -m studies.terrain_trip_timing SWEEP
 [--out FILE.md]``, SWEEP = a ``+experiment=terrain`` sweep folder, e.g. the one of ``results/terrain/``)
 
-Issue 28's trip target counts every foot trip. On logs, steps, rough and slope almost all of them are
+The terrain study's trip target counts every foot trip. On logs, steps, rough and slope almost all of them are
 ``foot_trips_top_late_swing``: a swing foot whose first contact with the relief is on a top (normal within 45
 deg of vertical) in the second half of its swing, before the gait's scheduled touchdown (the same event on the
 floor is an early touchdown and no trip). This study reads each run's ``steps.parquet`` and finds those onsets

@@ -1,5 +1,5 @@
 """Instructions per control tick of the default loop and of the parts of the bench's sum-of-parts limit
-(issue 25): callgrind counts, repeatable whatever else loads the machine (the timings of
+(the tick-cost work): callgrind counts, repeatable whatever else loads the machine (the timings of
 ``python -m taslel_bench.bench`` are not).
 
     python -m studies.tick_instructions [overrides ...]      # e.g. scenario=flat; needs valgrind and gcc

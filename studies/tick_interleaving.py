@@ -1,4 +1,4 @@
-"""Do the tick's parts slow each other down, or does the glue between them slow them down? (issue 25)
+"""Do the tick's parts slow each other down, or does the glue between them slow them down?
 
     python -m studies.tick_interleaving [--ticks N] [--rounds R] [overrides ...]
 

@@ -3,9 +3,10 @@
 Each run writes its folder (summary.json, steps.parquet, events.json, episode.mcap); at the end of a
 multirun the :class:`taslel_bench.sweep.aggregate.SweepCallback` aggregates the sweep folder and writes the report.
 
-Exit codes (README, "Exit codes"): 0 every run ``ok`` (and the sweep's table and report written); 1 a run
+Exit codes (docs, "Exit codes"): 0 every run ``ok`` (and the sweep's table and report written); 1 a run
 ``error`` or ``degraded``, a failed report, a full disk; 2 bad input (a value refused before anything
-ran, a job list that maps two jobs to one run folder).
+ran, an unknown group option or key, a ``+key`` no part of the run reads (:mod:`taslel_bench.cli_checks`),
+any other mistake Hydra refuses before the first job, a job list that maps two jobs to one run folder).
 """
 
 from __future__ import annotations
@@ -14,11 +15,16 @@ import errno
 import sys
 from pathlib import Path
 
-import hydra
+from taslel_bench.gl_hint import import_mujoco_or_exit
+
+import_mujoco_or_exit()  # MUJOCO_GL naming a library that cannot be loaded: one line, not a traceback
+
+import hydra  # after the GL check: the imports below load MuJoCo
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
+from taslel_bench.cli_checks import CliError, check_overrides
 from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.run import record_job_error
@@ -28,6 +34,27 @@ from taslel_bench.util.fields import ConfigError
 
 EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 _single_run_exit = [EXIT_OK]
+_task_started = [False]  # a Hydra error before the first job is a mistake on the command line: exit 2
+HELP_FLAGS = ("--help", "-h")
+
+
+def _labelled_progress(label: str):
+    """In a sweep, jobs run in parallel: each prints its progress on its own labelled line, once per simulated
+    second (the single run's in-place counter would put two jobs on one line)."""
+
+    def printer(duration: float, enabled: bool):
+        if not enabled:
+            return None
+        last = [-1]
+
+        def show(t: float) -> None:
+            if int(t) != last[0]:
+                last[0] = int(t)
+                print(f"  [{label}] simulated {t:6.2f} / {duration:.2f} s", file=sys.stderr, flush=True)
+
+        return show
+
+    return printer
 
 
 def _one_line(exc: BaseException) -> str:
@@ -39,12 +66,16 @@ def _one_line(exc: BaseException) -> str:
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def main(cfg: DictConfig) -> dict:
+    from taslel_bench.sim import run as sim_run
     from taslel_bench.sim.run import run
 
+    _task_started[0] = True
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if "/" not in k and not k.startswith("hydra")}
     multirun = hc.mode == RunMode.MULTIRUN
+    if multirun:
+        sim_run._progress_printer = _labelled_progress(hc.job.override_dirname or f"job #{hc.job.num}")
     try:
         summary = run(cfg, out_dir, choices, list(hc.overrides.task))
     except Exception as exc:
@@ -80,12 +111,34 @@ def main(cfg: DictConfig) -> dict:
     return summary
 
 
-if __name__ == "__main__":
+def cli() -> None:
+    """``python -m taslel_bench`` and the ``taslel-bench`` command."""
+    argv = sys.argv[1:]
+    if any(a in HELP_FLAGS for a in argv) and not any(a.startswith("hydra/help=") for a in argv):
+        sys.argv.append("hydra/help=taslel")  # conf/hydra/help/taslel.yaml: groups and options, one line each
+    else:
+        try:
+            check_launcher_overrides(argv)
+        except LauncherNotInstalled as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            sys.exit(EXIT_RUNS_FAILED)
+        try:
+            check_overrides(argv)
+        except CliError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            sys.exit(EXIT_BAD_INPUT)
     try:
-        check_launcher_overrides(sys.argv[1:])
-    except LauncherNotInstalled as exc:
-        sys.exit(f"error: {exc}")
-    main()
+        main()
+    except SystemExit as exc:
+        # Hydra exits 1 on its own errors (an unknown option, a bad override, a missing key): before the first
+        # job ran, that is bad input
+        if exc.code == 1 and not _task_started[0]:
+            sys.exit(EXIT_BAD_INPUT)
+        raise
     # a sweep's code is set by its callback (table and report written, every run ok?)
     code = sweep_callback.exit_code() if sweep_callback.sweep_ended() else _single_run_exit[0]
     sys.exit(code)
+
+
+if __name__ == "__main__":
+    cli()

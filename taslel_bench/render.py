@@ -6,6 +6,10 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported: it reads the variable then
 
+from taslel_bench.gl_hint import import_mujoco_or_exit
+
+import_mujoco_or_exit()  # MUJOCO_GL naming a library that cannot be loaded: one line, not a traceback
+
 from taslel_bench.record.video_cli import main
 
 if __name__ == "__main__":

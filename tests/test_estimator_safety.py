@@ -1,4 +1,4 @@
-"""One-sided estimator targets (issue 19): per-band metrics with episode-bootstrap CIs, band-aware margins,
+"""One-sided estimator targets: per-band metrics with episode-bootstrap CIs, band-aware margins,
 the conservative prior, the drop detector and inference off the control tick. A few seconds in all."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Extending the harness without touching the core (README, Extending): a barrier family and a kind of
+"""Extending the harness without touching the core (docs/guides/extending.md): a barrier family and a kind of
 terrain defined here, in a test module, reach the filter, the plant, the trace, the MCAP and the metrics
 through config and the public interface only."""
 

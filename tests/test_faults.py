@@ -1,4 +1,4 @@
-"""Fault matrix (issue 17): a bad value is refused before anything is simulated, and the error names the
+"""Fault matrix: a bad value is refused before anything is simulated, and the error names the
 field (dotted config path) and the value. ``Episode.run`` is replaced by a function that fails the test, and
 the run folder must stay empty (no config.yaml, steps.parquet, summary.json)."""
 

@@ -1,4 +1,4 @@
-"""The house rules (DESIGN.md), checked on the source: the axis packages import only the core's public
+"""The house rules (docs/concepts.md), checked on the source: the axis packages import only the core's public
 interface (``taslel_bench.interfaces``, ``taslel_bench.api``) and never each other; the core never imports
 an axis package, a study or a test; inside the core no module imports one that imports it back."""
 

@@ -1,4 +1,4 @@
-"""+experiment=terrain (issue 28 part B): the preset composes into the 7 x 3 x 2 x 10 sweep it promises, every
+"""+experiment=terrain (the terrain study): the preset composes into the 7 x 3 x 2 x 10 sweep it promises, every
 combination validates and builds its scenario, the lossy plant reaches the terrain worlds (and the URDF plant
 is untouched), and the report's side-by-side table and target sentences come out of a sweep's rows."""
 

@@ -93,7 +93,7 @@ def test_leg_point_terms_are_the_models_foot_terms_at_the_foot(states):
 
 
 def test_friction_margin_shrinks_each_feet_cone_too(states):
-    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before stop 42)."""
+    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before commit 076b4de)."""
     from taslel_bench.filter.robust import RobustSettings
 
     st, pm = states

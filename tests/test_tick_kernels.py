@@ -1,4 +1,4 @@
-"""The control tick's merged kernels (issue 25) against the code they replaced, number for number: the trace's
+"""The control tick's merged kernels against the code they replaced, number for number: the trace's
 one-call row copy, the fall terms with the foot-contact count, the PD law on the stacked references."""
 
 from __future__ import annotations
@@ -173,7 +173,7 @@ def test_controller_references_are_rows_of_one_array():
 
 
 def _record_numpy(reader, data: mujoco.MjData, log, k: int) -> None:
-    """The numpy code ContactFrameReader.record replaced (issue 25), kept here as the reference."""
+    """The numpy code ContactFrameReader.record replaced, kept here as the reference."""
     from taslel_bench.plant.contact_frames import MAX_CONTACTS_LOGGED
 
     n = data.ncon

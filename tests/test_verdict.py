@@ -199,8 +199,8 @@ def test_claims_are_split_by_every_filter_override_and_state_the_verdicts():
     ecbf_off = text.split("### Filter setting `filter.ecbf.enabled=false`")[1].split("### Filter setting")[0]
     assert "Violation rate 0.8 -> 0.7 of swing ticks" in ecbf_off  # the ECBF-off runs alone, not pooled
     assert "Violation rate 0.8 -> 0.001 of swing ticks" in text
-    assert "obstacle 2/2 (clearance 2) nominal vs 0/2 filtered" in text
-    assert "obstacle 2/2 (clearance 2) nominal vs 2/2 (clearance 2) filtered" in text
+    assert "obstacle: 2/2 (clearance 2) nominal vs 0/2 filtered" in text
+    assert "obstacle: 2/2 (clearance 2) nominal vs 2/2 (clearance 2) filtered" in text
 
 
 def test_the_verdict_table_counts_unsafe_runs_and_reasons_per_group():

@@ -77,7 +77,7 @@ def paper_claims(finished: pd.DataFrame) -> str:
     for keys, on_runs in settings:
         keys = keys if isinstance(keys, tuple) else (keys,)
         label = ", ".join(f"`{c}={v}`" for c, v in zip(split, keys))
-        body = _claims(pd.concat([nominal, on_runs]))
+        body = _claims(pd.concat([nominal, on_runs]), level=4 if split else 3)
         if body:
             sections.append((f"### Filter setting {label}\n\n" if split else "") + body)
     if not sections:
@@ -90,7 +90,7 @@ def paper_claims(finished: pd.DataFrame) -> str:
             "*unsafe* counts runs whose verdict is `safe: false`.\n\n" + "\n".join(sections))
 
 
-def _claims(frame: pd.DataFrame) -> str:
+def _claims(frame: pd.DataFrame, level: int = 3) -> str:
     """Table and sentences of one filter setting (its filter-on runs and the nominal runs); one backend only
     (:func:`_one_backend`: solvers are not seeds)."""
     frame, backend_note = _one_backend(frame)
@@ -105,7 +105,7 @@ def _claims(frame: pd.DataFrame) -> str:
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "nominal only", "filter on"])
-    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + "\n#### Claim by claim\n\n"
+    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + f"\n{'#' * level} Claim by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
 
 
@@ -123,6 +123,14 @@ def _unsafe(runs: pd.DataFrame) -> str:
     return f"{len(bad)}/{len(judged)}" + (f" ({why})" if why else "")
 
 
+def _nominal_vs_filtered(off: pd.DataFrame, on: pd.DataFrame, what=None) -> str:
+    """``<off> nominal vs <on> filtered`` of ``what`` (default: the unsafe count), leaving out a side with no
+    runs (never "— nominal")."""
+    what = what or _unsafe
+    said = [f"{what(r)} {label}" for r, label in ((off, "nominal"), (on, "filtered")) if what(r) != "—"]
+    return " vs ".join(said) if said else "no judged runs"
+
+
 def _verdicts(runs: Runs, rows: list, sentences: list) -> None:
     parts = []
     for scenario in ("flat", "low_friction", "obstacle", "logs"):
@@ -130,10 +138,10 @@ def _verdicts(runs: Runs, rows: list, sentences: list) -> None:
         if off.empty and on.empty:
             continue
         rows.append((f"unsafe runs, {scenario}", "safe", _unsafe(off), _unsafe(on)))
-        parts.append(f"{scenario} {_unsafe(off)} nominal vs {_unsafe(on)} filtered")
+        parts.append(f"{scenario}: {_nominal_vs_filtered(off, on)}")
     if parts:
         sentences.append("**Safe runs** (the verdict: no fall, no trip, no sustained sliding, clearance and "
-                         "friction cone kept; the same rules with the filter on or off), unsafe runs: "
+                         "friction cone kept; the same rules with the filter on or off), unsafe runs of the judged ones: "
                          + "; ".join(parts) + ".")
 
 
@@ -201,7 +209,7 @@ def _friction(runs: Runs, rows: list, sentences: list) -> None:
     sentences.append(
         f"**Friction constraint** (paper: the filter eliminates sliding on mu = 0.2): {verdict}. Loaded contacts "
         f"at the cone edge {edge_off:.3g} -> {edge_on:.3g}, total sliding distance {dist_off:.3g} -> {dist_on:.3g} m "
-        f"per run (nominal -> filter); unsafe runs (verdict) {_unsafe(off)} nominal vs {_unsafe(on)} filtered.")
+        f"per run (nominal -> filter); unsafe runs (verdict) {_nominal_vs_filtered(off, on)}.")
 
 
 def _clearance(runs: Runs, rows: list, sentences: list) -> None:
@@ -233,7 +241,7 @@ def _clearance(runs: Runs, rows: list, sentences: list) -> None:
         f"Violation rate {r_off:.3g} -> {r_on:.3g} of swing ticks (loaded ones included), p95 depth "
         f"{_mean(on, 'clearance_violation_depth_p95_m') * 1000:.3g} mm with the ECBF. The profile is virtual: "
         f"no geometry in the plant, so a violation here costs nothing physically (see the logs). Unsafe runs "
-        f"(verdict) {_unsafe(off)} nominal vs {_unsafe(on)} filtered.")
+        f"(verdict) {_nominal_vs_filtered(off, on)}.")
 
 
 def _logs(runs: Runs, rows: list, sentences: list) -> None:
@@ -253,7 +261,7 @@ def _logs(runs: Runs, rows: list, sentences: list) -> None:
     verdict = "holds" if all_safe else "does not hold"
     sentences.append(
         f"**Clearance on real geometry** (logs across the path, the ECBF on the foot sphere's distance to them): "
-        f"{verdict}: unsafe runs {_unsafe(off)} nominal vs {_unsafe(on)} filtered. Falls {_falls(off)} nominal vs "
+        f"{verdict}: unsafe runs {_nominal_vs_filtered(off, on)}. Falls {_falls(off)} nominal vs "
         f"{_falls(on)} filtered; trips per run {_mean(off, 'trips'):.3g} -> "
         f"{trips_on:.3g} (foot {_mean(off, 'foot_trips'):.3g} -> {_mean(on, 'foot_trips'):.3g}, lower leg "
         f"{_mean(off, 'shin_trips'):.3g} -> {_mean(on, 'shin_trips'):.3g}); distance {_mean(off, 'distance_m'):.3g} -> "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import errno
+import re
 import sys
 import textwrap
 from pathlib import Path
@@ -20,8 +21,9 @@ import pandas as pd
 
 from taslel_bench.record import run_files
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
-from taslel_bench.sweep.claims import paper_claims
-from taslel_bench.sweep.solver_verdict import solve_time_figure, solver_verdict
+from taslel_bench.sweep.claims import _unsafe, paper_claims
+from taslel_bench.sweep.solver_verdict import _overall, solve_time_figure, solver_verdict
+from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
@@ -400,6 +402,61 @@ def _run_commits(frame: pd.DataFrame) -> str:
     return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
 
 
+def anchor(heading: str) -> str:
+    """The link anchor GitHub and MkDocs give a markdown heading (lower case, punctuation dropped, spaces as -)."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower().replace("`", ""))
+    return text.replace(" ", "-")
+
+
+def contents(sections: list[str]) -> str:
+    """A contents list of the ``## `` headings in ``sections`` (each item a markdown string), linked."""
+    heads = [line[3:].strip() for text in sections for line in str(text).splitlines() if line.startswith("## ")]
+    return "## Contents\n\n" + "".join(f"- [{h}](#{anchor(h)})\n" for h in heads) + "\n"
+
+
+def _unsafe_lines(frame: pd.DataFrame) -> list[str]:
+    """One line per group of runs with an unsafe run: ``k/n`` of its judged runs and the reasons' counts."""
+    if "safe" not in frame or frame.empty:
+        return []
+    keys = [c for c in group_columns(frame) if c in frame]
+    out = []
+    groups = frame.groupby([frame[c].astype(str) for c in keys], sort=True) if keys else [((), frame)]
+    for values, runs in groups:
+        judged = runs[runs["safe"].notna()]
+        if judged.empty or judged["safe"].astype(bool).all():
+            continue
+        values = values if isinstance(values, tuple) else (values,)
+        label = ", ".join(f"{c}={v}" for c, v in zip(keys, values, strict=True)) or "all runs"
+        out.append(f"- {label}: {_unsafe(judged)} unsafe\n")
+    return out
+
+
+def answers_section(frame: pd.DataFrame, solver_rows: pd.DataFrame | None) -> str:
+    """The report's answers before its tables: which backend to ship (the solver verdict's sentences) and
+    which runs were unsafe, and why (the verdict's reason tags)."""
+    if frame.empty:
+        return "## Verdicts\n\n_no runs found_\n"
+    parts = ["## Verdicts\n"]
+    if solver_rows is not None and not solver_rows.empty:
+        overall = _overall(solver_rows).strip().replace("**Over the sweep** ", "over the sweep ")
+        parts.append(f"**Which solver to ship**: {overall} Per world:\n")
+        parts += [f"- {_solver_sentence(str(w), g)}" for w, g in solver_rows.groupby("scenario", sort=True)]
+        parts.append("\nDetails: [Solver verdict](#solver-verdict-which-backend-to-ship).\n")
+    unsafe = _unsafe_lines(frame)
+    judged = int(frame["safe"].notna().sum()) if "safe" in frame else 0
+    bad = int((frame["safe"].notna() & ~frame["safe"].fillna(True).astype(bool)).sum()) if "safe" in frame else 0
+    parts.append(f"**Unsafe runs.** {bad} of {judged} judged runs are unsafe"
+                 + (" (a fall, a trip, sustained sliding, the clearance profile or the friction cone crossed):"
+                    if unsafe else ".") + "\n")
+    parts += unsafe
+    if unsafe:
+        parts.append("")
+    errors = int((frame["status"] == "error").sum()) if "status" in frame else 0
+    degraded = int((frame["status"] == "degraded").sum()) if "status" in frame else 0
+    parts.append(f"**Health.** {errors} run(s) ended in an error, {degraded} degraded (listed at the end).\n")
+    return "\n".join(parts) + "\n"
+
+
 def _guarded(make, what: str) -> tuple[list, str]:
     """(``make()``, "") or ([], a note naming the error): one bad run's files cost a figure, not the report."""
     try:
@@ -420,18 +477,19 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     keys = [c for c in group_columns(frame) if c in table]
     safety = table[[*keys, *COUNT_COLUMNS, *SAFETY_COLUMNS]] if len(table) else table
     cost = table[[*keys, "runs", *COST_COLUMNS, "qp_shgeom_rel_best"]] if len(table) else table
-    lines = [
+    solver_text, solver_rows = solver_verdict(sweep_dir, frame, group_columns(frame)) if not frame.empty else ("", None)
+    head = [
         "# taslel_bench sweep report\n",
         f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
-        f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
-        f"Packages: {info['packages']}  \n",
-        f"Report written by {info['code']}; runs produced by {_run_commits(frame)}\n",
+    ]
+    lines = [
+        answers_section(frame, solver_rows),
         verdict_section(frame, group_columns(frame)) if not frame.empty else "",
         "## Safety and physics per group of runs (seeds pooled)\n",
         markdown_table(safety) if len(table) else "_no runs found_\n",
         "## Cost per group of runs\n" if len(table) else "",
         markdown_table(cost) if len(table) else "",
-        solver_verdict(sweep_dir, frame, group_columns(frame))[0] if not frame.empty else "",
+        solver_text,
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
         terrain_section(frame) if not frame.empty else "",
         paper_claims(_finished(urdf_plant_runs(frame))) if not frame.empty else "",
@@ -444,8 +502,13 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     if figures:
         lines.append("## Figures\n")
         lines += [f"![{f}]({f})\n" for f in figures]
+    lines.append("## Machine and code\n\n"
+                 f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n"
+                 f"Packages: {info['packages']}  \n"
+                 f"Report written by {info['code']}; runs produced by {_run_commits(frame)}\n")
+    text = "\n".join([*head, contents(lines), *lines])
     path = sweep_dir / "report.md"
-    run_files.atomic_write(path, lambda p: p.write_text("\n".join(lines)))
+    run_files.atomic_write(path, lambda p: p.write_text(text))
     return path
 
 

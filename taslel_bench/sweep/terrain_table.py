@@ -1,11 +1,11 @@
-"""The issue-28 comparison of a ``+experiment=terrain`` sweep: the three controllers (``filter_variant``:
+"""The terrain study's comparison of a ``+experiment=terrain`` sweep: the three controllers (``filter_variant``:
 nominal = filter off, paper = ``filter=id_cbf_qp``, terrain = ``filter=terrain``) side by side per world and
-plant (``mismatch_plant``: ``none`` = the URDF, ``lossy``), with the verdicts, and one sentence per issue-28
-target saying met or missed, with the numbers.
+plant (``mismatch_plant``: ``none`` = the URDF, ``lossy``), with the verdicts, and one sentence per target
+of the study saying met or missed, with the numbers.
 
 Numbers are means over a cell's finished runs (``ok`` or ``degraded``; ``runs`` shows finished/all, so a
 crashed run is never silently dropped); tick costs are the runs' medians, averaged. Targets are read on the
-URDF plant (the issue's rule), the lossy plant is shown beside. The walked-distance target (2.5 m in 10 s) is
+URDF plant (the study's rule), the lossy plant is shown beside. The walked-distance target (2.5 m in 10 s) is
 scaled to the sweep's duration and the sentence says so.
 """
 
@@ -24,7 +24,7 @@ VARIANTS = ("nominal", "paper", "terrain")
 WORLDS = ("flat", "low_friction", "logs", "steps", "rough", "slope", "friction_patch")
 ROUGH_WORLDS = ("logs", "steps", "rough", "slope")  # the 0 falls / <= 1 trip / >= 2.5 m target
 PLANT_LABELS = {"none": "URDF plant", "": "URDF plant", "lossy": "lossy plant (model not told)"}
-# issue 28's targets
+# the terrain study's targets (conf/experiment/terrain.yaml)
 MAX_TRIPS_PER_RUN = 1.0
 MIN_DISTANCE_M_PER_10_S = 2.5  # [m]
 MAX_GRF_MAE_Z_N = 2.0  # [N] vertical GRF error over every loaded contact, flat
@@ -217,7 +217,7 @@ def _cost_target(frame: pd.DataFrame) -> list[str]:
 
 
 def target_sentences(frame: pd.DataFrame) -> list[str]:
-    """One sentence per issue-28 target, met or missed, with the numbers (URDF plant)."""
+    """One sentence per target of the terrain study, met or missed, with the numbers (URDF plant)."""
     return [*_rough_targets(frame), *_flat_target(frame), *_friction_target(frame), *_cost_target(frame)]
 
 
@@ -225,7 +225,7 @@ def terrain_section(frame: pd.DataFrame) -> str:
     """Markdown section of the report ("" when the sweep has no ``filter_variant`` axis)."""
     if VARIANT_COLUMN not in frame or "scenario" not in frame or frame.empty:
         return ""
-    parts = ["## Terrain filter vs the paper's (issue 28)\n",
+    parts = ["## Terrain filter vs the paper's\n",
              ("Per world and plant, the three controllers side by side: nominal (filter off), paper "
              "(`filter=id_cbf_qp`), terrain (`filter=terrain`). Means over finished runs (`runs` = finished/all); "
              "`unsafe` = runs whose verdict is `safe: false`, with the reasons' counts; tick costs are per-run "
@@ -236,7 +236,7 @@ def terrain_section(frame: pd.DataFrame) -> str:
             parts += [f"### {PLANT_LABELS.get(plant, plant + ' plant')}\n", markdown_table(table, fmt=str)]
     sentences = target_sentences(frame)
     if sentences:
-        parts += ["### Issue-28 targets (URDF plant)\n", "\n".join(f"- {s}" for s in sentences) + "\n"]
+        parts += ["### Targets of the terrain study (URDF plant)\n", "\n".join(f"- {s}" for s in sentences) + "\n"]
     return "\n".join(parts)
 
 

@@ -13,7 +13,7 @@ Frames and units: world axes, z up, metres. Every part has
   signed distance [m] of each sphere's surface to the part (< 0: penetrating), its gradient with respect to
   the centre (the unit normal pointing from the part to the sphere) and the closest point on the part.
 
-A new kind of terrain is one class with these members (see README, Extending).
+A new kind of terrain is one class with these members (see docs/guides/extending.md).
 """
 
 from __future__ import annotations

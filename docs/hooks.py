@@ -1,0 +1,13 @@
+"""MkDocs hook: regenerate the reference and results pages (docs/gen_pages.py) before every build."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+
+def on_pre_build(config, **kwargs) -> None:
+    spec = importlib.util.spec_from_file_location("gen_pages", Path(__file__).with_name("gen_pages.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main()
