@@ -22,7 +22,7 @@ GROUP_LINES: dict[str, str] = {
     "scenario": "the world: floor friction, obstacles, terrain, pushes, plant perturbations (sweep axis 1)",
     "solver": "the QP backend of the safety filter (sweep axis 2)",
     "estimator": "the friction estimate the filter uses (sweep axis 3)",
-    "robot": "the robot: plant source, torque limit, fall rule",
+    "robot": "the quadruped: its URDF, names, limits, stand height and fall rule (conf/robot/<name>.yaml)",
     "model": "the controller's model of the robot (Pinocchio)",
     "controller": "the nominal controller (trot)",
     "filter": "the safety filter's rows and settings",
@@ -33,7 +33,7 @@ GROUP_LINES: dict[str, str] = {
     "tracker": "where a sweep is logged besides its folder (mlflow or none)",
     "hydra/launcher": "how -m runs its jobs: local (one per core), ray, slurm",
 }
-SKIP_GROUPS = ("hydra/help",)
+SKIP_GROUPS = ("hydra/help", "robot_plant")  # robot_plant: included by every robot file, not chosen
 
 
 def first_comment_line(path: Path) -> str:
