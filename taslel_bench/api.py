@@ -21,8 +21,8 @@ from __future__ import annotations
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
-from taslel_bench.config.compose import compose
 from taslel_bench.config import settings
+from taslel_bench.config.compose import compose
 from taslel_bench.config.settings import build_barriers, filter_settings, robot_description
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains

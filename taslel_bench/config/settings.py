@@ -20,7 +20,7 @@ from taslel_bench.filter.safety_filter import FilterSettings
 from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides
 from taslel_bench.plant.build import PlantOptions
-from taslel_bench.robot.description import RobotDescription, describe_robot, robot_config_path
+from taslel_bench.robot.description import RobotDescription, complete_robot_node, describe_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.robot.model_options import ModelOptions
@@ -39,10 +39,7 @@ def robot_description(cfg: DictConfig) -> RobotDescription:
     """The run's robot (``cfg.robot``, one of ``conf/robot/``) as a :class:`RobotDescription`. A run folder's
     config written before robots were described (no ``robot.name``) was an A1 run: ``conf/robot/a1.yaml`` under its
     own robot values."""
-    node = OmegaConf.to_container(cfg.robot, resolve=True)
-    if "name" not in node:
-        node = {**OmegaConf.to_container(OmegaConf.load(robot_config_path("a1")), resolve=True), **node}
-    return describe_robot(node)
+    return describe_robot(complete_robot_node(OmegaConf.to_container(cfg.robot, resolve=True)))
 
 
 def trot_values(cfg: DictConfig, robot: RobotDescription) -> dict[str, float]:

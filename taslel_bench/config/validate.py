@@ -28,6 +28,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.config.safety import safety_limits
+from taslel_bench.control.gait import trot_defaults
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import (
     FALLBACKS,
@@ -41,7 +42,6 @@ from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.adapter import CONES, INTEGRATORS, PlantNames, PlantOverrides
 from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.control.gait import trot_defaults
 from taslel_bench.robot.description import RobotDescription, describe_robot
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers

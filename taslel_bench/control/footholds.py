@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from taslel_bench.robot.description import load_robot
+from taslel_bench.robot.description import default_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.terrain.terrain import Terrain
 
@@ -48,9 +48,9 @@ class FootholdPlanner:
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01, riser_ahead_m: float = 0.045,
                  riser_rise_m: float = 0.03, kinematics: LegKinematics | None = None) -> None:
-        """``kinematics``: the robot's legs (None: the A1's); its foot radius and shin capsule are checked."""
+        """``kinematics``: the robot's legs (None: the default robot's); its foot radius and shin capsule are checked."""
         self.terrain = terrain
-        self.kinematics = kinematics if kinematics is not None else LegKinematics(load_robot("a1"))
+        self.kinematics = kinematics if kinematics is not None else LegKinematics(default_robot())
         robot = self.kinematics.robot
         self._foot_radius_m, self._shin_radius_m = robot.foot_radius_m, robot.shin_radius_m
         n = round(search_m / step_m)

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 TROT_OFFSETS = np.array([0.0, 0.5, 0.5, 0.0])  # LEGS order: FL, FR, RL, RR
 TROT_OFFSETS_LIST = TROT_OFFSETS.tolist()  # plain floats for the control tick
 

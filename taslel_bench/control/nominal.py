@@ -9,7 +9,7 @@ import numpy as np
 
 from taslel_bench.control.gait import GaitParams, GaitState, TrotGait
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.description import RobotDescription, load_robot
+from taslel_bench.robot.description import RobotDescription, default_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.util.jit import kernel
 
@@ -41,8 +41,8 @@ class NominalController:
         fd_dt_s: float = 1e-3,
         robot: RobotDescription | None = None,
     ) -> None:
-        """``robot``: whose legs (None: the A1); its torque limits clip the PD law."""
-        self.robot = robot = robot if robot is not None else load_robot("a1")
+        """``robot``: whose legs (None: the default robot); its torque limits clip the PD law."""
+        self.robot = robot = robot if robot is not None else default_robot()
         self.kinematics = LegKinematics(robot)
         self._legs_ik_list = self.kinematics.legs_ik_list
         self.gait = TrotGait(gait, self.kinematics.lateral_offsets_m())

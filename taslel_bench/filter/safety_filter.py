@@ -44,6 +44,7 @@ from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, Robust
 from taslel_bench.filter.terrain_cone import TerrainFrictionCone
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import quadruped as quad
+from taslel_bench.robot.description import default_robot
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
@@ -62,7 +63,8 @@ class FilterSettings:
     regularization_target: str = "nominal"  # "nominal" (vdot_nom, lambda_nom) or "zero"
     lambda_min_n: float = 1.0  # [N] minimum normal force of a stance foot
     contact_velocity_gain: float = 0.0  # [1/s] k_v in J vdot + J̇v = -k_v J v (0 = paper's eq. 3)
-    torque_limit_nm: tuple[float, ...] = (33.5,) * quad.N_JOINTS  # [N·m] per joint, core order (the robot's)
+    # [N·m] per joint, core order (the robot's: settings.filter_settings)
+    torque_limit_nm: tuple[float, ...] = field(default_factory=lambda: default_robot().torque_limit_nm)
     ecbf_enabled: bool = True  # only used when the scenario provides a clearance profile
     ecbf_alpha1: float = 20.0  # [1/s]
     ecbf_alpha2: float = 20.0  # [1/s]

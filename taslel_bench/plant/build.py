@@ -22,10 +22,17 @@ from pathlib import Path
 
 import mujoco
 
-from taslel_bench.plant.adapter import PlantNames, PlantOverrides, adapt, apply_overrides, rename, store_record
+from taslel_bench.plant.adapter import (
+    PlantNames,
+    PlantOverrides,
+    adapt,
+    apply_overrides,
+    rename,
+    store_record,
+)
 from taslel_bench.plant.mjcf_files import mjcf_files
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.description import RobotDescription, load_robot, physical_urdf_text
+from taslel_bench.robot.description import RobotDescription, default_robot, physical_urdf_text
 from taslel_bench.terrain.geoms import TERRAIN_PRIORITY, add_terrain_geom
 from taslel_bench.util.fields import ConfigError
 
@@ -36,7 +43,8 @@ class PlantOptions:
 
     timestep_s: float = 0.001  # [s] physics step
     floor_friction: float = 1.0  # [-] Coulomb coefficient the feet get on the floor
-    torque_limit_nm: tuple[float, ...] = (33.5,) * quad.N_JOINTS  # [N·m] motor ctrlrange per joint, core order
+    # [N·m] motor ctrlrange per joint, core order (the robot's: settings.plant_options)
+    torque_limit_nm: tuple[float, ...] = field(default_factory=lambda: default_robot().torque_limit_nm)
     names: PlantNames = field(default_factory=PlantNames)  # robot.plant_mjcf: its names where not the core's
     overrides: PlantOverrides = field(default_factory=PlantOverrides)  # contact/integrator settings
 
@@ -82,7 +90,7 @@ def robot_spec(robot: RobotDescription | None = None, options: PlantOptions | No
 
     Scenarios edit the returned spec (terrain, obstacles, perturbations) before :func:`compile_plant`.
     """
-    robot = robot if robot is not None else load_robot("a1")
+    robot = robot if robot is not None else default_robot()
     options = options if options is not None else PlantOptions(torque_limit_nm=robot.torque_limit_nm)
     spec = mujoco.MjSpec.from_string(_urdf_text(robot))
     _strip_unloadable_meshes(spec)

@@ -103,11 +103,30 @@ def robot_config_path(name: str) -> Path:
     return path
 
 
+DEFAULT_ROBOT = "a1"  # conf/config.yaml's default robot, for objects built without a config (tests, studies)
+
+
+def default_robot() -> RobotDescription:
+    """The default robot's description (:data:`DEFAULT_ROBOT`)."""
+    return load_robot(DEFAULT_ROBOT)
+
+
 def load_robot(name: str) -> RobotDescription:
     """The description of a shipped robot by name (``conf/robot/<name>.yaml``)."""
     from omegaconf import OmegaConf
 
     return describe_robot(OmegaConf.to_container(OmegaConf.load(robot_config_path(name)), resolve=True))
+
+
+def complete_robot_node(node: Mapping[str, Any]) -> dict[str, Any]:
+    """A run folder's ``robot`` node as :func:`describe_robot` reads it: a config written before robots were
+    described (no ``name``) was an A1 run, so the A1's file completes it under the run's own values."""
+    if "name" in node:
+        return dict(node)
+    from omegaconf import OmegaConf
+
+    a1 = OmegaConf.to_container(OmegaConf.load(robot_config_path("a1")), resolve=True)
+    return {**a1, **node}
 
 
 def describe_robot(node: Mapping[str, Any], where: str = "robot") -> RobotDescription:

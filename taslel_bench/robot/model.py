@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from taslel_bench.robot import model_options
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.description import RobotDescription, foot_frame, load_robot, pinocchio_model
+from taslel_bench.robot.description import RobotDescription, default_robot, foot_frame, pinocchio_model
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.jit import kernel
 
@@ -39,7 +39,7 @@ class RobotModel:
     """
 
     def __init__(self, robot: RobotDescription | None = None, options: ModelOptions | None = None) -> None:
-        self.robot = robot = robot if robot is not None else load_robot("a1")
+        self.robot = robot = robot if robot is not None else default_robot()
         self.options = options = options or ModelOptions()
         self.urdf_path = options.urdf or str(robot.urdf_path)
         self.model = pinocchio_model(robot, options.urdf)

@@ -25,7 +25,7 @@ from taslel_bench.config.settings import (
 from taslel_bench.config.validate import validate
 from taslel_bench.filter.safety_filter import SafetyFilter
 from taslel_bench.interfaces import Estimator, QPBackend, Scenario
-from taslel_bench.plant.build import PlantOptions, robot_spec, compile_plant, mjcf_spec
+from taslel_bench.plant.build import PlantOptions, compile_plant, mjcf_spec, robot_spec
 from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.qp.reference_check import reference_check
 from taslel_bench.robot.description import RobotDescription

@@ -18,7 +18,7 @@ import numpy as np
 from taslel_bench.filter.layout import INACTIVE_RHS, NV, VDOT, TickInputs
 from taslel_bench.interfaces import QPProblem
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.robot.description import RobotDescription, load_robot
+from taslel_bench.robot.description import RobotDescription, default_robot
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
@@ -32,7 +32,7 @@ class BarrierWorld:
     profile: ClearanceProfile | None  # the paper's virtual obstacle z(s) (None: the scenario has none)
     alpha1: float  # [1/s]
     alpha2: float  # [1/s]
-    robot: RobotDescription = field(default_factory=lambda: load_robot("a1"))  # whose feet and shins
+    robot: RobotDescription = field(default_factory=default_robot)  # whose feet and shins
 
 
 class Barrier:
