@@ -74,7 +74,7 @@ def _child(helper: str, overrides: list[str]) -> None:
     m, d, br = e.m, e.d, e.bridge
     q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
     qj, qdj, t = q[7:].copy(), v[6:].copy(), e.controller.stand_duration_s + 0.4
-    gs = e.controller.gait_state(t)
+    gs = e.controller.contact_plan(t)
     u = e.controller.compute(t, qj, qdj)
     inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
     fres = b.filter.filter(inputs, u)

@@ -13,18 +13,45 @@ import pandas as pd
 import pytest
 
 from scenarios.flat import FlatGround
+from taslel_bench.control.plan import ContactPlan, NominalControl
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.layout import VDOT
 from taslel_bench.interfaces import OBSTACLE, Plane, QPProblem, Terrain, quad
-from taslel_bench.robot.description import load_robot
-
-FOOT_RADIUS_M = load_robot("a1").foot_radius_m  # [m]
 from taslel_bench.record.mcap import read_messages
+from taslel_bench.robot.description import RobotDescription, load_robot
+from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.run import run
 from tests.conftest import compose_cfg
 
 SHORT = ["duration=1.0", "progress=false"]
+FOOT_RADIUS_M = load_robot("a1").foot_radius_m  # [m]
+
+
+class HoldStand:
+    """A toy nominal controller: joint PD to the stand pose, every foot planned in stance (a controller without
+    a gait clock). Built from ``controller._target_`` with the robot and the control period."""
+
+    def __init__(self, robot: RobotDescription, control_dt_s: float, terrain=None, stand_duration: float = 0.5,
+                 kp: float = 80.0, kd: float = 2.0) -> None:
+        self.robot, self.stand_duration_s, self.kp, self.kd = robot, stand_duration, kp, kd
+        self.stand_height_m, self.commanded_speed_mps, self.stance_swing_s = robot.stand_height_m, 0.0, (0.2, 0.2)
+        feet = [[0.0, g.lateral_m, -robot.stand_height_m] for g in robot.legs]
+        self._stand = LegKinematics(robot).legs_ik(feet)  # [rad]
+        self._plan = ContactPlan(math.nan, 0.0, np.ones(4, bool), np.zeros(4), 0.0)
+
+    def compute(self, t, q_joints, qd_joints, base_pose=None):
+        u = self.kp * (self._stand - q_joints) - self.kd * qd_joints
+        return np.clip(u, -self.robot.torque_limits, self.robot.torque_limits)
+
+    def contact_plan(self, t):
+        return self._plan
+
+    def stand_configuration(self):
+        return self._stand.copy()
+
+    def reset(self):
+        pass
 
 
 class FootCeiling(Barrier):
@@ -128,3 +155,18 @@ def test_a_kind_of_terrain_is_one_class(tmp_path):
     steps = pd.read_parquet(tmp_path / "steps.parquet")
     touched = steps[[f"{leg}_obstacle_contact" for leg in quad.LEGS]].to_numpy().any()
     assert touched and math.isfinite(summary["obstacle_touch_swing_rate"])
+
+
+def test_a_nominal_controller_is_one_class_and_one_config_group_entry(tmp_path):
+    """A controller defined here, chosen by ``controller._target_``, runs under the paper's filter on every shipped
+    robot's description it is given; the plan it returns is the stance set the filter and the trace use."""
+    over = ["~controller", f"+controller._target_={__name__}.HoldStand", "+controller.stand_duration=0.3",
+            "robot=go1"]
+    built = Built(compose_cfg([*SHORT, *over]))
+    assert isinstance(built.controller, HoldStand) and isinstance(built.controller, NominalControl)
+    assert built.controller.robot.name == "go1"
+    summary = run(compose_cfg([*SHORT, *over]), tmp_path / "hold", {"scenario": "flat", "solver": "daqp"})
+    assert summary["robot"] == "go1" and not summary["fell"] and summary["qp_failed"] == 0
+    steps = pd.read_parquet(tmp_path / "hold" / "steps.parquet")
+    assert steps[[f"{leg}_scheduled_stance" for leg in quad.LEGS]].all().all()  # the plan, recorded
+    assert abs(summary["distance_m"]) < 0.05  # it stands

@@ -97,7 +97,7 @@ def walking_states(n_states: int, t_start: float = 1.0, friction: float = 1.0):
         u = ctl.compute(t, d.qpos[br.joint_qadr], d.qvel[br.joint_dadr])
         if t >= t_start and k % 37 == 0:
             q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
-            out.append((q, v, ctl.gait_state(t), u.copy()))
+            out.append((q, v, ctl.contact_plan(t), u.copy()))
         br.ctrl_mj(u, d.ctrl)
         mujoco.mj_step(m, d)
         k += 1

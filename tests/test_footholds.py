@@ -219,7 +219,7 @@ def test_swing_heights_from_measured_hips_lift_a_sagging_trunks_swing_feet_by_th
     t = 0.6  # FR and RL mid-swing (swing phase 0.5), FL and RR in stance
     fresh.compute(t, np.zeros(12), np.zeros(12), low)
     assert abs(fresh.sag_m - 0.02) < 1e-4
-    gs = fresh.gait_state(t)
+    gs = fresh.contact_plan(t)
     rows = fresh.gait.foot_targets_list(fresh.gait_time(t))
     for i in range(4):
         lifted = rows[i][2] + (0.0 if gs.in_stance[i] else fresh.sag_m)

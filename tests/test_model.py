@@ -250,8 +250,8 @@ def test_controller_reference_table_matches_fresh_computation():
         assert np.abs(tab.compute(t, q, qd) - fresh.compute(t, q, qd)).max() < 1e-9
         assert np.abs(tab.qd_des - fresh.qd_des).max() < 1e-9
         if k >= 500:
-            gs, ref = tab.gait_state(t), fresh.gait.state(((k - 500) % 400) * 1e-3)
-            dphi = abs(fresh.gait_state(t).phi - gs.phi)  # the table's exact grid time vs t - 0.5 s, rounded
+            gs, ref = tab.contact_plan(t), fresh.gait.state(((k - 500) % 400) * 1e-3)
+            dphi = abs(fresh.contact_plan(t).phi - gs.phi)  # the table's exact grid time vs t - 0.5 s, rounded
             assert min(dphi, 1.0 - dphi) < 1e-9
             assert np.array_equal(gs.in_stance, ref.in_stance) and np.allclose(gs.swing_phase, ref.swing_phase)
     assert tab._table_filled.all()

@@ -10,10 +10,7 @@ from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
-from taslel_bench.control.footholds import FootholdPlanner
-from taslel_bench.control.gait import GaitParams, trot_defaults
-from taslel_bench.control.nominal import NominalController, PDGains
-from taslel_bench.control.terrain_following import TerrainFollowingController
+from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FilterSettings
@@ -21,7 +18,6 @@ from taslel_bench.metrics.health import HealthLimits
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides
 from taslel_bench.plant.build import PlantOptions
 from taslel_bench.robot.description import RobotDescription, complete_robot_node, describe_robot
-from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.sim.episode import EpisodeSettings
@@ -42,41 +38,12 @@ def robot_description(cfg: DictConfig) -> RobotDescription:
     return describe_robot(complete_robot_node(OmegaConf.to_container(cfg.robot, resolve=True)))
 
 
-def trot_values(cfg: DictConfig, robot: RobotDescription) -> dict[str, float]:
-    """The trot's speed, swing and stand height and PD gains: the ``controller`` group's where it sets them,
-    else the robot's (:func:`taslel_bench.control.gait.trot_defaults`)."""
-    c = cfg.controller
-    defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
-    return {key: float(c[key]) if c.get(key) is not None else value for key, value in defaults.items()}
-
-
-def build_controller(cfg: DictConfig, robot: RobotDescription, terrain: Terrain | None = None) -> NominalController:
-    """The nominal trot of ``cfg.controller`` for ``robot``; ``controller.terrain_following=true`` (needs
-    ``terrain``) gives :class:`~taslel_bench.control.terrain_following.TerrainFollowingController`."""
-    c = cfg.controller
-    trot = trot_values(cfg, robot)
-    gait = GaitParams(
-        period_s=float(c.period),
-        duty=float(c.duty),
-        swing_height_m=trot["swing_height"],
-        stand_height_m=trot["stand_height"],
-        speed_mps=trot["speed"],
-    )
-    gains = PDGains(kp=trot["kp"], kd=trot["kd"])
-    kwargs = {"stand_duration_s": float(c.stand_duration), "fd_dt_s": 1.0 / float(cfg.control_rate_hz),
-              "robot": robot}
-    if bool(c.get("terrain_following", False)):
-        if terrain is None:
-            raise ValueError("controller.terrain_following=true needs the scenario's terrain: build_controller(cfg, "
-                             "robot, terrain)")
-        search = float(c.get("foothold_search", 0.0))
-        footholds = FootholdPlanner(terrain, search, kinematics=LegKinematics(robot)) if search > 0.0 else None
-        return TerrainFollowingController(gait, gains, terrain=terrain,
-                                          footholds=footholds, replan_phase=float(c.get("foothold_replan_phase", 0.0)),
-                                          swing_from_measured_hips=bool(c.get("swing_from_measured_hips", False)),
-                                          touchdown_height_m=float(c.get("touchdown_height", 0.0)),
-                                          **kwargs)
-    return NominalController(gait, gains, **kwargs)
+def build_controller(cfg: DictConfig, robot: RobotDescription, terrain: Terrain | None = None) -> NominalControl:
+    """The nominal controller of the ``controller`` group (its ``_target_``, e.g.
+    :func:`taslel_bench.control.trot.trot_controller`) for ``robot`` at the control rate; ``terrain``: the world's
+    (a controller that follows the terrain reads it)."""
+    make = instantiate(cfg.controller, _partial_=True, _convert_="all")  # options from the config, objects below
+    return make(robot=robot, terrain=terrain, control_dt_s=1.0 / float(cfg.control_rate_hz))
 
 
 def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:

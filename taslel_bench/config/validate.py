@@ -47,6 +47,7 @@ from taslel_bench.robot.model_options import ModelOptions
 from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
 
 AXES = ("scenario", "solver", "estimator")
+TROT_TARGET = "taslel_bench.control.trot.trot_controller"  # conf/controller/trot.yaml's builder
 LEG_REACH_FRACTION = 0.95  # [-] of the robot's thigh + calf: the farthest a foot target may be from the hip
 MAX_SEED = 2**63 - 1
 MAX_DURATION_S = 3600.0  # [s] one episode (and the latest filter start)
@@ -228,6 +229,9 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
     """Trot parameters (null: the robot's, :func:`taslel_bench.control.gait.trot_defaults`); returns the stand
     height [m]."""
     c = "controller"
+    number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
+    if _get(cfg, f"{c}._target_") != TROT_TARGET:  # another controller checks its own arguments when built
+        return robot.stand_height_m
     reach = LEG_REACH_FRACTION * robot.leg_length_m  # [m]
     defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
 
@@ -266,7 +270,6 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
         why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
         f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
     )
-    number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     number(f"{c}.kp", value("kp"), 0.0, MAX_KP, unit="N·m/rad")
     number(f"{c}.kd", value("kd"), 0.0, MAX_KD, unit="N·m·s/rad")
     following = flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from taslel_bench.control.plan import ContactPlan
+
 TROT_OFFSETS = np.array([0.0, 0.5, 0.5, 0.0])  # LEGS order: FL, FR, RL, RR
 TROT_OFFSETS_LIST = TROT_OFFSETS.tolist()  # plain floats for the control tick
 
@@ -48,17 +50,6 @@ def trot_defaults(mass_kg: float, leg_length_m: float, stand_height_m: float) ->
     }
 
 
-@dataclass
-class GaitState:
-    """Schedule at one instant (arrays in :data:`quad.LEGS` order)."""
-
-    phi: float  # [-] gait phase in [0, 1)
-    phi_dot: float  # [1/s]
-    in_stance: np.ndarray  # bool (4,)
-    swing_phase: np.ndarray  # [-] (4,) progress of the swing in [0, 1]; 0 for stance legs
-    swing_phase_rate: float  # [1/s] d(swing_phase)/dt during swing
-
-
 class TrotGait:
     """Gait clock + foot targets. ``t`` is time since walking started [s]; t < 0 means standing."""
 
@@ -75,17 +66,17 @@ class TrotGait:
         """Foot travel during stance relative to the hip [m]: speed x stance duration."""
         return self.p.speed_mps * self.p.period_s * self.p.duty
 
-    def state(self, t: float) -> GaitState:
+    def state(self, t: float) -> ContactPlan:
         p = self.p
         if t < 0.0:
-            return GaitState(0.0, 0.0, np.ones(4, bool), np.zeros(4), 0.0)
+            return ContactPlan(0.0, 0.0, np.ones(4, bool), np.zeros(4), 0.0)
         phi = (t % p.period_s) / p.period_s
         stance, swing = [], []
         for offset in TROT_OFFSETS_LIST:  # scalar loop: cheaper than numpy on 4 legs, once per control tick
             lp = (phi + offset) % 1.0  # [0, duty) stance, [duty, 1) swing
             stance.append(lp < p.duty)
             swing.append(0.0 if lp < p.duty else (lp - p.duty) / (1.0 - p.duty))
-        return GaitState(phi, 1.0 / p.period_s, np.array(stance), np.array(swing),
+        return ContactPlan(phi, 1.0 / p.period_s, np.array(stance), np.array(swing),
                          1.0 / (p.period_s * (1.0 - p.duty)))
 
     def foot_targets_in_hip(self, t: float) -> np.ndarray:

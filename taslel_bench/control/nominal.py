@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taslel_bench.control.gait import GaitParams, GaitState, TrotGait
+from taslel_bench.control.gait import GaitParams, TrotGait
+from taslel_bench.control.plan import ContactPlan
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import RobotDescription, default_robot
 from taslel_bench.robot.kinematics import LegKinematics
@@ -62,16 +63,32 @@ class NominalController:
         self._period_ticks = round(n_period) if abs(n_period - round(n_period)) < 1e-9 else 0
         self._table = np.zeros((max(self._period_ticks, 1), 2, quad.N_JOINTS))
         self._table_filled = np.zeros(max(self._period_ticks, 1), bool)
-        self._gait_table: list[GaitState | None] = [None] * max(self._period_ticks, 1)
+        self._gait_table: list[ContactPlan | None] = [None] * max(self._period_ticks, 1)
         self._stand_q: np.ndarray | None = None  # q_des while standing (the same IK every tick)
-        self._stand_state: GaitState | None = None  # gait state while standing (all feet in stance)
+        self._stand_state: ContactPlan | None = None  # gait state while standing (all feet in stance)
         self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
+
+    @property
+    def stand_height_m(self) -> float:
+        """[m] hip joint -> foot centre in the stand and in stance."""
+        return self.gait.p.stand_height_m
+
+    @property
+    def commanded_speed_mps(self) -> float:
+        """[m/s] the commanded forward speed (sets the step length)."""
+        return self.gait.p.speed_mps
+
+    @property
+    def stance_swing_s(self) -> tuple[float, float]:
+        """[s] the schedule's stance and swing durations (period x duty, period x (1 - duty))."""
+        p = self.gait.p
+        return p.period_s * p.duty, p.period_s * (1.0 - p.duty)
 
     def gait_time(self, t: float) -> float:
         """Time since walking started [s] (negative while standing)."""
         return t - self.stand_duration_s
 
-    def gait_state(self, t: float) -> GaitState:
+    def contact_plan(self, t: float) -> ContactPlan:
         """Gait schedule at episode time ``t`` [s] (from the per-period table when on the tick grid; its
         arrays are then shared and read-only)."""
         if self.use_tables and t < self.stand_duration_s:  # standing: one constant state

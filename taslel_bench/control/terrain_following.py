@@ -115,7 +115,7 @@ class TerrainFollowingController(NominalController):
         (``qd_des`` kept)."""
         super().update_references(t)
         rows = self.gait.foot_targets_list(self.gait_time(t))
-        gs = self.gait_state(t)
+        gs = self.contact_plan(t)
         ground = self._ground_references(gs, self._base_pose, rows)
         h_ref = float(np.mean(ground))
         for i in range(quad.N_LEGS):

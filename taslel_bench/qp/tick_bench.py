@@ -143,7 +143,7 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
     }
     if built.filter is not None:
         costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
-        gs = e.controller.gait_state(t[0])
+        gs = e.controller.contact_plan(t[0])
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)

@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 
 from taslel_bench.control.contact_estimate import ContactEstimate
-from taslel_bench.control.nominal import NominalController
+from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
 from taslel_bench.interfaces import Estimator, FrictionEstimate, ImuSample, Proprioception, Scenario
@@ -72,7 +72,7 @@ class Episode:
         settings: EpisodeSettings,
         scenario: Scenario,
         mj_model: mujoco.MjModel,
-        controller: NominalController,
+        controller: NominalControl,
         safety_filter: SafetyFilter | None,
         estimator: Estimator,
         rng: np.random.Generator,
@@ -134,7 +134,7 @@ class Episode:
         s, m, d = self.s, self.m, self.d
         q = np.zeros(quad.NQ)
         q[6] = 1.0
-        q[2] = self.controller.gait.p.stand_height_m + self.model.robot.foot_radius_m
+        q[2] = self.controller.stand_height_m + self.model.robot.foot_radius_m
         q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
         v = np.zeros(quad.NV)
         v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)
@@ -171,7 +171,7 @@ class Episode:
             # the gait's state arrays are read-only (a type of their own for the compiler), the plant's
             # contact flags (filter.stance_source=contact) writable: warm both
             for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
-                gs = self.controller.gait_state(t)
+                gs = self.controller.contact_plan(t)
                 u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
@@ -190,7 +190,7 @@ class Episode:
         self.contact_frames.warm_up(self.d)
         scratch = EpisodeTrace(1, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
                                nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
-        gs = self.controller.gait_state(self.controller.stand_duration_s)
+        gs = self.controller.contact_plan(self.controller.stand_duration_s)
         writable = SimpleNamespace(phi=gs.phi, swing_phase=gs.swing_phase.copy(), in_stance=gs.in_stance.copy())
         for fres in results:
             for state, stance in ((gs, gs.in_stance), (writable, gs.in_stance.copy())):
@@ -283,7 +283,7 @@ class Episode:
         est = self.estimator.step(Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
                                                  mu_feet, self._imu_sample()))  # fmt: skip
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
-        gs = self.controller.gait_state(t)
+        gs = self.controller.contact_plan(t)
         if self.contact_estimate is not None:
             in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
         else:

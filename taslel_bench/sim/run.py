@@ -216,9 +216,8 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
 
 
 def _stance_and_swing_s(built: Built) -> tuple[float, float]:
-    """[s] the controller's scheduled stance and swing durations (period x duty, period x (1 - duty))."""
-    gait = built.controller.gait.p
-    return gait.period_s * gait.duty, gait.period_s * (1.0 - gait.duty)
+    """[s] the stance and swing durations the controller plans."""
+    return built.controller.stance_swing_s
 
 
 def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
@@ -254,7 +253,7 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
         "control_rate_hz": float(cfg.control_rate_hz),
         "physics_rate_hz": float(cfg.physics_rate_hz),
         "robot": built.robot.name,
-        "commanded_speed_mps": float(built.controller.gait.p.speed_mps),
+        "commanded_speed_mps": float(built.controller.commanded_speed_mps),
         "friction_true": float(built.scenario.terrain.friction_at(np.zeros(2))),
         "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides or [])),
         "config_sha256": config_hash,

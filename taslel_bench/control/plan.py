@@ -1,0 +1,51 @@
+"""What every nominal controller gives the rest of a run: joint torques and its *contact plan*.
+
+The safety filter, the contact estimate, the metrics and the recordings read the plan the controller produced at
+each tick (recorded in the trace), never the controller's configuration. A controller with a gait clock (the trot)
+plans stance and swing from it; one without a clock (a learned policy) would plan them from a contact estimate.
+
+Arrays are in the core's leg order (:data:`taslel_bench.robot.quadruped.LEGS`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from taslel_bench.robot.description import RobotDescription
+
+
+@dataclass
+class ContactPlan:
+    """The controller's plan at one instant."""
+
+    phi: float  # [-] gait phase in [0, 1) (nan for a controller without a gait clock)
+    phi_dot: float  # [1/s] its rate
+    in_stance: np.ndarray  # bool (4,): the stance set the controller plans
+    swing_phase: np.ndarray  # [-] (4,) progress of each swing in [0, 1]; 0 for stance legs (the ECBF's phase)
+    swing_phase_rate: float  # [1/s] d(swing_phase)/dt during swing
+
+
+@runtime_checkable
+class NominalControl(Protocol):
+    """A nominal controller as the episode uses it (the trot: :class:`taslel_bench.control.nominal.NominalController`).
+
+    ``compute`` gets the episode time [s], the joint angles [rad] and velocities [rad/s] in core order and the
+    trunk pose (position [m], quaternion xyzw; Pinocchio's), and returns the nominal torques [N·m] (12,)."""
+
+    robot: RobotDescription
+    stand_duration_s: float  # [s] the initial stand before walking
+    stand_height_m: float  # [m] hip joint -> foot centre in the stand configuration
+    commanded_speed_mps: float  # [m/s] the forward speed it is asked for (0: standing)
+    stance_swing_s: tuple[float, float]  # [s] the stance and swing durations it plans (or expects)
+
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
+                base_pose: np.ndarray | None = None) -> np.ndarray: ...
+
+    def contact_plan(self, t: float) -> ContactPlan: ...
+
+    def stand_configuration(self) -> np.ndarray: ...
+
+    def reset(self) -> None: ...
