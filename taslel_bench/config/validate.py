@@ -463,8 +463,8 @@ def _model(cfg: DictConfig) -> None:
     _known_keys(m, _get(cfg, m), ModelOptions)
     urdf = _get(cfg, f"{m}.urdf")
     if urdf is not None and not (isinstance(urdf, str) and urdf.strip() and Path(urdf).is_file()):
-        raise fail(f"{m}.urdf", urdf, "must be null (example-robot-data's a1.urdf) or the path of an "
-                                      "existing URDF")
+        raise fail(f"{m}.urdf", urdf, "must be null (the robot's URDF) or the path of an existing "
+                                      "URDF")
     shared = ("trunk_mass_scale", "trunk_com_shift_m", "payload_mass_kg", "payload_pos_m", "joint_damping",
               "armature", "joint_frictionloss")  # the plant perturbation's fields, checked by the same rules
     given = {key: _get(cfg, f"{m}.{key}") for key in shared}

@@ -46,8 +46,8 @@ class RobotModel:
         model_options.apply(self.model, options, robot.trunk_link)
         self.data = self.model.createData()
         # known joint losses added to h's joint rows each tick (skipped when all are 0: h is Pinocchio's nle)
-        self.joint_damping = options.per_joint("joint_damping")  # [N·m·s/rad] core order
-        self.joint_frictionloss = options.per_joint("joint_frictionloss")  # [N·m] core order
+        self.joint_damping = np.array(self.model.damping[6:])  # [N·m·s/rad] core order, URDF's + options'
+        self.joint_frictionloss = np.array(self.model.friction[6:])  # [N·m] core order, URDF's + options'
         self.frictionloss_smoothing_radps = float(options.frictionloss_smoothing_radps)  # [rad/s]
         self._joint_losses = bool(self.joint_damping.any() or self.joint_frictionloss.any())
         self.foot_frame_ids = [self.model.getFrameId(foot_frame(robot, i)) for i in range(quad.N_LEGS)]

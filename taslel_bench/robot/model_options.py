@@ -4,9 +4,11 @@ The same quantities, with the same meanings and units, perturb the MuJoCo plant 
 :class:`scenarios.perturbed.PerturbedPlant`, so a plant perturbation and the matching model setting describe
 the same physics (checked against MuJoCo in ``tests/test_model_options.py``):
 
-* ``joint_damping`` d [N·m·s/rad]: viscous joint torque -d qdot (MuJoCo ``joint.damping``);
+* ``joint_damping`` d [N·m·s/rad]: viscous joint torque -d qdot (MuJoCo ``joint.damping``), added to the URDF's
+  ``<dynamics damping>`` (as the plant perturbation adds to the plant's; 0 in the A1's URDF);
 * ``armature`` [kg·m²]: rotor inertia added to the joint's diagonal entry of M (MuJoCo ``joint.armature``);
-* ``joint_frictionloss`` F [N·m]: Coulomb joint friction of magnitude F opposing the joint velocity
+* ``joint_frictionloss`` F [N·m]: Coulomb joint friction of magnitude F opposing the joint velocity, added to the
+  URDF's ``<dynamics friction>`` (Go1: 0.2 N·m)
   (MuJoCo ``joint.frictionloss``, a constraint there; the model uses the smooth disturbance
   F tanh(qdot / ``frictionloss_smoothing_radps``) in h);
 * ``trunk_mass_scale`` [-]: the URDF ``trunk`` link's mass and rotational inertia (about its CoM) scaled
@@ -109,17 +111,17 @@ def edit_trunk(model: pin.Model, options: ModelOptions, trunk_link: str) -> None
 def apply(model: pin.Model, options: ModelOptions, trunk_link: str) -> None:
     """All edits of ``options`` on a freshly built Pinocchio model (joints in core order after the free
     flyer). Armature goes into Pinocchio's ``model.armature`` (its CRBA adds it to the diagonal of M);
-    damping and friction are stored in ``model.damping`` / ``model.friction`` for the record (Pinocchio's
-    ``nle`` ignores them: :class:`taslel_bench.robot.model.RobotModel` adds them to h)."""
+    damping and friction, the URDF's ``<dynamics>`` plus the options' (as MuJoCo reads the URDF's into the plant
+    and a plant perturbation adds to them), are stored in ``model.damping`` / ``model.friction`` (Pinocchio's ``nle``
+    ignores them: :class:`taslel_bench.robot.model.RobotModel` adds them to h)."""
     if options.edits_trunk:
         edit_trunk(model, options, trunk_link)
-    for attr, field in (
-        ("armature", "armature"),
-        ("damping", "joint_damping"),
-        ("friction", "joint_frictionloss"),
-    ):
+    for attr, field in (("damping", "joint_damping"), ("friction", "joint_frictionloss")):
         values = np.array(getattr(model, attr))  # (nv,) a copy: assign the whole vector back
-        values[6:] = options.per_joint(field)
-        if attr == "armature":  # implicit damping: (M + dt D) vdot + D v = f, dt D on the joint diagonal
-            values[6:] += options.implicit_damping_dt_s * options.per_joint("joint_damping")
+        values[6:] = values[6:] + options.per_joint(field)  # the URDF's (0 on the A1) plus the options'
         setattr(model, attr, values)
+    armature = np.array(model.armature)
+    armature[6:] = options.per_joint("armature")
+    # implicit damping: (M + dt D) vdot + D v = f, dt D on the joint diagonal
+    armature[6:] += options.implicit_damping_dt_s * np.array(model.damping)[6:]
+    model.armature = armature
