@@ -62,7 +62,9 @@ def test_plant_and_model_agree(robot_setup):
         worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
         tdot_v = np.zeros(quad.NV)
         tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
-        worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - pm.h).max())
+        losses = np.zeros(quad.NV)  # the known joint losses the model adds to h (the URDF's <dynamics>)
+        losses[6:] = pm.joint_damping * v[6:] + pm.joint_frictionloss * np.tanh(v[6:] / pm.frictionloss_smoothing_radps)
+        worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - (pm.h - losses)).max())
         for i, foot in enumerate(quad.FOOT_FRAMES):
             sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
             worst["pos"] = max(worst["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
@@ -70,6 +72,9 @@ def test_plant_and_model_agree(robot_setup):
             mujoco.mj_jacSite(m, d, jac, None, sid)
             worst["jac"] = max(worst["jac"], np.abs(jac @ T - pm.foot_jac_in_world[i]).max())
     assert max(worst.values()) < TOL, (robot.name, worst)
+    # the same joint losses in the plant (MuJoCo reads the URDF's <dynamics> into damping and frictionloss)
+    assert np.array_equal(br.joint_vector(m.dof_damping), pm.joint_damping)
+    assert np.array_equal(br.joint_vector(m.dof_frictionloss), pm.joint_frictionloss)
     assert pm.total_mass_kg == pytest.approx(float(m.body_mass.sum()), abs=1e-9)
 
 
