@@ -136,3 +136,16 @@ def _yaml(name: str) -> dict:
     node = OmegaConf.to_container(OmegaConf.load(ROBOT_CONFIG_DIR / f"{name}.yaml"))
     node.pop("defaults", None)
     return node
+
+
+def test_the_trot_scaled_to_the_a1_is_the_tuned_trot():
+    """The trot's values from the robot (conf/controller/trot.yaml's scaling) are the A1's tuned values exactly, and
+    follow each robot's mass and leg length."""
+    from taslel_bench.api import build_controller
+    from tests.conftest import compose_cfg
+
+    ctl = build_controller(compose_cfg([]))
+    p = ctl.gait.p
+    assert (p.speed_mps, p.swing_height_m, p.stand_height_m, ctl.gains.kp, ctl.gains.kd) == (0.4, 0.06, 0.27, 100.0, 3.0)
+    heavy = build_controller(compose_cfg(["robot=anymal_c"]))
+    assert heavy.gains.kp > 500 and heavy.gait.p.speed_mps > 0.45 and heavy.robot.name == "anymal_c"

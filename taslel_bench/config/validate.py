@@ -28,7 +28,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
 from taslel_bench.config.safety import safety_limits
-from taslel_bench.control.gait import trot_defaults
+from taslel_bench.control.gait import TrotScaling
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import (
     FALLBACKS,
@@ -226,14 +226,19 @@ def _video(cfg: DictConfig) -> None:
 
 
 def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) -> float:
-    """Trot parameters (null: the robot's, :func:`taslel_bench.control.gait.trot_defaults`); returns the stand
+    """Trot parameters (null: the robot's, :class:`taslel_bench.control.gait.TrotScaling`); returns the stand
     height [m]."""
     c = "controller"
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     if _get(cfg, f"{c}._target_") != TROT_TARGET:  # another controller checks its own arguments when built
         return robot.stand_height_m
     reach = LEG_REACH_FRACTION * robot.leg_length_m  # [m]
-    defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
+    scaling = _get(cfg, f"{c}.scaling") or {}
+    _known_keys(f"{c}.scaling", scaling, TrotScaling)
+    for key in (f.name for f in dataclasses.fields(TrotScaling)):
+        number(f"{c}.scaling.{key}", scaling.get(key), 0.0, lo_open=True)
+    defaults = TrotScaling(**{k: float(v) for k, v in scaling.items()}).values(robot.mass_kg, robot.leg_length_m,
+                                                                               robot.stand_height_m)
 
     def value(key: str) -> Any:
         got = _get(cfg, f"{c}.{key}")

@@ -28,26 +28,28 @@ class GaitParams:
     speed_mps: float = 0.4  # [m/s] commanded forward speed (trunk x)
 
 
-# The trot's values where the controller config leaves them null, scaled from the A1's tuned ones (mass 13.741 kg,
-# thigh + calf 0.4 m): speed and swing height with the leg length (speed as the square root: equal Froude number),
-# the joint gains with m g L (the torques that hold the robot up) and its square root (damping).
-REFERENCE_MASS_KG = 13.741  # [kg]
-REFERENCE_LEG_M = 0.4  # [m]
-REFERENCE_TROT = {"speed": 0.4, "swing_height": 0.06, "kp": 100.0, "kd": 3.0}
+@dataclass(frozen=True)
+class TrotScaling:
+    """How the trot's values follow a robot of mass m [kg] and leg length L [m] (thigh + calf): the speed with sqrt(L)
+    (equal Froude number), the swing height with L, the PD gains with m L (the torques that hold the robot up) and
+    its square root. The coefficients are ``controller.scaling`` in ``conf/controller/trot.yaml``."""
 
+    speed_per_sqrt_leg: float  # [m^0.5/s] speed = this x sqrt(L)
+    swing_per_leg: float  # [-] swing height = this x L
+    kp_per_mass_leg: float  # [N·m/rad per kg·m] kp = this x m L
+    kd_per_sqrt_mass_leg: float  # [N·m·s/rad per sqrt(kg·m)] kd = this x sqrt(m L)
 
-def trot_defaults(mass_kg: float, leg_length_m: float, stand_height_m: float) -> dict[str, float]:
-    """Speed [m/s], swing height [m], stand height [m], kp [N·m/rad], kd [N·m·s/rad] of a robot of this mass and
-    leg length (rounded: the A1 gets the tuned values exactly)."""
-    length = leg_length_m / REFERENCE_LEG_M
-    load = mass_kg * leg_length_m / (REFERENCE_MASS_KG * REFERENCE_LEG_M)
-    return {
-        "speed": round(REFERENCE_TROT["speed"] * math.sqrt(length), 3),
-        "swing_height": round(REFERENCE_TROT["swing_height"] * length, 4),
-        "stand_height": stand_height_m,
-        "kp": round(REFERENCE_TROT["kp"] * load, 1),
-        "kd": round(REFERENCE_TROT["kd"] * math.sqrt(load), 2),
-    }
+    def values(self, mass_kg: float, leg_length_m: float, stand_height_m: float) -> dict[str, float]:
+        """speed [m/s], swing_height [m], stand_height [m], kp [N·m/rad], kd [N·m·s/rad] of the robot (rounded to
+        1 mm/s, 0.1 mm, 0.1 N·m/rad and 0.01 N·m·s/rad)."""
+        load = mass_kg * leg_length_m  # [kg·m]
+        return {
+            "speed": round(self.speed_per_sqrt_leg * math.sqrt(leg_length_m), 3),
+            "swing_height": round(self.swing_per_leg * leg_length_m, 4),
+            "stand_height": stand_height_m,
+            "kp": round(self.kp_per_mass_leg * load, 1),
+            "kd": round(self.kd_per_sqrt_mass_leg * math.sqrt(load), 2),
+        }
 
 
 class TrotGait:

@@ -1,11 +1,11 @@
 """``controller=trot``: the paper's trot for any robot, built from the ``controller`` group (``_target_`` of
-``conf/controller/trot.yaml``). Values left null come from the robot (:func:`taslel_bench.control.gait.trot_defaults`);
+``conf/controller/trot.yaml``). Values left null come from the robot (:class:`taslel_bench.control.gait.TrotScaling`);
 ``terrain_following`` gives the terrain-following variant (beyond the paper)."""
 
 from __future__ import annotations
 
 from taslel_bench.control.footholds import FootholdPlanner
-from taslel_bench.control.gait import GaitParams, trot_defaults
+from taslel_bench.control.gait import GaitParams, TrotScaling
 from taslel_bench.control.nominal import NominalController, PDGains
 from taslel_bench.control.terrain_following import TerrainFollowingController
 from taslel_bench.robot.description import RobotDescription
@@ -13,10 +13,10 @@ from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.terrain.terrain import Terrain
 
 
-def trot_values(robot: RobotDescription, **given: float | None) -> dict[str, float]:
+def trot_values(robot: RobotDescription, scaling: TrotScaling, **given: float | None) -> dict[str, float]:
     """speed [m/s], swing_height [m], stand_height [m], kp [N·m/rad], kd [N·m·s/rad]: ``given`` where not None,
-    else the robot's."""
-    defaults = trot_defaults(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
+    else the robot's (``scaling``)."""
+    defaults = scaling.values(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
     return {key: float(given[key]) if given.get(key) is not None else value for key, value in defaults.items()}
 
 
@@ -28,6 +28,7 @@ def trot_controller(
     period: float,
     duty: float,
     stand_duration: float,
+    scaling: dict[str, float],
     speed: float | None = None,
     swing_height: float | None = None,
     stand_height: float | None = None,
@@ -41,7 +42,7 @@ def trot_controller(
 ) -> NominalController:
     """The trot of ``robot`` at the control period ``control_dt_s`` [s]; the keys are ``conf/controller/trot.yaml``'s
     (meanings and units there). ``terrain_following`` needs the world's ``terrain``."""
-    v = trot_values(robot, speed=speed, swing_height=swing_height, stand_height=stand_height, kp=kp, kd=kd)
+    v = trot_values(robot, TrotScaling(**scaling), speed=speed, swing_height=swing_height, stand_height=stand_height, kp=kp, kd=kd)
     gait = GaitParams(period_s=float(period), duty=float(duty), swing_height_m=v["swing_height"],
                       stand_height_m=v["stand_height"], speed_mps=v["speed"])
     gains = PDGains(kp=v["kp"], kd=v["kd"])

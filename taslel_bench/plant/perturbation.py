@@ -29,7 +29,7 @@ from taslel_bench.util.fields import integer, number, number_or_list, numbers
 MAX_SCALE = 10.0  # [-] mass and motor-strength factors
 MAX_COM_SHIFT_M = 0.2  # [m] per axis (the trunk is 0.27 x 0.19 x 0.11 m)
 MAX_JOINT_DAMPING = 10.0  # [N·m·s/rad]
-MAX_JOINT_FRICTIONLOSS_NM = 10.0  # [N·m] (the motors give 33.5)
+MAX_JOINT_FRICTIONLOSS_NM = 10.0  # [N·m]
 MAX_ARMATURE_KGM2 = 1.0  # [kg·m²] (real leg rotors reflect ~0.005-0.05 through their gearbox)
 MAX_PAYLOAD_KG = 50.0  # [kg] (the A1 weighs 13.7 kg)
 MAX_PAYLOAD_OFFSET_M = 0.5  # [m] per axis, trunk frame
