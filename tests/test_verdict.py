@@ -232,3 +232,19 @@ def test_barrier_negative_rate_has_a_worst_window_too():
     m = clearance_metrics(tr, 0, DT)
     assert m["barrier_negative_rate"] == pytest.approx(50 / 2000)
     assert m["barrier_negative_rate_worst_window"] == pytest.approx(50 / 500)
+
+
+def test_reasons_are_values_and_the_summary_keeps_their_tags():
+    """The verdict's reasons are typed (tag, key, measured, limit); the text and the tags in the summary come from
+    them, and the report counts the tags without parsing the text (older summaries: from the text)."""
+    from taslel_bench.metrics.verdict import Reason, reason_tags, reasons
+
+    summary = {"status": "ok", "fell": True, "time_to_fall_s": 3.25, "fall_reason": "trunk height", "trips": 2,
+               "friction_cone_edge_rate_worst_window": 0.5}
+    found = reasons(summary, SafetyLimits())
+    assert [r.tag for r in found] == ["fell", "tripped", "cone_edge"]
+    assert found[1] == Reason("tripped", "trips", 2.0, 0.0, found[1].meaning)
+    assert found[2].measured == 0.5 and found[2].limit == SafetyLimits().cone_edge_rate_worst_window_max
+    assert judge(summary, SafetyLimits())[1] == "; ".join(r.text for r in found)
+    assert reason_tags("ignored: text", "fell,tripped") == ["fell", "tripped"]
+    assert reason_tags(judge(summary, SafetyLimits())[1]) == ["fell", "tripped", "cone_edge"]

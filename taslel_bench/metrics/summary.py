@@ -15,7 +15,7 @@ from taslel_bench.metrics.contacts import ContactStream, stand_part
 from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.metrics.residuals import ResidualStream
 from taslel_bench.metrics.stream import Reducer
-from taslel_bench.metrics.verdict import SafetyLimits, judge
+from taslel_bench.metrics.verdict import SafetyLimits, reasons
 from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.trace import TICK_PARTS, rpy_from_quat
@@ -75,7 +75,9 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
     for key in [k for k in out if k.startswith("estimator_")]:
         out[key] = out.pop(key)  # after the residuals, as the summary always had them
     out["status"], out["degraded_reasons"] = assess(out, limits)
-    out["safe"], out["unsafe_reasons"] = judge(out, safety)
+    found = reasons(out, safety)
+    out["safe"], out["unsafe_reasons"] = not found, "; ".join(r.text for r in found)
+    out["unsafe_reason_tags"] = ",".join(r.tag for r in found)  # what the report counts (metrics/verdict.py)
     return out
 
 

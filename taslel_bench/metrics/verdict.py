@@ -7,7 +7,9 @@ not a reason). A run is unsafe when it fell, or crossed one of the ``safety`` li
 (:class:`SafetyLimits`, defaults below and in ``conf/config.yaml``). A run that ended in an error is not
 judged: ``safe`` is False with the reason ``not_judged``.
 
-Each reason is ``<tag>: <measurement>``; the tags (:data:`REASON_TAGS`) are what the report counts.
+Each reason is a :class:`Reason` value (tag, summary key, measured, limit); ``summary.json`` keeps them as text
+(``unsafe_reasons``: ``<tag>: <key>=<measured> > <limit> (<meaning>)`` joined by "; ") and their tags
+(``unsafe_reason_tags``: comma-joined), which is what the report counts (:data:`REASON_TAGS`).
 """
 
 from __future__ import annotations
@@ -44,14 +46,41 @@ CHECKS = {
 REASON_TAGS = ("not_judged", "fell", *CHECKS)
 
 
+@dataclass(frozen=True)
+class Reason:
+    """Why a run is unsafe: a tag of :data:`REASON_TAGS`, the summary key read, its value and the limit it crossed
+    (nan where the reason has no limit: a fall, a run not judged), and what crossing it means."""
+
+    tag: str
+    key: str
+    measured: float
+    limit: float
+    meaning: str
+
+    @property
+    def text(self) -> str:
+        """``<tag>: <key>=<measured> > <limit> (<meaning>)`` (a fall: ``fell: at <t> s (<how>)``)."""
+        if self.tag == "fell":
+            return f"fell: at {self.measured:.2f} s ({self.meaning})"
+        if self.tag == "not_judged":
+            return f"not_judged: {self.meaning}"
+        return f"{self.tag}: {self.key}={self.measured:.3g} > {self.limit:g} ({self.meaning})"
+
+
 def judge(summary: dict[str, object], limits: SafetyLimits) -> tuple[bool, str]:
-    """(safe, reasons joined by "; ") of a run's summary (``status``, ``fell`` and the keys of CHECKS)."""
+    """(safe, reasons joined by "; ") of a run's summary: the text of :func:`reasons`."""
+    found = reasons(summary, limits)
+    return not found, "; ".join(r.text for r in found)
+
+
+def reasons(summary: dict[str, object], limits: SafetyLimits) -> list[Reason]:
+    """Why the run of ``summary`` (``status``, ``fell`` and the keys of CHECKS) is unsafe; empty if it is safe."""
     if summary.get("status") == "error":
-        return False, "not_judged: the episode ended in an error"
-    reasons = []
+        return [Reason("not_judged", "status", math.nan, math.nan, "the episode ended in an error")]
+    found = []
     if summary.get("fell"):
-        reasons.append(f"fell: at {float(summary.get('time_to_fall_s', math.nan)):.2f} s "
-                       f"({summary.get('fall_reason', '')})")
+        found.append(Reason("fell", "time_to_fall_s", float(summary.get("time_to_fall_s", math.nan)), math.nan,
+                            str(summary.get("fall_reason", ""))))
     for tag, (key, attr, meaning) in CHECKS.items():
         if tag == "tripped" and limits.trip_touchdown_tolerance_s > 0.0:
             key = "trips_beyond_touchdown_tolerance"
@@ -60,12 +89,15 @@ def judge(summary: dict[str, object], limits: SafetyLimits) -> tuple[bool, str]:
         value = summary.get(key)
         limit = getattr(limits, attr)
         if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > limit:
-            reasons.append(f"{tag}: {key}={value:.3g} > {limit:g} ({meaning})")
-    return not reasons, "; ".join(reasons)
+            found.append(Reason(tag, key, float(value), float(limit), meaning))
+    return found
 
 
-def reason_tags(reasons: object) -> list[str]:
-    """The tags of an ``unsafe_reasons`` text (empty for a safe run or a missing value)."""
+def reason_tags(reasons: object, tags: object = None) -> list[str]:
+    """The tags of a run's unsafe reasons: ``unsafe_reason_tags`` (``tags``, comma-joined) where the summary has
+    it, else read from an older summary's ``unsafe_reasons`` text (empty for a safe run or a missing value)."""
+    if isinstance(tags, str):
+        return [t for t in tags.split(",") if t]
     if not isinstance(reasons, str) or not reasons:
         return []
     return [part.split(":", 1)[0].strip() for part in reasons.split("; ") if ":" in part]

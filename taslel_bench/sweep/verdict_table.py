@@ -18,7 +18,9 @@ def verdict_table(frame: pd.DataFrame, group_cols: list[str]) -> pd.DataFrame:
     for keys, g in groups:
         keys = keys if isinstance(keys, tuple) else (keys,)
         row: dict[str, object] = dict(zip(group_cols, keys))
-        tags = [reason_tags(r) for r in g.get("unsafe_reasons", pd.Series([""] * len(g), index=g.index))]
+        texts = g.get("unsafe_reasons", pd.Series([""] * len(g), index=g.index))
+        typed = g.get("unsafe_reason_tags", pd.Series([None] * len(g), index=g.index))  # absent in older summaries
+        tags = [reason_tags(r, t) for r, t in zip(texts, typed, strict=True)]
         judged = g["safe"].notna() if "safe" in g else pd.Series(False, index=g.index)
         unsafe = int((~g.loc[judged, "safe"].astype(bool)).sum()) if judged.any() else 0
         row["runs"] = len(g)
