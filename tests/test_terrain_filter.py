@@ -322,3 +322,21 @@ def test_scalar_cross_and_compiled_merge_give_numpys_bits():
         _take_closer(d, normal, point, dp, n_p, p_p, tol)
         assert all(np.array_equal(w, g) for w, g in zip(want, (d, normal, point)))
         assert 0 < closer.sum() < 24
+
+
+def test_a_barrier_family_declares_its_rows(tmp_path):
+    """The trunk-attitude family has two rows (pitch, roll), not four leg slots: two QP rows, its own trace columns,
+    and no part in the per-leg readings."""
+    from taslel_bench.filter.barriers.attitude import TrunkAttitude
+    from taslel_bench.sim.build import Built
+
+    over = ["filter=terrain", "+filter.barriers.attitude={_target_:taslel_bench.filter.barriers.attitude.TrunkAttitude}",
+            "duration=0.3", "progress=false"]
+    built = Built(compose_cfg(over))
+    att = next(b for b in built.filter.barriers if isinstance(b, TrunkAttitude))
+    assert att.rows == ("pitch", "roll") and att.n_rows == 2 and not att.per_leg
+    labels = built.filter.problem.row_labels
+    assert [lbl for lbl in labels if lbl.endswith("_attitude")] == ["pitch_attitude", "roll_attitude"]
+    frame = built.episode.run().trace.to_frame()
+    assert {"pitch_barrier_attitude_h_m", "roll_barrier_attitude_h_m"} <= set(frame.columns)
+    assert not any(c.startswith(("FL_", "FR_", "RL_", "RR_")) and "_attitude_" in c for c in frame.columns)

@@ -45,21 +45,25 @@ class BarrierLog:
     ECBF condition psi = hdot_e + a2 h_e [m/s²] the filter planned, and the one realised (filled after the
     episode by :mod:`taslel_bench.metrics.residuals`)."""
 
-    def __init__(self, name: str, capacity: int) -> None:
-        shape = (capacity, quad.N_LEGS)
-        self.name = name
+    def __init__(self, name: str, capacity: int, rows: Sequence[str] = quad.LEGS) -> None:
+        shape = (capacity, len(rows))
+        self.name, self.rows = name, tuple(rows)
+        self.per_leg = self.rows == quad.LEGS  # one row per leg: part of the per-leg readings
         self.h_m = np.full(shape, np.nan)
         self.he_mps = np.full(shape, np.nan)
         self.psi_planned_mps2 = np.full(shape, np.nan)
-        self.psi_realized_mps2 = np.zeros((0, quad.N_LEGS))
+        self.psi_realized_mps2 = np.zeros((0, len(rows)))
 
 
 class EpisodeTrace:
     """Arrays of length ``capacity``; ``n`` ticks are valid (derived arrays after :meth:`finalize`).
-    ``barrier_names``: the filter's barrier families, in its order (one :class:`BarrierLog` each)."""
+    ``barrier_names``: the filter's barrier families, in its order (one :class:`BarrierLog` each); ``barrier_rows``:
+    the row names of those whose rows are not the legs (name -> rows)."""
 
     def __init__(self, capacity: int, filter_on: bool, nq: int = quad.NQ, nv: int = quad.NV,
-                 nsensordata: int = 0, barrier_names: Sequence[str] = ()) -> None:  # fmt: skip
+                 nsensordata: int = 0, barrier_names: Sequence[str] = (),
+                 barrier_rows: dict[str, tuple[str, ...]] | None = None) -> None:  # fmt: skip
+        self._barrier_rows = dict(barrier_rows or {})
         c = capacity
         self.n = 0  # ticks recorded in the episode (global count)
         self.offset = 0  # global tick of row 0: the trace holds ticks offset .. n - 1 (see roll())
@@ -121,7 +125,8 @@ class EpisodeTrace:
         self.qp_status = np.full(c, -1, np.int8)
         self.qp_iterations = np.full(c, -1, np.int32)
         self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
-        self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
+        self.barriers = {name: BarrierLog(name, c, self._barrier_rows.get(name, quad.LEGS))  # the filter's families
+                         for name in barrier_names}
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
 
     def _allocate_contact_frames(self, c: int) -> None:
@@ -298,7 +303,7 @@ class EpisodeTrace:
     def barrier_h_min(self, ticks: slice = slice(None)) -> np.ndarray:
         """(n, 4) the smallest h [m] over the barrier families per tick and leg (nan where none is active)."""
         rows = self.t_s[ticks].shape[0]
-        return _fmin([log.h_m[ticks] for log in self.barriers.values()], rows)
+        return _fmin([log.h_m[ticks] for log in self.barriers.values() if log.per_leg], rows)
 
     # ------------------------------------------------------------------------------------------ derived
     def base_rpy(self) -> np.ndarray:
@@ -360,8 +365,13 @@ class EpisodeTrace:
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
             self._contact_frame_columns(cols, d, t, i, leg)
             for name, log in self.barriers.items():
-                cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
-                cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
+                if log.per_leg:
+                    cols[f"{leg}_barrier_{name}_h_m"] = log.h_m[t, i]
+                    cols[f"{leg}_barrier_{name}_he_mps"] = log.he_mps[t, i]
+        for name, log in self.barriers.items():  # families of other rows (the trunk's pitch and roll)
+            for j, row in enumerate(log.rows if not log.per_leg else ()):
+                cols[f"{row}_barrier_{name}_h_m"] = log.h_m[t, j]
+                cols[f"{row}_barrier_{name}_he_mps"] = log.he_mps[t, j]
 
     def _contact_frame_columns(self, cols: dict, d: dict, t: slice, i: int, leg: str) -> None:
         """Leg ``i``'s contacts in MuJoCo's contact frame: the summed normal force, and the tangential force,
@@ -385,8 +395,9 @@ class EpisodeTrace:
         cols["residual_trunk_torque_nm"] = np.linalg.norm(residual[:, 3:6], axis=1)
         cols["residual_joint_nm_max"] = np.abs(residual[:, 6:]).max(axis=1)
         acc_error = np.linalg.norm(_rows(self.foot_acc_error_w, k0, k1, quad.N_LEGS, 3), axis=2)
-        psi_planned = _fmin([log.psi_planned_mps2[t] for log in self.barriers.values()], k1 - k0)
-        psi_real = _fmin([_rows(log.psi_realized_mps2, k0, k1, quad.N_LEGS) for log in self.barriers.values()], k1 - k0)
+        legs = [log for log in self.barriers.values() if log.per_leg]
+        psi_planned = _fmin([log.psi_planned_mps2[t] for log in legs], k1 - k0)
+        psi_real = _fmin([_rows(log.psi_realized_mps2, k0, k1, quad.N_LEGS) for log in legs], k1 - k0)
         for i, leg in enumerate(quad.LEGS):
             cols[f"{leg}_foot_acc_error_mps2"] = acc_error[:, i]
             cols[f"{leg}_barrier_psi_planned_mps2"] = psi_planned[:, i]

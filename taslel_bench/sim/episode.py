@@ -189,7 +189,8 @@ class Episode:
         self.terminations.state_is_bad(self._qpos, self._qvel)
         self.contact_frames.warm_up(self.d)
         scratch = EpisodeTrace(1, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                               nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
+                               nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers],
+                               barrier_rows={b.name: tuple(b.rows) for b in self._barriers if not b.per_leg})
         gs = self.controller.contact_plan(self.controller.stand_duration_s)
         writable = SimpleNamespace(phi=gs.phi, swing_phase=gs.swing_phase.copy(), in_stance=gs.in_stance.copy())
         for fres in results:
@@ -230,7 +231,8 @@ class Episode:
         self._barriers = self.filter.barriers if self.filter is not None else []
         capacity = self.n_ticks if not self.chunk_ticks else min(self.n_ticks, int(self.chunk_ticks) + 1)
         trace = EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers])
+                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers],
+                             barrier_rows={b.name: tuple(b.rows) for b in self._barriers if not b.per_leg})
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()

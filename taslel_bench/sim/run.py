@@ -359,7 +359,8 @@ def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | N
         return None
     from taslel_bench.record import mcap
 
-    names = [b.name for b in built.filter.barriers] if built.filter is not None else []
+    # the per-leg families (the MCAP draws them at the feet)
+    names = [b.name for b in built.filter.barriers if b.per_leg] if built.filter is not None else []
     metadata = {"config": {"config.yaml": run_config_yaml(cfg)}, "versions": mcap.versions()}
     every = mcap.stride(cfg.control_rate_hz, cfg.record.mcap_rate_hz)  # record.mcap_rate_hz (null: every tick)
     stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),

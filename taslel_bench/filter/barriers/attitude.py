@@ -1,6 +1,5 @@
 """Trunk attitude (``filter.barriers.attitude``, preset ``filter=terrain``): the trunk's pitch and roll kept
-within +-``max_tilt_deg``. Not a leg barrier: it uses the family's first two rows (the FL slot for pitch,
-FR for roll; RL and RR stay inactive), so the QP layout stays four rows a family.
+within +-``max_tilt_deg``. Not a leg barrier: its two rows are ``pitch`` and ``roll``.
 
 On a step or a slope the nominal trot (joint PD about a stand pose, no terrain knowledge) pitches the trunk
 as its front feet climb; measured on ``steps`` (seed 0), with the front feet over the first riser the pitch
@@ -15,7 +14,6 @@ import numpy as np
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.layout import INACTIVE_RHS, TickInputs
 from taslel_bench.interfaces import QPProblem
-from taslel_bench.robot import quadruped as quad
 
 
 class TrunkAttitude(Barrier):
@@ -30,13 +28,12 @@ class TrunkAttitude(Barrier):
         super().__init__(world, name)
         self.max_tilt_rad = math.radians(float(max_tilt_deg))
 
-    def labels(self) -> list[str]:
-        return [f"pitch_{self.name}", f"roll_{self.name}", f"unused_{self.name}", f"unused2_{self.name}"]
+    rows = ("pitch", "roll")
 
     def write(self, qp: QPProblem, x: TickInputs) -> None:
         r0 = self.start
-        qp.G[r0 : r0 + quad.N_LEGS] = 0.0
-        qp.h[r0 : r0 + quad.N_LEGS] = INACTIVE_RHS
+        qp.G[r0 : r0 + self.n_rows] = 0.0
+        qp.h[r0 : r0 + self.n_rows] = INACTIVE_RHS
         self.h[:], self.h_e[:] = np.nan, np.nan
         rot = np.asarray(x.model.data.oMi[1].rotation)  # trunk -> world
         pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))

@@ -36,17 +36,28 @@ class BarrierWorld:
 
 
 class Barrier:
-    """One exponential-CBF row per leg (LEGS order), written by a subclass's :meth:`write` (usually one compiled
-    kernel), which also fills ``h`` [m] and ``h_e`` [m/s] (nan where a row is inactive). Each row reads
+    """Exponential-CBF rows, one per name of :attr:`rows` (by default one per leg, in LEGS order; a family of
+    other rows declares its own, e.g. the trunk's pitch and roll), written by a subclass's :meth:`write` (usually
+    one compiled kernel), which also fills ``h`` [m] and ``h_e`` [m/s] (nan where a row is inactive). Each row reads
     psi(vdot) >= margin with psi = hdot_e + a2 h_e [m/s²] and ``margin_mps2`` >= 0 a robustness margin (0:
     the paper's row). After a solve, :meth:`planned` records psi at the solution's vdot (``psi_planned``):
     the condition the filter believes the next instant satisfies.
 
     ``name`` is the family's config key (``filter.barriers.<name>``), the suffix of its row labels
-    (``FL_<name>``), and the middle of its trace columns (``FL_barrier_<name>_h_m``). Subclasses override
+    (``FL_<name>``), and the middle of its trace columns (``FL_barrier_<name>_h_m``). Only the families whose rows
+    are the legs enter the per-leg readings (``FL_barrier_h_m``, the psi columns, the MCAP's per-foot spheres). Subclasses override
     :meth:`write`, and :meth:`applies` when they need something of the world (a profile, obstacles)."""
 
-    n_rows = quad.N_LEGS
+    rows: tuple[str, ...] = quad.LEGS  # the family's row names (one QP row each)
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.rows)
+
+    @property
+    def per_leg(self) -> bool:
+        """True when the family has one row per leg (LEGS order)."""
+        return tuple(self.rows) == quad.LEGS
 
     def __init__(self, world: BarrierWorld, name: str) -> None:
         self.name = name
@@ -54,9 +65,9 @@ class Barrier:
         self.foot_radius_m = world.robot.foot_radius_m  # [m] the robot's foot spheres
         self.start = 0  # first row in the QP's inequality block (set by the filter)
         self.margin_mps2 = 0.0  # [m/s²] robust margin on psi (set per tick by the filter when robust)
-        self.h = np.full(quad.N_LEGS, np.nan)  # [m] barrier value per leg (nan where inactive)
-        self.h_e = np.full(quad.N_LEGS, np.nan)  # [m/s]
-        self.psi_planned = np.full(quad.N_LEGS, np.nan)  # [m/s²] hdot_e + a2 h_e at the solution
+        self.h = np.full(self.n_rows, np.nan)  # [m] barrier value per row (nan where inactive)
+        self.h_e = np.full(self.n_rows, np.nan)  # [m/s]
+        self.psi_planned = np.full(self.n_rows, np.nan)  # [m/s²] hdot_e + a2 h_e at the solution
 
     @classmethod
     def applies(cls, world: BarrierWorld) -> bool:
@@ -69,19 +80,19 @@ class Barrier:
         raise NotImplementedError
 
     def pattern(self, mask: np.ndarray) -> None:
-        mask[self.start : self.start + quad.N_LEGS, VDOT] = True
+        mask[self.start : self.start + self.n_rows, VDOT] = True
 
     def labels(self) -> list[str]:
-        return [f"{leg}_{self.name}" for leg in quad.LEGS]
+        return [f"{row}_{self.name}" for row in self.rows]
 
     def init(self, qp: QPProblem) -> None:
-        qp.G[self.start : self.start + quad.N_LEGS] = 0.0
-        qp.h[self.start : self.start + quad.N_LEGS] = INACTIVE_RHS
+        qp.G[self.start : self.start + self.n_rows] = 0.0
+        qp.h[self.start : self.start + self.n_rows] = INACTIVE_RHS
 
     def tighten(self, qp: QPProblem) -> None:
         """Subtract the robust margin from the active rows' right-hand sides (call at the end of write)."""
         if self.margin_mps2 > 0.0:
-            rows = slice(self.start, self.start + quad.N_LEGS)
+            rows = slice(self.start, self.start + self.n_rows)
             qp.h[rows] -= np.where(np.isfinite(self.h), self.margin_mps2, 0.0)
 
     def planned(self, qp: QPProblem, vdot: np.ndarray) -> None:
