@@ -1,4 +1,4 @@
-"""Terrain (friction) estimators: axis 3 of the sweep (DESIGN.md).
+"""Terrain (friction) estimators: axis 3 of the sweep (docs/concepts.md).
 
 Importable without torch: ``estimators.simple`` (oracle, fixed) and ``estimators.collect`` need only
 numpy and MuJoCo; ``estimators.models``, ``train``, ``evaluate`` and ``learned`` need the ``learn`` extra

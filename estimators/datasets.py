@@ -58,9 +58,9 @@ class Merge:
         return out
 
 
-R34 = "rounds 3-4 training / evaluation (results/estimators/report.md)"
-R7 = "round 7 per-band targets (results/estimators/targets_offline.md)"
-R8 = "round 8 surface patches (drops and rises, per-foot labels)"
+R34 = "training / evaluation (results/estimators/report.md)"
+R7 = "per-band targets (results/estimators/targets_offline.md)"
+R8 = "surface patches (drops and rises, per-foot labels)"
 FR = "--friction-range"
 PATCHES = ("--patch-fraction", "1.0")
 
@@ -73,7 +73,7 @@ RECIPE: tuple[Collection | Merge, ...] = (
     Collection("estimators_f_more5", 9, {"train": 2400}, ("--plant-beta", "0.4", *F), used_by=R34),
     Collection("estimators_shiftval", 11, {"shifted": 150}, used_by=R34),
     Merge("estimators_f_big4", ("estimators_f", "estimators_f_extra", "estimators_f_extra2", "estimators_f_corner",
-                                "estimators_f_corner2"), used_by="mlp (round 3)"),
+                                "estimators_f_corner2"), used_by="mlp"),
     Merge("estimators_f_big5", ("estimators_f", "estimators_f_extra", "estimators_f_extra2", "estimators_f_corner",
                                 "estimators_f_corner2", "estimators_f_more5"), used_by=R34),
     Collection("r7_low_shiftval", 31, {"shifted": 400}, (FR, "0.1", "0.5", *F), used_by=R7),
@@ -82,7 +82,7 @@ RECIPE: tuple[Collection | Merge, ...] = (
     Collection("r7_mid_test", 34, {"test": 200, "shifted": 200}, (FR, "0.5", "0.8", *F), used_by=R7),
     Collection("r7_vlow_test", 35, {"test": 300, "shifted": 300}, (FR, "0.1", "0.3", *F), used_by=R7),
     Collection("r7_vlow_shiftval", 36, {"shifted": 300}, (FR, "0.1", "0.3", *F), used_by=R7),
-    # round 8: floors with a strip of other friction across the path (drops and rises, 0.1-1.2)
+    # floors with a strip of other friction across the path (drops and rises, 0.1-1.2)
     # (a val split of its own: the set can be trained on alone; it was missing before)
     Collection("r8_patch_train", 40, {"train": 2400, "val": 300}, ("--patch-fraction", "0.7", *F), used_by=R8),
     Collection("r8_patch_shiftval", 41, {"shifted": 300}, (*PATCHES, *F), used_by=R8),
@@ -91,7 +91,7 @@ RECIPE: tuple[Collection | Merge, ...] = (
                (FR, "0.1", "0.4", *PATCHES, "--patch-friction", "0.1", "0.4", *F), used_by=R8),
     Merge("r8_train", ("estimators_f", "estimators_f_extra", "estimators_f_extra2", "estimators_f_corner",
                        "estimators_f_corner2", "estimators_f_more5", "r8_patch_train"), used_by=R8),
-    # round 8 retraining on this machine: the patch episodes beside round 3's first collection (3 200 training
+    # retraining on this machine: the patch episodes beside the first collection (3 200 training
     # episodes; val/test/shifted of estimators_f)
     Merge("r8_train_small", ("estimators_f", "r8_patch_train"), used_by=R8),
 )

@@ -1,6 +1,6 @@
 """One-sided safety targets of friction estimates, per friction band, with episode-bootstrap CIs (numpy only).
 
-What matters to the safety filter is one-sided (issue 19): never claim more friction than there is where
+What matters to the safety filter is one-sided: never claim more friction than there is where
 friction is low, and do not starve the gait.
 
 * **over-estimation**: ``mu_hat > mu + 0.05``; target P(over | mu < 0.5) <= 5 % (checked per band 0.1-0.3

@@ -55,7 +55,7 @@ class SlipSettings:
     velocity_tau_s: float = 0.1  # [s] leg-odometry correction time constant of the trunk velocity
     # subtract the legs' own weight (URDF link masses, trunk attitude from the IMU) from the joint torques before
     # the quasi-static force: the ratio's median error on support ticks of flat floors +0.044..+0.053 ->
-    # +0.005..+0.010, p90 0.07-0.08 -> 0.024-0.034 (studies/estimator_probe_signal.py); off: round 8's detector
+    # +0.005..+0.010, p90 0.07-0.08 -> 0.024-0.034 (studies/estimator_probe_signal.py); off: the detector without it
     leg_gravity: bool = False
 
     def __post_init__(self) -> None:

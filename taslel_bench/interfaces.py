@@ -1,4 +1,4 @@
-"""The contract of the three sweep axes (DESIGN.md, dependency rule): what ``scenarios``, ``solvers`` and
+"""The contract of the three sweep axes (docs/concepts.md, dependency rule): what ``scenarios``, ``solvers`` and
 ``estimators`` implement and the types they exchange with the core.
 
 The axis packages import from the core only this module (types, protocols, the terrain vocabulary, the

@@ -77,7 +77,7 @@ MAX_FOOT_MARGIN_M = 0.05  # [m]
 # holds the whole trace until the end: fitted to runs of 10 / 60 / 300 s at 1 kHz, record.mcap on (peak 0.41 /
 # 0.65 / 1.60 GB; studies/notes/reliability.md). In chunks (the default) the trace holds one chunk, and what
 # grows with the run is the 1-D series of the exact percentiles (taslel_bench.metrics.stream) and the
-# parquet footer: MEMORY_SERIES_PER_TICK_GB per tick (README "Reliability" gives the measured peaks)
+# parquet footer: MEMORY_SERIES_PER_TICK_GB per tick (docs/guides/reliability.md gives the measured peaks)
 MEMORY_BASE_GB = 0.40
 MEMORY_PER_TICK_GB = 4.0e-6
 MEMORY_SERIES_PER_TICK_GB = 2.5e-7

@@ -11,7 +11,7 @@ friction rows hold although the filter's model is wrong, input-to-state-safe sty
   capped at ``max_margin_mps2``.
 * Friction rows: the pyramid uses mu (1 - ``friction_margin``) instead of mu, and each per-foot cone its foot's
   mu_i (1 - ``friction_margin``) (whether or not ``enabled``, which switches the ECBF margins: ``filter=terrain``
-  uses the friction margin alone). Before stop 42 the per-foot values were not scaled: the margin was off
+  uses the friction margin alone). Before commit 4614b04 the per-foot values were not scaled: the margin was off
   wherever the estimator gave one value per foot (the oracle on a world of several frictions, the slip estimators).
 * Disturbance observer (``observer_time_constant_s`` > 0): the equations of motion become
   M vdot + h = S u + J' lambda + d_hat, with d_hat [N·m] on the joint rows a low-pass (that time constant) of

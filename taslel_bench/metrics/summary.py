@@ -365,7 +365,8 @@ CAPPED_MAE_CAP = 0.6  # [-] capped MAE: estimate and truth capped here
 
 def estimator_safety_metrics(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray,
                              ready: np.ndarray) -> dict[str, float]:
-    """One-sided estimator metrics over control ticks (issue 19); over = :func:`overestimates`.
+    """One-sided estimator metrics over control ticks (never claim more friction than there is); over =
+    :func:`overestimates`.
 
     * ``estimator_low_overestimate_rate``: over-estimation over the ticks with mu < 0.5 (every tick, the
       startup window and friction drops included; nan without such ticks);

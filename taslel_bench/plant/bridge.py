@@ -1,6 +1,6 @@
 """State bridge MuJoCo (plant) <-> Pinocchio (controller's model). The only module that knows both.
 
-Conversions (see DESIGN.md, "conversion traps"):
+Conversions (docs/concepts.md, "conversion traps"):
   * quaternion: MuJoCo wxyz -> Pinocchio xyzw;
   * trunk linear velocity: MuJoCo world axes -> Pinocchio trunk axes (angular is in the trunk frame in both);
   * leg order: MuJoCo keeps the plant model's joint order (URDF: FR, FL, RR, RL); Pinocchio and the core use

@@ -6,7 +6,7 @@ A family is a subclass of :class:`Barrier` built from its config entry with the 
 terrain, the scenario's virtual profile, the ECBF gains). Its rows read ``psi(vdot) >= margin`` with
 psi = hdot_e + a2 h_e [m/s²] the ECBF condition on h_e = hdot + a1 h; a row is inactive
 (``0 <= INACTIVE_RHS``, h = nan) where the family does not apply on this tick (a stance foot, a leg far from
-any obstacle). Adding a barrier = one subclass + one ``filter.barriers.<name>`` entry (README, Extending).
+any obstacle). Adding a barrier = one subclass + one ``filter.barriers.<name>`` entry (docs/guides/extending.md).
 """
 
 from __future__ import annotations
