@@ -57,8 +57,8 @@ MIN_PHASE_TICKS = 2  # stance and swing each last at least this many control per
 MAX_PERIOD_S = 5.0  # [s] gait period
 MAX_SWING_HEIGHT_M = 0.2  # [m]
 MAX_STAND_DURATION_S = 60.0  # [s]
-MAX_KP = 1000.0  # [N·m/rad] joint PD (the default is 100)
-MAX_KD = 100.0  # [N·m·s/rad] (the default is 3)
+MAX_KP_PER_NM = 30.0  # [1/rad] joint PD stiffness at most this x the robot's largest torque limit (A1: 1005 N·m/rad)
+MAX_KD_PER_NM = 3.0  # [s/rad] joint PD damping at most this x the largest torque limit (A1: 100.5 N·m·s/rad)
 MAX_FOOTHOLD_SEARCH_M = 0.08  # [m] half the 0.16 m between touchdowns of one foot at the default gait
 MAX_TOUCHDOWN_HEIGHT_M = 0.03  # [m] a swing that ends this far above the expected ground still lands within the stance's first 30 ms at ~0.9 m/s
 MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
@@ -275,8 +275,13 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
         why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
         f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
     )
-    number(f"{c}.kp", value("kp"), 0.0, MAX_KP, unit="N·m/rad")
-    number(f"{c}.kd", value("kd"), 0.0, MAX_KD, unit="N·m·s/rad")
+    torque = max(robot.torque_limit_nm)  # [N·m]
+    scaled = "" if _get(cfg, f"{c}.kp") is not None else " (from controller.scaling)"
+    number(f"{c}.kp", value("kp"), 0.0, MAX_KP_PER_NM * torque, unit="N·m/rad",
+           why=f"at most {MAX_KP_PER_NM:g} x robot={robot.name}'s largest torque limit{scaled}")
+    scaled = "" if _get(cfg, f"{c}.kd") is not None else " (from controller.scaling)"
+    number(f"{c}.kd", value("kd"), 0.0, MAX_KD_PER_NM * torque, unit="N·m·s/rad",
+           why=f"at most {MAX_KD_PER_NM:g} x robot={robot.name}'s largest torque limit{scaled}")
     following = flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
     search = number(f"{c}.foothold_search", _get(cfg, f"{c}.foothold_search", 0.0), 0.0, MAX_FOOTHOLD_SEARCH_M,
                     unit="m", why="touchdown offsets along the heading, within the stance stroke's reach")
