@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -232,7 +232,16 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
     number(f"{c}.stand_duration", _get(cfg, f"{c}.stand_duration"), 0.0, MAX_STAND_DURATION_S, unit="s")
     if _get(cfg, f"{c}._target_") != TROT_TARGET:  # another controller checks its own arguments when built
         return robot.stand_height_m
-    reach = LEG_REACH_FRACTION * robot.leg_length_m  # [m]
+    value = _trot_values(cfg, robot)
+    stand = _trot_gait(cfg, control_rate_hz, robot, value)
+    _trot_gains(cfg, robot, value)
+    _trot_terrain_following(cfg)
+    return stand
+
+
+def _trot_values(cfg: DictConfig, robot: RobotDescription) -> Callable[[str], Any]:
+    """``controller.scaling`` checked; returns key -> the trot's value (the config's, else the robot's)."""
+    c = "controller"
     scaling = _get(cfg, f"{c}.scaling") or {}
     _known_keys(f"{c}.scaling", scaling, TrotScaling)
     for key in (f.name for f in dataclasses.fields(TrotScaling)):
@@ -244,6 +253,13 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
         got = _get(cfg, f"{c}.{key}")
         return defaults[key] if got is None else got
 
+    return value
+
+
+def _trot_gait(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription, value: Callable[[str], Any]) -> float:
+    """Stand and swing heights, period, duty and speed within the robot's leg reach; returns the stand height [m]."""
+    c = "controller"
+    reach = LEG_REACH_FRACTION * robot.leg_length_m  # [m]
     stand = number(f"{c}.stand_height", value("stand_height"), 0.25 * reach, reach, unit="m",
                    why=f"leg reach of robot={robot.name} ({reach:.3g} m)")
     swing = number(f"{c}.swing_height", value("swing_height"), 0.0, MAX_SWING_HEIGHT_M, unit="m")
@@ -275,6 +291,12 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
         why=f"the stance stroke speed x period x duty must stay within the leg's reach at "
         f"stand_height={stand:g} m, period={period:g} s, duty={duty:g}",
     )
+    return stand
+
+
+def _trot_gains(cfg: DictConfig, robot: RobotDescription, value: Callable[[str], Any]) -> None:
+    """The joint PD gains within the robot's torque scale."""
+    c = "controller"
     torque = max(robot.torque_limit_nm)  # [N·m]
     scaled = "" if _get(cfg, f"{c}.kp") is not None else " (from controller.scaling)"
     number(f"{c}.kp", value("kp"), 0.0, MAX_KP_PER_NM * torque, unit="N·m/rad",
@@ -282,6 +304,11 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
     scaled = "" if _get(cfg, f"{c}.kd") is not None else " (from controller.scaling)"
     number(f"{c}.kd", value("kd"), 0.0, MAX_KD_PER_NM * torque, unit="N·m·s/rad",
            why=f"at most {MAX_KD_PER_NM:g} x robot={robot.name}'s largest torque limit{scaled}")
+
+
+def _trot_terrain_following(cfg: DictConfig) -> None:
+    """The terrain-following options (beyond the paper) and what each needs."""
+    c = "controller"
     following = flag(f"{c}.terrain_following", _get(cfg, f"{c}.terrain_following", False))
     search = number(f"{c}.foothold_search", _get(cfg, f"{c}.foothold_search", 0.0), 0.0, MAX_FOOTHOLD_SEARCH_M,
                     unit="m", why="touchdown offsets along the heading, within the stance stroke's reach")
@@ -301,7 +328,6 @@ def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) 
     if aim > 0.0 and not following:
         raise fail(f"{c}.touchdown_height", aim, "the touchdown aim is part of the terrain-following nominal: set "
                    "controller.terrain_following=true, or touchdown_height=0")
-    return stand
 
 
 def _filter(cfg: DictConfig, control_rate_hz: int) -> None:
