@@ -30,7 +30,8 @@ from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
-from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
+from taslel_bench.config.compose import CONF_DIR
+from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
 from taslel_bench.util.provenance import code_version
 
 
@@ -80,22 +81,37 @@ def run_config_yaml(cfg: DictConfig) -> str:
     return OmegaConf.to_yaml(OmegaConf.create(plain))
 
 
-def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
-    """Hash of everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved
-    config (``progress`` and ``force`` only change what is printed), the content of every file MuJoCo reads
-    for the plant (``robot.plant_mjcf`` with its includes and assets, or the URDF), the controller model's
-    URDF, ``input_files`` (the estimator's checkpoints) and the code version."""
+def hashed_config(cfg: DictConfig) -> dict:
+    """The resolved config as hashed: without ``progress``, ``force``, ``max_memory_gb`` (they only change what
+    is printed or refused), the sweep-level keys and ``record.chunk_ticks`` (how the trace is processed)."""
     plain = OmegaConf.to_container(cfg, resolve=True)
     for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
-    plain.get("record", {}).pop("chunk_ticks", None)  # how the trace is processed, not what it holds
-    h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
+    plain.get("record", {}).pop("chunk_ticks", None)
+    return plain
+
+
+def identity_of(cfg: DictConfig, input_files: Iterable[Path] = (),
+                choices: dict[str, str] | None = None) -> RunIdentity:  # fmt: skip
+    """Everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved config, the
+    plant files as MuJoCo reads them, the controller model's URDF, ``input_files`` (the estimator's
+    checkpoints), the project code the run imports and its ``_target_`` modules, the composed config files
+    (``choices``: the option of each config group) and the result-deciding package versions."""
+    plain = hashed_config(cfg)
     mjcf = cfg.robot.get("plant_mjcf")
-    hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [a1.a1_urdf_path()])
-    hash_files(h, [Path(cfg.get("model", {}).get("urdf") or a1.a1_urdf_path())])
-    hash_files(h, sorted(Path(p).resolve() for p in input_files))
-    h.update(code_identity().encode())
-    return h.hexdigest()
+    return run_identity(
+        OmegaConf.to_yaml(OmegaConf.create(plain)),
+        plant=mjcf_files(Path(mjcf)) if mjcf else [a1.a1_urdf_path()],
+        model=[Path(cfg.get("model", {}).get("urdf") or a1.a1_urdf_path())],
+        checkpoints=sorted(Path(p).resolve() for p in input_files),
+        targets=target_modules(plain),
+        config=config_files(CONF_DIR, choices or {}),
+    )
+
+
+def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = (), choices: dict[str, str] | None = None) -> str:
+    """The hash of :func:`identity_of`."""
+    return identity_of(cfg, input_files, choices).config_sha256
 
 
 def estimator_files(built: Built) -> list[Path]:
@@ -179,7 +195,8 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated or written
-    config_hash = config_sha256(cfg, estimator_files(built))
+    identity = identity_of(cfg, estimator_files(built), choices)
+    config_hash = identity.config_sha256
     out_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(out_dir) as lock:  # one writer per run folder (RunFolderLocked if another one is alive)
         skipped, notes = prepare_folder(cfg, out_dir, config_hash)
@@ -187,6 +204,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
             return skipped
         if lock.stale_taken_over:
             notes["stale_lock_taken_over"] = lock.stale_taken_over
+        notes["identity"] = identity.record()
         return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes)
 
 
