@@ -97,20 +97,44 @@ def _yaml_mapping(path: Path) -> dict:
 
 def _row(run_dir: Path, known: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The table row of one run folder; an unreadable summary or result file makes an error row naming it;
-    ``known``: rows the launcher kept for jobs that could not write their folder."""
+    ``known``: what the launcher saw each job of this sweep do, which wins over the folder (:func:`_outcome_row`)."""
+    outcome = known.get(str(run_dir.absolute()))
     summary_path = run_dir / run_files.SUMMARY
     if not summary_path.is_file():
-        row = dict(known.get(str(run_dir.absolute()), {})) or _row_for_unfinished(run_dir)
+        row = dict(outcome or {}) or _row_for_unfinished(run_dir)
         row.setdefault("status", "error")
         return row
     row = run_files.read_summary(run_dir)
     if row is None:
         fallback = _row_for_unfinished(run_dir)
         fallback["message"] = f"{summary_path}: unreadable (truncated or not a JSON object)"
-        return fallback
+        return _outcome_row(run_dir, outcome, fallback) if outcome else fallback
+    if outcome is not None:
+        row = _outcome_row(run_dir, outcome, row)
     if row.get("status") in ("ok", "degraded") and (problem := _unreadable(run_dir, row)):
         row = {**row, "status_reported": row.get("status"), "status": "error", "message": problem}
     return row
+
+
+def _outcome_row(run_dir: Path, outcome: dict[str, Any], folder_row: dict[str, Any]) -> dict[str, Any]:
+    """The job's own outcome against the summary in its folder: a job that failed is an error row naming the
+    folder and why, whatever summary the folder holds; a folder summary of another identity than the job's
+    is never reported as the job's result."""
+    if outcome.get("status") not in ("ok", "degraded"):
+        row = dict(outcome)
+        message = str(row.get("message", "the job failed"))
+        row["message"] = message if str(run_dir) in message else f"{run_dir}: {message}"
+        if folder_row.get("status"):
+            row["message"] += (f" (the folder's summary.json, status {folder_row.get('status')}, config_sha256 "
+                               f"{str(folder_row.get('config_sha256', 'unknown'))[:12]}, is not this job's result)")
+        return row
+    job_sha, folder_sha = outcome.get("config_sha256"), folder_row.get("config_sha256")
+    if job_sha and folder_sha != job_sha:
+        return {**outcome, "status": "error", "status_reported": outcome.get("status"),
+                "message": f"{run_dir / run_files.SUMMARY}: a run of another identity (config_sha256 "
+                           f"{str(folder_sha)[:12]}) than this job's ({str(job_sha)[:12]}); not reported as this "
+                           f"run"}  # fmt: skip
+    return folder_row
 
 
 def collect(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None) -> pd.DataFrame:
@@ -123,6 +147,7 @@ def collect(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None) -> 
     for run_dir in folders:
         row = _row(run_dir, known)
         row.pop("skipped", None)
+        row.pop("identity", None)  # which files the identity hashed: in summary.json, not a table column
         row["run_dir"] = str(run_dir.relative_to(sweep_dir))
         rows.append(row)
     seen = {str(d.absolute()) for d in folders}

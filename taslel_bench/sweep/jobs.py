@@ -122,13 +122,22 @@ def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str =
     return ret
 
 
+OUTCOME_KEYS = ("status", "message", "config_sha256", "scenario", "solver", "estimator", "seed")
+
+
 def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
-    """``ret`` if the job completed (its summary kept in :data:`JOB_OUTCOMES` if the folder holds none, e.g.
-    the disk was full); else an :func:`error_return` naming what it raised."""
+    """``ret`` if the job completed, else an :func:`error_return` naming what it raised. Every job's outcome
+    is kept in :data:`JOB_OUTCOMES` (the whole summary when its folder holds none, e.g. the disk was full),
+    so the table never shows an old summary in the folder in place of what this job did."""
     if isinstance(ret, JobReturn) and ret.status == JobStatus.COMPLETED:
         value = ret._return_value
-        if isinstance(value, dict) and "status" in value and read_summary(folder) is None:
-            JOB_OUTCOMES[str(folder)] = {**value, "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}
+        if isinstance(value, dict) and "status" in value:
+            joined = OVERRIDE_SEPARATOR.join(sorted(overrides))
+            full = read_summary(folder) is None or value.get("status") not in ("ok", "degraded")
+            kept = {k: v for k, v in value.items() if k != "identity"} if full else \
+                {k: value[k] for k in OUTCOME_KEYS if k in value}
+            axes = {k: v for k, v in JOB_AXES.get(str(folder), {}).items() if kept.get(k) in (None, "", -1)}
+            JOB_OUTCOMES[str(folder)] = {**kept, **axes, "overrides": joined}
         return ret
     exc = ret._return_value if isinstance(ret, JobReturn) else ret
     tb = "".join(traceback.format_exception(exc)) if isinstance(exc, BaseException) else ""
