@@ -27,11 +27,13 @@ import fcntl
 import json
 import os
 import socket
+import time
 from pathlib import Path
 from typing import Self
 
 LOCK_NAME = "run.lock"
 MAX_ATTEMPTS = 20  # the path was replaced under us this many times in a row: give up (RunFolderLocked)
+CONTENTION_WAIT_S = 0.5  # [s] a lock held this long by another process is a live writer (a probe holds it µs)
 
 
 class RunFolderLocked(RuntimeError):
@@ -52,6 +54,22 @@ def _describe(holder: dict | None) -> str:
     if holder is None:
         return "an unreadable lock record"
     return f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')}"
+
+
+def _flock_within(fd: int, wait_s: float) -> bool:
+    """Take the exclusive lock of ``fd``, retrying for ``wait_s``; False if another process keeps it."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except OSError as exc:
+            if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+                os.close(fd)
+                raise
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.02)
 
 
 def _same_file(fd: int, path: Path) -> bool:
@@ -76,13 +94,9 @@ class RunLock:
     def acquire(self) -> Self:
         for _ in range(MAX_ATTEMPTS):
             fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError as exc:
+            if not _flock_within(fd, CONTENTION_WAIT_S):
                 holder = _read_holder(fd)
                 os.close(fd)
-                if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
-                    raise
                 raise RunFolderLocked(
                     f"{self.path.parent}: run folder is being written by {_describe(holder)} ({self.path}, locked); "
                     f"two writers would corrupt each other's files. Wait for it, or stop it; the lock is released "
@@ -129,4 +143,25 @@ class RunLock:
         self.release()
 
 
-__all__ = ["LOCK_NAME", "RunFolderLocked", "RunLock"]
+def live_holder(run_dir: Path) -> str | None:
+    """Who holds ``run_dir/run.lock`` now (pid, host, start), None if nobody does (or there is no lock file).
+    Probed with a shared lock taken and dropped at once (a run starting meanwhile retries for
+    :data:`CONTENTION_WAIT_S`, so a reader, e.g. a report rebuilt during a sweep, never makes it fail)."""
+    try:
+        fd = os.open(Path(run_dir) / LOCK_NAME, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+                return _describe(_read_holder(fd))
+            raise
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
+__all__ = ["LOCK_NAME", "RunFolderLocked", "RunLock", "live_holder"]

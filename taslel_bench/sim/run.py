@@ -30,6 +30,7 @@ from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
 from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
 from taslel_bench.util.provenance import code_version
@@ -133,6 +134,8 @@ def _supersede_tag(problem: str, same: bool, previous: dict | None, out_dir: Pat
 
     if problem == "no-summary" and (out_dir / PARTIAL_NAME).exists():
         return "killed", "a killed run (partial episode.mcap, no summary.json)"
+    if problem == INTERRUPTED:
+        return INTERRUPTED, f"an interrupted run ({previous.get('message') if previous else 'partial episode'})"
     if problem:
         kind, _, name = problem.partition("-")
         why = {"missing": f"{name} of the result is missing", "size": f"{name} differs from the size the run "
@@ -151,6 +154,8 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
     traceback.txt) is moved to ``superseded/`` first, never overwritten, and the notes say what was moved
     and why; files of interrupted writes are removed and named."""
     previous, problem = run_files.folder_state(out_dir)
+    if not problem and previous is not None and previous.get("status") == INTERRUPTED:
+        problem = INTERRUPTED  # a partial episode: never reused as complete
     same = previous is not None and previous.get("config_sha256") == config_hash
     if not problem and same and not cfg.get("force", False):
         return {**previous, "skipped": True}, {}
@@ -198,19 +203,22 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     identity = identity_of(cfg, estimator_files(built), choices)
     config_hash = identity.config_sha256
     out_dir.mkdir(parents=True, exist_ok=True)
-    with RunLock(out_dir) as lock:  # one writer per run folder (RunFolderLocked if another one is alive)
+    with RunLock(out_dir) as lock, InterruptGuard() as guard:  # one writer per run folder; SIGINT/SIGTERM
         skipped, notes = prepare_folder(cfg, out_dir, config_hash)
         if skipped is not None:
             return skipped
         if lock.stale_taken_over:
             notes["stale_lock_taken_over"] = lock.stale_taken_over
         notes["identity"] = identity.record()
-        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes)
+        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes, guard)
 
 
 def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, str], overrides: list[str] | None,
-              config_hash: str, notes: dict[str, object]) -> dict[str, object]:
-    """The episode and its files, in a folder prepared (and locked) by :func:`run`."""
+              config_hash: str, notes: dict[str, object], guard: InterruptGuard) -> dict[str, object]:
+    """The episode and its files, in a folder prepared (and locked) by :func:`run`. A signal during the
+    episode stops it at its next progress point and the ticks simulated so far are written as an
+    ``interrupted`` run (:mod:`taslel_bench.sim.interrupt`); a signal while the files are written is held
+    until they are complete, then ends the run (:class:`RunInterrupted`)."""
     if choices.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
         choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
@@ -218,19 +226,45 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     steps = _stream_chunks(cfg, built, out_dir)  # record.chunk_ticks: steps.parquet and metrics per chunk
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
+    guard.defer = True
     try:
-        res: EpisodeResult = built.episode.run(progress=show)
+        res: EpisodeResult = built.episode.run(progress=guard.progress(show))
         if show is not None:
             print(file=sys.stderr)
+        stopped = _stopped_by_signal(res, guard)
         summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
         summary.update(_episode_summary(cfg, built, res))
+        if stopped:
+            summary.update(_interrupted_fields(cfg, res, guard))
         events = _events(cfg, res, out_dir)
-        video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
+        video = _video(cfg, built, out_dir) if not stopped else None  # record.video: rendered once steps.parquet is written
         _write_results(out_dir, res, summary, events, sink, qp_recorder, steps, video)
     except BaseException:
         steps.abandon()  # no half-written table under any name
         raise
+    finally:
+        guard.defer = False
+    if guard.signum is not None and not stopped:  # came while the files were written: they are complete
+        raise RunInterrupted(guard.signum)
     return summary
+
+
+def _stopped_by_signal(res: EpisodeResult, guard: InterruptGuard) -> bool:
+    """The episode ended because the guard stopped it (its fault handling caught :class:`StopRequested`):
+    the run is ``interrupted``, not an error (no traceback)."""
+    if guard.signum is None or res.status != "error" or not str(res.message).startswith(StopRequested.__name__):
+        return False
+    res.status, res.message = "ok", ""  # the ticks simulated are a valid (shorter) episode; the summary says why
+    res.extras.pop("traceback", None)
+    return True
+
+
+def _interrupted_fields(cfg: DictConfig, res: EpisodeResult, guard: InterruptGuard) -> dict[str, object]:
+    """``status: interrupted`` with the signal and the time reached [s, simulated, stand included]."""
+    total_s = float(cfg.controller.stand_duration) + float(cfg.duration)
+    reached_s = float(res.n_ticks) / float(cfg.control_rate_hz)
+    return {"status": INTERRUPTED, "interrupted_by": guard.signal_name, "interrupted_at_s": reached_s,
+            "message": f"interrupted by {guard.signal_name} at t = {reached_s:.2f} s of {total_s:.2f} s simulated"}
 
 
 def _stance_and_swing_s(cfg: DictConfig) -> tuple[float, float]:
@@ -443,4 +477,31 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
-__all__ = ["record_job_error", "run"]
+def earlier_unfinished(out_dir: Path, cfg: DictConfig) -> list[str]:
+    """One line per sibling of ``out_dir`` (another timestamped folder of ``outputs/runs/``) that holds a run
+    of the same config (same ``config.yaml``) that did not finish: interrupted (its summary says when) or
+    killed (no summary.json). A rerun of the same command names them; it does not reuse them."""
+    out_dir = Path(out_dir)
+    try:
+        mine = run_config_yaml(cfg)
+    except Exception:  # noqa: BLE001 - a config that does not resolve is refused by run() itself
+        return []
+    lines = []
+    for folder in sorted(out_dir.parent.iterdir()) if out_dir.parent.is_dir() else []:
+        config = folder / "config.yaml"
+        if folder == out_dir or not config.is_file():
+            continue
+        try:
+            if config.read_text() != mine:
+                continue
+        except (OSError, UnicodeDecodeError):
+            continue
+        summary = run_files.read_summary(folder)
+        if summary is None:
+            lines.append(f"{folder}: an earlier run of this config that was killed (no summary.json)")
+        elif summary.get("status") == INTERRUPTED:
+            lines.append(f"{folder}: an earlier run of this config, {summary.get('message', INTERRUPTED)}")
+    return lines
+
+
+__all__ = ["earlier_unfinished", "record_job_error", "run"]

@@ -11,8 +11,10 @@ import pandas as pd
 
 from taslel_bench.record import run_files
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
+from taslel_bench.record.run_lock import live_holder
 
 SUMMARY_TABLE = "summary.parquet"
+RUNNING = "running"  # status of a job whose run folder a live process holds (a report rebuilt mid-sweep)
 AXES = ("scenario", "solver", "estimator", "seed")
 # swept override -> summary column (and its type, for the rows of crashed jobs)
 OVERRIDE_COLUMNS = {"filter.formulation": "filter_formulation",
@@ -29,8 +31,12 @@ def run_folders(sweep_dir: Path) -> list[Path]:
 
 
 def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
-    """A job folder without a summary: it crashed before finishing; say so, with what is known."""
+    """A job folder without a summary: running (a live process holds its run.lock) or crashed before
+    finishing; say which, with what is known."""
     row: dict[str, Any] = {"status": "error", "message": "job left no summary.json (crashed or killed)"}
+    holder = live_holder(run_dir)
+    if holder is not None:
+        row = {"status": RUNNING, "message": f"running: run.lock held by {holder}"}
     overrides = run_dir / ".hydra" / "overrides.yaml"
     try:
         text = overrides.read_text() if overrides.is_file() else ""
@@ -47,7 +53,7 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
                 row[key] = _typed(key, value)
     tb = run_dir / "traceback.txt"
     try:
-        if tb.is_file() and tb.read_text().strip():
+        if holder is None and tb.is_file() and tb.read_text().strip():
             row["message"] = tb.read_text().strip().splitlines()[-1]
     except (OSError, UnicodeDecodeError):
         pass
@@ -99,6 +105,8 @@ def _row(run_dir: Path, known: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The table row of one run folder; an unreadable summary or result file makes an error row naming it;
     ``known``: what the launcher saw each job of this sweep do, which wins over the folder (:func:`_outcome_row`)."""
     outcome = known.get(str(run_dir.absolute()))
+    if outcome is None and live_holder(run_dir) is not None:
+        return _row_for_unfinished(run_dir)  # a live job (a report rebuilt mid-sweep): running, whatever is there
     summary_path = run_dir / run_files.SUMMARY
     if not summary_path.is_file():
         row = dict(outcome or {}) or _row_for_unfinished(run_dir)
