@@ -30,6 +30,8 @@ from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.solve_clock import time_solves_by_cpu
+from taslel_bench.util.machine import CpuWatch
 from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
 from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
@@ -226,14 +228,17 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     steps = _stream_chunks(cfg, built, out_dir)  # record.chunk_ticks: steps.parquet and metrics per chunk
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
+    time_solves_by_cpu(built)  # each solve also by the thread's CPU time (qp_solve_cpu_us)
     guard.defer = True
     try:
-        res: EpisodeResult = built.episode.run(progress=guard.progress(show))
+        with CpuWatch() as watch:  # the machine's load and this run's share of a CPU during the episode
+            res: EpisodeResult = built.episode.run(progress=guard.progress(show))
         if show is not None:
             print(file=sys.stderr)
         stopped = _stopped_by_signal(res, guard)
         summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
         summary.update(_episode_summary(cfg, built, res))
+        summary.update(watch.result.record())  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
         if stopped:
             summary.update(_interrupted_fields(cfg, res, guard))
         events = _events(cfg, res, out_dir)

@@ -9,7 +9,12 @@ sweep varies; seeds pooled, backends never pooled): per tick, pooled over the ro
   ``record.reference_tol_nm`` from the tight reference -- solved but wrong; ``u_err_p99_nm``/``u_err_max_nm``:
   the torque error max_j |u_j - u_ref,j| on those ticks;
 * ``solve_p50/p99/max_us``: the backend's own timer around its solve; ``miss_period_rate``: solves longer
-  than the control period, ``miss_1ms_rate``: longer than 1 ms;
+  than the control period, ``miss_1ms_rate``: longer than 1 ms. When a run of the row had a busy machine
+  (``machine_busy``: its loop had a CPU less than ``BUSY_CPU_SHARE`` of the time, :mod:`taslel_bench.util.machine`),
+  the wall clock also counts the waits for a CPU, so these figures come from the thread's CPU time instead
+  (``timing``: ``thread CPU``; per solve the smaller of the backend's timer and the thread's CPU time over the
+  call, :mod:`taslel_bench.sim.solve_clock`: both are at least the solve's own CPU time), and the sentence
+  says the machine was busy;
 * ``iterations``: median iterations per solve; ``rtf``: mean real-time factor of the runs;
 * ``route`` (``persistent``: set up once and updated; ``qpsolvers``: set up every call) and ``tolerances``
   (the settings in force whose names are tolerances, and the backend's answer check).
@@ -33,7 +38,8 @@ from taslel_bench.record import run_files
 from taslel_bench.util.tables import markdown_table
 
 ONE_MS_US = 1000.0  # [µs]
-STEP_COLUMNS = ("qp_solve_us", "qp_iterations", "qp_u_error_nm", "qp_status")
+STEP_COLUMNS = ("qp_solve_us", "qp_solve_cpu_us", "qp_iterations", "qp_u_error_nm", "qp_status")
+WALL, THREAD_CPU = "wall", "thread CPU"  # which measurement the deadline figures of a row come from
 FINISHED = ("ok", "degraded")
 FIGURE = "qp_solve_times.png"
 
@@ -110,7 +116,8 @@ def verdict_rows(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> pd.Da
     labels = done.apply(lambda r: _label(r, other), axis=1)
     for (scenario, label), runs in done.groupby([done["scenario"], labels], sort=True):
         t = _ticks(sweep_dir, runs)
-        solve, it, err = t["qp_solve_us"], t["qp_iterations"], t["qp_u_error_nm"]
+        timing, share = _timing(done[done["scenario"] == scenario], t)  # one measurement per world
+        solve, it, err = _solve_times(t, timing), t["qp_iterations"], t["qp_u_error_nm"]
         solved = np.isfinite(solve)
         checked = err[np.isfinite(err)]
         period_us = 1e6 / float(runs["control_rate_hz"].astype(float).iloc[0]) if "control_rate_hz" in runs else ONE_MS_US
@@ -131,9 +138,40 @@ def verdict_rows(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> pd.Da
             "miss_period_rate": _rate(s > period_us), "miss_1ms_rate": _rate(s > ONE_MS_US),
             "iterations": float(np.median(it[it >= 0])) if np.any(it >= 0) else math.nan,
             "rtf": float(runs["real_time_factor"].astype(float).mean()) if "real_time_factor" in runs else math.nan,
-            "route": route, "tolerances": tol, "period_us": period_us,
+            "route": route, "tolerances": tol, "timing": timing, "cpu_share": share, "period_us": period_us,
         })  # fmt: skip
     return pd.DataFrame(rows)
+
+
+def _timing(runs: pd.DataFrame, ticks: dict[str, np.ndarray]) -> tuple[str, float]:
+    """(:data:`WALL` or :data:`THREAD_CPU`, the lowest CPU share of ``runs``: every run of the world, so its
+    backends are ranked on one measurement): thread CPU when a run had a busy machine and the row's ticks
+    have CPU times."""
+    share = float(pd.to_numeric(runs["machine_cpu_share"], errors="coerce").min()) if "machine_cpu_share" in runs \
+        else math.nan
+    busy = "machine_busy" in runs and bool(runs["machine_busy"].fillna(False).astype(bool).any())
+    has_cpu = bool(np.isfinite(ticks["qp_solve_cpu_us"]).any())
+    return (THREAD_CPU if busy and has_cpu else WALL), share
+
+
+def _solve_times(ticks: dict[str, np.ndarray], timing: str) -> np.ndarray:
+    """[µs] per solve: the backend's wall timer, or (thread CPU) the smaller of it and the thread's CPU time
+    over the call (each is at least the solve's own CPU time; NaN CPU times fall back to the wall timer)."""
+    wall = ticks["qp_solve_us"]
+    if timing == WALL:
+        return wall
+    cpu = ticks["qp_solve_cpu_us"]
+    return np.where(np.isfinite(cpu) & np.isfinite(wall), np.fmin(wall, cpu), wall)
+
+
+def _busy_note(rows: pd.DataFrame) -> str:
+    """"machine busy: CPU share 0.41 -- deadline figures from thread CPU time. " when a row of the world had
+    a busy machine ("" otherwise)."""
+    busy = rows[rows["timing"] == THREAD_CPU] if "timing" in rows else rows.iloc[0:0]
+    if busy.empty:
+        return ""
+    share = float(busy["cpu_share"].min())
+    return f"machine busy: CPU share {share:.2f} -- deadline figures from thread CPU time. "
 
 
 def _qualifies(r: pd.Series) -> bool:
@@ -166,9 +204,10 @@ def _sentence(world: str, rows: pd.DataFrame) -> str:
             closest = (f" Closest: **{c['backend']}**, no failed solve and no wrong answer, the fewest solves over "
                        f"the period ({c['miss_period_rate']:.2%}; median {c['solve_p50_us']:.0f} µs, p99 "
                        f"{c['solve_p99_us']:.0f} µs).")
-        return f"**{world}**: no backend qualifies" + (f" ({rejected})." if rejected else ".") + closest
+        return (f"**{world}**: {_busy_note(rows)}no backend qualifies" + (f" ({rejected})." if rejected else ".")
+                + closest)
     best = ok.iloc[0]
-    text = (f"**{world}**: ship **{best['backend']}** -- the fastest (solve p99 {best['solve_p99_us']:.0f} µs, median "
+    text = (f"**{world}**: {_busy_note(rows)}ship **{best['backend']}** -- the fastest (solve p99 {best['solve_p99_us']:.0f} µs, median "
             f"{best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) of the {len(ok)} backend(s) with no "
             f"failed solve, no wrong answer in {int(best['checks'])} reference checks (u error <= "
             f"{best['u_err_max_nm']:.1g} N·m) and no solve over the {best['period_us']:.0f} µs control period")
@@ -189,7 +228,7 @@ def solver_verdict(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> tup
              "`route`: persistent (set up once, updated every tick) or qpsolvers (set up every call). The backend "
              "to ship is the fastest by solve p99 among those with no failed solve, no wrong answer and no "
              "deadline miss.\n")]
-    shown = [c for c in rows.columns if c not in ("scenario", "period_us")]
+    shown = [c for c in rows.columns if c not in ("scenario", "period_us", "cpu_share")]
     for world, g in rows.groupby("scenario", sort=True):
         lines += [f"### {world}\n", markdown_table(g[shown]), _sentence(str(world), g) + "\n"]
     lines.append(_overall(rows))
