@@ -26,7 +26,7 @@ from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.interrupt import INTERRUPTED, RunInterrupted
 from taslel_bench.sim.run import earlier_unfinished, record_job_error
 from taslel_bench.sweep import callback as sweep_callback
-from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides
+from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides, register_submitit_launchers
 from taslel_bench.util.fields import ConfigError
 
 EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -129,6 +129,7 @@ if __name__ == "__main__":
         check_launcher_overrides(sys.argv[1:])
     except LauncherNotInstalled as exc:
         sys.exit(f"error: {exc}")
+    register_submitit_launchers()  # lost submitit/SLURM jobs become error rows
     try:
         main()
     except KeyboardInterrupt:  # Ctrl-C before a run held its folder (composing the config, building): nothing written

@@ -132,7 +132,7 @@ def _outcome_row(run_dir: Path, outcome: dict[str, Any], folder_row: dict[str, A
         row = dict(outcome)
         message = str(row.get("message", "the job failed"))
         row["message"] = message if str(run_dir) in message else f"{run_dir}: {message}"
-        if folder_row.get("status"):
+        if folder_row.get("status") not in (None, "error"):  # an old result (an error summary is this job's own)
             row["message"] += (f" (the folder's summary.json, status {folder_row.get('status')}, config_sha256 "
                                f"{str(folder_row.get('config_sha256', 'unknown'))[:12]}, is not this job's result)")
         return row
