@@ -28,3 +28,37 @@ def test_submitit_local_with_a_killed_job_ends_with_its_table(tmp_path):
     assert rows[0]["status"] == "ok"
     assert rows[1]["status"] == "error" and "LostJob" in rows[1]["message"] and "seed=1" in rows[1]["message"]
     assert (tmp_path / "report.md").is_file() and "Traceback" not in out.stderr
+
+
+def _one_run_sweep(folder: Path) -> Path:
+    from taslel_bench.sim.run import run
+    from tests.conftest import compose_cfg
+
+    run(compose_cfg(["duration=0.2", "progress=false", "record.mcap=false"]), folder / "seed=0")
+    return folder
+
+
+def test_table_files_are_one_set_and_an_incomplete_set_is_told(tmp_path, monkeypatch, capsys):
+    from taslel_bench.sweep import report, table_set
+
+    sweep = _one_run_sweep(tmp_path)
+    with pytest.raises(SystemExit):
+        report.main([str(sweep)])
+    assert table_set.set_problem(sweep) == "" and (sweep / table_set.RECORD).is_file()
+    old_report = (sweep / "report.md").read_bytes()
+
+    def killed(*args, **kwargs):  # killed after the new summary.parquet, before table.csv and report.md
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "write_report", killed)
+    with pytest.raises(KeyboardInterrupt):
+        report.main([str(sweep)])
+    assert (sweep / "report.md").read_bytes() == old_report  # the old report beside a new summary.parquet...
+    problem = table_set.set_problem(sweep)
+    assert "table_set.json is missing" in problem  # ...and a reader can tell
+    monkeypatch.undo()
+    with pytest.raises(SystemExit):
+        report.main([str(sweep)])
+    assert "note: " in capsys.readouterr().err and table_set.set_problem(sweep) == ""
+    (sweep / "table.csv").write_text("edited\n")
+    assert "table.csv is not the file of the set" in table_set.set_problem(sweep)
