@@ -37,7 +37,8 @@ overlaps = 0
 for trial in range(trials):
     d = folder / f"t{trial}"
     d.mkdir()
-    (d / "run.lock").write_text(json.dumps({"pid": 1, "host": socket.gethostname(), "started": "x"}))
+    dead = mp.Process(target=time.sleep, args=(0,)); dead.start(); dead.join()  # a killed run's pid
+    (d / "run.lock").write_text(json.dumps({"pid": dead.pid, "host": socket.gethostname(), "started": "x"}))
     log = d / "log"
     log.write_text("")
     barrier = mp.Barrier(4)

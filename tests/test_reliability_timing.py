@@ -13,13 +13,14 @@ import pytest
 
 from taslel_bench.sim.run import run
 from taslel_bench.sweep.solver_verdict import solver_verdict
-from taslel_bench.util.machine import CpuShare, CpuWatch
 from tests.conftest import compose_cfg
 
 
 def test_cpu_watch_sees_a_thread_that_waited_for_the_cpu():
     """A second thread spinning in this process takes the GIL half the time: the measured thread ran about
     half of the wall time, and the watch says the timing is disturbed."""
+    from taslel_bench.util.machine import CpuWatch
+
     stop = threading.Event()
 
     def spin() -> None:
@@ -82,6 +83,7 @@ def test_verdict_on_a_busy_machine_is_the_quiet_ones_and_says_it_was_busy(tmp_pa
 
 def test_bench_refuses_to_write_a_report_from_a_disturbed_run(tmp_path, monkeypatch):
     from taslel_bench.qp import tick_bench
+    from taslel_bench.util.machine import CpuShare, CpuWatch
 
     class Busy(CpuWatch):
         def __exit__(self, *exc: object) -> None:
