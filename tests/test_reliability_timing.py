@@ -48,9 +48,13 @@ def test_a_run_records_its_cpu_share_and_each_solves_thread_cpu_time(tmp_path):
                 "machine_steal_share", "machine_involuntary_switches_per_s", "machine_busy", "machine_busy_reason"):
         assert key in summary
     assert 0 < summary["machine_cpu_share"] <= 1.05
-    steps = pd.read_parquet(tmp_path / "r" / "steps.parquet", columns=["qp_status", "qp_solve_us", "qp_solve_cpu_us"])
+    steps = pd.read_parquet(tmp_path / "r" / "steps.parquet",
+                            columns=["qp_status", "qp_solve_us", "qp_solve_cpu_us", "qp_setup"])  # fmt: skip
     solved = steps[steps["qp_status"] >= 0]
     assert len(solved) > 100 and np.isfinite(solved["qp_solve_cpu_us"]).all() and (solved["qp_solve_cpu_us"] > 0).all()
+    # the thread's CPU time is measured over the backend's own timed interval: never above its wall timer
+    assert (solved["qp_solve_cpu_us"] <= solved["qp_solve_us"] + 5.0).all()
+    assert solved["qp_setup"].iloc[0] and 1 <= solved["qp_setup"].sum() <= 3  # the persistent solver's builds
 
 
 def _sweep(folder, busy: bool, share: float):
@@ -60,10 +64,12 @@ def _sweep(folder, busy: bool, share: float):
     for solver, cpu_us, waited_us in (("osqp", 90.0, 8000.0), ("clarabel", 330.0, 9000.0)):
         (folder / solver).mkdir(parents=True)
         n = 1000
-        wall = np.full(n, cpu_us * 0.9)
+        wall, cpu = np.full(n, cpu_us * 1.05), np.full(n, cpu_us)
+        cpu[0] = wall[0] = 820.0 if not busy else 1320.0  # the solver's build: slower on a busy machine
         if busy:
-            wall[::33] = waited_us
-        pd.DataFrame({"qp_solve_us": wall, "qp_solve_cpu_us": np.full(n, cpu_us), "qp_iterations": np.full(n, 10),
+            wall[1::33] = waited_us
+        pd.DataFrame({"qp_solve_us": wall, "qp_solve_cpu_us": cpu, "qp_iterations": np.full(n, 10),
+                      "qp_setup": np.arange(n) == 0,
                       "qp_u_error_nm": np.where(np.arange(n) % 10 == 0, 1e-6, np.nan),
                       "qp_status": np.zeros(n, int)}).to_parquet(folder / solver / "steps.parquet")  # fmt: skip
         rows.append({"scenario": "flat", "solver": solver, "status": "ok", "run_dir": solver, "control_rate_hz": 1000.0,
@@ -78,6 +84,7 @@ def test_verdict_on_a_busy_machine_is_the_quiet_ones_and_says_it_was_busy(tmp_pa
     sentence = [line for line in busy.splitlines() if line.startswith("**flat**")][0]
     assert "machine busy: CPU share 0.41 -- deadline figures from thread CPU time" in sentence
     assert "ship **osqp**" in sentence and "ship **osqp**" in quiet and "machine busy" not in quiet
+    assert "its 1 QP setup(s), the first solve of a new layout, judged apart: up to 1320 µs" in sentence
     assert set(rows["timing"]) == {"thread CPU"}
 
 

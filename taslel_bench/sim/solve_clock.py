@@ -18,20 +18,23 @@ from typing import Any
 
 
 class ThreadTimedBackend:
-    """A QP backend whose every answer also carries ``solve_cpu_time_s`` [s]: the calling thread's CPU time
-    spent in ``solve``. Every other attribute is the wrapped backend's."""
+    """A QP backend whose every answer also carries ``solve_cpu_time_s`` [s] (the calling thread's CPU time
+    spent in the solve) and ``setup`` (True: a persistent backend built its solver for a new QP layout in this
+    call, ``qp_setup``). Every other attribute is the wrapped backend's."""
 
     def __init__(self, backend: Any) -> None:
         self.wrapped = backend
 
     def solve(self, problem: Any) -> Any:
+        setups = getattr(self.wrapped, "setups", None)  # a persistent backend counts its (re)builds
         cpu0 = time.thread_time_ns()
         solution = self.wrapped.solve(problem)
-        if math.isfinite(getattr(solution, "solve_cpu_time_s", math.nan)):
-            return solution  # the backend measured it over its own timer's interval
+        cpu_s = (time.thread_time_ns() - cpu0) * 1e-9
         try:
-            solution.solve_cpu_time_s = (time.thread_time_ns() - cpu0) * 1e-9
-        except AttributeError:  # an answer type with __slots__: the column stays NaN
+            if not math.isfinite(getattr(solution, "solve_cpu_time_s", math.nan)):
+                solution.solve_cpu_time_s = cpu_s  # else the backend measured it over its own timed interval
+            solution.setup = setups is not None and getattr(self.wrapped, "setups", None) != setups
+        except AttributeError:  # an answer type with __slots__: the columns stay NaN / False
             pass
         return solution
 
