@@ -226,8 +226,8 @@ def _(tmp: Path):
 @contextlib.contextmanager
 def _lock_holder(folder: Path):
     """A live process holding ``folder``'s run lock (through the checkout's own RunLock) for the block."""
-    holder = subprocess.Popen([sys.executable, "-c", "import sys; from taslel_bench.record.run_lock import RunLock; "
-                               f"l = RunLock(r'{folder}').acquire(); print('held', flush=True); sys.stdin.read()"],
+    holder = subprocess.Popen([sys.executable, "-c", ("import sys; from taslel_bench.record.run_lock import RunLock; "
+                               f"l = RunLock(r'{folder}').acquire(); print('held', flush=True); sys.stdin.read()")],
                               cwd=root(), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
     try:
         holder.stdout.readline()

@@ -26,7 +26,11 @@ from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.interrupt import INTERRUPTED, RunInterrupted
 from taslel_bench.sim.run import earlier_unfinished, record_job_error
 from taslel_bench.sweep import callback as sweep_callback
-from taslel_bench.sweep.launchers import LauncherNotInstalled, check_launcher_overrides, register_submitit_launchers
+from taslel_bench.sweep.launchers import (
+    LauncherNotInstalled,
+    check_launcher_overrides,
+    register_submitit_launchers,
+)
 from taslel_bench.util.fields import ConfigError
 
 EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -52,6 +56,8 @@ def _interrupted_line(out_dir: Path, summary: dict | None, exc: RunInterrupted |
     if summary is not None and summary.get("status") == INTERRUPTED:
         return f"{summary.get('message')}; partial results (summary.json status interrupted) in {out_dir}"
     what = exc.args[0] if exc is not None else "interrupted"
+    if exc is not None and exc.complete:
+        return f"{what} after the episode ended; its result in {out_dir} is complete"
     return f"{what}; {out_dir} holds no complete result (a rerun puts what is there aside and names it)"
 
 

@@ -191,8 +191,8 @@ def test_run_refuses_a_folder_that_a_live_process_writes(tmp_path, no_episode):
     out.mkdir()
     (out / "episode.partial.mcap").write_bytes(b"being written")
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from taslel_bench.record.run_lock import RunLock; "
-         f"l = RunLock(r'{out}').acquire(); print('held', flush=True); sys.stdin.read()"],
+        [sys.executable, "-c", ("import sys; from taslel_bench.record.run_lock import RunLock; "
+         f"l = RunLock(r'{out}').acquire(); print('held', flush=True); sys.stdin.read()")],
         cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
     try:
         assert holder.stdout.readline().strip() == "held"

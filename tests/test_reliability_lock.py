@@ -66,8 +66,8 @@ def test_lock_left_by_pid_1_in_a_container_is_taken_over(tmp_path):
 
 def test_live_holder_in_another_process_is_refused_and_named(tmp_path):
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from taslel_bench.record.run_lock import RunLock; "
-         f"l = RunLock(r'{tmp_path}').acquire(); print('held', flush=True); sys.stdin.read()"],
+        [sys.executable, "-c", ("import sys; from taslel_bench.record.run_lock import RunLock; "
+         f"l = RunLock(r'{tmp_path}').acquire(); print('held', flush=True); sys.stdin.read()")],
         cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
     try:
         assert holder.stdout.readline().strip() == "held"

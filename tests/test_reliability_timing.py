@@ -81,7 +81,7 @@ def _sweep(folder, busy: bool, share: float):
 def test_verdict_on_a_busy_machine_is_the_quiet_ones_and_says_it_was_busy(tmp_path):
     quiet, _ = solver_verdict(tmp_path / "q", _sweep(tmp_path / "q", False, 0.97), ["scenario", "solver"])
     busy, rows = solver_verdict(tmp_path / "b", _sweep(tmp_path / "b", True, 0.41), ["scenario", "solver"])
-    sentence = [line for line in busy.splitlines() if line.startswith("**flat**")][0]
+    sentence = next(line for line in busy.splitlines() if line.startswith("**flat**"))
     assert "machine busy: CPU share 0.41 -- deadline figures from thread CPU time" in sentence
     assert "ship **osqp**" in sentence and "ship **osqp**" in quiet and "machine busy" not in quiet
     assert "its 1 QP setup(s), the first solve of a new layout, judged apart: up to 1320 µs" in sentence

@@ -24,9 +24,10 @@ class RunInterrupted(BaseException):
     """A signal ended the run before its episode could be stopped cleanly (BaseException: no ``except
     Exception`` of a solver or recorder keeps it from ending the run)."""
 
-    def __init__(self, signum: int) -> None:
+    def __init__(self, signum: int, complete: bool = False) -> None:
         super().__init__(f"interrupted by {signal.Signals(signum).name}")
         self.signum = signum
+        self.complete = complete  # the signal came once the episode had ended: the run's files are complete
 
     @property
     def exit_code(self) -> int:

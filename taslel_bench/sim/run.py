@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits
 from taslel_bench.config.validate import memory_estimate_gb, validate
@@ -30,11 +31,10 @@ from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.robot import a1
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
+from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
 from taslel_bench.sim.solve_clock import time_solves_by_cpu
 from taslel_bench.util.machine import CpuWatch
-from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
-from taslel_bench.config.compose import CONF_DIR
-from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
 from taslel_bench.util.provenance import code_version
 
 
@@ -242,7 +242,7 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
         if stopped:
             summary.update(_interrupted_fields(cfg, res, guard))
         events = _events(cfg, res, out_dir)
-        video = _video(cfg, built, out_dir) if not stopped else None  # record.video: rendered once steps.parquet is written
+        video = None if stopped else _video(cfg, built, out_dir)  # record.video: once steps.parquet is written
         _write_results(out_dir, res, summary, events, sink, qp_recorder, steps, video)
     except BaseException:
         steps.abandon()  # no half-written table under any name
@@ -250,7 +250,7 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     finally:
         guard.defer = False
     if guard.signum is not None and not stopped:  # came while the files were written: they are complete
-        raise RunInterrupted(guard.signum)
+        raise RunInterrupted(guard.signum, complete=True)
     return summary
 
 

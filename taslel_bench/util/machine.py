@@ -11,6 +11,7 @@ import resource
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 from taslel_bench.util.provenance import describe as describe_code
 
@@ -100,7 +101,7 @@ class CpuWatch:
     """``with CpuWatch() as watch: ...`` then ``watch.result`` (:class:`CpuShare`) of the block, for the
     calling thread and its process."""
 
-    def __enter__(self) -> CpuWatch:
+    def __enter__(self) -> Self:
         self._wall0, self._thread0 = time.perf_counter(), time.thread_time()
         self._usage0 = resource.getrusage(resource.RUSAGE_SELF)
         self._load0 = os.getloadavg()[0]
