@@ -22,7 +22,7 @@ from taslel_bench.record import run_files
 from taslel_bench.sweep import table_set
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
 from taslel_bench.sweep.claims import paper_claims
-from taslel_bench.sweep.solver_verdict import solve_time_figure, solver_verdict
+from taslel_bench.sweep.solver_verdict import machine_busy_line, solve_time_figure, solver_verdict
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
@@ -427,6 +427,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
         f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}  \n",
         f"Packages: {info['packages']}  \n",
         f"Report written by {info['code']}; runs produced by {_run_commits(frame)}\n",
+        machine_busy_line(frame) if not frame.empty else "",
         verdict_section(frame, group_columns(frame)) if not frame.empty else "",
         "## Safety and physics per group of runs (seeds pooled)\n",
         markdown_table(safety) if len(table) else "_no runs found_\n",

@@ -281,6 +281,19 @@ def _overall(rows: pd.DataFrame) -> str:
             + ".\n")
 
 
+def machine_busy_line(frame: pd.DataFrame) -> str:
+    """The report's line on runs measured on a busy machine ("" if none: every run had its CPU)."""
+    if "machine_busy" not in frame:
+        return ""
+    busy = frame[frame["machine_busy"].fillna(False).astype(bool)]
+    if busy.empty:
+        return ""
+    share = pd.to_numeric(busy.get("machine_cpu_share"), errors="coerce").min()
+    return (f"**Machine busy** during {len(busy)} of {len(frame)} runs (their loop had a CPU {share:.0%} of the time "
+            f"at the least): their wall-clock timings (tick, real-time factor, `wall_*`) measure the machine, not "
+            f"the code; the solver verdict's deadline figures are the solves' thread CPU time.\n")
+
+
 def solve_time_figure(sweep_dir: Path, frame: pd.DataFrame, keys: list[str], plt) -> list[str]:
     """``qp_solve_times.png`` (module doc); nothing when no run has solve times."""
     done = frame[frame["status"].isin(FINISHED)] if "status" in frame else frame.iloc[0:0]
@@ -320,4 +333,4 @@ def solve_time_figure(sweep_dir: Path, frame: pd.DataFrame, keys: list[str], plt
     return [FIGURE]
 
 
-__all__ = ["solve_time_figure", "solver_verdict", "verdict_rows"]
+__all__ = ["machine_busy_line", "solve_time_figure", "solver_verdict", "verdict_rows"]
