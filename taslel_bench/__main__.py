@@ -26,6 +26,7 @@ from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.interrupt import INTERRUPTED, RunInterrupted
 from taslel_bench.sim.run import earlier_unfinished, record_job_error
 from taslel_bench.sweep import callback as sweep_callback
+from taslel_bench.sweep.jobs import SWEEP_INTERRUPTED
 from taslel_bench.sweep.launchers import (
     LauncherNotInstalled,
     check_launcher_overrides,
@@ -56,7 +57,7 @@ def _interrupted_line(out_dir: Path, summary: dict | None, exc: RunInterrupted |
     if summary is not None and summary.get("status") == INTERRUPTED:
         return f"{summary.get('message')}; partial results (summary.json status interrupted) in {out_dir}"
     what = exc.args[0] if exc is not None else "interrupted"
-    if exc is not None and exc.complete:
+    if exc is not None and exc.summary is not None:
         return f"{what} after the episode ended; its result in {out_dir} is complete"
     return f"{what}; {out_dir} holds no complete result (a rerun puts what is there aside and names it)"
 
@@ -84,7 +85,7 @@ def main(cfg: DictConfig) -> dict:
     except RunInterrupted as exc:
         print(f"error: {_interrupted_line(out_dir, None, exc)}", file=sys.stderr)
         _single_run_exit[0] = exc.exit_code
-        return {"status": INTERRUPTED, "message": str(exc)}
+        return exc.summary if exc.summary is not None else {"status": INTERRUPTED, "message": str(exc)}
     except Exception as exc:
         if not multirun:
             if isinstance(exc, ConfigError):  # the refusal (naming the field, the value, what is valid) is the output
@@ -143,4 +144,6 @@ if __name__ == "__main__":
         sys.exit(130)
     # a sweep's code is set by its callback (table and report written, every run ok?)
     code = sweep_callback.exit_code() if sweep_callback.sweep_ended() else _single_run_exit[0]
+    if SWEEP_INTERRUPTED:  # Ctrl-C / SIGTERM of a sweep: its table is written, the exit says it was stopped
+        code = 128 + SWEEP_INTERRUPTED[0]
     sys.exit(code)

@@ -5,6 +5,7 @@ leaves no folder. Each test failed on the main of before (a traceback, an empty 
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -101,3 +102,24 @@ def test_a_report_rebuilt_during_a_live_sweep_marks_live_jobs_running(tmp_path):
         holder.wait()
     assert rows[0]["status"] == "running" and f"pid {holder.pid}" in rows[0]["message"]
     assert rows[1]["status"] == "error" and "crashed or killed" in rows[1]["message"]
+
+
+def test_ctrl_c_of_a_sweep_stops_its_runs_starts_no_more_and_writes_the_table(tmp_path):
+    """The terminal's SIGINT reaches the sweep and its workers: the running jobs end as interrupted runs, the
+    queued ones are not started, the table says so for each, exit 130."""
+    folder = tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "taslel_bench", "-m", "seed=0,1,2,3", *LONG, f"hydra.sweep.dir={folder}"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # fmt: skip
+    deadline = time.monotonic() + 300
+    while len(list(folder.glob("*/.steps.parquet.tmp-*"))) < 2 and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)  # as a Ctrl-C in its terminal: the whole process group
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err[-3000:]
+    table = pd.read_parquet(folder / "summary.parquet")
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    assert sorted(rows) == [0, 1, 2, 3] and {r["status"] for r in rows.values()} == {"interrupted"}
+    assert sum("not run: the sweep was interrupted by SIGINT" in r["message"] for r in rows.values()) == 2
+    assert "Traceback" not in err and not (folder / ".sweep_interrupted").exists()

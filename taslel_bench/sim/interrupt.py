@@ -12,26 +12,45 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
 from collections.abc import Callable
 from types import FrameType
 from typing import Self
 
 INTERRUPTED = "interrupted"  # summary status of a run stopped by a signal
 HANDLED = (signal.SIGINT, signal.SIGTERM)
+DUPLICATE_S = 1.0  # [s] the same signal again within this is one delivery (a second Ctrl-C later ends at once)
 
 
 class RunInterrupted(BaseException):
     """A signal ended the run before its episode could be stopped cleanly (BaseException: no ``except
     Exception`` of a solver or recorder keeps it from ending the run)."""
 
-    def __init__(self, signum: int, complete: bool = False) -> None:
+    def __init__(self, signum: int, summary: dict | None = None) -> None:
         super().__init__(f"interrupted by {signal.Signals(signum).name}")
         self.signum = signum
-        self.complete = complete  # the signal came once the episode had ended: the run's files are complete
+        self.summary = summary  # the signal came once the episode had ended: the run's (complete) summary
 
     @property
     def exit_code(self) -> int:
         return 128 + self.signum
+
+
+PENDING: list[int] = []  # a signal a sweep's worker got outside a run (see hold_signals_between_runs)
+
+
+def hold_signals_between_runs() -> None:
+    """In a sweep's worker process: a SIGINT/SIGTERM that comes outside a run (between jobs, while a job's
+    config is composed) is kept, not raised (no traceback, no dead worker); the next run of this worker
+    raises :class:`RunInterrupted` before it starts."""
+
+    def keep(signum: int, frame: FrameType | None) -> None:
+        if not PENDING:
+            PENDING.append(signum)
+
+    if threading.current_thread() is threading.main_thread():
+        for signum in HANDLED:
+            signal.signal(signum, keep)
 
 
 class StopRequested(Exception):
@@ -46,13 +65,17 @@ class InterruptGuard:
     def __init__(self) -> None:
         self.signum: int | None = None
         self.defer = False  # True while the episode runs and its files are written: a first signal waits
+        self._first_s = 0.0  # [s, monotonic] when the first signal came
         self._previous: dict[int, object] = {}
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
+        now = time.monotonic()
+        if self.signum == signum and now - self._first_s < DUPLICATE_S:
+            return  # the same signal twice at once (a Ctrl-C reaches a sweep's worker and is forwarded to it)
         if self.signum is not None or not self.defer:
             self.signum = signum
             raise RunInterrupted(signum)
-        self.signum = signum  # the episode stops at its next progress point
+        self.signum, self._first_s = signum, now  # the episode stops at its next progress point
 
     def progress(self, show: Callable[[float], None] | None) -> Callable[[float], None]:
         """The episode's progress callback: ``show(t)`` (if any), and the stop when a signal came."""
@@ -70,6 +93,8 @@ class InterruptGuard:
         return signal.Signals(self.signum).name if self.signum is not None else ""
 
     def __enter__(self) -> Self:
+        if PENDING:  # a signal came to this worker before its run began: the run does not begin
+            raise RunInterrupted(PENDING[0])
         if threading.current_thread() is threading.main_thread():
             for signum in HANDLED:
                 self._previous[signum] = signal.signal(signum, self._handle)
@@ -81,4 +106,4 @@ class InterruptGuard:
         self._previous.clear()
 
 
-__all__ = ["INTERRUPTED", "InterruptGuard", "RunInterrupted", "StopRequested"]
+__all__ = ["INTERRUPTED", "PENDING", "InterruptGuard", "RunInterrupted", "StopRequested", "hold_signals_between_runs"]

@@ -250,7 +250,7 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     finally:
         guard.defer = False
     if guard.signum is not None and not stopped:  # came while the files were written: they are complete
-        raise RunInterrupted(guard.signum, complete=True)
+        raise RunInterrupted(guard.signum, summary)
     return summary
 
 

@@ -128,6 +128,9 @@ def _outcome_row(run_dir: Path, outcome: dict[str, Any], folder_row: dict[str, A
     """The job's own outcome against the summary in its folder: a job that failed is an error row naming the
     folder and why, whatever summary the folder holds; a folder summary of another identity than the job's
     is never reported as the job's result."""
+    job_sha, folder_sha = outcome.get("config_sha256"), folder_row.get("config_sha256")
+    if job_sha and job_sha == folder_sha and outcome.get("status") == folder_row.get("status"):
+        return folder_row  # the folder holds this job's own result
     if outcome.get("status") not in ("ok", "degraded"):
         row = dict(outcome)
         message = str(row.get("message", "the job failed"))
@@ -136,7 +139,6 @@ def _outcome_row(run_dir: Path, outcome: dict[str, Any], folder_row: dict[str, A
             row["message"] += (f" (the folder's summary.json, status {folder_row.get('status')}, config_sha256 "
                                f"{str(folder_row.get('config_sha256', 'unknown'))[:12]}, is not this job's result)")
         return row
-    job_sha, folder_sha = outcome.get("config_sha256"), folder_row.get("config_sha256")
     if job_sha and folder_sha != job_sha:
         return {**outcome, "status": "error", "status_reported": outcome.get("status"),
                 "message": f"{run_dir / run_files.SUMMARY}: a run of another identity (config_sha256 "

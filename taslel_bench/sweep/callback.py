@@ -55,7 +55,7 @@ def print_failed_rows(frame: pd.DataFrame) -> None:
     if "status" not in frame:
         return
     for _, row in frame[frame["status"] != "ok"].iterrows():
-        reason = row.get("message") if row.get("status") == "error" else row.get("degraded_reasons")
+        reason = row.get("degraded_reasons") if row.get("status") == "degraded" else row.get("message")
         print(f"  {row.get('status')}: {row.get('run_dir')}: {reason}")
 
 

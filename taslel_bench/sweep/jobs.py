@@ -29,6 +29,10 @@ JOB_OUTCOMES: dict[str, dict[str, Any]] = {}
 JOB_AXES: dict[str, dict[str, Any]] = {}
 
 
+# the signal that interrupted the sweep (SIGINT / SIGTERM), if one did: the sweep then exits 128 + its number
+SWEEP_INTERRUPTED: list[int] = []
+
+
 class SweepRefused(SystemExit):
     """The job list cannot run as given (exit code 2, one line on stderr, nothing run)."""
 
@@ -99,10 +103,12 @@ def begin_launch(config: DictConfig, job_overrides: Sequence[Sequence[str]], hyd
     return folders, sweep_dir
 
 
-def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "") -> JobReturn:
-    """A completed JobReturn holding an error summary for a job that could not run or finish; the error is
-    written into its folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
-    summary: dict[str, Any] = {"status": "error", "message": message, "fell": False, "seed": -1,
+def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "",
+                 status: str = "error") -> JobReturn:  # fmt: skip
+    """A completed JobReturn holding an error summary (``status``: "error", or "interrupted" for a job the
+    interrupted sweep never started) for a job that could not run or finish; the error is written into its
+    folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
+    summary: dict[str, Any] = {"status": status, "message": message, "fell": False, "seed": -1,
                                "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}  # fmt: skip
     summary.update(JOB_AXES.get(str(folder), {}))
     for item in overrides:
@@ -112,7 +118,8 @@ def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str =
         elif key == "seed" and value.isdigit():
             summary["seed"] = int(value)
     try:
-        write_error_folder(folder, dict(summary), tb or message)
+        if status == "error":  # a job never started leaves no folder; its row lives in the table
+            write_error_folder(folder, dict(summary), tb or message)
     except OSError as exc:  # a full disk, a read-only folder: the row lives on in the sweep's table
         summary["message"] = f"{message}; its error summary could not be written either ({exc})"
     JOB_OUTCOMES[str(folder)] = summary
@@ -144,5 +151,5 @@ def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
     return error_return(overrides, folder, f"{type(exc).__name__}: {exc}", tb)
 
 
-__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SweepRefused", "check_one_folder_per_job", "error_return",
+__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SWEEP_INTERRUPTED", "SweepRefused", "check_one_folder_per_job", "error_return",
            "job_folders", "settle"]
