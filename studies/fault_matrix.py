@@ -180,7 +180,21 @@ def _(tmp: Path):
 
 @case("stale", "code version in the identity")
 def _(tmp: Path):
-    return cli_probe("import taslel_bench.sim.run as r, inspect; print('code_identity' in inspect.getsource(r))")
+    probe = ("from hydra import compose, initialize_config_dir\nfrom taslel_bench.sim.run import config_sha256\n"
+             f"with initialize_config_dir(config_dir=r'{root() / 'conf'}', version_base='1.3'):\n"
+             "    print(config_sha256(compose(config_name='config', overrides=['duration=0.2'])))\n")  # fmt: skip
+
+    def identity() -> str:
+        out = subprocess.run([sys.executable, "-c", probe], cwd=tmp, capture_output=True, text=True, check=True)
+        return out.stdout.split()[-1]
+
+    source = root() / "scenarios" / "flat.py"  # a module every default run imports
+    before, text = identity(), source.read_text()
+    try:
+        source.write_text(text + "\n# an edit\n")
+        return identity() != before, ""
+    finally:
+        source.write_text(text)
 
 
 def cli_probe(code: str) -> tuple[bool, str]:

@@ -165,8 +165,14 @@ def test_identity_covers_the_code_by_content_and_git_is_information_only(monkeyp
     cfg = compose_cfg(TINY)
     before = config_sha256(cfg)
     assert "taslel_bench.filter.safety_filter" in identity.code_modules(identity.ENTRY_MODULES)
-    monkeypatch.setattr(identity, "code_version", lambda: {"git_commit": "0" * 40, "git_dirty": False})
-    assert config_sha256(cfg) == before
+    from taslel_bench.util import provenance
+
+    provenance.code_version.cache_clear()
+    monkeypatch.setattr(provenance, "_git", lambda *args: "0" * 40)  # another commit, same content
+    try:
+        assert provenance.code_version()["git_commit"] == "0" * 40 and config_sha256(cfg) == before
+    finally:
+        provenance.code_version.cache_clear()
 
 
 @pytest.mark.parametrize(

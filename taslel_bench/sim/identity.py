@@ -32,7 +32,6 @@ from functools import lru_cache
 from pathlib import Path
 
 from taslel_bench.plant.mjcf_files import mjcf_files
-from taslel_bench.util.provenance import _git, code_version
 
 PROJECT_PACKAGES = ("taslel_bench", "scenarios", "solvers", "estimators", "hydra_plugins.taslel_bench_launchers")
 ENTRY_MODULES = ("taslel_bench.sim.run",)  # runs an episode and writes its folder (the CLI around it only prints)
@@ -81,18 +80,6 @@ def file_sha256(path: Path) -> str:
     """[hex] sha256 of the file's bytes, :data:`MISSING` if it is not a file."""
     path = Path(path)
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else MISSING
-
-
-def hash_files(h: hashlib._Hash, paths: Iterable[Path]) -> list[str]:
-    """Feed each file's name and content (or ``<missing>``) to ``h``; returns the names hashed."""
-    names = []
-    for path in paths:
-        path = Path(path)
-        h.update(str(path).encode() + b"\0")
-        h.update(path.read_bytes() if path.is_file() else b"<missing>")
-        h.update(b"\0")
-        names.append(str(path))
-    return names
 
 
 # --------------------------------------------------------------------------------------------------- code
@@ -280,15 +267,5 @@ def run_identity(config_text: str, plant: Iterable[Path], model: Iterable[Path],
     return RunIdentity(h.hexdigest(), tuple(files), packages)
 
 
-@lru_cache(maxsize=1)
-def code_identity() -> str:
-    """The git commit and a hash of the uncommitted changes to tracked files (results/ excluded): information
-    for people, not part of the identity (see the module doc)."""
-    v = code_version()
-    diff = _git("diff", "HEAD", "--", ".", ":(exclude)results") if v["git_commit"] != "unknown" else None
-    diff_sha = hashlib.sha256((diff or "").encode()).hexdigest()[:16]
-    return f"commit {v['git_commit']} diff {diff_sha}"
-
-
-__all__ = ["FileRole", "IdentityFile", "RunIdentity", "code_identity", "code_modules", "config_files", "file_sha256",
-           "hash_files", "mjcf_files", "run_identity", "target_modules"]
+__all__ = ["FileRole", "IdentityFile", "RunIdentity", "code_modules", "config_files", "file_sha256", "mjcf_files",
+           "run_identity", "target_modules"]
