@@ -71,6 +71,11 @@ class PersistentBackend:
         self._vacuous: np.ndarray | None = None  # scratch of vacuous_rows
         self.setups = 0  # how many times the solver was (re)built -- for tests and reports
 
+    @property
+    def layout(self) -> tuple | None:
+        """The QP layout the solver is built for now (None before the first solve)."""
+        return self._key
+
     # ------------------------------------------------------------------ to implement
     def _setup(self, problem: QPProblem) -> None:
         raise NotImplementedError

@@ -84,7 +84,7 @@ def test_verdict_on_a_busy_machine_is_the_quiet_ones_and_says_it_was_busy(tmp_pa
     sentence = next(line for line in busy.splitlines() if line.startswith("**flat**"))
     assert "machine busy: CPU share 0.41 -- deadline figures from thread CPU time" in sentence
     assert "ship **osqp**" in sentence and "ship **osqp**" in quiet and "machine busy" not in quiet
-    assert "its 1 QP setup(s), the first solve of a new layout, judged apart: up to 1320 µs" in sentence
+    assert "its 1 first build(s) of a QP layout judged apart: up to 1320 µs" in sentence
     assert set(rows["timing"]) == {"thread CPU"}
 
 
@@ -104,3 +104,23 @@ def test_bench_refuses_to_write_a_report_from_a_disturbed_run(tmp_path, monkeypa
     with pytest.raises(SystemExit, match="machine busy during the measurement .*CPU share 0.41"):
         tick_bench.main(argv)
     assert not out.exists()
+
+
+def test_only_the_first_build_of_a_layout_is_flagged_a_setup():
+    """A backend that keeps one solver and switches between two layouts rebuilds at every switch: only the
+    first build of each layout is judged apart, the rebuilds are the loop's cost."""
+    from types import SimpleNamespace
+
+    from taslel_bench.sim.solve_clock import ThreadTimedBackend
+
+    class Switching:
+        setups, layout = 0, None
+
+        def solve(self, problem):
+            if problem != self.layout:
+                self.setups, self.layout = self.setups + 1, problem
+            return SimpleNamespace(solve_cpu_time_s=float("nan"))
+
+    timed = ThreadTimedBackend(Switching())
+    flags = [timed.solve(layout).setup for layout in ("stand", "stand", "walk", "stand", "walk", "walk")]
+    assert flags == [True, False, True, False, False, False]

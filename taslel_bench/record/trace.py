@@ -122,7 +122,7 @@ class EpisodeTrace:
         self.qp_iterations = np.full(c, -1, np.int32)
         self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
         self.qp_solve_cpu_us = np.full(c, np.nan)  # [µs] thread CPU time of the solve (taslel_bench.sim.solve_clock)
-        self.qp_setup = np.zeros(c, np.bool_)  # the backend built its solver for a new QP layout on this tick
+        self.qp_setup = np.zeros(c, np.bool_)  # the backend's first build for this QP layout (sim.solve_clock)
         self.barriers = {name: BarrierLog(name, c) for name in barrier_names}  # the filter's families
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
 

@@ -19,11 +19,14 @@ from typing import Any
 
 class ThreadTimedBackend:
     """A QP backend whose every answer also carries ``solve_cpu_time_s`` [s] (the calling thread's CPU time
-    spent in the solve) and ``setup`` (True: a persistent backend built its solver for a new QP layout in this
-    call, ``qp_setup``). Every other attribute is the wrapped backend's."""
+    spent in the solve) and ``setup`` (``qp_setup``: True when a persistent backend built its solver for a QP
+    layout it had not been built for before in this episode -- a controller can build its layouts before
+    its loop starts; a rebuild for a layout seen before is part of the loop's cost and is not flagged). Every
+    other attribute is the wrapped backend's."""
 
     def __init__(self, backend: Any) -> None:
         self.wrapped = backend
+        self._layouts_built: set = set()
 
     def solve(self, problem: Any) -> Any:
         setups = getattr(self.wrapped, "setups", None)  # a persistent backend counts its (re)builds
@@ -33,10 +36,25 @@ class ThreadTimedBackend:
         try:
             if not math.isfinite(getattr(solution, "solve_cpu_time_s", math.nan)):
                 solution.solve_cpu_time_s = cpu_s  # else the backend measured it over its own timed interval
-            solution.setup = setups is not None and getattr(self.wrapped, "setups", None) != setups
+            solution.setup = self._first_build(setups)
         except AttributeError:  # an answer type with __slots__: the columns stay NaN / False
             pass
         return solution
+
+    def reset(self) -> None:
+        """A new episode (the filter resets its backend): its layouts are built anew, each once judged apart."""
+        self._layouts_built.clear()
+        self.wrapped.reset()
+
+    def _first_build(self, setups_before: int | None) -> bool:
+        """The backend was (re)built in this call, for a layout it had not been built for before."""
+        if setups_before is None or getattr(self.wrapped, "setups", None) == setups_before:
+            return False
+        layout = getattr(self.wrapped, "layout", None)
+        if layout is None or layout in self._layouts_built:
+            return False
+        self._layouts_built.add(layout)
+        return True
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.wrapped, name)

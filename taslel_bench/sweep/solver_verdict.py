@@ -17,9 +17,10 @@ sweep varies; seeds pooled, backends never pooled): per tick, pooled over the ro
   show it beside. Runs recorded before thread CPU times existed are judged on the wall clock (``timing``:
   ``wall``). When a run of the world had a busy machine (``machine_busy``: its loop had a CPU less than
   ``BUSY_CPU_SHARE`` of the time, :mod:`taslel_bench.util.machine`) the sentence says so first. The first
-  solve of each new QP layout of a persistent backend (``qp_setup``: it builds the solver, at the first tick
-  and when the stand turns into walking -- a deployed controller builds its layouts before its loop starts)
-  is judged apart: ``setups`` and ``setup_max_us``, named in the sentence, not in the deadline figures;
+  build of each QP layout of a persistent backend in a run (``qp_setup``: e.g. at the first tick and when
+  the stand turns into walking; a controller can build its layouts before its loop starts) is judged apart:
+  ``setups`` and ``setup_max_us``, named in the sentence, not in the deadline figures. A rebuild for a
+  layout built before (a backend that keeps one solver and switches back) counts like any solve;
 * ``iterations``: median iterations per solve; ``rtf``: mean real-time factor of the runs;
 * ``route`` (``persistent``: set up once and updated; ``qpsolvers``: set up every call) and ``tolerances``
   (the settings in force whose names are tolerances, and the backend's answer check).
@@ -186,10 +187,10 @@ def _solve_times(ticks: dict[str, np.ndarray], timing: str) -> np.ndarray:
 
 
 def _setups_text(r: pd.Series) -> str:
-    """`` (its 2 QP setups, the first solve of a new layout, judged apart: up to 1321 µs)``; "" if none."""
+    """`` (its 2 first builds of a QP layout judged apart: up to 1321 µs)``; "" if none."""
     if not r.get("setups"):
         return ""
-    return (f" (its {int(r['setups'])} QP setup(s), the first solve of a new layout, judged apart: up to "
+    return (f" (its {int(r['setups'])} first build(s) of a QP layout judged apart: up to "
             f"{r['setup_max_us']:.0f} µs)")
 
 
