@@ -20,7 +20,9 @@ class BackendSolution(QPSolution):
         matrix packing and the native solver's setup; for persistent backends: update + solve);
       * ``setup_time_s`` -- the part of ``solve_time_s`` spent (re)building solver data, when known;
       * ``overhead_s`` -- harness work *outside* the timed call: conversions (sparse CSC, bound rows,
-        presolve, pattern values) and the residual check of the answer.
+        presolve, pattern values) and the residual check of the answer;
+      * ``solve_cpu_time_s`` -- the calling thread's CPU time over the same interval as ``solve_time_s``
+        (time the thread waited for a CPU on a busy machine is in ``solve_time_s`` only); nan if not measured.
     """
 
     overhead_s: float = 0.0
@@ -29,6 +31,7 @@ class BackendSolution(QPSolution):
     y: np.ndarray | None = None  # equality multipliers (original rows)
     z: np.ndarray | None = None  # inequality multipliers (original G rows)
     z_box: np.ndarray | None = None  # bound multipliers (n)
+    solve_cpu_time_s: float = float("nan")
 
 
 def layout_key(problem: QPProblem) -> tuple:

@@ -71,6 +71,11 @@ class PersistentBackend:
         self._vacuous: np.ndarray | None = None  # scratch of vacuous_rows
         self.setups = 0  # how many times the solver was (re)built -- for tests and reports
 
+    @property
+    def layout(self) -> tuple | None:
+        """The QP layout the solver is built for now (None before the first solve)."""
+        return self._key
+
     # ------------------------------------------------------------------ to implement
     def _setup(self, problem: QPProblem) -> None:
         raise NotImplementedError
@@ -139,7 +144,7 @@ class PersistentBackend:
             if fresh:
                 self.reset()
             self._prepare(problem, fresh)
-            t1 = time.perf_counter()
+            t1, cpu1 = time.perf_counter(), time.thread_time()
             if fresh:
                 self._setup(problem)
                 self._key = key
@@ -148,7 +153,7 @@ class PersistentBackend:
                 self._update(problem)
             t2 = time.perf_counter()
             res = self._solve()
-            t3 = time.perf_counter()
+            t3, cpu3 = time.perf_counter(), time.thread_time()
         except Exception as exc:  # a native failure must not end the episode  # noqa: BLE001
             self.reset()
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
@@ -156,6 +161,7 @@ class PersistentBackend:
             problem, res.x, res.ok, res.status, self.tol, t3 - t1, y=res.y, z=res.z, z_box=res.z_box,
             iterations=res.iterations, setup_time_s=t2 - t1, overhead_s=t1 - t0,
         )  # fmt: skip
+        out.solve_cpu_time_s = cpu3 - cpu1  # the thread's CPU time over the solve_time_s interval
         if not out.ok:  # never warm start from a failed (possibly NaN) iterate: set up afresh next tick
             self.reset()
         out.overhead_s += time.perf_counter() - t3

@@ -17,10 +17,12 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import time
 import traceback
 from collections.abc import Callable
 from pathlib import Path
@@ -178,7 +180,21 @@ def _(tmp: Path):
 
 @case("stale", "code version in the identity")
 def _(tmp: Path):
-    return cli_probe("import taslel_bench.sim.run as r, inspect; print('code_identity' in inspect.getsource(r))")
+    probe = ("from hydra import compose, initialize_config_dir\nfrom taslel_bench.sim.run import config_sha256\n"
+             f"with initialize_config_dir(config_dir=r'{root() / 'conf'}', version_base='1.3'):\n"
+             "    print(config_sha256(compose(config_name='config', overrides=['duration=0.2'])))\n")  # fmt: skip
+
+    def identity() -> str:
+        out = subprocess.run([sys.executable, "-c", probe], cwd=tmp, capture_output=True, text=True, check=True)
+        return out.stdout.split()[-1]
+
+    source = root() / "scenarios" / "flat.py"  # a module every default run imports
+    before, text = identity(), source.read_text()
+    try:
+        source.write_text(text + "\n# an edit\n")
+        return identity() != before, ""
+    finally:
+        source.write_text(text)
 
 
 def cli_probe(code: str) -> tuple[bool, str]:
@@ -216,9 +232,23 @@ def _(tmp: Path):
     out = tmp / "run"
     out.mkdir()
     (out / "episode.partial.mcap").write_bytes(b"live")
-    (out / "run.lock").write_text(json.dumps({"pid": os.getppid(), "host": socket.gethostname(), "started": "x"}))
-    ok, msg = refused([], out, "being written")
+    with _lock_holder(out):  # a live process that took the folder's lock
+        ok, msg = refused([], out, "being written")
     return ok and (out / "episode.partial.mcap").is_file(), msg
+
+
+@contextlib.contextmanager
+def _lock_holder(folder: Path):
+    """A live process holding ``folder``'s run lock (through the checkout's own RunLock) for the block."""
+    holder = subprocess.Popen([sys.executable, "-c", ("import sys; from taslel_bench.record.run_lock import RunLock; "
+                               f"l = RunLock(r'{folder}').acquire(); print('held', flush=True); sys.stdin.read()")],
+                              cwd=root(), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        holder.stdout.readline()
+        yield holder
+    finally:
+        holder.kill()
+        holder.wait()
 
 
 @case("writers", "stale lock of a dead process taken over")
@@ -479,11 +509,259 @@ def _(tmp: Path):
               module="taslel_bench.replay")  # fmt: skip
     return _one_line(out, "modes")
 
+# -------------------------------------------------------------------------------------- identity (content)
+
+
+@case("identity", "nested include: the file MuJoCo reads changed -> another identity")
+def _(tmp: Path):
+    from taslel_bench.plant.build import robot_spec
+
+    (tmp / "m" / "sub").mkdir(parents=True)
+    (tmp / "m" / "main.xml").write_text('<mujoco model="scene"><include file="sub/wrap.xml"/></mujoco>\n')
+    (tmp / "m" / "sub" / "wrap.xml").write_text('<mujoco><include file="a1.xml"/></mujoco>\n')
+    for f in (tmp / "m" / "a1.xml", tmp / "m" / "sub" / "a1.xml"):
+        f.write_text(robot_spec().to_xml())
+    over = [f"robot.plant_mjcf={tmp / 'm' / 'main.xml'}"]
+    before = sha(over)
+    read = tmp / "m" / "a1.xml"  # MuJoCo looks in the main file's folder first (checked: tests/test_reliability_identity.py)
+    read.write_text(read.read_text().replace('mass="6.001"', 'mass="7"'))
+    return sha(over) != before, ""
+
+
+@case("identity", "new untracked scenario module edited -> another identity")
+def _(tmp: Path):
+    module = root() / "scenarios" / "_fault_matrix_probe.py"
+    module.write_text("from scenarios.flat import FlatGround\n\n\nclass Probe(FlatGround):\n    pass\n")
+    try:
+        over = ["scenario._target_=scenarios._fault_matrix_probe.Probe"]
+        before = sha(over)
+        module.write_text(module.read_text() + "\nEDITED = True\n")
+        return sha(over) != before, ""
+    finally:
+        module.unlink(missing_ok=True)
+
+
+@case("identity", "copy without .git: a code edit -> another identity")
+def _(tmp: Path):
+    copy = tmp / "copy"
+    for name in ("taslel_bench", "scenarios", "solvers", "estimators", "hydra_plugins", "conf"):
+        shutil.copytree(root() / name, copy / name, ignore=shutil.ignore_patterns("__pycache__"))
+    probe = ("from hydra import compose, initialize_config_dir\nfrom taslel_bench.sim.run import config_sha256\n"
+             f"with initialize_config_dir(config_dir=r'{copy / 'conf'}', version_base='1.3'):\n"
+             "    cfg = compose(config_name='config', overrides=['duration=0.2'])\nprint(config_sha256(cfg))\n")
+
+    def identity() -> str:
+        env = {"PATH": os.environ.get("PATH", ""), "PYTHONPATH": str(copy), "HOME": str(tmp)}
+        return subprocess.run([sys.executable, "-c", probe], cwd=tmp, env=env, capture_output=True, text=True,
+                              check=True).stdout.split()[-1]  # fmt: skip
+
+    before = identity()
+    target = copy / "taslel_bench" / "filter" / "safety_filter.py"
+    target.write_text(target.read_text() + "\n# edited\n")
+    return identity() != before, ""
+
+
+# -------------------------------------------------------------------------------------------------- outcome
+
+
+@case("outcome", "sweep job that cannot write its folder: error row, not the old summary; exit 1")
+def _(tmp: Path):
+    first = _sweep(tmp, "0")
+    out = _sweep(tmp, "0", "eacces=seed=0")
+    t = _table(tmp)
+    ok = first.returncode == 0 and t is not None and (t["status"] == "error").all() and out.returncode == 1
+    return ok, f"exit {out.returncode}, statuses {None if t is None else list(t['status'])}"
+
+
+# ---------------------------------------------------------------------------------------------------- locks
+
+
+@case("locks", "lock left by a killed pid-1 run (container) taken over")
+def _(tmp: Path):
+    out = tmp / "run"
+    out.mkdir()
+    (out / "run.lock").write_text(json.dumps({"pid": 1, "host": socket.gethostname(), "started": "x"}))
+    try:
+        s = run([], out)
+    except Exception as exc:  # noqa: BLE001
+        return False, f"{type(exc).__name__}: {str(exc)[:100]}"
+    return s.get("status") == "ok", str(s.get("stale_lock_taken_over", ""))
+
+
+@case("locks", "stale lock released to 4 processes at once: one holder (15 trials)")
+def _(tmp: Path):
+    out = subprocess.run([sys.executable, "-c", _RACE, str(tmp), "15"], cwd=root(), capture_output=True, text=True,
+                         timeout=600, check=False)  # fmt: skip
+    over = out.stdout.strip()
+    return over == "0", f"{over or out.stderr[-100:]} of 15 trials had more than one holder"
+
+
+_RACE = r"""
+import json, multiprocessing as mp, os, socket, sys, time
+from pathlib import Path
+from taslel_bench.record.run_lock import RunFolderLocked, RunLock
+
+def contender(folder, barrier, log):
+    barrier.wait()
+    try:
+        lock = RunLock(folder).acquire()
+    except RunFolderLocked:
+        return
+    with open(log, "a") as f:
+        f.write(f"{os.getpid()} in\n")
+    time.sleep(0.2)
+    with open(log, "a") as f:
+        f.write(f"{os.getpid()} out\n")
+    lock.release()
+
+folder, trials, overlaps = Path(sys.argv[1]), int(sys.argv[2]), 0
+for trial in range(trials):
+    d = folder / f"t{trial}"
+    d.mkdir()
+    dead = mp.Process(target=time.sleep, args=(0,)); dead.start(); dead.join()
+    (d / "run.lock").write_text(json.dumps({"pid": dead.pid, "host": socket.gethostname(), "started": "x"}))
+    log = d / "log"
+    log.write_text("")
+    barrier = mp.Barrier(4)
+    procs = [mp.Process(target=contender, args=(d, barrier, log)) for _ in range(4)]
+    for p in procs: p.start()
+    for p in procs: p.join()
+    held = most = 0
+    for line in log.read_text().split("\n"):
+        if line:
+            held += 1 if line.split()[1] == "in" else -1
+            most = max(most, held)
+    overlaps += most > 1
+print(overlaps)
+"""
+
+
+# ------------------------------------------------------------------------------------------------ launchers
+
+
+@case("launchers", "submitit_local with one job killed: error row, table, exit 1")
+def _(tmp: Path):
+    out = _sweep(tmp, "0,1", "kill=seed=1", ("hydra/launcher=submitit_local",))
+    t = _table(tmp)
+    ok = t is not None and len(t) == 2 and (t["status"] == "ok").sum() == 1 and out.returncode == 1
+    return ok, f"exit {out.returncode}, rows {None if t is None else len(t)}"
+
+
+@case("launchers", "report killed between summary.parquet and report.md: a reader can tell")
+def _(tmp: Path):
+    run([], tmp / "sweep" / "seed=0")
+    first = cli(str(tmp / "sweep"), module="taslel_bench.report")
+    kill = ("import os, signal, taslel_bench.sweep.report as r\n"  # killed once summary.parquet is written
+            "r.write_report = lambda *a, **k: os.kill(os.getpid(), signal.SIGKILL)\n"
+            f"r.main([r'{tmp / 'sweep'}'])\n")  # fmt: skip
+    killed = subprocess.run([sys.executable, "-c", kill], cwd=root(), capture_output=True, text=True, check=False)
+    again = cli(str(tmp / "sweep"), module="taslel_bench.report")
+    told = "table_set.json is missing" in again.stderr
+    return first.returncode == 0 and killed.returncode != 0 and told, again.stderr.strip()[:140]
+
+
+# --------------------------------------------------------------------------------------------- interruption
+
+
+def _interrupted(tmp: Path, signum: int) -> tuple[subprocess.Popen, str]:
+    run_dir = tmp / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "taslel_bench", "duration=30", "progress=false",
+                             "record.chunk_ticks=500", f"hydra.run.dir={run_dir}"], cwd=root(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not list(run_dir.glob(".steps.parquet.tmp-*")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.2)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=300)
+    return proc, err
+
+
+@case("interruption", "Ctrl-C mid-run: one line, summary interrupted with the time, readable files, exit 130")
+def _(tmp: Path):
+    proc, err = _interrupted(tmp, signal.SIGINT)
+    lines = [line for line in err.splitlines() if line.strip()]
+    summary = json.loads((tmp / "run" / "summary.json").read_text()) if (tmp / "run" / "summary.json").is_file() else {}
+    readable = (tmp / "run" / "steps.parquet").is_file() and (tmp / "run" / "episode.mcap").is_file()
+    ok = proc.returncode == 130 and len(lines) == 1 and summary.get("status") == "interrupted" and readable
+    return ok, f"exit {proc.returncode}, {len(lines)} stderr lines, status {summary.get('status')}"
+
+
+@case("interruption", "SIGTERM mid-run: summary interrupted, exit 143")
+def _(tmp: Path):
+    proc, _ = _interrupted(tmp, signal.SIGTERM)
+    summary = json.loads((tmp / "run" / "summary.json").read_text()) if (tmp / "run" / "summary.json").is_file() else {}
+    return proc.returncode == 143 and summary.get("status") == "interrupted", f"exit {proc.returncode}"
+
+
+@case("interruption", "a refused value creates no run folder")
+def _(tmp: Path):
+    out = cli("controller.kp=-1", f"hydra.run.dir={tmp / 'r'}")
+    return out.returncode == 2 and not (tmp / "r").exists(), f"exit {out.returncode}, folder {(tmp / 'r').exists()}"
+
+
+@case("interruption", "report during a live sweep: a live job is running, not crashed")
+def _(tmp: Path):
+    from taslel_bench.sweep.aggregate import collect
+
+    job = tmp / "seed=0"
+    (job / ".hydra").mkdir(parents=True)
+    (job / ".hydra" / "config.yaml").write_text("seed: 0\n")
+    (job / ".hydra" / "overrides.yaml").write_text("- seed=0\n")
+    with _lock_holder(job):
+        row = collect(tmp).iloc[0]
+    return row["status"] == "running", f"{row['status']}: {row['message']}"[:140]
+
+
+# --------------------------------------------------------------------------------------------------- timing
+
+
+@case("timing", "a run records its CPU share and each solve's thread CPU time")
+def _(tmp: Path):
+    import pandas as pd
+
+    s = run(["solver=osqp"], tmp / "run")
+    steps = pd.read_parquet(tmp / "run" / "steps.parquet")
+    ok = "machine_cpu_share" in s and "machine_busy" in s and "qp_solve_cpu_us" in steps
+    return ok, f"machine_cpu_share {s.get('machine_cpu_share')}"
+
+
+@case("timing", "busy machine: verdict from thread CPU time, says it was busy")
+def _(tmp: Path):
+    import pandas as pd
+
+    from taslel_bench.sweep.solver_verdict import solver_verdict
+
+    rows = []
+    for solver, cpu_us in (("osqp", 90.0), ("clarabel", 330.0)):
+        (tmp / solver).mkdir()
+        wall = np.full(1000, cpu_us)
+        wall[::33] = 8500.0  # waited for a CPU
+        pd.DataFrame({"qp_solve_us": wall, "qp_solve_cpu_us": np.full(1000, cpu_us), "qp_iterations": 10,
+                      "qp_u_error_nm": np.where(np.arange(1000) % 10 == 0, 1e-6, np.nan),
+                      "qp_status": 0}).to_parquet(tmp / solver / "steps.parquet")  # fmt: skip
+        rows.append({"scenario": "flat", "solver": solver, "status": "ok", "run_dir": solver, "control_rate_hz": 1000.0,
+                     "qp_reference_tol_nm": 1e-3, "machine_busy": True, "machine_cpu_share": 0.41})  # fmt: skip
+    text, _ = solver_verdict(tmp, pd.DataFrame(rows), ["scenario", "solver"])
+    line = next((x for x in text.splitlines() if x.startswith("**flat**")), "")
+    return "machine busy: CPU share 0.41" in line and "ship **osqp**" in line, line[:140]
+
+
+@case("timing", "bench tool refuses --out from a disturbed run unless --allow-busy")
+def _(tmp: Path):
+    code = ("import taslel_bench.qp.tick_bench as b\n"  # the watch reports a busy machine (CPU share 0.41)
+            "from taslel_bench.util.machine import CpuShare, CpuWatch\n"
+            "class Busy(CpuWatch):\n"
+            "    def __exit__(self, *e): self.result = CpuShare(1.0, 0.41, 0.45, 3.0, 3.5, 0.0, 900.0)\n"
+            "b.CpuWatch = Busy\nb.part_costs = lambda built, trace=None: {}\nb._print_table = lambda r, a: None\n"
+            f"b.main(['--duration', '0.1', '--solvers', 'daqp', '--formulations', 'condensed', '--out', r'{tmp / 't.md'}'])\n")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], cwd=root(), capture_output=True, text=True, check=False)
+    ok = out.returncode == 1 and "machine busy" in out.stderr and not (tmp / "t.md").exists()
+    return ok, (out.stderr.strip().splitlines() or [""])[-1][:140]
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="run the cases whose name holds this text")
-    ap.add_argument("--klass", default="", help="run the cases of this class (stale, writers, superseded, table, messages)")
+    ap.add_argument("--klass", default="", help="run the cases of this class (stale, writers, superseded, table, messages, identity, outcome, locks, launchers, interruption, timing)")
     args = ap.parse_args()
     print(f"taslel_bench from {root()}")
     good = tried = 0

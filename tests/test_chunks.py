@@ -28,7 +28,7 @@ TIMING = ("wall_time_s", "real_time_factor", "warmup_s", "recording_s", "referen
 
 
 def _timing(key: str) -> bool:
-    return key in TIMING or (key.startswith("tick_") and key.endswith("_us_median"))
+    return key in TIMING or (key.startswith("tick_") and key.endswith("_us_median")) or key.startswith("machine_")
 
 
 def _same(a, b) -> bool:
@@ -50,7 +50,7 @@ def test_chunk_size_changes_no_summary_number_and_no_step(tmp_path, scenario):
     steps = [pd.read_parquet(tmp_path / d / "steps.parquet") for d in ("whole", "chunked")]
     assert list(steps[0].columns) == list(steps[1].columns) and len(steps[0]) == whole["ticks"]
     for col in steps[0].columns:
-        if not col.startswith("tick_") and col not in ("qp_solve_us", "qp_build_us"):
+        if not col.startswith("tick_") and col not in ("qp_solve_us", "qp_solve_cpu_us", "qp_build_us"):
             assert np.array_equal(steps[0][col].to_numpy(), steps[1][col].to_numpy(), equal_nan=True), col
     events = [json.loads((tmp_path / d / "events.json").read_text()) for d in ("whole", "chunked")]
     assert events[0] == events[1]

@@ -160,15 +160,20 @@ def test_identity_covers_the_drop_detectors_checkpoint(tmp_path):
     assert config_sha256(compose_cfg(TINY), files) != before
 
 
-def test_identity_covers_the_code_version(monkeypatch):
+def test_identity_covers_the_code_by_content_and_git_is_information_only(monkeypatch):
+    """The code's identity is its content (tests/test_reliability_identity.py edits code); the git commit is
+    recorded for people but a commit of the same content is the same code."""
     cfg = compose_cfg(TINY)
     before = config_sha256(cfg)
-    identity.code_identity.cache_clear()
-    monkeypatch.setattr(identity, "code_version", lambda: {"git_commit": "0" * 40, "git_dirty": False})
+    assert "taslel_bench.filter.safety_filter" in identity.code_modules(identity.ENTRY_MODULES)
+    from taslel_bench.util import provenance
+
+    provenance.code_version.cache_clear()
+    monkeypatch.setattr(provenance, "_git", lambda *args: "0" * 40)  # another commit, same content
     try:
-        assert config_sha256(cfg) != before
+        assert provenance.code_version()["git_commit"] == "0" * 40 and config_sha256(cfg) == before
     finally:
-        identity.code_identity.cache_clear()
+        provenance.code_version.cache_clear()
 
 
 @pytest.mark.parametrize(
@@ -188,23 +193,26 @@ def test_meaningless_combination_is_refused_with_the_reason(overrides, field, re
 # ------------------------------------------------------------------------- (2) two writers, one folder
 
 
-def _live_foreign_pid() -> int:
-    return os.getppid()  # alive for the whole test, not this process
-
-
 def test_run_refuses_a_folder_that_a_live_process_writes(tmp_path, no_episode):
     out = tmp_path / "run"
     out.mkdir()
     (out / "episode.partial.mcap").write_bytes(b"being written")
-    lock = {"pid": _live_foreign_pid(), "host": socket.gethostname(), "started": "2026-12-03T12:00:00+00:00"}
-    (out / LOCK_NAME).write_text(json.dumps(lock))
-    with pytest.raises(RunFolderLocked, match=rf"pid {lock['pid']} on {socket.gethostname()}"):
-        run(compose_cfg(TINY), out)
-    assert (out / "episode.partial.mcap").read_bytes() == b"being written"  # its live file was not moved
-    assert not (out / "superseded").exists()
-    # in a sweep the error is reported without touching that folder either
-    summary = record_job_error(out, {}, compose_cfg(TINY), RunFolderLocked("locked"))
-    assert summary["status"] == "error" and not (out / "summary.json").exists()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", ("import sys; from taslel_bench.record.run_lock import RunLock; "
+         f"l = RunLock(r'{out}').acquire(); print('held', flush=True); sys.stdin.read()")],
+        cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(RunFolderLocked, match=rf"pid {holder.pid} on {socket.gethostname()}"):
+            run(compose_cfg(TINY), out)
+        assert (out / "episode.partial.mcap").read_bytes() == b"being written"  # its live file was not moved
+        assert not (out / "superseded").exists()
+        # in a sweep the error is reported without touching that folder either
+        summary = record_job_error(out, {}, compose_cfg(TINY), RunFolderLocked("locked"))
+        assert summary["status"] == "error" and not (out / "summary.json").exists()
+    finally:
+        holder.kill()
+        holder.wait()
 
 
 def test_stale_lock_of_a_dead_process_is_taken_over_and_said(tmp_path):

@@ -76,6 +76,15 @@ def _urdf_text(robot: RobotDescription) -> str:
     return text
 
 
+def urdf_mesh_files(urdf: Path) -> list[Path]:
+    """The mesh files the plant of ``urdf`` loads (collision meshes MuJoCo can read: STL, OBJ, MSH; the run's
+    identity hashes them with the URDF)."""
+    text = re.sub(r"<visual>.*?</visual>", "", Path(urdf).read_text(), flags=re.DOTALL)
+    names = re.findall(r'filename="package://([^/"]+)/([^"]*)"', text)
+    files = {Path(_package_file(Path(urdf), pkg, inner)) for pkg, inner in names}
+    return sorted(f for f in files if f.suffix.lower() in (".stl", ".obj", ".msh") and f.is_file())
+
+
 def _package_file(urdf: Path, package: str, inner: str) -> str:
     for folder in urdf.parents:
         if folder.name == package and (folder / inner).is_file():

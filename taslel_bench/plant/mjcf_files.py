@@ -1,7 +1,7 @@
 """The files MuJoCo reads for an MJCF: the file, its ``<include>``s (recursively) and every mesh, skin,
-heightfield and texture they name, found as MuJoCo finds them (includes relative to the including file's
-folder, then the main file's; assets under ``<compiler meshdir / texturedir / assetdir>`` relative to the
-main file's folder). Used for the run's identity (:mod:`taslel_bench.sim.identity`) and to name missing
+heightfield and texture they name, found as MuJoCo finds them (includes relative to the main file's folder,
+then the including file's; assets under ``<compiler meshdir / texturedir / assetdir>`` relative to the main
+file's folder). Used for the run's identity (:mod:`taslel_bench.sim.identity`) and to name missing
 files in a compile error (:func:`taslel_bench.plant.build.compile_plant`)."""
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ def _parse(path: Path) -> ET.Element | None:
 
 def mjcf_files(main: Path) -> list[Path]:
     """Every file MuJoCo reads for the MJCF ``main``: the file, its includes (recursively, relative to the
-    including file's folder, then the main file's) and the assets they name. Missing files are listed too
-    (their absence is part of the identity)."""
+    main file's folder, then the including file's: MuJoCo's order) and the assets they name. Missing files are
+    listed too (their absence is part of the identity)."""
     main = Path(main).resolve()
     root_dir = main.parent
     files: list[Path] = []
@@ -55,7 +55,7 @@ def mjcf_files(main: Path) -> list[Path]:
         trees.append(tree)
         for inc in tree.iter("include"):
             if inc.get("file"):
-                todo.append(_resolve(inc.get("file", ""), (path.parent, root_dir)).resolve())
+                todo.append(_resolve(inc.get("file", ""), (root_dir, path.parent)).resolve())  # MuJoCo's order
     dirs = {"meshdir": None, "texturedir": None, "assetdir": None}
     for tree in trees:
         for compiler in tree.iter("compiler"):

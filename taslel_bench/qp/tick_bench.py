@@ -40,7 +40,7 @@ from taslel_bench.qp.tick_replay import AFTER_STAND_TICKS, record_ticks, replay
 from taslel_bench.record.run_files import atomic_write
 from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
 from taslel_bench.sim.build import Built
-from taslel_bench.util.machine import machine_info
+from taslel_bench.util.machine import CpuWatch, machine_info
 from taslel_bench.util.tables import markdown_table
 
 
@@ -281,21 +281,41 @@ def wall_accounting(wall_per_tick_us: float, tick_mean_us: float, parts_mean_us:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Run each loop, print the table and, with ``--out``, write it as markdown with a figure."""
+    """Run each loop, print the table and, with ``--out``, write it as markdown with a figure. A loop (or a
+    run of ``--main``) on a busy machine (:class:`taslel_bench.util.machine.CpuShare`) is named; the
+    markdown is then refused (exit 1) unless ``--allow-busy``, and carries the note when allowed."""
     args = _parse_args(argv)
     load_before = os.getloadavg()[0]
-    rows = [_run_loop(label, extra, args) for label, extra in _loop_configs(args.solvers, args.formulations)]
-    main_rtf = main_command(args.main) if args.main else {}
+    rows, busy = [], []
+    for label, extra in _loop_configs(args.solvers, args.formulations):
+        with CpuWatch() as watch:
+            rows.append(_run_loop(label, extra, args))
+        if watch.result.busy_reason:
+            busy.append(f"{label}: {watch.result.busy_reason}")
+    main_rtf = main_command(args.main, busy) if args.main else {}
     _print_table(rows, args)
     if main_rtf:
         print(_main_text(args.main, main_rtf))
+    note = busy_note(busy)
+    if note:
+        print(note)
     if args.out is not None:
-        _write_markdown(rows, args, load_before, main_rtf)
+        if note and not args.allow_busy:
+            raise SystemExit(f"error: {note}; {args.out} not written: its numbers would measure the other work "
+                             f"on this machine, not the code. Rerun on a quiet machine, or pass --allow-busy to "
+                             f"write it with this note")
+        _write_markdown(rows, args, load_before, main_rtf, note)
 
 
-def main_command(solvers: str) -> dict[str, float]:
+def busy_note(busy: list[str]) -> str:
+    """One line naming the loops measured on a busy machine ("" if none)."""
+    return f"machine busy during the measurement ({'; '.join(busy)})" if busy else ""
+
+
+def main_command(solvers: str, busy: list[str] | None = None) -> dict[str, float]:
     """Run ``python -m taslel_bench -m solver=<solvers>`` (the default config otherwise; its jobs run in
-    parallel) into a temporary sweep folder; {solver: real-time factor of its run}."""
+    parallel) into a temporary sweep folder; {solver: real-time factor of its run}. Its runs on a busy
+    machine are appended to ``busy``."""
     import pandas as pd
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -303,6 +323,9 @@ def main_command(solvers: str) -> dict[str, float]:
                f"hydra.sweep.dir={tmp}"]  # fmt: skip
         subprocess.run(cmd, check=True, capture_output=True, text=True)
         table = pd.read_parquet(Path(tmp) / "summary.parquet")
+    if busy is not None and "machine_busy" in table:
+        busy += [f"main command {r['solver']}: {r['machine_busy_reason']}" for _, r in table.iterrows()
+                 if bool(r["machine_busy"])]
     return {str(r["solver"]): float(r["real_time_factor"]) for _, r in table.iterrows()}
 
 
@@ -325,6 +348,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--cold", action="store_true",
                     help="also time idempotent parts twice in a row in one more run (cost of interleaving)")
     ap.add_argument("--main", default="", help="also run the main command with these solvers, e.g. osqp,clarabel")
+    ap.add_argument("--allow-busy", action="store_true",
+                    help="write --out even when the machine was busy during a loop (the file then says so)")
     return ap.parse_args(argv)
 
 
@@ -449,7 +474,7 @@ def _back_to_back_text(rows: list[tuple]) -> str:
 
 
 def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: float,
-                    main_rtf: dict[str, float] | None = None) -> None:  # fmt: skip
+                    main_rtf: dict[str, float] | None = None, busy: str = "") -> None:  # fmt: skip
     """Write the rows as markdown to ``args.out`` (with the command, machine, 1-min load average at the
     start ``load_before`` and now, and what the columns mean) and the figure next to it (``.png``)."""
     info = machine_info()
@@ -463,7 +488,8 @@ def _write_markdown(rows: list[tuple], args: argparse.Namespace, load_before: fl
          + f"` · {stamp}\n"),
         (f"Machine: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']}; "
          f"load average during the run (1 min): {load_before:.1f} at start, {load_after:.1f} at end  \n"
-         f"Packages: {info['packages']}  \nCode: {info['code']}\n"),
+         f"Packages: {info['packages']}  \nCode: {info['code']}\n"
+         + (f"\n**Disturbed**: {busy} (written with --allow-busy).\n" if busy else "")),
         _NOTES,
     ]
     cells = [(label, f"{tick:.1f}", f"{rtf:.1f}x", f"{limit:.1f}x", f"{rtf / limit:.2f}", status, fell,

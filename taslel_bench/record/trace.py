@@ -125,6 +125,8 @@ class EpisodeTrace:
         self.qp_status = np.full(c, -1, np.int8)
         self.qp_iterations = np.full(c, -1, np.int32)
         self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
+        self.qp_solve_cpu_us = np.full(c, np.nan)  # [µs] thread CPU time of the solve (taslel_bench.sim.solve_clock)
+        self.qp_setup = np.zeros(c, np.bool_)  # the backend's first build for this QP layout (sim.solve_clock)
         self.barriers = {name: BarrierLog(name, c, self._barrier_rows.get(name, quad.LEGS))  # the filter's families
                          for name in barrier_names}
         self.contact_log = ContactLog(c)  # raw contact rows of each tick's last physics step
@@ -208,6 +210,8 @@ class EpisodeTrace:
             solve_us = sol.solve_time_s * 1e6 if sol is not None else np.nan
             iterations = sol.iterations if sol is not None and sol.iterations is not None else -1
             fallback = fres.used_fallback
+            self.qp_solve_cpu_us[r] = getattr(sol, "solve_cpu_time_s", np.nan) * 1e6 if sol is not None else np.nan
+            self.qp_setup[r] = bool(getattr(sol, "setup", False))
         else:
             (lam, vdot), build_us, margin, solve_us, iterations, fallback = self._no_filter, np.nan, 0.0, np.nan, -1, \
                 False  # fmt: skip
@@ -408,7 +412,8 @@ class EpisodeTrace:
         cols["nonfoot_obstacle_contact"] = self.nonfoot_obstacle_contact[t]
         cols["shin_floor_contact"] = self.shin_floor_contact[t]
         cols["ecbf_margin_mps2"] = self.ecbf_margin_mps2[t]
-        for name in ("qp_status", "qp_fallback", "qp_build_us", "qp_solve_us", "qp_iterations", "qp_u_error_nm",
+        for name in ("qp_status", "qp_fallback", "qp_build_us", "qp_solve_us", "qp_solve_cpu_us", "qp_setup",
+                     "qp_iterations", "qp_u_error_nm",
                      "mu_hat", "mu_true", "mu_hat_ready", "tick_us"):
             cols[name] = getattr(self, name)[t]
         _put(cols, "tick_{}_us", TICK_PARTS, d["tick_parts_us"])

@@ -17,10 +17,12 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits, robot_description
 from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.summary import SummaryStream, summarize
+from taslel_bench.plant.build import urdf_mesh_files
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.qp.reference_check import reference_metrics
 from taslel_bench.record import qpset, run_files
@@ -29,7 +31,10 @@ from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.sim.build import Built
-from taslel_bench.sim.identity import code_identity, hash_files, mjcf_files
+from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
+from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
+from taslel_bench.sim.solve_clock import time_solves_by_cpu
+from taslel_bench.util.machine import CpuWatch
 from taslel_bench.util.provenance import code_version
 
 
@@ -79,23 +84,38 @@ def run_config_yaml(cfg: DictConfig) -> str:
     return OmegaConf.to_yaml(OmegaConf.create(plain))
 
 
-def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = ()) -> str:
-    """Hash of everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved
-    config (``progress`` and ``force`` only change what is printed), the content of every file MuJoCo reads
-    for the plant (``robot.plant_mjcf`` with its includes and assets, or the URDF), the controller model's
-    URDF, ``input_files`` (the estimator's checkpoints) and the code version."""
+def hashed_config(cfg: DictConfig) -> dict:
+    """The resolved config as hashed: without ``progress``, ``force``, ``max_memory_gb`` (they only change what
+    is printed or refused), the sweep-level keys and ``record.chunk_ticks`` (how the trace is processed)."""
     plain = OmegaConf.to_container(cfg, resolve=True)
     for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
-    plain.get("record", {}).pop("chunk_ticks", None)  # how the trace is processed, not what it holds
-    h = hashlib.sha256(OmegaConf.to_yaml(OmegaConf.create(plain)).encode())
+    plain.get("record", {}).pop("chunk_ticks", None)
+    return plain
+
+
+def identity_of(cfg: DictConfig, input_files: Iterable[Path] = (),
+                choices: dict[str, str] | None = None) -> RunIdentity:  # fmt: skip
+    """Everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved config, the
+    plant files as MuJoCo reads them, the controller model's URDF, ``input_files`` (the estimator's
+    checkpoints), the project code the run imports and its ``_target_`` modules, the composed config files
+    (``choices``: the option of each config group) and the result-deciding package versions."""
+    plain = hashed_config(cfg)
     mjcf = cfg.robot.get("plant_mjcf")
     robot_urdf = robot_description(cfg).urdf_path
-    hash_files(h, mjcf_files(Path(mjcf)) if mjcf else [robot_urdf])
-    hash_files(h, [Path(cfg.get("model", {}).get("urdf") or robot_urdf)])
-    hash_files(h, sorted(Path(p).resolve() for p in input_files))
-    h.update(code_identity().encode())
-    return h.hexdigest()
+    return run_identity(
+        OmegaConf.to_yaml(OmegaConf.create(plain)),
+        plant=mjcf_files(Path(mjcf)) if mjcf else [robot_urdf, *urdf_mesh_files(robot_urdf)],
+        model=[Path(cfg.get("model", {}).get("urdf") or robot_urdf)],
+        checkpoints=sorted(Path(p).resolve() for p in input_files),
+        targets=target_modules(plain),
+        config=config_files(CONF_DIR, choices or {}),
+    )
+
+
+def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = (), choices: dict[str, str] | None = None) -> str:
+    """The hash of :func:`identity_of`."""
+    return identity_of(cfg, input_files, choices).config_sha256
 
 
 def estimator_files(built: Built) -> list[Path]:
@@ -117,6 +137,8 @@ def _supersede_tag(problem: str, same: bool, previous: dict | None, out_dir: Pat
 
     if problem == "no-summary" and (out_dir / PARTIAL_NAME).exists():
         return "killed", "a killed run (partial episode.mcap, no summary.json)"
+    if problem == INTERRUPTED:
+        return INTERRUPTED, f"an interrupted run ({previous.get('message') if previous else 'partial episode'})"
     if problem:
         kind, _, name = problem.partition("-")
         why = {"missing": f"{name} of the result is missing", "size": f"{name} differs from the size the run "
@@ -135,6 +157,8 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
     traceback.txt) is moved to ``superseded/`` first, never overwritten, and the notes say what was moved
     and why; files of interrupted writes are removed and named."""
     previous, problem = run_files.folder_state(out_dir)
+    if not problem and previous is not None and previous.get("status") == INTERRUPTED:
+        problem = INTERRUPTED  # a partial episode: never reused as complete
     same = previous is not None and previous.get("config_sha256") == config_hash
     if not problem and same and not cfg.get("force", False):
         return {**previous, "skipped": True}, {}
@@ -179,20 +203,25 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
     built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated or written
-    config_hash = config_sha256(cfg, estimator_files(built))
+    identity = identity_of(cfg, estimator_files(built), choices)
+    config_hash = identity.config_sha256
     out_dir.mkdir(parents=True, exist_ok=True)
-    with RunLock(out_dir) as lock:  # one writer per run folder (RunFolderLocked if another one is alive)
+    with RunLock(out_dir) as lock, InterruptGuard() as guard:  # one writer per run folder; SIGINT/SIGTERM
         skipped, notes = prepare_folder(cfg, out_dir, config_hash)
         if skipped is not None:
             return skipped
         if lock.stale_taken_over:
             notes["stale_lock_taken_over"] = lock.stale_taken_over
-        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes)
+        notes["identity"] = identity.record()
+        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes, guard)
 
 
 def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, str], overrides: list[str] | None,
-              config_hash: str, notes: dict[str, object]) -> dict[str, object]:
-    """The episode and its files, in a folder prepared (and locked) by :func:`run`."""
+              config_hash: str, notes: dict[str, object], guard: InterruptGuard) -> dict[str, object]:
+    """The episode and its files, in a folder prepared (and locked) by :func:`run`. A signal during the
+    episode stops it at its next progress point and the ticks simulated so far are written as an
+    ``interrupted`` run (:mod:`taslel_bench.sim.interrupt`); a signal while the files are written is held
+    until they are complete, then ends the run (:class:`RunInterrupted`)."""
     if choices.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
         choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
@@ -200,19 +229,48 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     steps = _stream_chunks(cfg, built, out_dir)  # record.chunk_ticks: steps.parquet and metrics per chunk
     sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
+    time_solves_by_cpu(built)  # each solve also by the thread's CPU time (qp_solve_cpu_us)
+    guard.defer = True
     try:
-        res: EpisodeResult = built.episode.run(progress=show)
+        with CpuWatch() as watch:  # the machine's load and this run's share of a CPU during the episode
+            res: EpisodeResult = built.episode.run(progress=guard.progress(show))
         if show is not None:
             print(file=sys.stderr)
+        stopped = _stopped_by_signal(res, guard)
         summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
         summary.update(_episode_summary(cfg, built, res))
+        summary.update(watch.result.record())  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
+        if stopped:
+            summary.update(_interrupted_fields(cfg, res, guard))
         events = _events(cfg, res, out_dir)
-        video = _video(cfg, built, out_dir)  # record.video: rendered once steps.parquet is written
+        video = None if stopped else _video(cfg, built, out_dir)  # record.video: once steps.parquet is written
         _write_results(out_dir, res, summary, events, sink, qp_recorder, steps, video)
     except BaseException:
         steps.abandon()  # no half-written table under any name
         raise
+    finally:
+        guard.defer = False
+    if guard.signum is not None and not stopped:  # came while the files were written: they are complete
+        raise RunInterrupted(guard.signum, summary)
     return summary
+
+
+def _stopped_by_signal(res: EpisodeResult, guard: InterruptGuard) -> bool:
+    """The episode ended because the guard stopped it (its fault handling caught :class:`StopRequested`):
+    the run is ``interrupted``, not an error (no traceback)."""
+    if guard.signum is None or res.status != "error" or not str(res.message).startswith(StopRequested.__name__):
+        return False
+    res.status, res.message = "ok", ""  # the ticks simulated are a valid (shorter) episode; the summary says why
+    res.extras.pop("traceback", None)
+    return True
+
+
+def _interrupted_fields(cfg: DictConfig, res: EpisodeResult, guard: InterruptGuard) -> dict[str, object]:
+    """``status: interrupted`` with the signal and the time reached [s, simulated, stand included]."""
+    total_s = float(cfg.controller.stand_duration) + float(cfg.duration)
+    reached_s = float(res.n_ticks) / float(cfg.control_rate_hz)
+    return {"status": INTERRUPTED, "interrupted_by": guard.signal_name, "interrupted_at_s": reached_s,
+            "message": f"interrupted by {guard.signal_name} at t = {reached_s:.2f} s of {total_s:.2f} s simulated"}
 
 
 def _stance_and_swing_s(built: Built) -> tuple[float, float]:
@@ -426,4 +484,31 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
 
-__all__ = ["record_job_error", "run"]
+def earlier_unfinished(out_dir: Path, cfg: DictConfig) -> list[str]:
+    """One line per sibling of ``out_dir`` (another timestamped folder of ``outputs/runs/``) that holds a run
+    of the same config (same ``config.yaml``) that did not finish: interrupted (its summary says when) or
+    killed (no summary.json). A rerun of the same command names them; it does not reuse them."""
+    out_dir = Path(out_dir)
+    try:
+        mine = run_config_yaml(cfg)
+    except Exception:  # noqa: BLE001 - a config that does not resolve is refused by run() itself
+        return []
+    lines = []
+    for folder in sorted(out_dir.parent.iterdir()) if out_dir.parent.is_dir() else []:
+        config = folder / "config.yaml"
+        if folder == out_dir or not config.is_file():
+            continue
+        try:
+            if config.read_text() != mine:
+                continue
+        except (OSError, UnicodeDecodeError):
+            continue
+        summary = run_files.read_summary(folder)
+        if summary is None:
+            lines.append(f"{folder}: an earlier run of this config that was killed (no summary.json)")
+        elif summary.get("status") == INTERRUPTED:
+            lines.append(f"{folder}: an earlier run of this config, {summary.get('message', INTERRUPTED)}")
+    return lines
+
+
+__all__ = ["earlier_unfinished", "record_job_error", "run"]

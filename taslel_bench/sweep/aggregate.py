@@ -11,8 +11,10 @@ import pandas as pd
 
 from taslel_bench.record import run_files
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
+from taslel_bench.record.run_lock import live_holder
 
 SUMMARY_TABLE = "summary.parquet"
+RUNNING = "running"  # status of a job whose run folder a live process holds (a report rebuilt mid-sweep)
 AXES = ("scenario", "solver", "estimator", "seed")
 # swept override -> summary column (and its type, for the rows of crashed jobs)
 OVERRIDE_COLUMNS = {"filter.formulation": "filter_formulation",
@@ -29,8 +31,12 @@ def run_folders(sweep_dir: Path) -> list[Path]:
 
 
 def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
-    """A job folder without a summary: it crashed before finishing; say so, with what is known."""
+    """A job folder without a summary: running (a live process holds its run.lock) or crashed before
+    finishing; say which, with what is known."""
     row: dict[str, Any] = {"status": "error", "message": "job left no summary.json (crashed or killed)"}
+    holder = live_holder(run_dir)
+    if holder is not None:
+        row = {"status": RUNNING, "message": f"running: run.lock held by {holder}"}
     overrides = run_dir / ".hydra" / "overrides.yaml"
     try:
         text = overrides.read_text() if overrides.is_file() else ""
@@ -47,7 +53,7 @@ def _row_for_unfinished(run_dir: Path) -> dict[str, Any]:
                 row[key] = _typed(key, value)
     tb = run_dir / "traceback.txt"
     try:
-        if tb.is_file() and tb.read_text().strip():
+        if holder is None and tb.is_file() and tb.read_text().strip():
             row["message"] = tb.read_text().strip().splitlines()[-1]
     except (OSError, UnicodeDecodeError):
         pass
@@ -97,20 +103,48 @@ def _yaml_mapping(path: Path) -> dict:
 
 def _row(run_dir: Path, known: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The table row of one run folder; an unreadable summary or result file makes an error row naming it;
-    ``known``: rows the launcher kept for jobs that could not write their folder."""
+    ``known``: what the launcher saw each job of this sweep do, which wins over the folder (:func:`_outcome_row`)."""
+    outcome = known.get(str(run_dir.absolute()))
+    if outcome is None and live_holder(run_dir) is not None:
+        return _row_for_unfinished(run_dir)  # a live job (a report rebuilt mid-sweep): running, whatever is there
     summary_path = run_dir / run_files.SUMMARY
     if not summary_path.is_file():
-        row = dict(known.get(str(run_dir.absolute()), {})) or _row_for_unfinished(run_dir)
+        row = dict(outcome or {}) or _row_for_unfinished(run_dir)
         row.setdefault("status", "error")
         return row
     row = run_files.read_summary(run_dir)
     if row is None:
         fallback = _row_for_unfinished(run_dir)
         fallback["message"] = f"{summary_path}: unreadable (truncated or not a JSON object)"
-        return fallback
+        return _outcome_row(run_dir, outcome, fallback) if outcome else fallback
+    if outcome is not None:
+        row = _outcome_row(run_dir, outcome, row)
     if row.get("status") in ("ok", "degraded") and (problem := _unreadable(run_dir, row)):
         row = {**row, "status_reported": row.get("status"), "status": "error", "message": problem}
     return row
+
+
+def _outcome_row(run_dir: Path, outcome: dict[str, Any], folder_row: dict[str, Any]) -> dict[str, Any]:
+    """The job's own outcome against the summary in its folder: a job that failed is an error row naming the
+    folder and why, whatever summary the folder holds; a folder summary of another identity than the job's
+    is never reported as the job's result."""
+    job_sha, folder_sha = outcome.get("config_sha256"), folder_row.get("config_sha256")
+    if job_sha and job_sha == folder_sha and outcome.get("status") == folder_row.get("status"):
+        return folder_row  # the folder holds this job's own result
+    if outcome.get("status") not in ("ok", "degraded"):
+        row = dict(outcome)
+        message = str(row.get("message", "the job failed"))
+        row["message"] = message if str(run_dir) in message else f"{run_dir}: {message}"
+        if folder_row.get("status") not in (None, "error"):  # an old result (an error summary is this job's own)
+            row["message"] += (f" (the folder's summary.json, status {folder_row.get('status')}, config_sha256 "
+                               f"{str(folder_row.get('config_sha256', 'unknown'))[:12]}, is not this job's result)")
+        return row
+    if job_sha and folder_sha != job_sha:
+        return {**outcome, "status": "error", "status_reported": outcome.get("status"),
+                "message": f"{run_dir / run_files.SUMMARY}: a run of another identity (config_sha256 "
+                           f"{str(folder_sha)[:12]}) than this job's ({str(job_sha)[:12]}); not reported as this "
+                           f"run"}  # fmt: skip
+    return folder_row
 
 
 def collect(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None) -> pd.DataFrame:
@@ -123,6 +157,7 @@ def collect(sweep_dir: Path, known: dict[str, dict[str, Any]] | None = None) -> 
     for run_dir in folders:
         row = _row(run_dir, known)
         row.pop("skipped", None)
+        row.pop("identity", None)  # which files the identity hashed: in summary.json, not a table column
         row["run_dir"] = str(run_dir.relative_to(sweep_dir))
         rows.append(row)
     seen = {str(d.absolute()) for d in folders}

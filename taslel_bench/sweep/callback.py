@@ -17,6 +17,7 @@ import pandas as pd
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+from taslel_bench.sweep import table_set
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect
 from taslel_bench.sweep.jobs import JOB_OUTCOMES
 from taslel_bench.sweep.report import write_report
@@ -54,7 +55,7 @@ def print_failed_rows(frame: pd.DataFrame) -> None:
     if "status" not in frame:
         return
     for _, row in frame[frame["status"] != "ok"].iterrows():
-        reason = row.get("message") if row.get("status") == "error" else row.get("degraded_reasons")
+        reason = row.get("degraded_reasons") if row.get("status") == "degraded" else row.get("message")
         print(f"  {row.get('status')}: {row.get('run_dir')}: {reason}")
 
 
@@ -79,8 +80,10 @@ class SweepCallback(Callback):
         frame = collect(sweep_dir, dict(JOB_OUTCOMES))
         code = EXIT_OK if "status" in frame and (frame["status"] == "ok").all() and len(frame) else EXIT_RUNS_FAILED
         try:
+            table_set.begin(sweep_dir)  # summary.parquet, table.csv/.tex and report.md: one set
             aggregate(sweep_dir, dict(JOB_OUTCOMES), frame=frame)
             report = write_report(sweep_dir, frame)
+            table_set.seal(sweep_dir, len(frame))
         except Exception as exc:  # noqa: BLE001 - the table is still printed below
             print(_one_line(f"the sweep's table or report in {sweep_dir}", exc), file=sys.stderr)
             print(f"sweep: {status_line(frame)} (table not written)")

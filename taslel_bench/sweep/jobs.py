@@ -29,6 +29,10 @@ JOB_OUTCOMES: dict[str, dict[str, Any]] = {}
 JOB_AXES: dict[str, dict[str, Any]] = {}
 
 
+# the signal that interrupted the sweep (SIGINT / SIGTERM), if one did: the sweep then exits 128 + its number
+SWEEP_INTERRUPTED: list[int] = []
+
+
 class SweepRefused(SystemExit):
     """The job list cannot run as given (exit code 2, one line on stderr, nothing run)."""
 
@@ -99,10 +103,12 @@ def begin_launch(config: DictConfig, job_overrides: Sequence[Sequence[str]], hyd
     return folders, sweep_dir
 
 
-def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "") -> JobReturn:
-    """A completed JobReturn holding an error summary for a job that could not run or finish; the error is
-    written into its folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
-    summary: dict[str, Any] = {"status": "error", "message": message, "fell": False, "seed": -1,
+def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str = "",
+                 status: str = "error") -> JobReturn:  # fmt: skip
+    """A completed JobReturn holding an error summary (``status``: "error", or "interrupted" for a job the
+    interrupted sweep never started) for a job that could not run or finish; the error is written into its
+    folder when possible (else kept for the callback in :data:`JOB_OUTCOMES`)."""
+    summary: dict[str, Any] = {"status": status, "message": message, "fell": False, "seed": -1,
                                "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}  # fmt: skip
     summary.update(JOB_AXES.get(str(folder), {}))
     for item in overrides:
@@ -112,7 +118,8 @@ def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str =
         elif key == "seed" and value.isdigit():
             summary["seed"] = int(value)
     try:
-        write_error_folder(folder, dict(summary), tb or message)
+        if status == "error":  # a job never started leaves no folder; its row lives in the table
+            write_error_folder(folder, dict(summary), tb or message)
     except OSError as exc:  # a full disk, a read-only folder: the row lives on in the sweep's table
         summary["message"] = f"{message}; its error summary could not be written either ({exc})"
     JOB_OUTCOMES[str(folder)] = summary
@@ -122,18 +129,27 @@ def error_return(overrides: Sequence[str], folder: Path, message: str, tb: str =
     return ret
 
 
+OUTCOME_KEYS = ("status", "message", "config_sha256", "scenario", "solver", "estimator", "seed")
+
+
 def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
-    """``ret`` if the job completed (its summary kept in :data:`JOB_OUTCOMES` if the folder holds none, e.g.
-    the disk was full); else an :func:`error_return` naming what it raised."""
+    """``ret`` if the job completed, else an :func:`error_return` naming what it raised. Every job's outcome
+    is kept in :data:`JOB_OUTCOMES` (the whole summary when its folder holds none, e.g. the disk was full),
+    so the table never shows an old summary in the folder in place of what this job did."""
     if isinstance(ret, JobReturn) and ret.status == JobStatus.COMPLETED:
         value = ret._return_value
-        if isinstance(value, dict) and "status" in value and read_summary(folder) is None:
-            JOB_OUTCOMES[str(folder)] = {**value, "overrides": OVERRIDE_SEPARATOR.join(sorted(overrides))}
+        if isinstance(value, dict) and "status" in value:
+            joined = OVERRIDE_SEPARATOR.join(sorted(overrides))
+            full = read_summary(folder) is None or value.get("status") not in ("ok", "degraded")
+            kept = {k: v for k, v in value.items() if k != "identity"} if full else \
+                {k: value[k] for k in OUTCOME_KEYS if k in value}
+            axes = {k: v for k, v in JOB_AXES.get(str(folder), {}).items() if kept.get(k) in (None, "", -1)}
+            JOB_OUTCOMES[str(folder)] = {**kept, **axes, "overrides": joined}
         return ret
     exc = ret._return_value if isinstance(ret, JobReturn) else ret
     tb = "".join(traceback.format_exception(exc)) if isinstance(exc, BaseException) else ""
     return error_return(overrides, folder, f"{type(exc).__name__}: {exc}", tb)
 
 
-__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SweepRefused", "check_one_folder_per_job", "error_return",
+__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SWEEP_INTERRUPTED", "SweepRefused", "check_one_folder_per_job", "error_return",
            "job_folders", "settle"]

@@ -41,6 +41,23 @@ def require_launcher_package(launcher: str, installed: Callable[[str], bool] = _
         )
 
 
+def register_submitit_launchers() -> None:
+    """Put this project's submitit launchers (error rows for lost jobs,
+    ``hydra_plugins/taslel_bench_launchers/submitit_launcher.py``) under hydra-submitit-launcher's option
+    names. Hydra's plugin scan runs that package's registrations (again) in an order of its own, so ours are
+    made after the scan: call this before ``hydra.main`` (the scan happens once per process). Nothing to do
+    without the ``slurm`` extra."""
+    if not _installed("hydra_plugins.hydra_submitit_launcher"):
+        return
+    import importlib
+
+    from hydra.core.plugins import Plugins
+
+    Plugins.instance()  # the scan, now, so that it does not run after the registration below
+    module = importlib.import_module("hydra_plugins.taslel_bench_launchers.submitit_launcher")
+    module.register()
+
+
 def check_launcher_overrides(argv: Sequence[str], installed: Callable[[str], bool] = _installed) -> None:
     """Check the launcher chosen on the command line (``hydra/launcher=<name>``)."""
     for arg in argv:

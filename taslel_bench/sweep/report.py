@@ -20,9 +20,10 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.record import run_files
+from taslel_bench.sweep import table_set
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
 from taslel_bench.sweep.claims import _unsafe, paper_claims
-from taslel_bench.sweep.solver_verdict import _overall, solve_time_figure, solver_verdict
+from taslel_bench.sweep.solver_verdict import _overall, machine_busy_line, solve_time_figure, solver_verdict
 from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
@@ -481,6 +482,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     head = [
         "# taslel_bench sweep report\n",
         f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
+        machine_busy_line(frame) if not frame.empty else "",
     ]
     lines = [
         answers_section(frame, solver_rows),
@@ -527,10 +529,14 @@ def main(argv: list[str] | None = None) -> None:
         print(f"error: no runs in {args.sweep_dir}: expected run folders holding summary.json or Hydra's "
               ".hydra/ (a sweep folder, outputs/sweeps/<time>/)", file=sys.stderr)
         raise SystemExit(2)
+    if problem := table_set.set_problem(args.sweep_dir):  # the set found here was left incomplete
+        print(f"note: {problem}; rebuilding it now", file=sys.stderr)
     frame = collect(args.sweep_dir)
     try:
+        table_set.begin(args.sweep_dir)  # summary.parquet, table.csv/.tex, report.md: one set (table_set.json)
         aggregate(args.sweep_dir, frame=frame)
         print(write_report(args.sweep_dir, frame, args.keep_stills))
+        table_set.seal(args.sweep_dir, len(frame))
     except OSError as exc:
         what = "disk full" if exc.errno == errno.ENOSPC else type(exc).__name__
         print(f"error: {what}: could not write the table or report in {args.sweep_dir}: {exc}", file=sys.stderr)

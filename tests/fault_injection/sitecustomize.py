@@ -2,7 +2,8 @@
 the test's sweep (main process and loky workers) through PYTHONPATH. Nothing happens unless
 ``TASLEL_FAULTS`` is set: ``kill=<text>`` SIGKILLs the process that starts a run whose folder contains
 <text> (a worker dying as under the OOM killer); ``enospc=<text>`` makes writing that run's steps.parquet
-fail with ENOSPC (a full disk). Entries are separated by ``;``. The patch is applied when
+fail with ENOSPC (a full disk); ``eacces=<text>`` makes taking that run folder's lock fail with EACCES
+(a folder this process cannot write; root ignores file modes, so a chmod cannot show it). Entries are separated by ``;``. The patch is applied when
 ``taslel_bench.sim.run`` is first imported (nothing is imported at startup)."""
 
 import os
@@ -17,6 +18,7 @@ def _patch(run_module) -> None:
     import signal
 
     from taslel_bench.record import run_files
+    from taslel_bench.record.run_lock import RunLock
     from taslel_bench.record.steps_writer import StepsWriter
 
     original_run, original_write_parquet = run_module.run, run_files.write_parquet
@@ -37,6 +39,14 @@ def _patch(run_module) -> None:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.tmp))
         return original_append(self, frame)
 
+    original_acquire = RunLock.acquire
+
+    def acquire_with_faults(self):
+        if "eacces" in _FAULTS and _FAULTS["eacces"] in str(self.path):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self.path))
+        return original_acquire(self)
+
+    RunLock.acquire = acquire_with_faults
     run_module.run = run_with_faults
     run_files.write_parquet = write_parquet_with_faults
     StepsWriter.append = append_with_faults
