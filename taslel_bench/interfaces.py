@@ -2,7 +2,7 @@
 ``estimators`` implement and the types they exchange with the core.
 
 The axis packages import from the core only this module (types, protocols, the terrain vocabulary, the
-A1's constants, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
+the core's quadruped vocabulary, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
 the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
 
 Joint vectors are in the core order (:data:`taslel_bench.robot.quadruped.JOINT_NAMES`, legs FL, FR, RL, RR).
@@ -157,7 +157,7 @@ def overestimates(mu_hat, mu_true):
 @dataclass
 class ImuSample:
     """What the trunk's IMU measures on one control tick (ideal: no noise, bias or delay; the IMU at the trunk
-    origin). A real A1's IMU reports its attitude (from its own filter), the gyro and the accelerometer."""
+    origin). A real robot's IMU reports its attitude (from its own filter), the gyro and the accelerometer."""
 
     quat_wxyz: np.ndarray  # [-] (4,) trunk orientation in the world (world <- trunk)
     gyro_in_base: np.ndarray  # [rad/s] (3,) trunk angular velocity, trunk axes

@@ -160,7 +160,7 @@ def test_missing_names_are_reported_by_kind(tmp_path):
     with pytest.raises(ConfigError) as err:  # no mapping: every kind is missing, each named
         Built(compose_cfg([f"robot.plant_mjcf={xml}", "filter.enabled=false"]))
     message = str(err.value)
-    assert message.startswith(f"robot.plant_mjcf={str(xml)!r} does not fit the A1 controller")
+    assert message.startswith(f"robot.plant_mjcf={str(xml)!r} does not fit the controller")
     for line in ("joints: no joint FL_hip_joint", "feet: no sphere geom FL_foot", "trunk: no body 'trunk'"):
         assert line in message, message
     assert "joints in the file: FL_calf, FL_hip" in message and "sphere geoms in the file: FL, FR" in message

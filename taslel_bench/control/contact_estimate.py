@@ -18,7 +18,7 @@ Rules per foot, every control tick:
 * otherwise swing.
 
 Signals: the gait phase (the controller's own clock) and the norm of the contact force on each foot. In the
-plant that is MuJoCo's net contact force on the foot sphere (the feet's contact sensors); a real Unitree A1
+plant that is MuJoCo's net contact force on the foot sphere (the feet's contact sensors); a real robot
 reports a force per foot from the pressure sensors in its foot pads (``footForce`` in the SDK's low-level
 state), uncalibrated and noisy, so a threshold of tens of newtons (the trot loads a stance foot with
 ~35-70 N) is what it supports; a kinematic signal (foot height over an estimated terrain) is not used.

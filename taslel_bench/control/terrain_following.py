@@ -31,9 +31,9 @@ trunk's z axis by that height relative to the mean of the four:
   every touchdown on a top counted a trip). The correction eases in over the first
   :data:`SWING_SAG_RAMP` of the swing (no step in the target at lift-off) and holds to touchdown.
 
-What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real A1 would need a
+What it reads: the trunk's position and yaw (world) and the terrain object (a map; a real robot would need a
 height map from vision or from its footholds); with ``swing_from_measured_hips`` also the trunk's height and
-tilt (the stance hips' heights; a real A1 would estimate them from leg kinematics and its IMU). The shifts are
+tilt (the stance hips' heights; a real robot would estimate them from leg kinematics and its IMU). The shifts are
 along the trunk's z, exact when the trunk is level. ``qd_des`` stays the flat gait's (the shift's rate is not fed
 forward). The gait schedule (stance/swing, swing phase) is the paper's.
 """

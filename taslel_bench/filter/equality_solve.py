@@ -5,7 +5,7 @@ contact-or-swing rows per foot) determine (vdot, lambda) from u. ``A_free`` is t
 block (30 x 30, columns ordered vdot then lambda); the filter solves A_free Y = R for one right-hand side
 (the nominal target) or 13 (the condensed formulation's [z0, Z]).
 
-The A1 is a floating base with four 3-joint legs, so A_free has a fixed block structure: the rows of leg
+The robot is a floating base with four 3-joint legs, so A_free has a fixed block structure: the rows of leg
 i (its 3 joint rows of the equations of motion and its foot's 3 contact rows) touch only the base
 accelerations and that leg's 6 unknowns y_i = (vdot of its joints, lambda_i) -- M has no leg-to-leg
 entries, foot i's Jacobian no other leg's columns. :func:`solve_tree` eliminates each y_i with a 6x6 LU

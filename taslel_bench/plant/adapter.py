@@ -1,4 +1,4 @@
-"""Fitting another A1 MJCF (``robot.plant_mjcf``) to the harness: names, actuators, floor, overrides.
+"""Fitting another MJCF of the robot (``robot.plant_mjcf``) to the harness: names, actuators, floor, overrides.
 
 The harness finds plant elements by the core's names (:mod:`taslel_bench.robot.quadruped`): joints ``FL_hip_joint``
 .. ``RR_calf_joint``, one actuator per joint named like the joint, sphere foot geoms ``FL_foot`` ..
@@ -161,7 +161,7 @@ def adapt(
     if floor_problem:
         problems.append(floor_problem)
     if problems:
-        raise ConfigError(f"{where} does not fit the A1 controller:\n  " + "\n  ".join(problems))
+        raise ConfigError(f"{where} does not fit the controller:\n  " + "\n  ".join(problems))
 
     # torque motors first (it deletes the other actuators on the leg joints), then the core's names
     record: dict[str, object] = _torque_motors(spec, chosen, torque_limit_nm)

@@ -5,7 +5,7 @@ Conversions (docs/concepts.md, "conversion traps"):
   * trunk linear velocity: MuJoCo world axes -> Pinocchio trunk axes (angular is in the trunk frame in both);
   * leg order: MuJoCo keeps the plant model's joint order (URDF: FR, FL, RR, RL); Pinocchio and the core use
     :data:`quad.LEGS` = FL, FR, RL, RR. The permutation is built from joint and actuator names, so any
-    plant MJCF with the A1 joint names works.
+    plant MJCF with the core joint names works (the plant builder renames a robot's joints to them).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ class StateBridge:
         if not free:
             missing.append("a free joint on the trunk")
         if missing:
-            raise ValueError(f"plant model does not fit the A1 controller: missing {', '.join(missing)}")
+            raise ValueError(f"plant model does not fit the core's quadruped: missing {', '.join(missing)}")
         self.free_qadr = int(mj_model.jnt_qposadr[free[0]])
         self.free_dadr = int(mj_model.jnt_dofadr[free[0]])
         self.joint_qadr = np.array(qadr)  # core joint i -> MuJoCo qpos index

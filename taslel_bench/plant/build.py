@@ -189,7 +189,7 @@ def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
 
 
 def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
-    """Plant from another A1 MJCF: a free joint, 12 leg joints, one torque motor or servo per joint, sphere
+    """Plant from another MJCF of the robot: a free joint, 12 leg joints, one torque motor or servo per joint, sphere
     foot geoms; names as the core's or mapped by ``options.names`` (:mod:`taslel_bench.plant.adapter`
     renames them to the core's, converts servos to torque motors, finds the file's floor).
 
@@ -242,7 +242,7 @@ def _check_feet_touch(spec: mujoco.MjSpec, floor: mujoco.MjsGeom, where: str) ->
     blind = [f for f in quad.FOOT_FRAMES if not ((spec.geom(f).contype & floor.conaffinity)
                                                  or (floor.contype & spec.geom(f).conaffinity))]
     if blind:
-        raise ConfigError(f"{where} does not fit the A1 controller: feet: {', '.join(blind)} cannot collide "
+        raise ConfigError(f"{where} does not fit the controller: feet: {', '.join(blind)} cannot collide "
                           f"with the floor (contype/conaffinity: foot {spec.geom(blind[0]).contype}/"
                           f"{spec.geom(blind[0]).conaffinity}, floor {floor.contype}/{floor.conaffinity})")
 

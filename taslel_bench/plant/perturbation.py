@@ -1,4 +1,4 @@
-"""One vocabulary for how the MuJoCo plant differs from the A1 URDF, and one implementation of each edit.
+"""One vocabulary for how the MuJoCo plant differs from the robot's URDF, and one implementation of each edit.
 
 :class:`PlantPerturbation` is what ``scenario=perturbed``/``payload`` configure, what the estimators' domain
 randomisation draws per episode, and -- with the same field names, meanings and units -- what the ``model``

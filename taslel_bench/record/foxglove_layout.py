@@ -31,7 +31,7 @@ def _plot(title: str, series: list[tuple[str, str]], y_label: str, **series_opti
 def _three_d() -> fl.ThreeDeePanel:
     scene_topics = {topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)
                     for topic in ("/scene/robot", "/scene/terrain", "/scene/contact")}  # fmt: skip
-    return fl.ThreeDeePanel(title="A1 (trunk followed; blue: MuJoCo contact force, orange: filter lambda)",
+    return fl.ThreeDeePanel(title="robot (trunk followed; blue: MuJoCo contact force, orange: filter lambda)",
                             config=fl.ThreeDeeConfig(
                                 follow_tf=quad.TRUNK_BODY, fixed_frame="world", follow_mode="follow-position",
                                 camera_state=fl.ThreeDeeCameraState(distance=1.6, phi=65.0, theta_offset=135.0,

@@ -1,4 +1,4 @@
-"""When an episode ends: the one fall rule and the state guard, used by every loop that runs the A1 (the
+"""When an episode ends: the one fall rule and the state guard, used by every loop that runs a robot (the
 benchmark, estimator data collection, in-loop studies) through :class:`taslel_bench.sim.episode.Episode`.
 
 Named terms, checked after **every physics step** on the state that step produced:
