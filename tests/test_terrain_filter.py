@@ -340,3 +340,15 @@ def test_a_barrier_family_declares_its_rows(tmp_path):
     frame = built.episode.run().trace.to_frame()
     assert {"pitch_barrier_attitude_h_m", "roll_barrier_attitude_h_m"} <= set(frame.columns)
     assert not any(c.startswith(("FL_", "FR_", "RL_", "RR_")) and "_attitude_" in c for c in frame.columns)
+
+
+def test_the_public_api_builds_the_terrain_filter_with_its_terrain():
+    """``api.build_safety_filter`` hands the terrain to the filter itself (its per-foot cones read it), not only to
+    the barrier families: ``filter=terrain`` builds through the public API."""
+    from taslel_bench import api
+    from taslel_bench.filter.terrain_cone import TerrainFrictionCone
+    from taslel_bench.interfaces import Plane, Terrain
+
+    terrain = Terrain((Plane(0.4),))
+    built = api.build_safety_filter(compose_cfg(["filter=terrain"]), terrain=terrain)
+    assert isinstance(built.friction, TerrainFrictionCone) and built.friction.terrain is terrain
