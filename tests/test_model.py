@@ -52,26 +52,36 @@ def velocity_map(br: StateBridge, q: np.ndarray) -> np.ndarray:
     return T
 
 
+def plant_model_errors(m, d, br: StateBridge, pm: RobotModel, q: np.ndarray, v: np.ndarray) -> dict[str, float]:
+    """Largest |plant - model| at the state (q, v) set in both (MuJoCo forward run, model updated): the mass matrix,
+    the bias forces (the model's h less its known joint losses, which MuJoCo keeps outside qfrc_bias), the foot
+    positions and their translational Jacobians (Pinocchio's velocity convention)."""
+    T = velocity_map(br, q)
+    M_mj = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M_mj)  # MuJoCo 4 signature
+    # qacc = T vdot + Tdot v; Tdot v is R (w x v_lin) on the linear rows (linear velocity frame change)
+    tdot_v = np.zeros(quad.NV)
+    tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
+    losses = np.zeros(quad.NV)  # the known joint losses the model adds to h (the URDF's <dynamics>)
+    losses[6:] = pm.joint_damping * v[6:] + pm.joint_frictionloss * np.tanh(v[6:] / pm.frictionloss_smoothing_radps)
+    out = {"M": np.abs(T.T @ M_mj @ T - pm.M).max(),
+           "h": np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - (pm.h - losses)).max(), "pos": 0.0, "jac": 0.0}
+    for i, foot in enumerate(quad.FOOT_FRAMES):
+        sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
+        out["pos"] = max(out["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
+        jac = np.zeros((3, m.nv))
+        mujoco.mj_jacSite(m, d, jac, None, sid)
+        out["jac"] = max(out["jac"], np.abs(jac @ T - pm.foot_jac_in_world[i]).max())
+    return out
+
+
 def test_mass_bias_feet_match_mujoco(setup):
     m, d, br, pm = setup
     rng = np.random.default_rng(0)
     worst = {"M": 0.0, "h": 0.0, "pos": 0.0, "jac": 0.0}
     for _ in range(20):
         q, v = same_random_state(m, d, br, pm, rng)
-        T = velocity_map(br, q)
-        M_mj = np.zeros((m.nv, m.nv))
-        mujoco.mj_fullM(m, d, M_mj)  # MuJoCo 4 signature
-        worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
-        # qacc = T vdot + Tdot v; Tdot v is R (w x v_lin) on the linear rows (linear velocity frame change)
-        tdot_v = np.zeros(quad.NV)
-        tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
-        worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - pm.h).max())
-        for i, foot in enumerate(quad.FOOT_FRAMES):
-            sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
-            worst["pos"] = max(worst["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
-            jac = np.zeros((3, m.nv))
-            mujoco.mj_jacSite(m, d, jac, None, sid)
-            worst["jac"] = max(worst["jac"], np.abs(jac @ T - pm.foot_jac_in_world[i]).max())
+        worst = {k: max(worst[k], e) for k, e in plant_model_errors(m, d, br, pm, q, v).items()}
     assert worst["M"] < 1e-9, worst
     assert worst["h"] < 1e-9, worst
     assert worst["pos"] < 1e-9, worst

@@ -10,13 +10,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from taslel_bench.plant.bridge import StateBridge, quat_wxyz_to_matrix
+from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.build import build_plant
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import ROBOT_CONFIG_DIR, describe_robot, load_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.util.fields import ConfigError
+from tests.test_model import plant_model_errors
 
 SHIPPED = ("a1", "go1", "anymal_c", "solo12")
 TOL = 1e-10
@@ -52,25 +53,7 @@ def test_plant_and_model_agree(robot_setup):
         br.qvel_mj(q, v, d.qvel)
         mujoco.mj_forward(m, d)
         pm.update(q, v)
-        T = np.zeros((quad.NV, quad.NV))  # qvel_mujoco = T v_pinocchio
-        for i in range(quad.NV):
-            e = np.zeros(quad.NV)
-            e[i] = 1.0
-            br.qvel_mj(q, e, T[:, i])
-        M_mj = np.zeros((m.nv, m.nv))
-        mujoco.mj_fullM(m, d, M_mj)
-        worst["M"] = max(worst["M"], np.abs(T.T @ M_mj @ T - pm.M).max())
-        tdot_v = np.zeros(quad.NV)
-        tdot_v[:3] = quat_wxyz_to_matrix(d.qpos[3:7]) @ np.cross(v[3:6], v[:3])
-        losses = np.zeros(quad.NV)  # the known joint losses the model adds to h (the URDF's <dynamics>)
-        losses[6:] = pm.joint_damping * v[6:] + pm.joint_frictionloss * np.tanh(v[6:] / pm.frictionloss_smoothing_radps)
-        worst["h"] = max(worst["h"], np.abs(T.T @ (d.qfrc_bias + M_mj @ tdot_v) - (pm.h - losses)).max())
-        for i, foot in enumerate(quad.FOOT_FRAMES):
-            sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
-            worst["pos"] = max(worst["pos"], np.abs(d.site_xpos[sid] - pm.foot_pos_in_world[i]).max())
-            jac = np.zeros((3, m.nv))
-            mujoco.mj_jacSite(m, d, jac, None, sid)
-            worst["jac"] = max(worst["jac"], np.abs(jac @ T - pm.foot_jac_in_world[i]).max())
+        worst = {k: max(worst[k], e) for k, e in plant_model_errors(m, d, br, pm, q, v).items()}
     assert max(worst.values()) < TOL, (robot.name, worst)
     # the same joint losses in the plant (MuJoCo reads the URDF's <dynamics> into damping and frictionloss)
     assert np.array_equal(br.joint_vector(m.dof_damping), pm.joint_damping)

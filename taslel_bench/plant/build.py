@@ -188,7 +188,7 @@ def add_foot_contact_sensors(spec: mujoco.MjSpec) -> None:
             spec.add_sensor(name=f"{foot}_{kind}", type=typ, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=foot)
 
 
-def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSpec:
+def mjcf_spec(path: Path, options: PlantOptions | None = None) -> mujoco.MjSpec:
     """Plant from another MJCF of the robot: a free joint, 12 leg joints, one torque motor or servo per joint, sphere
     foot geoms; names as the core's or mapped by ``options.names`` (:mod:`taslel_bench.plant.adapter`
     renames them to the core's, converts servos to torque motors, finds the file's floor).
@@ -197,8 +197,9 @@ def mjcf_spec(path: Path, options: PlantOptions = PlantOptions()) -> mujoco.MjSp
     world body), sets the time step and ``options.overrides``, and makes terrain friction win (the floor
     gets terrain priority and condim 3; the feet priority 0). What was changed is kept in the model
     (:func:`taslel_bench.plant.adapter.read_record`). Raises :class:`ConfigError` naming the field and what
-    is missing (joints, actuators, feet, trunk, floor).
+    is missing (joints, actuators, feet, trunk, floor). ``options`` None: the defaults (the default robot's limits).
     """
+    options = options if options is not None else PlantOptions()
     path = Path(path)
     where = f"robot.plant_mjcf={str(path)!r}"
     if not path.is_file():

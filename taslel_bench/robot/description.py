@@ -111,6 +111,7 @@ def default_robot() -> RobotDescription:
     return load_robot(DEFAULT_ROBOT)
 
 
+@lru_cache(maxsize=16)
 def load_robot(name: str) -> RobotDescription:
     """The description of a shipped robot by name (``conf/robot/<name>.yaml``)."""
     from omegaconf import OmegaConf
