@@ -38,7 +38,6 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.fastloop import run_nominal
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, sample_vector
 from estimators.randomisation import (
     PATCH_COLUMNS,
@@ -57,7 +56,6 @@ from estimators.randomisation import (
 from taslel_bench import api
 from taslel_bench.interfaces import FrictionEstimate, FrictionStrips, Plane, Proprioception, Terrain, quad
 
-LOOPS = ("fast", "core")  # how nominal episodes run (filtered ones always run Episode.run)
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
 
@@ -70,7 +68,6 @@ class EpisodeConfig:
     stride: int = 4  # [samples] between window starts
     fall_margin_s: float = 0.3  # [s] windows must end this long before a fall
     filter_overrides: tuple[str, ...] = ()  # Hydra overrides of the project config for the safety filter
-    loop: str = "fast"  # nominal episodes: "fast" (estimators.fastloop, bit-identical samples) or "core" (Episode.run)
 
 
 @dataclass
@@ -104,28 +101,49 @@ def _worker_config(overrides: tuple[str, ...]):
 
 
 class WindowSampler:
-    """The estimator slot of the core episode loop, used to record: every ``every_ticks`` control ticks it
-    keeps the 36 features the loop hands estimators (q, qdot, the torque applied on the previous tick), and
-    it gives the filter the friction ``mu`` [-] the episode assumes."""
+    """An observer of the core episode loop (:mod:`taslel_bench.sim.observers`) that records every
+    ``every_ticks`` control ticks the 36 features the loop hands estimators (q and qdot at the tick's start,
+    the torque applied on the previous tick: the tick's ``Proprioception``), the friction under the trunk
+    (its ``true_friction``) and the plant's sensors after the tick's physics (the feet's contact sensors);
+    it counts the ticks on which the filter's QP failed (fallback torque used)."""
 
-    name = "window_sampler"
-
-    def __init__(self, every_ticks: int, mu: float) -> None:
-        self.every, self.mu = every_ticks, mu
-        self.reset()
-
-    def reset(self) -> None:
+    def __init__(self, every_ticks: int) -> None:
+        self.every = int(every_ticks)
+        self._episode = None
         self.samples: list[np.ndarray] = []
         self.trunk_friction: list[float] = []  # [-] the loop's true_friction at each sample
+        self.sensors: list[np.ndarray] = []  # MuJoCo sensordata after each sample's tick
         self.ticks: list[int] = []  # control tick of each sample
-        self._tick = 0
+        self.filter_fallbacks = 0
+
+    def start(self, episode) -> None:
+        self._episode, self._sensordata = episode, episode.d.sensordata
+        self.samples, self.trunk_friction, self.sensors, self.ticks = [], [], [], []
+        self.filter_fallbacks = 0
+
+    def after_tick(self, k: int, t: float, fres) -> None:
+        if fres is not None and fres.used_fallback:
+            self.filter_fallbacks += 1
+        if k % self.every == 0:
+            sensed: Proprioception = self._episode.sensed
+            self.samples.append(sample_vector(sensed.q_joints, sensed.qd_joints, sensed.tau_joints))
+            self.trunk_friction.append(sensed.true_friction)
+            self.sensors.append(self._sensordata.copy())
+            self.ticks.append(k)
+
+
+class AssumedFriction:
+    """The estimator slot of a collection episode: the friction ``mu`` [-] the filter assumes, every tick."""
+
+    name = "assumed_friction"
+
+    def __init__(self, mu: float) -> None:
+        self.mu = float(mu)
+
+    def reset(self) -> None:
+        pass
 
     def step(self, obs: Proprioception) -> FrictionEstimate:
-        if self._tick % self.every == 0:
-            self.samples.append(sample_vector(obs.q_joints, obs.qd_joints, obs.tau_joints))
-            self.trunk_friction.append(obs.true_friction)
-            self.ticks.append(self._tick)
-        self._tick += 1
         return FrictionEstimate(self.mu)
 
 
@@ -139,11 +157,12 @@ def episode_terrain(p: EpisodeParams, patch: SurfacePatch | None = None) -> Terr
 
 
 def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False,
-                  patch: SurfacePatch | None = None):
+                  patch: SurfacePatch | None = None, observers=(), trace: bool = True):
     """The core episode of one draw: the flat floor (:func:`episode_terrain`, with ``patch``) with the
     draw's friction and plant perturbation, the
     draw's gait and gains, the benchmark's loop and fall rule (``api.episode_settings`` of the project config),
-    no initial-state noise, ``estimator`` in the estimator slot, the project's safety filter if ``filtered``."""
+    no initial-state noise, ``estimator`` in the estimator slot, the project's safety filter if ``filtered``,
+    ``observers`` watching it; ``trace``: record the benchmark's per-tick trace too."""
     project = _worker_config(cfg.filter_overrides)
     world = api.StaticWorld(episode_terrain(p, patch), perturbation=p.perturbation())
     plant = api.build_plant(world, api.PlantOptions(timestep_s=cfg.timestep_s), seed=p.seed)
@@ -154,7 +173,8 @@ def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: boo
                        physics_dt_s=cfg.timestep_s, control_dt_s=cfg.timestep_s, init_joint_noise_rad=0.0,
                        init_base_vel_noise_mps=0.0, filter_start_s=0.0, analyse=False)
     safety_filter = api.build_safety_filter(project) if filtered else None
-    return api.Episode(settings, world, plant, controller, safety_filter, estimator, np.random.default_rng(p.seed))
+    return api.Episode(settings, world, plant, controller, safety_filter, estimator, np.random.default_rng(p.seed),
+                       observers=observers, trace=trace)
 
 
 def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
@@ -169,30 +189,19 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
         filter_mu = float(p.friction)
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
-    if cfg.loop not in LOOPS:
-        raise ValueError(f"EpisodeConfig.loop must be one of {LOOPS}, got {cfg.loop!r}")
-    every = round(WINDOW_DT_S / cfg.timestep_s)
-    sampler = WindowSampler(every, filter_mu if filtered else float(p.friction))
-    episode = build_episode(p, cfg, sampler, filtered, patch)
-    if not filtered and cfg.loop == "fast":
-        fast = run_nominal(episode, every)
-        status, message, fell, fall_time_s = fast.status, fast.message, fast.fell, fast.time_to_fall_s
-        samples, n_ticks, failures = fast.samples, fast.n_ticks, 0
-        mu_trunk, sensors = fast.trunk_friction, fast.sensordata
-    else:
-        res = episode.run()
-        status, message, fell, fall_time_s = res.status, res.message, res.fell, res.time_to_fall_s
-        samples, n_ticks = np.stack(sampler.samples), res.n_ticks
-        failures = int(res.trace.qp_fallback[: res.trace.n].sum())
-        mu_trunk, sensors = np.array(sampler.trunk_friction), res.trace.sensordata_mj[sampler.ticks]
-    if status == "error":
-        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {message}")
-    fall_t = fall_time_s if fell else float("nan")
+    sampler = WindowSampler(round(WINDOW_DT_S / cfg.timestep_s))
+    estimator = AssumedFriction(filter_mu if filtered else float(p.friction))
+    episode = build_episode(p, cfg, estimator, filtered, patch, observers=[sampler], trace=False)
+    res = episode.run()
+    if res.status == "error":
+        raise RuntimeError(f"collection episode (seed {p.seed}) failed: {res.message}")
+    fall_t = res.time_to_fall_s if res.fell else float("nan")
+    samples, mu_trunk = np.stack(sampler.samples), np.array(sampler.trunk_friction)
     starts = _window_starts(len(samples), fall_t, cfg)
     ends = starts + WINDOW_STEPS - 1
-    feet = episode.contacts.from_sensor_log(sensors[ends])
-    return EpisodeResult(_cut_windows(samples, starts), fell, fall_t, n_ticks * episode.physics_per_tick, p,
-                         filtered, failures, filter_mu, time.perf_counter() - wall0,
+    feet = episode.contacts.from_sensor_log(np.asarray(sampler.sensors)[ends])
+    return EpisodeResult(_cut_windows(samples, starts), res.fell, fall_t, res.n_ticks * episode.physics_per_tick, p,
+                         filtered, sampler.filter_fallbacks, filter_mu, time.perf_counter() - wall0,
                          y=mu_trunk[ends].astype(np.float32),
                          y_foot=episode.terrain.friction_under(feet["foot_pos_in_world"][..., :2]).astype(np.float32),
                          foot_loaded=feet["in_contact"], patch=patch)
@@ -578,9 +587,6 @@ def _parser() -> argparse.ArgumentParser:
                     help="patch length log-uniform in [LO, HI] [m]")
     ap.add_argument("--patch-friction", type=float, nargs=2, default=list(PATCH_RANGES.friction),
                     metavar=("LO", "HI"), help="patch friction ~ U(LO, HI), at least 0.15 away from the floor's")
-    ap.add_argument("--loop", choices=LOOPS, default=EpisodeConfig.loop,
-                    help="nominal episodes: fast (estimators.fastloop: the core episode's parts without its "
-                         "per-tick trace; bit-identical samples) or core (Episode.run)")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp")
     return ap
@@ -606,8 +612,7 @@ def _print_summary(man: dict[str, object], out: Path, workers: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     a = _parser().parse_args(argv)
-    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides),
-                        loop=a.loop)
+    cfg = EpisodeConfig(duration_s=a.duration, stride=a.stride, filter_overrides=tuple(a.filter_overrides))
     counts = {"train": a.train, "val": a.val, "test": a.test, "shifted": a.shifted}
     man = collect(a.out, counts, seed=a.seed, workers=a.workers, cfg=cfg, filter_fraction=a.filter_fraction,
                   filter_mu_scale=tuple(a.filter_mu_scale),

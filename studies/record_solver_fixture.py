@@ -76,9 +76,9 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
         sf.backend = backend
     controller = api.build_controller(cfg)
     settings = replace(api.episode_settings(cfg), duration_s=seconds - controller.stand_duration_s, analyse=False)
+    recorder = _Recorder()
     episode = api.Episode(settings, world, api.build_plant(world), controller, sf, _AssumedFriction(mu),
-                          np.random.default_rng(0))
-    episode.qp_recorder = recorder = _Recorder()
+                          np.random.default_rng(0), observers=[api.FilterQPs(recorder)])
     res = episode.run()
     if res.status != "ok" or res.fell:
         raise RuntimeError(f"the fixture episode did not run to its end: {res.message or res.fall_reason}")

@@ -48,6 +48,7 @@ def _child(helper: str, overrides: list[str]) -> None:
     from taslel_bench.api import compose
     from taslel_bench.filter.layout import TickInputs
     from taslel_bench.qp.tick_bench import QPSequence
+    from taslel_bench.sim.observers import FilterQPs
     from taslel_bench.record.trace import EpisodeTrace
     from taslel_bench.sim.build import Built
 
@@ -68,9 +69,9 @@ def _child(helper: str, overrides: list[str]) -> None:
         return out
 
     episode_module.Episode._tick = counted_tick
-    e.qp_recorder = seq = QPSequence(LOOP_TICKS[0], REPLAYED)
-    trace = e.run().trace
-    e.qp_recorder, episode_module.Episode._tick = None, tick
+    seq = QPSequence(LOOP_TICKS[0], REPLAYED)
+    trace = e.with_observers([FilterQPs(seq)]).run().trace
+    episode_module.Episode._tick = tick
     m, d, br = e.m, e.d, e.bridge
     q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
     qj, qdj, t = q[7:].copy(), v[6:].copy(), e.controller.stand_duration_s + 0.4

@@ -40,6 +40,8 @@ from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.build import build_plant
 from taslel_bench.sim.episode import Episode, EpisodeSettings
+from taslel_bench.sim.observers import FilterQPs
+from taslel_bench.sim.stance import EstimatedStance, MeasuredStance, PlannedStance
 from taslel_bench.sim.world import StaticWorld
 from taslel_bench.util.machine import machine_info
 
@@ -47,11 +49,15 @@ __all__ = [
     "Episode",
     "EpisodeResult",
     "EpisodeSettings",
+    "EstimatedStance",
+    "FilterQPs",
     "FilterResult",
     "GaitParams",
     "NominalController",
     "PDGains",
     "LegKinematics",
+    "MeasuredStance",
+    "PlannedStance",
     "PlantOptions",
     "QPRecorder",
     "QPSet",

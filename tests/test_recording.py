@@ -17,6 +17,7 @@ import pytest
 
 from taslel_bench.record.mcap import PARTIAL_NAME, McapStream, read_messages
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.observers import StreamedChunks
 from taslel_bench.sim.run import config_sha256, run
 from taslel_bench.sweep.aggregate import aggregate
 from taslel_bench.sweep.report import write_report
@@ -66,7 +67,6 @@ def test_stale_temporary_files_are_removed_and_named(tmp_path):
 def test_streamed_mcap_is_readable_before_it_is_finished(tmp_path):
     """Chunks are flushed as the episode runs: the partial file reads back up to its last chunk, also when
     cut inside a record (a kill during a write)."""
-    built = Built(compose_cfg(short("duration=1.5")))
     stream = McapStream(tmp_path)
     sizes: list[int] = []  # file size after each streamed chunk
 
@@ -74,7 +74,7 @@ def test_streamed_mcap_is_readable_before_it_is_finished(tmp_path):
         stream(trace, k0, k1)
         sizes.append((tmp_path / PARTIAL_NAME).stat().st_size)
 
-    built.episode.chunk_sink, built.episode.chunk_ticks = sink, 500
+    built = Built(compose_cfg(short("duration=1.5")), lambda b: [StreamedChunks(lambda: sink, 1000)], chunk_ticks=500)
     res = built.episode.run()
     assert stream.ticks_written == 2000 and res.trace.n == 2000
     stream.abandon()  # as if killed before close(): no summary section, no rename

@@ -36,13 +36,12 @@ DEFAULT_SAFETY = SafetyLimits()
 
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
               limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY,
-              swing_duration_s: float = 0.2) -> dict[str, object]:  # fmt: skip
+              swing_duration_s: float = 0.2, stream: SummaryStream | None = None) -> dict[str, object]:  # fmt: skip
     """The run's summary. ``stance_duration_s`` / ``swing_duration_s`` [s]: the scheduled stance length
     (touchdown-slip window) and swing length (how early a landing is); ``limits``: when the run is ``degraded``
-    instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from the episode's
-    :class:`SummaryStream` (fed chunk by chunk during the episode) when it was made with these settings, else
-    from the whole trace (which must then hold every tick)."""
-    stream = res.extras.get("metrics")
+    instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from ``stream`` (the episode's
+    metrics, fed chunk by chunk during the episode) when it was made with these settings, else from the
+    whole trace (which must then hold every tick)."""
     settings = (control_dt_s, stand_duration_s, stance_duration_s, limits, swing_duration_s,
                 safety.trip_touchdown_tolerance_s)  # fmt: skip
     if not isinstance(stream, SummaryStream) or stream.settings != settings:

@@ -40,6 +40,7 @@ from taslel_bench.qp.tick_replay import AFTER_STAND_TICKS, record_ticks, replay
 from taslel_bench.record.run_files import atomic_write
 from taslel_bench.record.trace import TICK_PARTS, EpisodeTrace
 from taslel_bench.sim.build import Built
+from taslel_bench.sim.observers import FilterQPs
 from taslel_bench.util.machine import CpuWatch, machine_info
 from taslel_bench.util.tables import markdown_table
 
@@ -57,7 +58,8 @@ REPLAY_TICKS = 1000  # walking ticks whose QPs the isolated solve replays in ord
 
 
 class QPSequence:
-    """Episode hook (``Episode.qp_recorder``): copies of the backend QP's values on ``n`` consecutive ticks
+    """A QP recorder (an observer through :class:`taslel_bench.sim.observers.FilterQPs`): copies of the backend
+    QP's values on ``n`` consecutive ticks
     from tick ``k0``, for replaying them in order (each solve warm-started from the previous tick's answer,
     as in the loop). Used on an extra, untimed run of the episode."""
 
@@ -80,12 +82,7 @@ def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
     lower bound the loop cannot reach."""
     e = built.episode
     seq = QPSequence(round(e.controller.stand_duration_s / e.s.control_dt_s) + 1, n)
-    e.qp_recorder, analyse = seq, e.s.analyse
-    e.s = replace(e.s, analyse=False)
-    try:
-        e.run()
-    finally:
-        e.qp_recorder, e.s = None, replace(e.s, analyse=analyse)
+    e.with_observers([FilterQPs(seq)], analyse=False).run()
     problem, backend = built.filter.backend_problem, built.backend
     backend.reset()
     times = np.empty(len(seq.values))

@@ -5,6 +5,7 @@ terrain's before the first step."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
@@ -30,6 +31,8 @@ from taslel_bench.plant.contacts import measure_contact_friction
 from taslel_bench.qp.reference_check import reference_check
 from taslel_bench.robot.description import RobotDescription
 from taslel_bench.sim.episode import Episode
+from taslel_bench.sim.observers import ReferenceChecks
+from taslel_bench.sim.stance import EstimatedStance, MeasuredStance, PlannedStance, StanceSource
 
 FRICTION_CHECK_TOL = 1e-9
 
@@ -87,9 +90,14 @@ def check_friction(episode: Episode) -> list[tuple[str, float, float]]:
 
 
 class Built:
-    """Everything one run needs, built (and validated) before simulation starts."""
+    """Everything one run needs, built (and validated) before simulation starts: the parts, then the episode
+    assembled from them. ``observers(built)``: the run's observers (:mod:`taslel_bench.sim.observers`), made
+    from the built parts and kept as ``recorders`` (None: none but the reference check of
+    ``record.reference_every``);
+    ``chunk_ticks``: the episode's trace in chunks of that many ticks (None: the whole episode)."""
 
-    def __init__(self, cfg: DictConfig) -> None:
+    def __init__(self, cfg: DictConfig, observers: Callable[[Built], Sequence[object]] | None = None,
+                 chunk_ticks: int | None = None) -> None:
         validate(cfg)
         self.cfg = cfg
         self.rng = np.random.default_rng(int(cfg.seed))
@@ -101,24 +109,22 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.robot, self.scenario, self.rng)
         self.controller = build_controller(cfg, self.robot, self.scenario.terrain)
         barriers = build_barriers(cfg, self.robot, self.scenario.terrain, self.scenario.clearance_profile())
-        self.filter = (
-            SafetyFilter(fs, self.backend, barriers, self.scenario.terrain)
-            if self.backend is not None
-            else None
-        )
-        self.episode = Episode(
-            episode_settings(cfg, self.robot),
-            self.scenario,
-            self.mj_model,
-            self.controller,
-            self.filter,
-            self.estimator,
-            self.rng,
-            stance_from_contact=fs.stance_source == "contact",
-            model=build_model(cfg, self.robot),
-            contact_estimate=contact_estimate(cfg) if self.filter is not None and fs.stance_source == "estimate" else None,
-        )
+        self.filter = SafetyFilter(fs, self.backend, barriers, self.scenario.terrain) if self.backend is not None else None
+        self.stance = stance_source(cfg, fs.stance_source if self.filter is not None else "schedule")
         # record.reference_every: the backend's answers checked against the tight reference (None: off)
         self.reference_check = reference_check(cfg) if self.filter is not None else None
-        self.episode.reference_check = self.reference_check
+        checks = [ReferenceChecks(self.reference_check)] if self.reference_check is not None else []
+        self.recorders = observers(self) if observers is not None else ()
+        self.episode = Episode(
+            episode_settings(cfg, self.robot), self.scenario, self.mj_model, self.controller, self.filter,
+            self.estimator, self.rng, model=build_model(cfg, self.robot), stance=self.stance,
+            observers=[*checks, *self.recorders], chunk_ticks=chunk_ticks,
+        )
         self.friction_checked = check_friction(self.episode)  # on the state every run of the episode starts from
+
+
+def stance_source(cfg: DictConfig, name: str) -> StanceSource:
+    """The filter's stance source ``name`` (``filter.stance_source``: schedule, contact, estimate)."""
+    if name == "estimate":
+        return EstimatedStance(contact_estimate(cfg))
+    return MeasuredStance() if name == "contact" else PlannedStance()

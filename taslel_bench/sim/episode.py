@@ -20,14 +20,13 @@ import gc
 import math
 import time
 import traceback
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import mujoco
 import numpy as np
 
-from taslel_bench.control.contact_estimate import ContactEstimate
 from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
@@ -42,6 +41,8 @@ from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.model import RobotModel
 from taslel_bench.sim.imu import TrunkImu
+from taslel_bench.sim.observers import HOOKS, hooks_of
+from taslel_bench.sim.stance import PlannedStance, StanceSource
 from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
@@ -65,7 +66,14 @@ class EpisodeSettings:
 
 
 class Episode:
-    """Wires plant, model, controller, filter and estimator for one run."""
+    """One run's closed loop, assembled from its declared parts: the plant (``mj_model`` with the ``scenario``'s
+    terrain and edits), the nominal ``controller``, the ``stance`` source and the ``safety_filter`` (None: the
+    nominal torques reach the plant), the friction ``estimator``, the controller's ``model`` and the
+    ``observers`` (:mod:`taslel_bench.sim.observers`: the recorders, each timed on its own clock).
+
+    ``trace``: record every tick in an :class:`EpisodeTrace` (the metrics, steps.parquet and MCAP read it;
+    False for a loop that only needs its observers, as data collection); ``chunk_ticks``: process and drop
+    the trace every that many ticks (None: keep the whole episode; ``result.trace`` then holds every tick)."""
 
     def __init__(
         self,
@@ -76,9 +84,13 @@ class Episode:
         safety_filter: SafetyFilter | None,
         estimator: Estimator,
         rng: np.random.Generator,
-        stance_from_contact: bool = False,
+        *,
         model: RobotModel | None = None,  # the controller's model (None: the URDF as is)
-        contact_estimate: ContactEstimate | None = None,  # filter.stance_source=estimate: the stance set
+        stance: StanceSource | None = None,  # the filter's stance set (None: the controller's plan)
+        observers: Sequence[object] = (),
+        chunk_ticks: int | None = None,
+        trace: bool = True,
+        initial_state: tuple[np.ndarray, np.ndarray] | None = None,  # MuJoCo (qpos, qvel); None: drawn from rng
     ) -> None:
         self.s = settings
         self.scenario = scenario
@@ -91,12 +103,14 @@ class Episode:
         self.filter = safety_filter
         self.estimator = estimator
         self.rng = rng
-        self.stance_from_contact = stance_from_contact
-        self.contact_estimate = contact_estimate
+        self.stance: StanceSource = stance if stance is not None else PlannedStance()
+        self.observers = tuple(observers)
+        self.chunk_ticks = int(chunk_ticks) if chunk_ticks else None
+        self.records_trace = bool(trace)
         # the terrain-aware filter reads the feet's contact forces (contact estimate) and the friction under
         # each foot (per-foot cones) every tick
         self.per_foot_terrain = safety_filter is not None and safety_filter.settings.friction_cone == "terrain"
-        self._read_feet = contact_estimate is not None or self.per_foot_terrain
+        self._read_feet = self.stance.reads_feet_before_tick or self.per_foot_terrain
         self.contacts = FootContactReader(mj_model)
         self.contact_frames = ContactFrameReader(mj_model)  # every foot contact in its own frame (metrics)
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
@@ -105,25 +119,20 @@ class Episode:
         self._imu_on = False  # sampled every tick of a run whose estimator reads it (set at the run's start)
         self._scenario_step: Callable | None = None  # scenario.on_tick, None if it does nothing (per run)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
-        # --- QP recording hook (record.qps, taslel_bench.record.qpset.QPRecorder): on_tick(k, t, problem, result)
-        self.qp_recorder = None
-        # --- reference hook (record.reference_every, taslel_bench.qp.reference_check.ReferenceCheck): keep(k,
-        # backend problem, solution) after the tick, flush() -> [(k, |u - u_ref|)] between ticks and at each
-        # chunk's end, off the clock (extras["reference_s"])
-        self.reference_check = None
-        # --- the trace in chunks (record.chunk_ticks): None keeps the whole episode in memory (one chunk,
-        # processed after the episode; result.trace holds every tick); a number processes every chunk_ticks
-        # ticks (derived quantities, residuals, then the hooks below) and keeps only the current chunk.
-        # The hooks run outside the ticks' timers (their time is reported as recording_s, not wall_time_s):
-        # chunk_sink(trace, k0, k1) (record.mcap), steps_sink(frame of the chunk) (steps.parquet) and
-        # metrics.feed(trace, k1) (a taslel_bench.metrics.summary.SummaryStream, in result.extras["metrics"])
-        self.chunk_sink: Callable[[EpisodeTrace, int, int], None] | None = None
-        self.steps_sink: Callable[[object], None] | None = None
-        self.metrics = None
-        self.chunk_ticks: int | None = None
-        self.sink_ticks: int | None = None  # chunk_sink in pieces of this many ticks (None: one per chunk)
-        self.initial_qpos, self.initial_qvel = self._draw_initial_state()
+        self.sensed: Proprioception | None = None  # the current tick's proprioception (observers read it)
+        if initial_state is None:
+            initial_state = self._draw_initial_state()
+        self.initial_qpos, self.initial_qvel = (np.array(x, float) for x in initial_state)
         self.initial_state()
+
+    def with_observers(self, observers: Sequence[object], *, analyse: bool | None = None,
+                       chunk_ticks: int | None = None) -> Episode:
+        """A new episode of the same parts and initial state with other ``observers`` (a tool's extra run,
+        e.g. one that records the filter's QPs); ``analyse``: override ``settings.analyse``."""
+        settings = self.s if analyse is None else replace(self.s, analyse=analyse)
+        return Episode(settings, self.scenario, self.m, self.controller, self.filter, self.estimator, self.rng,
+                       model=self.model, stance=self.stance, observers=observers, chunk_ticks=chunk_ticks,
+                       trace=self.records_trace, initial_state=(self.initial_qpos, self.initial_qvel))
 
     # ------------------------------------------------------------------------------------ initial state
     def _draw_initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -182,15 +191,16 @@ class Episode:
         return time.perf_counter() - t0
 
     def _warm_up_after_filter(self, results: list[FilterResult | None]) -> None:
-        """The kernels of the tick's second half (fall terms, state guard, contact rows, the trace's row copy) on the initial
-        state, the row copy into a scratch trace with and without a filter result, read-only (gait table)
-        and writable (contact flags, an off-grid gait state) stance and phase arrays."""
+        """The kernels of the tick's second half (fall terms, state guard; with a trace: contact rows, the
+        trace's row copy) on the initial state, the row copy into a scratch trace with and without a filter
+        result, read-only (gait table) and writable (contact flags, an off-grid gait state) stance and phase
+        arrays."""
         self.terminations.after_step(self._qpos, self.d, 0.0)  # a check only: nothing of the episode changes
         self.terminations.state_is_bad(self._qpos, self._qvel)
+        if not self.records_trace:
+            return
         self.contact_frames.warm_up(self.d)
-        scratch = EpisodeTrace(1, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                               nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers],
-                               barrier_rows={b.name: tuple(b.rows) for b in self._barriers if not b.per_leg})
+        scratch = self._new_trace(1)
         gs = self.controller.contact_plan(self.controller.stand_duration_s)
         writable = SimpleNamespace(phi=gs.phi, swing_phase=gs.swing_phase.copy(), in_stance=gs.in_stance.copy())
         for fres in results:
@@ -198,48 +208,76 @@ class Episode:
                 scratch.record(0, 0.0, self._plant_rows, state, stance, self._tau_prev, self._tau_prev, fres, 1.0,
                                True, 1.0, (0.0,) * 5, self._barriers, False, False)  # fmt: skip
 
+    def _new_trace(self, capacity: int) -> EpisodeTrace:
+        return EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
+                            nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers],
+                            barrier_rows={b.name: tuple(b.rows) for b in self._barriers if not b.per_leg})
+
     # -------------------------------------------------------------------------------------------- run
     def run(self, progress: Callable[[float], None] | None = None) -> EpisodeResult:
-        """Reset, run every tick until the end, a fall or an error, then analyse the trace."""
+        """Reset, run every tick until the end, a fall or an error, then analyse the trace. The observers'
+        time is reported under their clocks (``result.extras``), not in ``result.wall_time_s``."""
         trace, res = self._start()
         gc_was_enabled = gc.isenabled()
         gc.disable()  # the loop makes no reference cycles: no collector pauses inside ticks (restored below)
         wall0 = time.perf_counter()
         try:
             for k in range(self.n_ticks):
-                if self._tick(k, trace, res):
+                ended = self._tick(k, trace, res)
+                self._ticks_done = k + 1
+                if ended:
                     break
                 self._between_ticks(k, trace, progress)
-        except Exception as exc:  # noqa: BLE001 - a fault in one run is recorded, never crashes the sweep
+        except Exception as exc:  # a fault in one run is recorded, never crashes the sweep
             res.status, res.message = "error", f"{type(exc).__name__}: {exc}"
             res.extras["traceback"] = traceback.format_exc()
         finally:
             if gc_was_enabled:
                 gc.enable()
-        res.wall_time_s = time.perf_counter() - wall0 - self._recording_s - self._reference_s - self._residuals_s
-        res.n_ticks = trace.n
-        self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
-        res.extras["recording_s"] = self._recording_s
-        res.extras["reference_s"] = self._reference_s
-        res.extras["residuals_s"] = self._residuals_s
-        if self.metrics is not None:
-            res.extras["metrics"] = self.metrics
+        res.wall_time_s = time.perf_counter() - wall0 - sum(self._clock.values())
+        if trace is not None:
+            res.n_ticks = trace.n
+            self._process_chunk(trace, res, trace.n - trace.offset)  # the last (or only) chunk
+        else:
+            res.n_ticks = self._ticks_done
+        self._observe(self._hooks["finish"], res)
+        res.extras.update(self._clock)  # recording_s, reference_s, residuals_s: [s] off the loop's clock
         return res
 
-    def _start(self) -> tuple[EpisodeTrace, EpisodeResult]:
-        """A fresh trace and result, the plant at its initial state, the per-run buffers, warmed kernels."""
+    def _start(self) -> tuple[EpisodeTrace | None, EpisodeResult]:
+        """A fresh trace (if recorded) and result, the plant at its initial state, the per-run buffers,
+        the observers started, warmed kernels."""
         self._barriers = self.filter.barriers if self.filter is not None else []
-        capacity = self.n_ticks if not self.chunk_ticks else min(self.n_ticks, int(self.chunk_ticks) + 1)
-        trace = EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
-                             nsensordata=self.m.nsensordata, barrier_names=[b.name for b in self._barriers],
-                             barrier_rows={b.name: tuple(b.rows) for b in self._barriers if not b.per_leg})
+        trace = None
+        if self.records_trace:
+            trace = self._new_trace(self.n_ticks if not self.chunk_ticks else min(self.n_ticks, self.chunk_ticks + 1))
         res = EpisodeResult(trace=trace)
         self.initial_state()
         self.estimator.reset()
-        if self.contact_estimate is not None:
-            self.contact_estimate.reset()
-        trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain, self.contact_frames)
-        # views of the plant's arrays, made once (MjData makes a new numpy wrapper on every attribute read)
+        self.stance.reset()
+        if trace is not None:
+            trace.bind(self.bridge, self.contacts, self.scenario.clearance_profile(), self.terrain,
+                       self.contact_frames)  # fmt: skip
+        self._views()
+        self.imu.reset(self._v_trunk_w)
+        self._t0_plant = self.d.time
+        self._ticks_done = 0
+        self._clock = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)  # [s] off the loop's clock
+        self._hooks = {hook: hooks_of(self.observers, hook) for hook in HOOKS}
+        for _, clock in (pair for pairs in self._hooks.values() for pair in pairs):
+            self._clock.setdefault(clock, 0.0)
+        if trace is None and self._hooks["on_chunk"]:
+            raise ValueError("Episode(trace=False): an observer reads the trace's chunks (on_chunk): "
+                             f"{[m.__qualname__ for m, _ in self._hooks['on_chunk']]}")
+        self._residuals_error = ""  # the first residual computation's error ("" none)
+        self._state_before = (self.initial_qpos.copy(), self.initial_qvel.copy())  # before the chunk's first row
+        self._observe(self._hooks["start"], self)
+        res.extras["warmup_s"] = self._warm_up()
+        return trace, res
+
+    def _views(self) -> None:
+        """Views of the plant's arrays and the tick's buffers, made once per run (MjData makes a new numpy
+        wrapper on every attribute read)."""
         self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
         self._q = np.zeros(quad.NQ)  # Pinocchio configuration, read from the plant every tick
         self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
@@ -253,23 +291,20 @@ class Episode:
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._v_trunk_w = self._qvel[self.bridge.free_dadr : self.bridge.free_dadr + 3]  # [m/s] view, world axes
         self._imu_on = bool(getattr(self.estimator, "reads_imu", False))
-        self.imu.reset(self._v_trunk_w)
-        self._t0_plant = self.d.time
-        self._recording_s = 0.0  # [s] spent handing chunks to the sink, outside the ticks' timers
-        self._reference_s = 0.0  # [s] spent in the reference check, outside the ticks' timers
-        self._residuals_error = ""  # the first residual computation's error ("" none)
-        self._residuals_s = 0.0  # [s] spent computing the model residuals (chunk by chunk)
-        self._state_before = (self.initial_qpos.copy(), self.initial_qvel.copy())  # before the chunk's first row
-        if self.reference_check is not None:
-            self.reference_check.reset()
-        res.extras["warmup_s"] = self._warm_up()
-        return trace, res
+        self._read_feet_after_step = self.stance.reads_feet_after_step
+
+    def _observe(self, hooks: list[tuple[Callable, str]], *args) -> None:
+        """Call each observer's hook, its time added to the observer's clock."""
+        for method, clock in hooks:
+            t0 = time.perf_counter()
+            method(*args)
+            self._clock[clock] += time.perf_counter() - t0
 
     def _imu_sample(self) -> ImuSample | None:
         """This tick's trunk IMU sample (None when the estimator does not read one)."""
         return self.imu.read(self._q, self._v, self._v_trunk_w) if self._imu_on else None
 
-    def _tick(self, k: int, trace: EpisodeTrace, res: EpisodeResult) -> bool:
+    def _tick(self, k: int, trace: EpisodeTrace | None, res: EpisodeResult) -> bool:
         """Control tick ``k``: sense and estimate, control, filter, step the plant, record. True when the
         episode ends here (a fall or a non-finite state)."""
         tick0 = time.perf_counter()
@@ -282,32 +317,28 @@ class Episode:
             self.contacts.read(self.d)
             if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
-        est = self.estimator.step(Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
-                                                 mu_feet, self._imu_sample()))  # fmt: skip
+        self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
+                                              mu_feet, self._imu_sample())  # fmt: skip
+        est = self.estimator.step(sensed)
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.contact_plan(t)
-        if self.contact_estimate is not None:
-            in_stance = self.contact_estimate.update(gs.in_stance, gs.swing_phase, self.contacts.forces_in_world)
-        else:
-            in_stance = self.contacts.in_contact.copy() if self.stance_from_contact else gs.in_stance
+        in_stance = self.stance.stance(gs, self.contacts)
         tick1 = time.perf_counter()
-        u, fres, tick2, tick3 = self._filter(k, t, u_nom, gs, in_stance, est, tick1)
+        u, fres, tick2, tick3 = self._filter(t, u_nom, gs, in_stance, est, tick1)
         fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
-        self._tau_prev[:] = u
         tick4 = time.perf_counter()
-        trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est.mu, est.ready, true_mu,
-                     (tick0, tick1, tick2, tick3, tick4), self._barriers, obstacle_touch, shin_touch)  # fmt: skip
-        frames0 = time.perf_counter()
-        row = k - trace.offset  # the tick's row in the trace's current chunk
-        self.contact_frames.record(self.d, trace.contact_log, row)  # the raw contacts of the tick's last physics step
-        self._recording_s += time.perf_counter() - frames0  # recording for the metrics: not in wall_time_s
-        if self.reference_check is not None and fres is not None:  # copied now, solved between ticks
-            ref0 = time.perf_counter()
-            self.reference_check.keep(k, self.filter.backend_problem, fres.solve)
-            self._reference_s += time.perf_counter() - ref0
+        if trace is not None:
+            trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est.mu, est.ready, true_mu,
+                         (tick0, tick1, tick2, tick3, tick4), self._barriers, obstacle_touch, shin_touch)  # fmt: skip
+            frames0 = time.perf_counter()
+            self.contact_frames.record(self.d, trace.contact_log, k - trace.offset)  # the tick's last physics step
+            self._clock["recording_s"] += time.perf_counter() - frames0  # recording for the metrics
+        if self._hooks["after_tick"]:
+            self._observe(self._hooks["after_tick"], k, t, fres)
+        self._tau_prev[:] = u
         return self._ended(t, fall, unstable, res)
 
-    def _filter(self, k: int, t: float, u_nom: np.ndarray, gs, in_stance: np.ndarray, est: FrictionEstimate,
+    def _filter(self, t: float, u_nom: np.ndarray, gs, in_stance: np.ndarray, est: FrictionEstimate,
                 tick1: float) -> tuple[np.ndarray, FilterResult | None, float, float]:
         """(u, the filter's result or None, the times the model update and the filter ended) for this tick:
         u_nom while no filter is in the loop (none, or before ``filter_start_s``: both times are ``tick1``)."""
@@ -316,13 +347,10 @@ class Episode:
             return u_nom, None, tick1, tick1
         self.model.update(self._q, self._v)
         tick2 = time.perf_counter()
-        phase = self.contact_estimate.swing_phase(gs.swing_phase) if self.contact_estimate is not None else gs.swing_phase
-        inputs = TickInputs(self.model, self._v, in_stance, est.mu, phase, gs.swing_phase_rate,
+        inputs = TickInputs(self.model, self._v, in_stance, est.mu, self.stance.swing_phase(gs), gs.swing_phase_rate,
                             est.mu_per_foot if self.per_foot_terrain else None)  # fmt: skip
         fres = self.filter.filter(inputs, u_nom)
         self._mu_filter_prev = est.mu
-        if self.qp_recorder is not None:  # record.qps: copy this tick's QP + solution used
-            self.qp_recorder.on_tick(k, t, self.filter.backend_problem, fres)
         return fres.u, fres, tick2, time.perf_counter()
 
     def _step_plant(self, u: np.ndarray, t: float) -> tuple[Fall | None, bool, bool, bool]:
@@ -347,7 +375,7 @@ class Episode:
             shin_touch |= contacts.shin_contact
             if fall is not None:
                 return fall, obstacle_touch, shin_touch, False
-        if self.stance_from_contact:  # next tick's stance set
+        if self._read_feet_after_step:  # the stance source's next stance set
             contacts.read(d)
         return None, obstacle_touch, shin_touch, False
 
@@ -362,58 +390,35 @@ class Episode:
             return True
         return False
 
-    def _between_ticks(self, k: int, trace: EpisodeTrace, progress: Callable[[float], None] | None) -> None:
-        """Progress and the chunk's processing (record.chunk_ticks), outside the tick's timers. A chunk is
-        processed once the tick after it is recorded (the realised barrier condition of its last tick needs
-        the next one), then dropped from the trace."""
+    def _between_ticks(self, k: int, trace: EpisodeTrace | None, progress: Callable[[float], None] | None) -> None:
+        """Progress, the observers' between-tick work and the chunk's processing (``chunk_ticks``), outside
+        the tick's timers. A chunk is processed once the tick after it is recorded (the realised barrier
+        condition of its last tick needs the next one), then dropped from the trace."""
         if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
             progress(k * self.s.control_dt_s)
-        if self.reference_check is not None and self.reference_check.due:
-            self._check_references(trace)
-        if self.chunk_ticks and trace.n - trace.offset == int(self.chunk_ticks) + 1:
-            self._process_chunk(trace, None, int(self.chunk_ticks))
-            trace.roll(int(self.chunk_ticks))
+        if self._hooks["between_ticks"]:
+            self._observe(self._hooks["between_ticks"], k, trace)
+        if self.chunk_ticks and trace is not None and trace.n - trace.offset == self.chunk_ticks + 1:
+            self._process_chunk(trace, None, self.chunk_ticks)
+            trace.roll(self.chunk_ticks)
             rec0 = time.perf_counter()
             gc.collect()  # the collector is off in the loop: free the chunk's cyclic garbage (tables, frames)
-            self._recording_s += time.perf_counter() - rec0
+            self._clock["recording_s"] += time.perf_counter() - rec0
 
     def _process_chunk(self, trace: EpisodeTrace, res: EpisodeResult | None, rows: int) -> None:
-        """The first ``rows`` rows of the trace: derived quantities, model residuals (``analyse``), then the
-        MCAP sink, the steps sink and the metrics (their time is recording_s)."""
-        rec0 = time.perf_counter()
-        self._recording_s -= self._check_references(trace)  # the chunk's qp_u_error_nm (reported as reference_s)
+        """The first ``rows`` rows of the trace: derived quantities and model residuals (``analyse``), then the
+        observers' ``on_chunk`` in order."""
         if self.s.analyse:
+            rec0 = time.perf_counter()
             trace.finalize(rows)
+            self._clock["recording_s"] += time.perf_counter() - rec0
             self._residuals(trace, rows)
-        k0, k1 = trace.offset, trace.offset + rows
-        if self.chunk_sink is not None and rows:
-            step, a = int(self.sink_ticks or rows), k0
-            while a < k1:  # pieces ending at multiples of sink_ticks (from tick 0 on)
-                b = min(k1, (a // step + 1) * step)
-                self.chunk_sink(trace, a, b)
-                a = b
-        if self.steps_sink is not None and (rows or k0 == 0):
-            self.steps_sink(trace.frame(k0, k1))
-        if self.metrics is not None:
-            self.metrics.feed(trace, k1)
+        k0 = trace.offset
+        self._observe(self._hooks["on_chunk"], trace, k0, k0 + rows)
         if rows:
             self._state_before = (trace.qpos_mj[rows - 1].copy(), trace.qvel_mj[rows - 1].copy())
         if self._residuals_error and res is not None:
             res.extras["residuals_error"] = self._residuals_error
-        self._recording_s += time.perf_counter() - rec0
-
-    def _check_references(self, trace: EpisodeTrace) -> float:
-        """Solve the reference checks kept so far (record.reference_every) and write their torque errors into
-        the trace (their ticks are in its current chunk). Returns the time it took [s], added to
-        reference_s (off the ticks' timers, not in wall_time_s)."""
-        if self.reference_check is None:
-            return 0.0
-        t0 = time.perf_counter()
-        for k, error in self.reference_check.flush():
-            trace.qp_u_error_nm[k - trace.offset] = error
-        dt = time.perf_counter() - t0
-        self._reference_s += dt
-        return dt
 
     def _residuals(self, trace: EpisodeTrace, rows: int) -> None:
         """The controller model's residuals against the recorded plant motion of the chunk's rows (after
@@ -425,11 +430,9 @@ class Episode:
         setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s, alpha2)
         try:
             residuals.compute_rows(trace, setup, rows, *self._state_before)
-        except Exception:  # noqa: BLE001 - a metric must not lose the run: note it
+        except Exception:  # a metric must not lose the run: note it
             self._residuals_error = traceback.format_exc().strip().splitlines()[-1]
-        dt = time.perf_counter() - t0
-        self._residuals_s += dt
-        self._recording_s -= dt  # reported as residuals_s
+        self._clock["residuals_s"] += time.perf_counter() - t0
 
 
 _NOOP_OPS = ("RESUME", "NOP", "LOAD_CONST", "RETURN_VALUE", "RETURN_CONST")

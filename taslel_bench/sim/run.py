@@ -29,10 +29,10 @@ from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
-from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.sim.build import Built
 from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run_identity, target_modules
 from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
+from taslel_bench.sim.run_recorders import SWEEP_LEVEL_KEYS, RunRecorders, chunk_ticks, run_config_yaml, run_recorders
 from taslel_bench.sim.solve_clock import time_solves_by_cpu
 from taslel_bench.util.machine import CpuWatch
 from taslel_bench.util.provenance import code_version
@@ -72,16 +72,13 @@ def _progress_printer(duration: float, enabled: bool):
     return show
 
 
-DEFAULT_CHUNK_TICKS = 5000  # record.chunk_ticks when the config has none
-SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
-
-
-def run_config_yaml(cfg: DictConfig) -> str:
-    """The run's resolved config as written to its config.yaml (without :data:`SWEEP_LEVEL_KEYS`)."""
-    plain = OmegaConf.to_container(cfg, resolve=True)
-    for key in SWEEP_LEVEL_KEYS:
-        plain.pop(key, None)
-    return OmegaConf.to_yaml(OmegaConf.create(plain))
+def summary_choices(cfg: DictConfig, choices: dict[str, str] | None) -> dict[str, str]:
+    """The option of each config group as the summary and the QP test set name it (``solver=qpsolvers``:
+    ``qpsolvers:<the solver it runs>``)."""
+    out = dict(choices or {})
+    if out.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
+        out["solver"] = f"qpsolvers:{cfg.solver.name}"
+    return out
 
 
 def hashed_config(cfg: DictConfig) -> dict:
@@ -178,23 +175,6 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
     return None, notes
 
 
-class _GuardedSink:
-    """The MCAP stream as the episode's chunk sink: a recording failure is noted and stops the streaming,
-    it never ends the episode."""
-
-    def __init__(self, stream) -> None:
-        self.stream, self.error = stream, ""
-
-    def __call__(self, trace, k0: int, k1: int) -> None:
-        if self.error:
-            return
-        try:
-            self.stream(trace, k0, k1)
-        except Exception:  # noqa: BLE001 - recording must not lose the run
-            self.error = traceback.format_exc().strip().splitlines()[-1]
-            self.stream.abandon()
-
-
 def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         overrides: list[str] | None = None) -> dict[str, object]:  # fmt: skip
     """Run one episode and write ``out_dir``. Returns the summary. Config errors raise before simulating;
@@ -202,7 +182,10 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
     overrides of this run (Hydra's task overrides), kept in the summary so reports can group by them."""
     validate(cfg)  # every bad value is refused (naming it) before the folder is touched
     out_dir = Path(out_dir)
-    built = Built(cfg)  # raises ConfigError / ValueError before anything is simulated or written
+    labels = summary_choices(cfg, choices)
+    # raises ConfigError / ValueError before anything is simulated or written (the recorders open their
+    # files when the episode starts)
+    built = Built(cfg, lambda b: run_recorders(cfg, b, out_dir, labels), chunk_ticks(cfg))
     identity = identity_of(cfg, estimator_files(built), choices)
     config_hash = identity.config_sha256
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -213,7 +196,7 @@ def run(cfg: DictConfig, out_dir: Path, choices: dict[str, str] | None = None,
         if lock.stale_taken_over:
             notes["stale_lock_taken_over"] = lock.stale_taken_over
         notes["identity"] = identity.record()
-        return _run_into(cfg, out_dir, built, dict(choices or {}), overrides, config_hash, notes, guard)
+        return _run_into(cfg, out_dir, built, labels, overrides, config_hash, notes, guard)
 
 
 def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, str], overrides: list[str] | None,
@@ -222,12 +205,8 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     episode stops it at its next progress point and the ticks simulated so far are written as an
     ``interrupted`` run (:mod:`taslel_bench.sim.interrupt`); a signal while the files are written is held
     until they are complete, then ends the run (:class:`RunInterrupted`)."""
-    if choices.get("solver") == "qpsolvers":  # the per-call route: name the solver it runs
-        choices["solver"] = f"qpsolvers:{cfg.solver.name}"
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
-    qp_recorder = _qp_recorder(cfg, built, choices)  # record.qps (None when off)
-    steps = _stream_chunks(cfg, built, out_dir)  # record.chunk_ticks: steps.parquet and metrics per chunk
-    sink = _mcap_sink(cfg, built, out_dir)  # record.mcap: streamed during the episode
+    recorders: RunRecorders = built.recorders  # steps.parquet, metrics, record.mcap, record.qps
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
     time_solves_by_cpu(built)  # each solve also by the thread's CPU time (qp_solve_cpu_us)
     guard.defer = True
@@ -238,15 +217,15 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
             print(file=sys.stderr)
         stopped = _stopped_by_signal(res, guard)
         summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
-        summary.update(_episode_summary(cfg, built, res))
+        summary.update(_episode_summary(cfg, built, res, recorders.metrics))
         summary.update(watch.result.record())  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
         if stopped:
             summary.update(_interrupted_fields(cfg, res, guard))
-        events = _events(cfg, res, out_dir)
+        events = _events(cfg, res, out_dir, recorders.metrics)
         video = None if stopped else _video(cfg, built, out_dir)  # record.video: once steps.parquet is written
-        _write_results(out_dir, res, summary, events, sink, qp_recorder, steps, video)
+        _write_results(out_dir, res, summary, events, recorders, video)
     except BaseException:
-        steps.abandon()  # no half-written table under any name
+        recorders.steps.abandon()  # no half-written table under any name
         raise
     finally:
         guard.defer = False
@@ -271,26 +250,6 @@ def _interrupted_fields(cfg: DictConfig, res: EpisodeResult, guard: InterruptGua
     reached_s = float(res.n_ticks) / float(cfg.control_rate_hz)
     return {"status": INTERRUPTED, "interrupted_by": guard.signal_name, "interrupted_at_s": reached_s,
             "message": f"interrupted by {guard.signal_name} at t = {reached_s:.2f} s of {total_s:.2f} s simulated"}
-
-
-def _stance_and_swing_s(built: Built) -> tuple[float, float]:
-    """[s] the stance and swing durations the controller plans."""
-    return built.controller.stance_swing_s
-
-
-def _stream_chunks(cfg: DictConfig, built: Built, out_dir: Path) -> StepsWriter:
-    """The episode in chunks of ``record.chunk_ticks`` ticks (null: the whole episode in memory): each
-    chunk's rows go to steps.parquet (a temporary file until the end) and to the summary's metrics."""
-    chunk = cfg.record.get("chunk_ticks", DEFAULT_CHUNK_TICKS)
-    episode = built.episode
-    episode.chunk_ticks = int(chunk) if chunk is not None else None
-    dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = _stance_and_swing_s(built)
-    episode.metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), swing_s,
-                                    safety_limits(cfg).trip_touchdown_tolerance_s)  # fmt: skip
-    writer = StepsWriter(out_dir / run_files.STEPS)
-    episode.steps_sink = writer.append
-    return writer
 
 
 def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overrides: list[str] | None,
@@ -323,16 +282,16 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
     return out
 
 
-def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[str, object]:
+def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics: SummaryStream) -> dict[str, object]:
     """The episode's metrics (:func:`taslel_bench.metrics.summary.summarize`), the estimator's own
     diagnostics (optional ``diagnostics()``) and the backend's settings."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = _stance_and_swing_s(built)
+    stance_s, swing_s = built.controller.stance_swing_s
     out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg),
-                    swing_s)  # fmt: skip
+                    swing_s, metrics)  # fmt: skip
     out["recording_s"] = float(res.extras.get("recording_s", 0.0))
     out["reference_s"] = float(res.extras.get("reference_s", 0.0))
-    out.update(_reference_summary(built, res, dt))  # record.reference_every: u error against the reference
+    out.update(_reference_summary(built, metrics, dt))  # record.reference_every: u error against the reference
     diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
         out.update({f"estimator_{k}": v for k, v in diagnostics().items()})
@@ -341,17 +300,16 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult) -> dict[
     if built.filter is not None:  # filter.relaxation=priority: ticks solved only after dropping barrier families
         out["filter_relaxed_ticks"] = int(built.filter.relaxed_ticks)
         out.update({f"filter_relaxed_{k}_ticks": int(v) for k, v in built.filter.relaxed_by_family.items()})
-    estimate = built.episode.contact_estimate
+    estimate = getattr(built.stance, "estimate", None)
     if estimate is not None:  # filter.stance_source=estimate: early touchdowns taken as stance
         out["contact_early_touchdowns"] = int(estimate.early_touchdowns)
         out["contact_late_touchdown_foot_ticks"] = int(estimate.late_touchdown_ticks)
     return out
 
 
-def _reference_summary(built: Built, res: EpisodeResult, dt: float) -> dict[str, float]:
+def _reference_summary(built: Built, stream: SummaryStream, dt: float) -> dict[str, float]:
     """:func:`taslel_bench.qp.reference_check.reference_metrics` from the episode's metrics stream (the
     deadline rates as means, the u errors of the checked ticks as their series)."""
-    stream = res.extras["metrics"]
     errors = stream.u_errors()
     out = reference_metrics(built.reference_check, errors, np.zeros(0), dt)
     rates = stream.reference.result()
@@ -360,7 +318,7 @@ def _reference_summary(built: Built, res: EpisodeResult, dt: float) -> dict[str,
     return out
 
 
-def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
+def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path, metrics: SummaryStream) -> list[dict]:
     """QP failures, residual alarms, the fall and the error of the run (with simulated times); an error's
     traceback goes to ``traceback.txt``."""
     dt = 1.0 / float(cfg.control_rate_hz)
@@ -369,7 +327,7 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
         events.append({"t_s": res.trace.n * dt, "kind": "qp_failure",
                        "message": f"{res.trace.qp_failures_not_listed} more QP failures not listed "
                                   "(every one is counted in summary.json's qp_failed)"})  # fmt: skip
-    events += res.extras["metrics"].alarm_events()
+    events += metrics.alarm_events()
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
     if res.status == "error":
@@ -379,20 +337,14 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path) -> list[dict]:
     return events
 
 
-def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict],
-                   sink: _GuardedSink | None, qp_recorder, steps: StepsWriter, video=None) -> None:
+def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: list[dict], recorders: RunRecorders,
+                   video=None) -> None:
     """episode.mcap (finished), qps.npz, steps.parquet (streamed: renamed now), events.json, video.mp4 and,
     last (it marks the run complete), summary.json; a recording failure is noted in the summary, never
     loses the run."""
-    if sink is not None:
-        _close_mcap(sink, res, events, summary)
-    if qp_recorder is not None:  # record.qps: the run's QP test set (taslel_bench.record.qpset)
-        try:
-            qp_recorder.save(out_dir / qpset.FILENAME, {"source": "taslel_bench.sim.run"})
-            summary["qps_recorded"] = len(qp_recorder)
-        except Exception:  # noqa: BLE001 - recording must not lose the run
-            summary["qps_error"] = traceback.format_exc().strip().splitlines()[-1]
-    steps.finish()
+    recorders.close_mcap(res, events, summary)
+    recorders.save_qps(out_dir, summary)  # record.qps: the run's QP test set (taslel_bench.record.qpset)
+    recorders.steps.finish()
     run_files.write_json(out_dir / run_files.EVENTS, events)
     if video is not None:
         video(summary)
@@ -408,51 +360,6 @@ def _video(cfg: DictConfig, built: Built, out_dir: Path):
     from taslel_bench.record.video import render_at_end_of_run
 
     return lambda summary: render_at_end_of_run(out_dir, built.mj_model, summary, cfg.record)
-
-
-def _mcap_sink(cfg: DictConfig, built: Built, out_dir: Path) -> _GuardedSink | None:
-    """record.mcap: an :class:`taslel_bench.record.mcap.McapStream` fed by the episode every second of
-    simulated time (written while the episode runs; a killed run leaves a readable partial file)."""
-    if not cfg.record.mcap:
-        return None
-    from taslel_bench.record import mcap
-
-    # the per-leg families (the MCAP draws them at the feet)
-    names = [b.name for b in built.filter.barriers if b.per_leg] if built.filter is not None else []
-    metadata = {"config": {"config.yaml": run_config_yaml(cfg)}, "versions": mcap.versions()}
-    every = mcap.stride(cfg.control_rate_hz, cfg.record.mcap_rate_hz)  # record.mcap_rate_hz (null: every tick)
-    stream = mcap.McapStream(out_dir, names, every=every, plant=mcap.Plant3D(built.mj_model, built.scenario.terrain),
-                             metadata=metadata)
-    sink = _GuardedSink(stream)
-    built.episode.chunk_sink = sink  # fed after every record.chunk_ticks ticks, one MCAP chunk per second
-    built.episode.sink_ticks = max(1, round(float(cfg.control_rate_hz)))
-    return sink
-
-
-def _close_mcap(sink: _GuardedSink, res: EpisodeResult, events: list[dict], summary: dict) -> None:
-    """Finish episode.mcap (the last ticks, events, summary); a recording failure is noted in the summary."""
-    if not sink.error:
-        try:
-            sink.stream.close(res.trace, events, summary)
-        except Exception:  # noqa: BLE001 - recording must not lose the run: note it and keep the other files
-            sink.error = traceback.format_exc().strip().splitlines()[-1]
-            sink.stream.abandon()
-    if sink.error:
-        summary["mcap_error"] = sink.error
-
-
-def _qp_recorder(cfg: DictConfig, built: Built, choices: dict[str, str]):
-    """A :class:`taslel_bench.record.qpset.QPRecorder` hooked into the episode when ``record.qps`` is on."""
-    if not cfg.record.get("qps", False) or built.filter is None:
-        return None
-    info = {
-        "scenario": choices.get("scenario", built.scenario.name), "solver": choices.get("solver", ""),
-        "estimator": choices.get("estimator", getattr(built.estimator, "name", "")), "seed": int(cfg.seed),
-        "control_rate_hz": float(cfg.control_rate_hz), "backend": str(built.backend.describe()),
-    }  # fmt: skip
-    rec = qpset.QPRecorder(info, every=int(cfg.record.get("qps_every", 1)))
-    built.episode.qp_recorder = rec
-    return rec
 
 
 def record_job_error(out_dir: Path, choices: dict[str, str], cfg: DictConfig, exc: BaseException,
