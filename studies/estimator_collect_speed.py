@@ -1,18 +1,19 @@
-"""Collection throughput of nominal episodes, the core loop against the fast loop, on the same draws
-(``python -m studies.estimator_collect_speed [--episodes N] [--workers W]``).
+"""Collection throughput of nominal episodes (``python -m studies.estimator_collect_speed [--episodes N]
+[--workers W] [--windows FILE] [--compare FILE]``).
 
-Prints env-steps/s (physics steps per wall second, all workers) of ``estimators.collect`` with
-``--loop core`` and ``--loop fast`` on the same N nominal training episodes (seed 0, no filter, 5 s each),
-whether their windows are identical, and the machine's load before and after; a printed benchmark, not a
-test (the number depends on the machine and on what else runs on it).
+Prints env-steps/s (physics steps per wall second, all workers, and per worker) of ``estimators.collect`` on
+N nominal training episodes (seed 0, no filter, 5 s each) and the machine's load before and after; a printed
+benchmark, not a test (the number depends on the machine and on what else runs on it). ``--windows``
+keeps the collected windows; ``--compare`` checks them against windows kept by another checkout (run the
+same command there: the printed line says whether every window is identical).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,22 +26,27 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--episodes", type=int, default=200)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--patch-fraction", type=float, default=0.0)
+    ap.add_argument("--windows", type=Path, help="keep the collected train.npz here")
+    ap.add_argument("--compare", type=Path, help="a train.npz of the same command from another checkout")
     a = ap.parse_args(argv)
     print(f"cpus {os.cpu_count()}, load before {os.getloadavg()[0]:.2f}")
-    rates, windows = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for loop in ("core", "fast"):
-            cfg = replace(EpisodeConfig(), loop=loop)
-            man = collect(Path(tmp) / loop, {"train": a.episodes}, seed=0, workers=a.workers, cfg=cfg,
-                          patch_fraction=a.patch_fraction)
-            rates[loop] = man["env_steps_per_s"]
-            windows[loop] = np.load(Path(tmp) / loop / "train.npz")["X"]
-            print(f"{loop}: {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s -> "
-                  f"{rates[loop]:,.0f} env-steps/s with {a.workers} workers "
-                  f"({man['env_steps_per_s_per_worker']['nominal']:,.0f} per worker)", flush=True)
-    same = np.array_equal(windows["core"], windows["fast"])
-    print(f"fast / core = {rates['fast'] / rates['core']:.2f}x; windows identical: {same}; "
-          f"load after {os.getloadavg()[0]:.2f}")
+        man = collect(Path(tmp), {"train": a.episodes}, seed=0, workers=a.workers, cfg=EpisodeConfig(),
+                      patch_fraction=a.patch_fraction)
+        print(f"{man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s -> {man['env_steps_per_s']:,.0f} "
+              f"env-steps/s with {a.workers} workers ({man['env_steps_per_s_per_worker']['nominal']:,.0f} per "
+              f"worker); load after {os.getloadavg()[0]:.2f}", flush=True)
+        if a.windows is not None:
+            shutil.copy(Path(tmp) / "train.npz", a.windows)
+        if a.compare is not None:
+            mine, other = np.load(Path(tmp) / "train.npz"), np.load(a.compare)
+            same = set(mine.files) == set(other.files) and all(_same(mine[k], other[k]) for k in other.files)
+            print(f"windows and labels identical to {a.compare}: {same}")
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal shapes and values, NaN equal to NaN (the unfiltered episodes' filter_mu, no patch)."""
+    return np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
 
 
 if __name__ == "__main__":
