@@ -81,7 +81,7 @@ class EpisodeResult:
     filter_failures: int = 0  # ticks on which the filter's QP failed (fallback torque used)
     filter_mu: float = float("nan")  # [-] friction the filter assumed (nan: no filter)
     wall_s: float = 0.0  # [s] wall time of the episode
-    # per window, at its last sample: friction under the trunk (the loop's true_friction) [-], under each foot
+    # per window, at its last sample: friction under the trunk (the loop's ground truth) [-], under each foot
     # (LEGS order) [-], and whether each foot touched the floor (its contact sensor found a contact)
     y: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     y_foot: np.ndarray = field(default_factory=lambda: np.zeros((0, quad.N_LEGS), np.float32))
@@ -104,14 +104,14 @@ class WindowSampler:
     """An observer of the core episode loop (:mod:`taslel_bench.sim.observers`) that records every
     ``every_ticks`` control ticks the 36 features the loop hands estimators (q and qdot at the tick's start,
     the torque applied on the previous tick: the tick's ``Proprioception``), the friction under the trunk
-    (its ``true_friction``) and the plant's sensors after the tick's physics (the feet's contact sensors);
+    (the tick's ``GroundTruth``: the label) and the plant's sensors after the tick's physics (the feet's contact sensors);
     it counts the ticks on which the filter's QP failed (fallback torque used)."""
 
     def __init__(self, every_ticks: int) -> None:
         self.every = int(every_ticks)
         self._episode = None
         self.samples: list[np.ndarray] = []
-        self.trunk_friction: list[float] = []  # [-] the loop's true_friction at each sample
+        self.trunk_friction: list[float] = []  # [-] the friction under the trunk at each sample
         self.sensors: list[np.ndarray] = []  # MuJoCo sensordata after each sample's tick
         self.ticks: list[int] = []  # control tick of each sample
         self.filter_fallbacks = 0
@@ -127,7 +127,7 @@ class WindowSampler:
         if k % self.every == 0:
             sensed: Proprioception = self._episode.sensed
             self.samples.append(sample_vector(sensed.q_joints, sensed.qd_joints, sensed.tau_joints))
-            self.trunk_friction.append(sensed.true_friction)
+            self.trunk_friction.append(self._episode.truth.friction_under_trunk)
             self.sensors.append(self._sensordata.copy())
             self.ticks.append(k)
 

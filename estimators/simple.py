@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
-from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, Proprioception, number
+from taslel_bench.interfaces import MAX_FRICTION, FrictionEstimate, GroundTruth, Proprioception, number
 
 
 class OracleEstimator:
-    """Returns the true ground friction under the robot every tick (upper bound of any estimator)."""
+    """Returns the true ground friction under the robot every tick (upper bound of any estimator): the one
+    estimator that reads the simulator's ground truth."""
 
     name = "oracle"
+    reads_ground_truth = True
 
     def reset(self) -> None:
         """Nothing to forget."""
 
-    def step(self, obs: Proprioception) -> FrictionEstimate:
-        """``mu`` = ``obs.true_friction`` [-], ``sigma`` = 0, always ready; the friction under each foot when
-        the observation carries it (``true_friction_per_foot``)."""
-        return FrictionEstimate(mu=float(obs.true_friction), sigma=0.0, ready=True,
-                                mu_per_foot=obs.true_friction_per_foot)
+    def step(self, obs: Proprioception, truth: GroundTruth) -> FrictionEstimate:
+        """``mu`` = the friction under the trunk [-], ``sigma`` = 0, always ready; the friction under each foot
+        when the truth carries it."""
+        return FrictionEstimate(mu=float(truth.friction_under_trunk), sigma=0.0, ready=True,
+                                mu_per_foot=truth.friction_per_foot)
 
 
 SAFE_FLOOR_MU = 0.2  # [-] lowest floor friction the deployment must handle (the filtered trot falls below it)

@@ -534,7 +534,7 @@ def latency(a: argparse.Namespace) -> None:
 
     rows = []
     rng = np.random.default_rng(0)
-    obs = [Proprioception(0.0, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5, 0.5)
+    obs = [Proprioception(0.0, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5)
            for _ in range(64)]
     for rep in range(a.repeats):
         for name in a.estimators:

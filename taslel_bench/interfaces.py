@@ -11,7 +11,7 @@ Joint vectors are in the core order (:data:`taslel_bench.robot.quadruped.JOINT_N
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Protocol, runtime_checkable
 
 import mujoco
@@ -168,20 +168,29 @@ class ImuSample:
 
 @dataclass
 class Proprioception:
-    """One control tick of what a real robot measures, plus the truth for the oracle and the metrics."""
+    """One control tick of what a real robot measures (and what its controller knows it asked for). What
+    only the simulator knows is :class:`GroundTruth`, a separate input."""
 
     t_s: float  # [s] episode time
     q_joints: np.ndarray  # [rad] (12,)
     qd_joints: np.ndarray  # [rad/s] (12,)
-    tau_joints: np.ndarray  # [N·m] (12,) torques applied this tick
-    true_friction: float  # [-] ground friction under the robot (oracle / metrics only)
+    tau_joints: np.ndarray  # [N·m] (12,) torques applied on the previous tick
+    _: KW_ONLY
     # [-] friction the safety filter assumed on the previous tick, the one that produced tau_joints (the
     # controller knows what it asked for); NaN when no filter was in the loop on that tick
     filter_mu: float = math.nan
-    # [-] (4,) ground friction under each foot, LEGS order (oracle / metrics only; None unless the filter uses
-    # per-foot friction cones)
-    true_friction_per_foot: np.ndarray | None = None
     imu: ImuSample | None = None  # the trunk IMU (None: the caller has none)
+
+
+@dataclass
+class GroundTruth:
+    """What only the simulator knows at one control tick: the oracle estimator (``reads_ground_truth``), the
+    data collection's labels and the metrics read it; a real robot has none of it."""
+
+    friction_under_trunk: float  # [-] ground friction under the trunk
+    # [-] (4,) ground friction under each foot, LEGS order (None unless the filter uses per-foot cones on a
+    # terrain of more than one friction)
+    friction_per_foot: np.ndarray | None = None
 
 
 @dataclass
@@ -198,7 +207,9 @@ class Estimator(Protocol):
     """Terrain (friction) estimator in the loop. Optional: ``diagnostics() -> dict[str, float]`` (counters of
     the episode, e.g. drops detected, inference deadlines missed), added to ``summary.json`` as
     ``estimator_<key>``; ``reads_imu = True`` (class attribute): the loop fills ``Proprioception.imu`` every
-    tick (else it is None: the sample costs time in every tick)."""
+    tick (else it is None: the sample costs time in every tick); ``reads_ground_truth = True`` (class
+    attribute, an oracle): ``step`` gets the tick's :class:`GroundTruth` as a second argument (no other
+    estimator sees it)."""
 
     name: str
 
@@ -216,7 +227,7 @@ __all__ = [  # noqa: RUF022 - grouped by topic
     "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "HeightField", "Log", "Plane", "Ramp",
     "Scenario", "Terrain", "TerrainPart", "rough_heights",
     # estimator
-    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "ImuSample", "Proprioception",
+    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "GroundTruth", "ImuSample", "Proprioception",
     "overestimates",
     # the plant's perturbations
     "ActuatorDelay", "PlantPerturbation",

@@ -16,7 +16,7 @@ DT = 0.001  # [s] control tick of the synthetic runs
 
 
 def _obs(t: float, rng: np.random.Generator) -> Proprioception:
-    return Proprioception(t, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5, 0.5)
+    return Proprioception(t, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5)
 
 
 def test_ratio_ci_resamples_episodes_not_windows() -> None:

@@ -15,14 +15,14 @@ from omegaconf import OmegaConf
 from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS, to_joint_tokens
 from estimators.metrics import regression_metrics
 from estimators.simple import FixedEstimator, OracleEstimator
-from taslel_bench.interfaces import Estimator, Proprioception
+from taslel_bench.interfaces import Estimator, GroundTruth, Proprioception
 
 CONF = Path(__file__).resolve().parents[1] / "conf" / "estimator"
 
 
-def _obs(t: float, mu: float = 0.7, rng: np.random.Generator | None = None) -> Proprioception:
+def _obs(t: float, rng: np.random.Generator | None = None) -> Proprioception:
     rng = rng or np.random.default_rng(0)
-    return Proprioception(t, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5, mu)
+    return Proprioception(t, rng.normal(size=12), rng.normal(size=12), rng.normal(size=12) * 5)
 
 
 def _tiny_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -39,15 +39,26 @@ def _tiny_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def test_oracle_returns_true_friction() -> None:
     est = OracleEstimator()
-    assert isinstance(est, Estimator)
-    e = est.step(_obs(0.0, mu=0.37))
-    assert (e.mu, e.sigma, e.ready) == (0.37, 0.0, True)
+    assert isinstance(est, Estimator) and est.reads_ground_truth
+    e = est.step(_obs(0.0), GroundTruth(0.37))
+    assert (e.mu, e.sigma, e.ready, e.mu_per_foot) == (0.37, 0.0, True, None)
+    feet = np.array([0.3, 0.4, 0.5, 0.6])
+    assert est.step(_obs(0.0), GroundTruth(0.37, feet)).mu_per_foot is feet
+
+
+def test_only_the_oracle_reads_the_ground_truth() -> None:
+    """What only the simulator knows is not part of what a robot measures: the loop hands the truth to an
+    estimator that declares it reads it, and to no other."""
+    assert not hasattr(Proprioception(0.0, np.zeros(12), np.zeros(12), np.zeros(12)), "true_friction")
+    with pytest.raises(TypeError):  # a friction where the measurements end is refused, not taken as filter_mu
+        Proprioception(0.0, np.zeros(12), np.zeros(12), np.zeros(12), 0.5)
+    assert not getattr(FixedEstimator(), "reads_ground_truth", False)
 
 
 def test_fixed_returns_constant_and_rejects_bad_mu() -> None:
     est = FixedEstimator(0.42)
     assert isinstance(est, Estimator)
-    assert [est.step(_obs(t, mu=1.0)).mu for t in (0.0, 1.0)] == [0.42, 0.42]
+    assert [est.step(_obs(t)).mu for t in (0.0, 1.0)] == [0.42, 0.42]
     with pytest.raises(ValueError, match="positive"):
         FixedEstimator(-0.1)
 

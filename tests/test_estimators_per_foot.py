@@ -95,7 +95,7 @@ def test_per_foot_labels_load_from_collections(tmp_path: Path) -> None:
 
 
 def _obs(t: float, sample: np.ndarray) -> Proprioception:
-    return Proprioception(t, sample[:12].astype(float), sample[12:24].astype(float), sample[24:].astype(float), 0.5)
+    return Proprioception(t, sample[:12].astype(float), sample[12:24].astype(float), sample[24:].astype(float))
 
 
 def test_learned_estimator_per_foot_output_and_slip_floor(tmp_path: Path) -> None:

@@ -39,7 +39,7 @@ def test_torques_give_back_the_foot_force() -> None:
 
 def _obs(t: float, qd: np.ndarray, tau: np.ndarray, accel_b=(0.0, 0.0, 9.81)) -> Proprioception:
     imu = ImuSample(np.array([1.0, 0, 0, 0]), np.zeros(3), np.asarray(accel_b, float))
-    return Proprioception(t, STAND.copy(), qd, tau, 0.5, imu=imu)
+    return Proprioception(t, STAND.copy(), qd, tau, imu=imu)
 
 
 def _standing_torques(fz: float = 30.0, fx_front_left: float = 0.0) -> np.ndarray:

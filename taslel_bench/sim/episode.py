@@ -30,7 +30,7 @@ import numpy as np
 from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
-from taslel_bench.interfaces import Estimator, FrictionEstimate, ImuSample, Proprioception, Scenario
+from taslel_bench.interfaces import Estimator, FrictionEstimate, GroundTruth, ImuSample, Proprioception, Scenario
 from taslel_bench.metrics import residuals
 from taslel_bench.metrics.residuals import ResidualSetup
 from taslel_bench.plant.bridge import StateBridge
@@ -120,6 +120,7 @@ class Episode:
         self._scenario_step: Callable | None = None  # scenario.on_tick, None if it does nothing (per run)
         self.n_ticks = round((controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
         self.sensed: Proprioception | None = None  # the current tick's proprioception (observers read it)
+        self.truth: GroundTruth | None = None  # the current tick's ground truth (observers read it)
         if initial_state is None:
             initial_state = self._draw_initial_state()
         self.initial_qpos, self.initial_qvel = (np.array(x, float) for x in initial_state)
@@ -291,6 +292,7 @@ class Episode:
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._v_trunk_w = self._qvel[self.bridge.free_dadr : self.bridge.free_dadr + 3]  # [m/s] view, world axes
         self._imu_on = bool(getattr(self.estimator, "reads_imu", False))
+        self._estimator_reads_truth = bool(getattr(self.estimator, "reads_ground_truth", False))
         self._read_feet_after_step = self.stance.reads_feet_after_step
 
     def _observe(self, hooks: list[tuple[Callable, str]], *args) -> None:
@@ -317,9 +319,10 @@ class Episode:
             self.contacts.read(self.d)
             if self.per_foot_terrain and self.terrain.uniform_friction is None:  # one coefficient: mu broadcast
                 mu_feet = self.terrain.friction_under(self.contacts.foot_pos_in_world[:, :2])
-        self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, true_mu, self._mu_filter_prev,
-                                              mu_feet, self._imu_sample())  # fmt: skip
-        est = self.estimator.step(sensed)
+        self.truth = truth = GroundTruth(true_mu, mu_feet)  # what only the simulator knows
+        self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, filter_mu=self._mu_filter_prev,
+                                              imu=self._imu_sample())  # what the robot measures
+        est = self.estimator.step(sensed, truth) if self._estimator_reads_truth else self.estimator.step(sensed)
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.contact_plan(t)
         in_stance = self.stance.stance(gs, self.contacts)
