@@ -248,3 +248,32 @@ def test_reasons_are_values_and_the_summary_keeps_their_tags():
     assert judge(summary, SafetyLimits())[1] == "; ".join(r.text for r in found)
     assert reason_tags("ignored: text", "fell,tripped") == ["fell", "tripped"]
     assert reason_tags(judge(summary, SafetyLimits())[1]) == ["fell", "tripped", "cone_edge"]
+
+
+def test_the_summary_is_typed_sections_flattened_once_with_reasons_as_values():
+    """summary_sections keeps each key in one section and the reasons as values; summary.json is its flat dict."""
+    from taslel_bench.metrics.sections import SECTIONS, RunSummary, Verdict
+    from taslel_bench.metrics.summary import summarize, summary_sections
+    from taslel_bench.metrics.verdict import Reason
+
+    from taslel_bench.sim.build import Built
+
+    built = Built(compose_cfg(["scenario=logs", "filter.enabled=false", "duration=3", "seed=0"]))
+    res = built.episode.run()  # the nominal trot on the logs: trips (and a fall) to judge
+    stand_s = built.controller.stand_duration_s
+    sections = summary_sections(res, DT, stand_s)
+    flat = sections.flat()
+    assert flat.keys() == summarize(res, DT, stand_s).keys()
+    counts = {}
+    for name in SECTIONS:
+        for key in sections.section(name):
+            counts[key] = counts.get(key, 0) + (name != "verdict" or key != "status")
+    assert set(counts) == set(flat) and set(counts.values()) == {1}  # every key in one section (status: outcome)
+    assert all(isinstance(r, Reason) for r in sections.verdict.reasons) and "tripped" in flat["unsafe_reason_tags"]
+    assert [r.tag for r in sections.verdict.reasons] == flat["unsafe_reason_tags"].split(",")
+    assert "trips" in sections.contacts and "qp_solves" in sections.filter and "mean_speed_mps" in sections.locomotion
+    clash = RunSummary({"status": "ok"}, Verdict("ok", "", []), locomotion={"status": "walking"})
+    with pytest.raises(ValueError, match="two sections"):
+        clash.flat()
+    with pytest.raises(KeyError, match="sections"):
+        clash.section("speed")

@@ -14,6 +14,7 @@ from taslel_bench.metrics.clearance import ClearanceStream
 from taslel_bench.metrics.contacts import ContactStream, stand_part
 from taslel_bench.metrics.health import HealthLimits, assess
 from taslel_bench.metrics.residuals import ResidualStream
+from taslel_bench.metrics.sections import RunSummary, Verdict
 from taslel_bench.metrics.stream import Reducer
 from taslel_bench.metrics.verdict import SafetyLimits, reasons
 from taslel_bench.metrics.windows import window_ticks
@@ -37,11 +38,21 @@ DEFAULT_SAFETY = SafetyLimits()
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
               limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY,
               swing_duration_s: float = 0.2, stream: SummaryStream | None = None) -> dict[str, object]:  # fmt: skip
-    """The run's summary. ``stance_duration_s`` / ``swing_duration_s`` [s]: the scheduled stance length
-    (touchdown-slip window) and swing length (how early a landing is); ``limits``: when the run is ``degraded``
-    instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from ``stream`` (the episode's
-    metrics, fed chunk by chunk during the episode) when it was made with these settings, else from the
-    whole trace (which must then hold every tick)."""
+    """The episode's summary keys (:func:`summary_sections`, flattened)."""
+    return summary_sections(res, control_dt_s, stand_duration_s, stance_duration_s, limits, safety, swing_duration_s,
+                            stream).flat()  # fmt: skip
+
+
+def summary_sections(res: EpisodeResult, control_dt_s: float, stand_duration_s: float,
+                     stance_duration_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS,
+                     safety: SafetyLimits = DEFAULT_SAFETY, swing_duration_s: float = 0.2,
+                     stream: SummaryStream | None = None) -> RunSummary:  # fmt: skip
+    """The episode's summary in sections (:class:`taslel_bench.metrics.sections.RunSummary`; the run adds its
+    identity, plant and machine). ``stance_duration_s`` / ``swing_duration_s`` [s]: the scheduled stance
+    length (touchdown-slip window) and swing length (how early a landing is); ``limits``: when the run is
+    ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from ``stream``
+    (the episode's metrics, fed chunk by chunk during the episode) when it was made with these settings,
+    else from the whole trace (which must then hold every tick)."""
     settings = (control_dt_s, stand_duration_s, stance_duration_s, limits, swing_duration_s,
                 safety.trip_touchdown_tolerance_s)  # fmt: skip
     if not isinstance(stream, SummaryStream) or stream.settings != settings:
@@ -51,33 +62,37 @@ def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, 
         stream = SummaryStream(*settings)
         stream.feed(res.trace, res.trace.n)
     n = res.trace.n
-    out: dict[str, object] = {
-        "status": res.status,
-        "message": res.message,
-        "fell": bool(res.fell),
-        "time_to_fall_s": float(res.time_to_fall_s),
-        "fall_reason": res.fall_reason,
-        "ticks": int(n),
-        "sim_time_s": float(n * control_dt_s),
-        "wall_time_s": float(res.wall_time_s),
-        # compiled kernels loaded (or compiled) before the episode clock starts; not in wall_time_s
-        "warmup_s": float(res.extras.get("warmup_s", math.nan)),
-        "real_time_factor": float(n * control_dt_s / res.wall_time_s) if res.wall_time_s > 0 else math.nan,
-    }
-    out.update(stream.result())
+    outcome: dict[str, object] = {
+        "status": res.status, "message": res.message, "fell": bool(res.fell),
+        "time_to_fall_s": float(res.time_to_fall_s), "fall_reason": res.fall_reason,
+        "ticks": int(n), "sim_time_s": float(n * control_dt_s),
+    }  # fmt: skip
+    parts = stream.result_sections()
+    summary = RunSummary(outcome, Verdict(res.status, "", []), **parts)
+    summary.timing = {**_episode_timing(res, n * control_dt_s), **parts["timing"]}
     sketched = stream.sketched_keys()
     if sketched:  # a long episode: these percentiles are read from a histogram (metrics/stream.py, rel. error 1e-3)
-        out["percentiles_from_histogram"] = ",".join(sketched)
-    out["residuals_s"] = float(res.extras.get("residuals_s", math.nan))
+        summary.timing["percentiles_from_histogram"] = ",".join(sketched)
     if "residuals_error" in res.extras:
-        out["residuals_error"] = str(res.extras["residuals_error"])
-    for key in [k for k in out if k.startswith("estimator_")]:
-        out[key] = out.pop(key)  # after the residuals, as the summary always had them
-    out["status"], out["degraded_reasons"] = assess(out, limits)
-    found = reasons(out, safety)
-    out["safe"], out["unsafe_reasons"] = not found, "; ".join(r.text for r in found)
-    out["unsafe_reason_tags"] = ",".join(r.tag for r in found)  # what the report counts (metrics/verdict.py)
-    return out
+        summary.model["residuals_error"] = str(res.extras["residuals_error"])
+    flat = summary.flat()
+    status, degraded = assess(flat, limits)
+    summary.outcome["status"] = status
+    summary.verdict = Verdict(status, degraded, reasons({**flat, "status": status}, safety))
+    return summary
+
+
+def _episode_timing(res: EpisodeResult, sim_time_s: float) -> dict[str, float]:
+    """[s] the loop's wall time, the kernels' warm-up and the model residuals (both off the loop's clock)
+    and the real-time factor (simulated / wall time)."""
+    wall = float(res.wall_time_s)
+    return {
+        "wall_time_s": wall,
+        # compiled kernels loaded (or compiled) before the episode clock starts; not in wall_time_s
+        "warmup_s": float(res.extras.get("warmup_s", math.nan)),
+        "real_time_factor": float(sim_time_s / wall) if wall > 0 else math.nan,
+        "residuals_s": float(res.extras.get("residuals_s", math.nan)),
+    }
 
 
 class SummaryStream:
@@ -165,7 +180,12 @@ class SummaryStream:
         self.reference.mean("qp_solve_over_1ms_rate", solve > ONE_MS_US)
 
     def result(self) -> dict[str, object]:
-        out = {k: v for k, v in self.acc.result().items() if not k.startswith(("trunk_height", "intervention", "u_nom"))}
+        """Every metric, one dict (:meth:`result_sections` merged)."""
+        return {k: v for part in self.result_sections().values() for k, v in part.items()}
+
+    def result_sections(self) -> dict[str, dict[str, object]]:
+        """The metrics by summary section: timing (the tick's parts), locomotion, filter, contacts (walking,
+        stand, clearance, trips), model (residuals), estimator."""
         acc = self.acc.result()
         loco = self._locomotion_result(acc.get("trunk_height_mean_m", math.nan))
         filt = {k: acc[k] for k in ("intervention_nm_mean", "u_nom_nm_mean") if k in acc}
@@ -175,13 +195,13 @@ class SummaryStream:
             for key in ("qp_solves", "qp_failed", "qp_failed_rate", "qp_failed_rate_worst_window",
                         "qp_solve_us_median", "qp_solve_us_p99", "qp_solve_us_max", "qp_build_us_median",
                         "intervention_nm_max"):
-                filt[key] = out.pop(key, acc.get(key))
-            iterations = out.pop("qp_iterations_median", math.nan)
+                filt[key] = acc.get(key)
+            iterations = acc.get("qp_iterations_median", math.nan)
             if not math.isnan(iterations):
                 filt["qp_iterations_median"] = iterations
-        head = {k: out[k] for k in out if k.startswith("tick_")}
-        return {**head, **loco, **filt, **self.walk_contacts.result(), **stand_part(self.stand_contacts.result()),
-                **self.clearance.result(), **self.residuals.result(), **self.estimator.result(self.n)}
+        contacts = {**self.walk_contacts.result(), **stand_part(self.stand_contacts.result()), **self.clearance.result()}
+        return {"timing": {k: v for k, v in acc.items() if k.startswith("tick_")}, "locomotion": loco, "filter": filt,
+                "contacts": contacts, "model": self.residuals.result(), "estimator": self.estimator.result(self.n)}
 
     def sketched_keys(self) -> list[str]:
         """The percentile keys of this episode read from a histogram (:class:`taslel_bench.metrics.stream.Quantiles`)."""

@@ -21,7 +21,8 @@ from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.config.safety import safety_limits
 from taslel_bench.config.settings import health_limits, robot_description
 from taslel_bench.config.validate import memory_estimate_gb, validate
-from taslel_bench.metrics.summary import SummaryStream, summarize
+from taslel_bench.metrics.sections import RunSummary
+from taslel_bench.metrics.summary import SummaryStream, summary_sections
 from taslel_bench.plant.build import urdf_mesh_files
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.qp.reference_check import reference_metrics
@@ -216,9 +217,11 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
         if show is not None:
             print(file=sys.stderr)
         stopped = _stopped_by_signal(res, guard)
-        summary = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
-        summary.update(_episode_summary(cfg, built, res, recorders.metrics))
-        summary.update(watch.result.record())  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
+        sections = _episode_summary(cfg, built, res, recorders.metrics)
+        sections.identity = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
+        sections.plant = _plant_summary(cfg, built)
+        sections.machine = watch.result.record()  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
+        summary = sections.flat()  # the run's files add their keys when they are written
         if stopped:
             summary.update(_interrupted_fields(cfg, res, guard))
         events = _events(cfg, res, out_dir, recorders.metrics)
@@ -277,33 +280,38 @@ def _run_identity(cfg: DictConfig, built: Built, choices: dict[str, str], overri
         "memory_estimate_gb": memory_estimate_gb(cfg),  # [GB] checked against max_memory_gb before the run
         **code_version(),  # git_commit, git_dirty
     }
-    out.update(plant_identity(cfg, built))
-    out.update(plant_vs_model(built.mj_model, built.episode.model, built.controller.stand_configuration()))
+    if built.backend is not None:
+        out["solver_settings"] = str(built.backend.describe())
     return out
 
 
-def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics: SummaryStream) -> dict[str, object]:
-    """The episode's metrics (:func:`taslel_bench.metrics.summary.summarize`), the estimator's own
-    diagnostics (optional ``diagnostics()``) and the backend's settings."""
+def _plant_summary(cfg: DictConfig, built: Built) -> dict[str, object]:
+    """The plant and the controller's model: their files and how far they agree at the stand."""
+    return {**plant_identity(cfg, built),
+            **plant_vs_model(built.mj_model, built.episode.model, built.controller.stand_configuration())}
+
+
+def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics: SummaryStream) -> RunSummary:
+    """The episode's metrics in sections (:func:`taslel_bench.metrics.summary.summary_sections`), with the
+    time spent off the loop's clock, the reference check, the estimator's own diagnostics (optional
+    ``diagnostics()``), the filter's relaxations and the contact estimate's counts."""
     dt = 1.0 / float(cfg.control_rate_hz)
     stance_s, swing_s = built.controller.stance_swing_s
-    out = summarize(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), safety_limits(cfg),
-                    swing_s, metrics)  # fmt: skip
-    out["recording_s"] = float(res.extras.get("recording_s", 0.0))
-    out["reference_s"] = float(res.extras.get("reference_s", 0.0))
-    out.update(_reference_summary(built, metrics, dt))  # record.reference_every: u error against the reference
+    out = summary_sections(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg),
+                           safety_limits(cfg), swing_s, metrics)  # fmt: skip
+    out.timing["recording_s"] = float(res.extras.get("recording_s", 0.0))
+    out.timing["reference_s"] = float(res.extras.get("reference_s", 0.0))
+    out.filter.update(_reference_summary(built, metrics, dt))  # record.reference_every: u error against the reference
     diagnostics = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
-        out.update({f"estimator_{k}": v for k, v in diagnostics().items()})
-    if built.backend is not None:
-        out["solver_settings"] = str(built.backend.describe())
+        out.estimator.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.filter is not None:  # filter.relaxation=priority: ticks solved only after dropping barrier families
-        out["filter_relaxed_ticks"] = int(built.filter.relaxed_ticks)
-        out.update({f"filter_relaxed_{k}_ticks": int(v) for k, v in built.filter.relaxed_by_family.items()})
+        out.filter["filter_relaxed_ticks"] = int(built.filter.relaxed_ticks)
+        out.filter.update({f"filter_relaxed_{k}_ticks": int(v) for k, v in built.filter.relaxed_by_family.items()})
     estimate = getattr(built.stance, "estimate", None)
     if estimate is not None:  # filter.stance_source=estimate: early touchdowns taken as stance
-        out["contact_early_touchdowns"] = int(estimate.early_touchdowns)
-        out["contact_late_touchdown_foot_ticks"] = int(estimate.late_touchdown_ticks)
+        out.contacts["contact_early_touchdowns"] = int(estimate.early_touchdowns)
+        out.contacts["contact_late_touchdown_foot_ticks"] = int(estimate.late_touchdown_ticks)
     return out
 
 
