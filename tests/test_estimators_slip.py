@@ -163,19 +163,23 @@ def test_stance_detection_counts_stances_with_a_slip() -> None:
 
 
 def test_slip_kernel_matches_the_numpy_legs() -> None:
-    """The compiled kernel's leg kinematics and torque-implied forces equal estimators.legs' (numpy)."""
-    from estimators.slip_kernel import _leg, _solve_transposed
+    """The compiled leg kinematics the detector's tick reads and the kernel's torque-implied forces equal
+    estimators.legs' (numpy)."""
+    from estimators.legs import chain_table
+    from estimators.slip_kernel import _solve_transposed
+    from taslel_bench.robot.leg_chain import feet_and_jacobians_into
 
     rng = np.random.default_rng(3)
     q = STAND + rng.normal(0, 0.3, 12)
     tau = rng.normal(0, 5, 12)
     p_ref, jac_ref = feet_and_jacobians(q)
     f_ref = foot_forces_from_torques(jac_ref, tau)
-    p, jac, f = np.empty(3), np.empty((3, 3)), np.empty(3)
+    p, jac, f = np.empty((4, 3)), np.empty((4, 3, 3)), np.empty(3)
+    feet_and_jacobians_into(chain_table(), q, p, jac)
+    assert np.allclose(p, p_ref) and np.allclose(jac, jac_ref)
     for i in range(4):
-        _leg(q, i, p, jac)
-        _solve_transposed(jac, tau[3 * i : 3 * i + 3].copy(), f)
-        assert np.allclose(p, p_ref[i]) and np.allclose(jac, jac_ref[i]) and np.allclose(f, f_ref[i])
+        _solve_transposed(jac[i], tau[3 * i : 3 * i + 3].copy(), f)
+        assert np.allclose(f, f_ref[i])
 
 
 def _feet(xy: list[list[float]]) -> object:
