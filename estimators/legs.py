@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from taslel_bench import api
-from taslel_bench.robot import leg_chain
-from taslel_bench.robot.description import RobotDescription
+from taslel_bench.api import RobotDescription, leg_chain
 
 # the shipped estimator checkpoints were trained on A1 data: the estimators' kinematics default to the A1's chain
 TRAINED_ROBOT = "a1"

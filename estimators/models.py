@@ -32,9 +32,8 @@ from torch import nn
 
 from estimators import legs
 from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
+from taslel_bench.api import RobotDescription, leg_chain
 from taslel_bench.interfaces import quad
-from taslel_bench.robot import leg_chain
-from taslel_bench.robot.description import RobotDescription
 
 VARIANTS = ("mlp", "attention", "linformer")
 TOKENISATIONS = ("joint", "step", "foot")
@@ -179,16 +178,16 @@ N_SLIP_FEATURES = 8  # per foot: speed relative to the stance partner [m/s], hei
 STANCE_PARTNER = (3, 2, 1, 0)  # trot pairs in LEGS order: FL-RR, FR-RL
 
 
-def slip_features(x: torch.Tensor) -> torch.Tensor:
+def slip_features(x: torch.Tensor, robot: RobotDescription | None = None) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 8): a slip signal from leg kinematics alone (``[d (4) [m/s], h (4)
     [m]]``, LEGS order). ``d_i`` = |v_i - v_j|, horizontal (trunk x, y), of foot i's velocity relative to the
-    trunk (:func:`foot_kinematics`) against its trot partner j's: two stance feet that hold both move at
+    trunk (:func:`foot_kinematics` on ``robot``'s chain, None: the A1) against its trot partner j's: two stance feet that hold both move at
     -(v_trunk + omega x p), so d_i is the rotation term |omega x (p_i - p_j)| (small in a trot) plus the
     slip of either foot. ``h_i`` = foot i's height above the lowest foot in trunk axes: near 0 for the stance
     pair, so the model can tell the stance pair's d (a slip) from a swing foot's. The trunk's angular rate
     (the IMU gyro) would remove the rotation term; the loop's Proprioception carries no IMU yet."""
     b, t, _ = x.shape
-    kin = foot_kinematics(x)
+    kin = foot_kinematics(x, robot)
     p, v = kin[..., :12].reshape(b, t, 4, 3), kin[..., 12:].reshape(b, t, 4, 3)
     dv = v[..., :2] - v[:, :, list(STANCE_PARTNER), :2]
     d = dv.pow(2).sum(-1).add(1e-12).sqrt()

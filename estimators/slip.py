@@ -37,9 +37,8 @@ import numpy as np
 
 from estimators import legs, slip_kernel
 from taslel_bench import api
+from taslel_bench.api import RobotDescription, leg_chain
 from taslel_bench.interfaces import ImuSample, Proprioception, integer, number
-from taslel_bench.robot import leg_chain
-from taslel_bench.robot.description import RobotDescription
 
 
 @dataclass

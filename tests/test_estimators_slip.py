@@ -182,6 +182,18 @@ def test_slip_kernel_matches_the_numpy_legs() -> None:
         assert np.allclose(f, f_ref[i])
 
 
+def test_detector_reads_the_legs_of_its_robot() -> None:
+    """SlipDetector(robot=...) uses that robot's chain: on the first tick (trunk at the origin, level IMU) its
+    feet are the robot's feet in the trunk frame."""
+    from taslel_bench.robot.description import load_robot
+    from taslel_bench.robot.leg_chain import chain_table, feet_in_trunk
+
+    go1 = load_robot("go1")
+    out = SlipDetector(robot=go1).step(_obs(0.0, np.zeros(12), np.zeros(12)))
+    np.testing.assert_allclose(out.feet_w, feet_in_trunk(chain_table(go1), STAND), rtol=0, atol=1e-12)
+    assert np.abs(out.feet_w - feet_and_jacobians(STAND)[0]).max() > 1e-3  # not the A1's
+
+
 def _feet(xy: list[list[float]]) -> object:
     from estimators.slip import FootState
 
