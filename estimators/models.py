@@ -30,8 +30,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from estimators import legs
 from estimators.features import N_CHANNELS, N_FEATURES, N_FILTER_FEATURES, N_JOINTS, WINDOW_STEPS
-from taslel_bench import api
+from taslel_bench.api import RobotDescription, leg_chain
 from taslel_bench.interfaces import quad
 
 VARIANTS = ("mlp", "attention", "linformer")
@@ -158,36 +159,18 @@ def window_features(x: torch.Tensor, mode: str) -> torch.Tensor:
 
 
 N_KIN_FEATURES = 24  # foot positions (4 x 3) and velocities (4 x 3)
-_A1 = api.load_robot("a1")  # the shipped estimators were trained on the A1: its chain, from its description
-_HIPS = torch.tensor(_A1.hip_positions_in_trunk, dtype=torch.float32)  # (4, 3) [m] hip joints in the trunk frame
-_SIDES = torch.tensor(quad.LEG_SIDE, dtype=torch.float32)  # (4,) +1 left, -1 right
 
 
-def foot_kinematics(x: torch.Tensor) -> torch.Tensor:
+def foot_kinematics(x: torch.Tensor, robot: RobotDescription | None = None) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 24): ``[p_foot (4 x 3) [m], v_foot (4 x 3) [m/s]]``, legs FL, FR, RL,
     RR, foot-sphere centres relative to the trunk origin, in trunk axes; v_foot = J_leg(q) qdot (the foot's
-    velocity relative to the trunk, not in the world). Same chain as :meth:`taslel_bench.robot.kinematics.LegKinematics.leg_fk`.
+    velocity relative to the trunk, not in the world). The chain of ``robot`` (None: the A1,
+    :data:`estimators.legs.TRAINED_ROBOT`) through :func:`taslel_bench.robot.leg_chain.feet_and_velocities`.
     A stance foot that holds has v_foot = -(v_trunk + omega x p_foot); feet of one stance pair that disagree
     beyond the rotation term are slipping, whatever the payload or motor strength."""
-    l1, l2, l3 = abs(_A1.legs[0].lateral_m), _A1.legs[0].thigh_length_m, _A1.legs[0].calf_length_m
     b, t, _ = x.shape
-    q = x[..., :12].reshape(b, t, 4, 3)
-    qd = x[..., 12:24].reshape(b, t, 4, 3)
-    q1, q2, q3 = q.unbind(-1)
-    d1, d2, d3 = qd.unbind(-1)
-    s1, c1, s2, c2 = torch.sin(q1), torch.cos(q1), torch.sin(q2), torch.cos(q2)
-    s23, c23 = torch.sin(q2 + q3), torch.cos(q2 + q3)
-    y0 = _SIDES.to(x) * l1
-    px = -l2 * s2 - l3 * s23
-    zp = -l2 * c2 - l3 * c23
-    py = c1 * y0 - s1 * zp
-    pz = s1 * y0 + c1 * zp
-    vx = zp * d2 - l3 * c23 * d3
-    vzp = -px * d2 + l3 * s23 * d3
-    vy = -pz * d1 - s1 * vzp
-    vz = py * d1 + c1 * vzp
-    p = torch.stack([px, py, pz], -1) + _HIPS.to(x)
-    v = torch.stack([vx, vy, vz], -1)
+    columns = torch.tensor(legs.chain_table(robot).T, dtype=x.dtype, device=x.device)
+    p, v = leg_chain.feet_and_velocities(columns, x[..., :12], x[..., 12:24], torch)
     return torch.cat([p.reshape(b, t, 12), v.reshape(b, t, 12)], dim=-1)
 
 
@@ -195,16 +178,16 @@ N_SLIP_FEATURES = 8  # per foot: speed relative to the stance partner [m/s], hei
 STANCE_PARTNER = (3, 2, 1, 0)  # trot pairs in LEGS order: FL-RR, FR-RL
 
 
-def slip_features(x: torch.Tensor) -> torch.Tensor:
+def slip_features(x: torch.Tensor, robot: RobotDescription | None = None) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 8): a slip signal from leg kinematics alone (``[d (4) [m/s], h (4)
     [m]]``, LEGS order). ``d_i`` = |v_i - v_j|, horizontal (trunk x, y), of foot i's velocity relative to the
-    trunk (:func:`foot_kinematics`) against its trot partner j's: two stance feet that hold both move at
+    trunk (:func:`foot_kinematics` on ``robot``'s chain, None: the A1) against its trot partner j's: two stance feet that hold both move at
     -(v_trunk + omega x p), so d_i is the rotation term |omega x (p_i - p_j)| (small in a trot) plus the
     slip of either foot. ``h_i`` = foot i's height above the lowest foot in trunk axes: near 0 for the stance
     pair, so the model can tell the stance pair's d (a slip) from a swing foot's. The trunk's angular rate
     (the IMU gyro) would remove the rotation term; the loop's Proprioception carries no IMU yet."""
     b, t, _ = x.shape
-    kin = foot_kinematics(x)
+    kin = foot_kinematics(x, robot)
     p, v = kin[..., :12].reshape(b, t, 4, 3), kin[..., 12:].reshape(b, t, 4, 3)
     dv = v[..., :2] - v[:, :, list(STANCE_PARTNER), :2]
     d = dv.pow(2).sum(-1).add(1e-12).sqrt()

@@ -3,8 +3,9 @@
 What a real A1 measures is enough (:class:`taslel_bench.interfaces.Proprioception` with its ``imu``): no
 plant contact flag, no true velocity. Every control tick:
 
-1. **Leg kinematics** (:mod:`estimators.legs`): each foot's position ``p_i`` and velocity ``J_i qd_i``
-   relative to the trunk, trunk axes; the ground force the joint torques balance, ``f_i = -J_i^-T tau_i``
+1. **Leg kinematics** (the robot's chain, :mod:`taslel_bench.robot.leg_chain`; default the A1's,
+   :data:`estimators.legs.TRAINED_ROBOT`): each foot's position ``p_i`` and velocity ``J_i qd_i`` relative to the
+   trunk, trunk axes; the ground force the joint torques balance, ``f_i = -J_i^-T tau_i``
    (quasi-static leg), rotated to world axes by the IMU attitude ``R``. A foot is *loaded* when that force's
    world-z component exceeds ``contact_force_n``.
 2. **Trunk velocity** (:class:`TrunkVelocityObserver`, world axes): the accelerometer integrated
@@ -34,8 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators import slip_kernel
+from estimators import legs, slip_kernel
 from taslel_bench import api
+from taslel_bench.api import RobotDescription, leg_chain
 from taslel_bench.interfaces import ImuSample, Proprioception, integer, number
 
 
@@ -98,13 +100,15 @@ class FootState:
 
 class LegGravity:
     """Joint torques [N·m] (12, core order) that hold the legs' own links against gravity at joint angles q and
-    trunk attitude ``quat_wxyz`` (the A1 URDF's link masses, Pinocchio's generalized gravity, its joint rows)."""
+    trunk attitude ``quat_wxyz`` (the robot URDF's link masses, Pinocchio's generalized gravity, its joint rows;
+    None: the A1, :data:`estimators.legs.TRAINED_ROBOT`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, robot: RobotDescription | None = None) -> None:
         import pinocchio as pin
 
         self._pin = pin
-        self.model = pin.buildModelFromUrdf(str(api.load_robot("a1").urdf_path), pin.JointModelFreeFlyer())
+        robot = robot if robot is not None else api.load_robot(legs.TRAINED_ROBOT)
+        self.model = pin.buildModelFromUrdf(str(robot.urdf_path), pin.JointModelFreeFlyer())
         self.data = self.model.createData()
         self._q = np.zeros(self.model.nq)
 
@@ -117,13 +121,17 @@ class LegGravity:
 
 class SlipDetector:
     """Per-foot slip from proprioception (module doc). Call :meth:`step` every control tick; the arithmetic
-    runs in :func:`estimators.slip_kernel.tick`."""
+    runs in :func:`estimators.slip_kernel.tick`. ``robot``: whose legs (None: the A1,
+    :data:`estimators.legs.TRAINED_ROBOT`)."""
 
-    def __init__(self, settings: SlipSettings | None = None) -> None:
+    def __init__(self, settings: SlipSettings | None = None, robot: RobotDescription | None = None) -> None:
         self.s = settings if settings is not None else SlipSettings()
         self.velocity = TrunkVelocityObserver(self.s.velocity_tau_s)
         s = self.s
-        self._gravity = LegGravity() if s.leg_gravity else None
+        self._gravity = LegGravity(robot) if s.leg_gravity else None
+        self._chain = legs.chain_table(robot)
+        self._feet_b = np.zeros((4, 3))  # [m] this tick's foot positions, trunk axes
+        self._jac = np.zeros((4, 3, 3))  # [m/rad] this tick's leg Jacobians, trunk axes
         self._prm = np.zeros(slip_kernel.N_PARAMS)
         self._prm[[slip_kernel.P_CONTACT, slip_kernel.P_TOUCHDOWN, slip_kernel.P_SPEED, slip_kernel.P_AVERAGE,
                    slip_kernel.P_CONFIRM, slip_kernel.P_FAST_TOUCHDOWN, slip_kernel.P_FAST_SPEED,
@@ -155,8 +163,9 @@ class SlipDetector:
         tau = np.asarray(obs.tau_joints, float)
         if self._gravity is not None:
             tau = tau - self._gravity.torques(obs.q_joints, imu.quat_wxyz)
+        leg_chain.feet_and_jacobians_into(self._chain, np.asarray(obs.q_joints, float), self._feet_b, self._jac)
         v.started = slip_kernel.tick(
-            np.asarray(obs.q_joints, float), np.asarray(obs.qd_joints, float), tau,
+            self._feet_b, self._jac, np.asarray(obs.qd_joints, float), tau,
             np.asarray(imu.quat_wxyz, float), np.asarray(imu.gyro_in_base, float),
             np.asarray(imu.accel_in_base, float), float(obs.t_s), float(dt), self._prm, v.started, v.v_w, v.p_w,
             self._heading, self._loaded_since, self._judged, self._speeds, self._above, self._above_fast,

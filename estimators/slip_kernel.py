@@ -1,17 +1,17 @@
 """One control tick of the slip detector (:class:`estimators.slip.SlipDetector`) in a compiled kernel.
 
-The same arithmetic as :func:`estimators.legs.feet_and_jacobians` / :func:`estimators.legs.foot_forces_from_torques`
-(tested against them) and the detector's rules (module doc of :mod:`estimators.slip`), for the four legs in
-one call: the numpy version cost ~270 µs per tick, which would double a filtered tick. Frames: ``_b`` trunk
-axes, ``_w`` world axes; units m, m/s, N, s. All state arrays are updated in place.
+The detector's rules (module doc of :mod:`estimators.slip`) and the torque-implied forces of
+:func:`estimators.legs.foot_forces_from_torques` (tested against it), for the four legs in one call: the numpy
+version cost ~270 µs per tick, which would double a filtered tick. The leg kinematics come in computed by
+:func:`taslel_bench.robot.leg_chain.feet_and_jacobians_into` (the robot package's chain, compiled there: a kernel
+cached here would not see edits to that file). Frames: ``_b`` trunk axes, ``_w`` world axes; units m, m/s, N, s.
+All state arrays are updated in place.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from estimators.legs import HIPS_IN_TRUNK, L1, L2, L3, SIDES
 
 # indices of the float settings vector given to tick()
 P_CONTACT, P_TOUCHDOWN, P_SPEED, P_AVERAGE, P_CONFIRM, P_FAST_TOUCHDOWN, P_FAST_SPEED, P_FAST_CONFIRM, P_TAU, \
@@ -28,23 +28,6 @@ def _rotation(quat: np.ndarray, rot: np.ndarray) -> None:
     rot[0, 0], rot[0, 1], rot[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
     rot[1, 0], rot[1, 1], rot[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
     rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-
-
-@njit(cache=True)
-def _leg(q: np.ndarray, i: int, p: np.ndarray, jac: np.ndarray) -> None:
-    """Foot i's position (trunk frame) into ``p`` (3,) and its leg Jacobian into ``jac`` (3, 3)."""
-    q1, q2, q3 = q[3 * i], q[3 * i + 1], q[3 * i + 2]
-    s1, c1, s2, c2 = np.sin(q1), np.cos(q1), np.sin(q2), np.cos(q2)
-    s23, c23 = np.sin(q2 + q3), np.cos(q2 + q3)
-    y0 = SIDES[i] * L1
-    px = -L2 * s2 - L3 * s23
-    zp = -L2 * c2 - L3 * c23
-    py = c1 * y0 - s1 * zp
-    pz = s1 * y0 + c1 * zp
-    p[0], p[1], p[2] = px + HIPS_IN_TRUNK[i, 0], py + HIPS_IN_TRUNK[i, 1], pz + HIPS_IN_TRUNK[i, 2]
-    jac[0, 0], jac[1, 0], jac[2, 0] = 0.0, -pz, py
-    jac[0, 1], jac[1, 1], jac[2, 1] = zp, s1 * px, -c1 * px
-    jac[0, 2], jac[1, 2], jac[2, 2] = -L3 * c23, -s1 * L3 * s23, c1 * L3 * s23
 
 
 @njit(cache=True)
@@ -73,9 +56,10 @@ def _matvec(a: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def tick(q, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, heading, loaded_since, judged_n,
-         speeds, above, above_fast, loaded, slipping, speed, ratio, feet_w) -> bool:
-    """One tick: reads q, qd [rad, rad/s], tau [N·m] (12,), the IMU (quat wxyz, gyro [rad/s], accel [m/s²]),
+def tick(p_b, jac, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, heading, loaded_since,
+         judged_n, speeds, above, above_fast, loaded, slipping, speed, ratio, feet_w) -> bool:
+    """One tick: reads the feet ``p_b`` (4, 3) [m] and the leg Jacobians ``jac`` (4, 3, 3) [m/rad] (trunk axes,
+    at this tick's joint angles), qd [rad/s] and tau [N·m] (12,), the IMU (quat wxyz, gyro [rad/s], accel [m/s²]),
     t_s, dt [s] and the settings ``prm`` (P_* indices); updates the observer state (``v_w``, ``p_w``,
     ``heading``) and the per-foot state (``loaded_since`` [s], ``judged_n``, ``speeds`` ring, ``above``,
     ``above_fast``); writes the outputs ``loaded``, ``slipping``, ``speed`` [m/s], ``ratio``, ``feet_w`` [m].
@@ -88,24 +72,20 @@ def tick(q, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, hea
         v_w[2] += dt * GRAVITY_Z
         for k in range(3):
             p_w[k] += dt * v_w[k]
-    p = np.empty(3)
-    jac = np.empty((3, 3))
     f_b = np.empty(3)
     vrel_w = np.empty((4, 3))
-    p_b = np.empty((4, 3))
     n_avg = int(prm[P_AVERAGE])
     judged = np.zeros(4, np.bool_)
     fast = np.zeros(4, np.bool_)
     for i in range(4):
-        _leg(q, i, p, jac)
-        p_b[i] = p
+        p = p_b[i]
         vr = np.empty(3)  # omega x p + J qd, trunk axes
         vr[0] = gyro_b[1] * p[2] - gyro_b[2] * p[1]
         vr[1] = gyro_b[2] * p[0] - gyro_b[0] * p[2]
         vr[2] = gyro_b[0] * p[1] - gyro_b[1] * p[0]
         for r in range(3):
-            vr[r] += jac[r, 0] * qd[3 * i] + jac[r, 1] * qd[3 * i + 1] + jac[r, 2] * qd[3 * i + 2]
-        _solve_transposed(jac, tau[3 * i : 3 * i + 3], f_b)
+            vr[r] += jac[i, r, 0] * qd[3 * i] + jac[i, r, 1] * qd[3 * i + 1] + jac[i, r, 2] * qd[3 * i + 2]
+        _solve_transposed(jac[i], tau[3 * i : 3 * i + 3], f_b)
         f_w = _matvec(rot, f_b)
         vrel_w[i] = _matvec(rot, vr)
         loaded[i] = f_w[2] > prm[P_CONTACT]

@@ -35,6 +35,7 @@ from taslel_bench.record.qpset import QPRecorder, QPSet, active_sets, binding_ta
 from taslel_bench.record.qpset import load as load_qpset
 from taslel_bench.record.qpset import save as save_qpset
 from taslel_bench.record.result import EpisodeResult
+from taslel_bench.robot import leg_chain
 from taslel_bench.robot.description import RobotDescription, load_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
@@ -75,6 +76,7 @@ __all__ = [
     "compose",
     "episode_settings",
     "from_problems",
+    "leg_chain",
     "load_qpset",
     "load_robot",
     "robot_description",

@@ -163,19 +163,35 @@ def test_stance_detection_counts_stances_with_a_slip() -> None:
 
 
 def test_slip_kernel_matches_the_numpy_legs() -> None:
-    """The compiled kernel's leg kinematics and torque-implied forces equal estimators.legs' (numpy)."""
-    from estimators.slip_kernel import _leg, _solve_transposed
+    """The compiled leg kinematics the detector's tick reads and the kernel's torque-implied forces equal
+    estimators.legs' (numpy)."""
+    from estimators.legs import chain_table
+    from estimators.slip_kernel import _solve_transposed
+    from taslel_bench.robot.leg_chain import feet_and_jacobians_into
 
     rng = np.random.default_rng(3)
     q = STAND + rng.normal(0, 0.3, 12)
     tau = rng.normal(0, 5, 12)
     p_ref, jac_ref = feet_and_jacobians(q)
     f_ref = foot_forces_from_torques(jac_ref, tau)
-    p, jac, f = np.empty(3), np.empty((3, 3)), np.empty(3)
+    p, jac, f = np.empty((4, 3)), np.empty((4, 3, 3)), np.empty(3)
+    feet_and_jacobians_into(chain_table(), q, p, jac)
+    assert np.allclose(p, p_ref) and np.allclose(jac, jac_ref)
     for i in range(4):
-        _leg(q, i, p, jac)
-        _solve_transposed(jac, tau[3 * i : 3 * i + 3].copy(), f)
-        assert np.allclose(p, p_ref[i]) and np.allclose(jac, jac_ref[i]) and np.allclose(f, f_ref[i])
+        _solve_transposed(jac[i], tau[3 * i : 3 * i + 3].copy(), f)
+        assert np.allclose(f, f_ref[i])
+
+
+def test_detector_reads_the_legs_of_its_robot() -> None:
+    """SlipDetector(robot=...) uses that robot's chain: on the first tick (trunk at the origin, level IMU) its
+    feet are the robot's feet in the trunk frame."""
+    from taslel_bench.robot.description import load_robot
+    from taslel_bench.robot.leg_chain import chain_table, feet_in_trunk
+
+    go1 = load_robot("go1")
+    out = SlipDetector(robot=go1).step(_obs(0.0, np.zeros(12), np.zeros(12)))
+    np.testing.assert_allclose(out.feet_w, feet_in_trunk(chain_table(go1), STAND), rtol=0, atol=1e-12)
+    assert np.abs(out.feet_w - feet_and_jacobians(STAND)[0]).max() > 1e-3  # not the A1's
 
 
 def _feet(xy: list[list[float]]) -> object:

@@ -10,7 +10,9 @@ In the hip frame (trunk axes, origin at the hip (abduction) joint), with the leg
 For the A1 and the Go1 (offsets only along y and -z, axes +x, +y, +y) this is the classic chain: hip roll, lateral
 offset, thigh pitch, thigh along -z, calf pitch, calf along -z to the foot-sphere centre. The inverse keeps the
 knee on the robot's side (``knee_sign``: -1 bends backwards, calf angle negative, as the A1). Angles [rad],
-positions [m]. The controller, the foothold search, the estimators' features and the slip signal all use this.
+positions [m]. The forward chain is :mod:`taslel_bench.robot.leg_chain`'s, which also gives it for all four legs at
+once (numpy, torch, compiled) with the foot Jacobians: the controller, the foothold search, the estimators'
+features and the slip signal all use that one chain.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import LegGeometry, RobotDescription
+from taslel_bench.robot.leg_chain import chain_row, knee_in_hip, leg_pose
 
 
 class LegKinematics:
@@ -74,13 +77,10 @@ class _Leg:
         self.b2, self.b32 = g.thigh_angle_rad, g.calf_angle_rad - g.thigh_angle_rad
         self.s1, self.s2, self.s3 = g.axis_signs
         self.knee = g.knee_sign
+        self.row = chain_row(g)  # the forward chain's numbers (leg_chain)
 
     def fk(self, q1: float, q2: float, q3: float) -> tuple[float, float, float]:
-        q1, q2, q3 = self.s1 * q1, self.s2 * q2 + self.b2, self.s3 * q3 + self.b32
-        x = self.dx - self.l2 * math.sin(q2) - self.l3 * math.sin(q2 + q3)
-        zp = self.dz - self.l2 * math.cos(q2) - self.l3 * math.cos(q2 + q3)
-        c, s = math.cos(q1), math.sin(q1)
-        return x, c * self.y0 - s * zp, s * self.y0 + c * zp
+        return leg_pose(self.row, q1, q2, q3, math.sin, math.cos)[:3]
 
     def ik(self, x: float, y: float, z: float) -> tuple[float, float, float]:
         y0, l2, l3 = self.y0, self.l2, self.l3
@@ -95,12 +95,5 @@ class _Leg:
 
     def knee_and_foot(self, x: float, y: float, z: float
                       ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-        q1, q2, q3 = self.ik(x, y, z)
-        q1, q2, q3 = self.s1 * q1, self.s2 * q2 + self.b2, self.s3 * q3 + self.b32
-        c, s = math.cos(q1), math.sin(q1)
-        out = []
-        for xs, zp in ((self.dx - self.l2 * math.sin(q2), self.dz - self.l2 * math.cos(q2)),
-                       (self.dx - self.l2 * math.sin(q2) - self.l3 * math.sin(q2 + q3),
-                        self.dz - self.l2 * math.cos(q2) - self.l3 * math.cos(q2 + q3))):
-            out.append((xs, c * self.y0 - s * zp, s * self.y0 + c * zp))
-        return out[0], out[1]
+        q = self.ik(x, y, z)
+        return knee_in_hip(self.row, *q, math.sin, math.cos), self.fk(*q)
