@@ -131,7 +131,7 @@ def _source_records(dirs: list[Path], manifests: list[dict],
          "filter_fraction": m.get("filter_fraction", 0.0), "filter_mu_scale": m.get("filter_mu_scale"),
          "filter_mu_range": m.get("filter_mu_range"),
          "dropped_filtered": dropped.get(str(d), {"episodes": 0, "windows": 0})}
-        for d, m in zip(dirs, manifests)
+        for d, m in zip(dirs, manifests, strict=True)
     ]
 
 

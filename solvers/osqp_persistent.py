@@ -163,10 +163,10 @@ class OsqpPersistent(PersistentBackend):
 
 
 @njit(cache=True, nogil=True)
-def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l,
-            u):  # pragma: no cover - compiled  # fmt: skip
+def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l_out,
+            u_out):  # pragma: no cover - compiled  # fmt: skip
     """OSQP's data in the fixed CSC orders: P's upper triangle, C = [A; G[g_rows]; unit rows of the
-    bounded variables]; l <= C x <= u with (b, b), (-inf, h), (lb, ub)."""
+    bounded variables]; l_out <= C x <= u_out with (b, b), (-inf, h), (lb, ub)."""
     m_eq, m_in = A.shape[0], g_rows.shape[0]
     for k in range(Px.shape[0]):
         Px[k] = P[P_rows[k], P_cols[k]]
@@ -175,9 +175,9 @@ def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C
         Cx[k] = A[r, c] if r < m_eq else (G[g_rows[r - m_eq], c] if r < m_eq + m_in else 1.0)
     q_out[:] = q
     for r in range(m_eq):
-        l[r], u[r] = max(b[r], -OSQP_INFTY), min(b[r], OSQP_INFTY)
+        l_out[r], u_out[r] = max(b[r], -OSQP_INFTY), min(b[r], OSQP_INFTY)
     for r in range(m_in):
-        l[m_eq + r], u[m_eq + r] = -OSQP_INFTY, min(h[g_rows[r]], OSQP_INFTY)
+        l_out[m_eq + r], u_out[m_eq + r] = -OSQP_INFTY, min(h[g_rows[r]], OSQP_INFTY)
     for i in range(bounded.shape[0]):
-        l[m_eq + m_in + i] = max(lb[bounded[i]], -OSQP_INFTY)
-        u[m_eq + m_in + i] = min(ub[bounded[i]], OSQP_INFTY)
+        l_out[m_eq + m_in + i] = max(lb[bounded[i]], -OSQP_INFTY)
+        u_out[m_eq + m_in + i] = min(ub[bounded[i]], OSQP_INFTY)

@@ -137,7 +137,7 @@ def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.6), squeeze=False)
-    for ax, (split, (y, mean, sigma)) in zip(axes[0], panels.items()):
+    for ax, (split, (y, mean, sigma)) in zip(axes[0], panels.items(), strict=True):
         ax.scatter(y, mean, s=3, alpha=0.35, label="mean")
         ax.scatter(y, mean - k * sigma, s=3, alpha=0.25, label=f"mean - {k:g} sigma")
         ax.plot([0, 1.3], [0, 1.3], "k--", lw=1)

@@ -217,8 +217,10 @@ def main(argv: list[str] | None = None) -> None:
 
 def git_commit() -> str:
     """The checkout's commit (short hash; ``+`` if the tree has changes), ``unknown`` outside git."""
+    def run_(*c: str) -> str:
+        return subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
+
     try:
-        run_ = lambda *c: subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
         return run_("rev-parse", "--short", "HEAD") + ("+" if run_("status", "--porcelain", "-uno") else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

@@ -374,7 +374,9 @@ def inloop_markdown(out: dict[str, object]) -> str:
              "time-to-safe [s] | tick p99 [µs] | ctrl p99 [µs] | distance [m] | intervention [N·m] | sliding % | "
              "mean mu_hat |"), "|" + "---|" * 14]
     for r in out["rows"]:  # type: ignore[union-attr]
-        ci = lambda n, r=r: f"{pct(r[n])} [{pct(r[n + '_lo'])}, {pct(r[n + '_hi'])}]"
+        def ci(n: str, r=r) -> str:
+            return f"{pct(r[n])} [{pct(r[n + '_lo'])}, {pct(r[n + '_hi'])}]"
+
         tts = r["time_to_safe_s_max"]
         lines.append(
             f"| {r['group']} | {r['estimator']} | {r['runs']} | {r['falls']} | {ci('over_low') if r['low_ticks'] else '—'} | "

@@ -86,7 +86,7 @@ def refused(overrides: list[str], out: Path, *texts: str) -> tuple[bool, str]:
         run(overrides, out)
     except Simulated:
         return False, "accepted: it would have been simulated"
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error is the case's answer: its message is checked
         msg = f"{type(exc).__name__}: {exc}"
         return all(t in msg for t in texts), msg.splitlines()[0][:160]
     finally:
@@ -410,7 +410,7 @@ def _(tmp: Path):
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             callback.SweepCallback().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}}))
-    except Exception as exc:  # noqa: BLE001 - Hydra turns this into a UserWarning and exits 0
+    except Exception as exc:  # Hydra turns this into a UserWarning and exits 0
         return False, f"raised {type(exc).__name__} (Hydra: a warning, exit 0)"
     code = callback.exit_code() if hasattr(callback, "exit_code") else 0
     return code == 1 and "report failed" in err.getvalue(), f"exit code {code}"
@@ -583,7 +583,7 @@ def _(tmp: Path):
     (out / "run.lock").write_text(json.dumps({"pid": 1, "host": socket.gethostname(), "started": "x"}))
     try:
         s = run([], out)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error is the case's answer
         return False, f"{type(exc).__name__}: {str(exc)[:100]}"
     return s.get("status") == "ok", str(s.get("stale_lock_taken_over", ""))
 
@@ -771,7 +771,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             try:
                 ok, detail = fn(Path(tmp))
-            except Exception as exc:  # noqa: BLE001 - a crash of the case is a bad behaviour
+            except Exception as exc:  # a crash of the case is a bad behaviour
                 ok, detail = False, f"crashed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:160]
                 if os.environ.get("FAULT_MATRIX_DEBUG"):
                     traceback.print_exc()

@@ -103,7 +103,7 @@ def _child(helper: str, overrides: list[str]) -> None:
     problem, backend = b.filter.backend_problem, b.backend
     backend.reset()
     for i, values in enumerate(seq.values):
-        for field, value in zip(QPSequence.FIELDS, values):
+        for field, value in zip(QPSequence.FIELDS, values, strict=True):
             np.copyto(getattr(problem, field), value)
         if i:
             cg.cg_begin()

@@ -9,6 +9,9 @@ ran, an unknown group option or key, a ``+key`` no part of the run reads (:mod:`
 any other mistake Hydra refuses before the first job, a job list that maps two jobs to one run folder).
 """
 
+# The GL check runs before the imports that load MuJoCo, which reads MUJOCO_GL once, at import:
+# ruff: noqa: E402
+
 from __future__ import annotations
 
 import errno

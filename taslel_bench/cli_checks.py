@@ -172,7 +172,7 @@ def check_overrides(argv: Sequence[str]) -> None:
 
     try:
         cfg = compose(group_args)
-    except Exception:  # noqa: BLE001 -- a composition error is reported by Hydra itself, with its own message
+    except Exception:  # a composition error is reported by Hydra itself, with its own message
         return
     known = _keys(cfg)
     optional = _optional_keys_read()

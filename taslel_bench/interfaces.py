@@ -209,7 +209,7 @@ class Estimator(Protocol):
         ...
 
 
-__all__ = [  # noqa: RUF022 - grouped by topic
+__all__ = [  # grouped by topic
     # QP
     "SOLVED", "QPBackend", "QPProblem", "QPSolution", "all_finite",
     # scenario and terrain

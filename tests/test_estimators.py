@@ -226,7 +226,7 @@ def test_checkpoint_round_trip(tmp_path: Path) -> None:
     assert meta["note"] == "test" and meta["model"]["tokens"] == "step"
     x = torch.from_numpy(X)
     with torch.no_grad():
-        for a, b in zip(model(x), loaded(x)):
+        for a, b in zip(model(x), loaded(x), strict=True):
             torch.testing.assert_close(a, b)
     with pytest.raises(FileNotFoundError, match="shipped checkpoints"):
         load_checkpoint(tmp_path / "missing")
@@ -267,7 +267,7 @@ def test_ensemble_combines_members_and_round_trips(tmp_path: Path) -> None:
     assert isinstance(loaded, EnsembleModel) and meta["ensemble"]["members"] == 3
     assert len(meta["normalisation"]) == 3
     with torch.no_grad():
-        for a, b in zip(ens.predict(x), loaded.predict(x)):
+        for a, b in zip(ens.predict(x), loaded.predict(x), strict=True):
             torch.testing.assert_close(a, b)
     est = LearnedEstimator("attention", checkpoint=tmp_path / "ens", prior_mu=0.5, conservative_k=1.0)
     for i in range(WINDOW_STEPS):
@@ -484,7 +484,9 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
     lo, hi = TRAIN_RANGES.motor_strength_scale
     for draws in (uni, edge):
         assert all(lo <= d.motor_strength_scale <= hi for d in draws)
-    near = lambda ds: np.mean([min(d.motor_strength_scale - lo, hi - d.motor_strength_scale) < 0.1 * (hi - lo) for d in ds])
+    def near(ds):
+        return np.mean([min(d.motor_strength_scale - lo, hi - d.motor_strength_scale) < 0.1 * (hi - lo) for d in ds])
+
     assert near(uni) == pytest.approx(0.2, abs=0.03) and near(edge) > 0.35
     # friction and operator settings are still uniform
     assert np.mean([d.friction for d in edge]) == pytest.approx(np.mean(TRAIN_RANGES.friction), abs=0.03)

@@ -154,7 +154,7 @@ def test_terrain_entities_are_the_plant_logs(logs_run):
     logs = [e for e in entities if {"key": "kind", "value": "Log"} in e["metadata"]]
     capsules = [g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
     assert len(logs) == len(capsules) > 0
-    for entity, g in zip(logs, capsules):
+    for entity, g in zip(logs, capsules, strict=True):
         cyl = entity["cylinders"][0]
         p = cyl["pose"]["position"]
         np.testing.assert_allclose([p.get("x", 0.0), p.get("y", 0.0), p.get("z", 0.0)], d.geom_xpos[g], atol=1e-12)

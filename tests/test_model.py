@@ -13,10 +13,10 @@ from taslel_bench.plant.contacts import FootContactReader, foot_geom_ids, measur
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.kinematics import LegKinematics
+from taslel_bench.robot.model import RobotModel
 
 A1 = load_robot("a1")
 KIN = LegKinematics(A1)
-from taslel_bench.robot.model import RobotModel
 
 
 @pytest.fixture(scope="module")

@@ -332,7 +332,7 @@ def test_report_never_crashes_on_bad_runs_and_names_the_file(tmp_path, capsys):
     assert exited.value.code == 1
     table = pd.read_parquet(sweep / "summary.parquet")
     assert len(table) == 3 and (table["status"] == "error").all()
-    messages = dict(zip(table["run_dir"], table["message"]))
+    messages = dict(zip(table["run_dir"], table["message"], strict=True))
     assert str(steps) in messages["seed=0"]
     assert str(sweep / "seed=1" / "config.yaml") in messages["seed=1"]
     assert str(sweep / "seed=2" / "summary.json") in messages["seed=2"]

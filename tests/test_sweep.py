@@ -185,7 +185,7 @@ def test_a_swept_none_level_splits_the_report_rows_and_the_fall_figure(tmp_path)
     frame = expand_overrides(pd.DataFrame(rows))
     assert group_columns(frame) == ["scenario", "solver", "estimator", "mismatch_plant"]
     table = summary_table(tmp_path, frame)
-    assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"])) == [("lossy", 2, "1/2"),
+    assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"], strict=True)) == [("lossy", 2, "1/2"),
                                                                                        ("none", 2, "0/2")]
     assert "figures skipped" not in write_report(tmp_path, frame).read_text()
     assert (tmp_path / "fall_rates.png").is_file()

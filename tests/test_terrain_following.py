@@ -13,9 +13,9 @@ from taslel_bench.interfaces import OBSTACLE, Box, Plane, Terrain
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.kinematics import LegKinematics
+from tests.conftest import compose_cfg
 
 KIN = LegKinematics(load_robot("a1"))
-from tests.conftest import compose_cfg
 
 LEVEL_POSE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])  # trunk at the origin, level, heading +x
 STEP_M = 0.05

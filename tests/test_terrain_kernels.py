@@ -63,7 +63,7 @@ def test_packed_query_with_the_heightfield_gives_the_old_bits():
         packed = PackedTerrain(parts)
         assert packed.compiled and packed.has_field
         for tol in (0.0, 0.005):
-            for a, b in zip(old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol)):
+            for a, b in zip(old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol), strict=True):
                 assert np.array_equal(a, b)
 
 
@@ -118,7 +118,7 @@ def test_a_part_of_another_kind_keeps_the_python_query(states):
     old, new = families(Terrain((Plane(1.0), Pillar())), True), families(Terrain((Plane(1.0), Pillar())), True)
     for state in st[:3]:
         x = inputs_for(pm, state, 0.8)
-        for f_old, f_new in zip(old.ineq_families, new.ineq_families):
+        for f_old, f_new in zip(old.ineq_families, new.ineq_families, strict=True):
             f_old.write_python(old.problem, x)
             f_new.write(new.problem, x)
         assert np.array_equal(old.problem.G, new.problem.G) and np.array_equal(old.problem.h, new.problem.h)
@@ -149,11 +149,11 @@ def test_compiled_family_writes_give_the_python_writes_bits(states, downhill):
         active = 0
         for state in st:
             for x in stance_variants(inputs_for(pm, state, 0.8)):
-                for f_old, f_new in zip(old.ineq_families, new.ineq_families):
+                for f_old, f_new in zip(old.ineq_families, new.ineq_families, strict=True):
                     f_old.write_python(old.problem, x)
                     f_new.write(new.problem, x)
                 assert np.array_equal(old.problem.G, new.problem.G) and np.array_equal(old.problem.h, new.problem.h)
-                for b_old, b_new in zip(old.barriers, new.barriers):
+                for b_old, b_new in zip(old.barriers, new.barriers, strict=True):
                     assert np.array_equal(b_old.h, b_new.h, equal_nan=True)
                     assert np.array_equal(b_old.h_e, b_new.h_e, equal_nan=True)
                     active += int(np.isfinite(b_new.h).sum())

@@ -169,7 +169,7 @@ def test_controller_references_are_rows_of_one_array():
     np.testing.assert_allclose(ctl.q_des, fresh.q_des, atol=1e-12)
     np.testing.assert_allclose(ctl.qd_des, fresh.qd_des, atol=1e-8)
     assert ctl.q_des.base is ctl._references and ctl.qd_des.base is ctl._references
-    assert quad.N_JOINTS == ctl.q_des.shape[0]
+    assert ctl.q_des.shape[0] == quad.N_JOINTS
 
 
 def _record_numpy(reader, data: mujoco.MjData, log, k: int) -> None:

@@ -126,7 +126,7 @@ def _raw(cfg: DictConfig, path: str) -> Any:
         for part in re.findall(r"[^.\[\]]+", path):
             node = node._get_node(int(part) if isinstance(node, ListConfig) else part)
         return node._value()
-    except Exception:  # noqa: BLE001 - only for the message
+    except Exception:  # only for the message
         return "?"
 
 

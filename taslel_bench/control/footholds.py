@@ -80,7 +80,7 @@ class FootholdPlanner:
         x0, y0 = touchdown_xy_w
         px = x0 + c * self.offsets_m
         py = y0 + s * self.offsets_m
-        h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py)])
+        h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py, strict=True)])
         feet_w = np.stack([px, py, h + self._foot_radius_m], axis=1)  # (n, 3) foot centres resting on the ground
         return (self._shin_violation(leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m)
                 + self._edge_violation(feet_w, h, heading) + SIZE_TIE * np.abs(self.offsets_m))

@@ -53,7 +53,7 @@ def terrain_normals(tr: EpisodeTrace, ticks: slice, sel: np.ndarray) -> np.ndarr
     if terrain is None or not sel.any():
         return out
     cache: dict[tuple[int, int], np.ndarray] = {}
-    for k, i in zip(*np.nonzero(sel)):
+    for k, i in zip(*np.nonzero(sel), strict=True):
         key = (round(xy[k, i, 0] * 1000), round(xy[k, i, 1] * 1000))
         if key not in cache:
             cache[key] = np.asarray(terrain.normal_at(key[0] / 1000, key[1] / 1000), float)

@@ -52,7 +52,7 @@ class ExactSum:
         sum_hi, sum_lo = np.zeros(exps.size, np.int64), np.zeros(exps.size, np.int64)
         np.add.at(sum_hi, inverse, hi)
         np.add.at(sum_lo, inverse, lo)
-        for e, h, low in zip(exps.tolist(), sum_hi.tolist(), sum_lo.tolist()):
+        for e, h, low in zip(exps.tolist(), sum_hi.tolist(), sum_lo.tolist(), strict=True):
             self.scaled += ((h << 26) + low) << (int(e) - 53 + _SCALE_BITS)
 
     def divided(self, count: int) -> float:

@@ -117,7 +117,7 @@ def robot_spec(robot: RobotDescription | None = None, options: PlantOptions | No
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 1, 0
         geom.condim = 3
-    for leg, foot in enumerate(quad.FOOT_FRAMES):
+    for foot in quad.FOOT_FRAMES:
         geom = spec.geom(foot)
         geom.parent.add_site(name=foot, pos=list(geom.pos))
     spec.body(quad.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])

@@ -34,7 +34,7 @@ def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
 
 def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, float]]:
     """(foot name, sliding friction coefficient) of every active foot contact, read from ``data.contact``."""
-    feet = {int(g): name for g, name in zip(foot_geom_ids(model), quad.FOOT_FRAMES)}
+    feet = {int(g): name for g, name in zip(foot_geom_ids(model), quad.FOOT_FRAMES, strict=True)}
     out = []
     for i in range(data.ncon):
         c = data.contact[i]

@@ -144,7 +144,7 @@ class McapStream:
     def _write_signals(self, frame: pd.DataFrame, channels: dict) -> None:
         times = frame["t_s"].tolist()
         for topic, spec in channels.items():
-            for t, msg in zip(times, signals.messages(frame, spec)):
+            for t, msg in zip(times, signals.messages(frame, spec), strict=True):
                 self._put_json(topic, t, msg)
 
     def _write_3d(self, qpos_rows: np.ndarray, frame: pd.DataFrame) -> None:

@@ -48,10 +48,7 @@ def _json_safe(value: object) -> object:
 
 def write_json(path: Path, data: object) -> None:
     def dump(tmp: Path) -> None:
-        if isinstance(data, dict):
-            payload = {k: _json_safe(v) for k, v in data.items()}
-        else:
-            payload = data
+        payload = {k: _json_safe(v) for k, v in data.items()} if isinstance(data, dict) else data
         tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n")
 
     atomic_write(path, dump)

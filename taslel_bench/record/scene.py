@@ -125,7 +125,7 @@ def body_transforms(tree: BodyTree, stamp_ns: int, pos: np.ndarray, quat: np.nda
         fm.FrameTransform(timestamp=ts, parent_frame_id=parent, child_frame_id=child,
                           translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
                           rotation=fm.Quaternion(w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3])))
-        for parent, child, p, q in zip(tree.parent_names, tree.names, pos, quat)
+        for parent, child, p, q in zip(tree.parent_names, tree.names, pos, quat, strict=True)
     ])  # fmt: skip
 
 
@@ -192,7 +192,7 @@ class Primitives:
 def robot_scene(m: mujoco.MjModel, tree: BodyTree, stamp_ns: int) -> fm.SceneUpdate:
     """The robot's collision geometry: one entity per body (id = body name), locked to the body frame."""
     entities = []
-    for body, name in zip(tree.ids, tree.names):
+    for body, name in zip(tree.ids, tree.names, strict=True):
         prims = Primitives()
         for g in range(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body]):
             is_foot = m.geom(g).name in quad.FOOT_FRAMES
@@ -218,7 +218,7 @@ def _part_primitives(part, prims: Primitives) -> bool:
         _floor(prims, *FLOOR_EXTENT_X_M, part.friction)
     elif isinstance(part, FrictionStrips):
         edges = [FLOOR_EXTENT_X_M[0], *part.edges_x_m, FLOOR_EXTENT_X_M[1]]
-        for x0, x1, mu in zip(edges[:-1], edges[1:], part.frictions):
+        for x0, x1, mu in zip(edges[:-1], edges[1:], part.frictions, strict=True):
             _floor(prims, x0, x1, mu)
     elif isinstance(part, Log):
         prims.capsule((part.x_m, part.y_m, part.z_m), _Z_TO_Y, part.radius_m, part.half_width_m, LOG_RGBA)

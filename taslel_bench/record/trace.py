@@ -442,11 +442,11 @@ def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...],
     """One array holding ``columns`` side by side, each (shape of one tick's value, initial value), and a view
     of shape (capacity, *shape) per column group (no copies: rows are written through the block)."""
     widths = [int(np.prod(shape)) for shape, _ in columns]
-    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns)])
+    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns, strict=True)])
     block = np.empty((capacity, init.shape[0]), dtype)
     block[:] = init
     views, start = [], 0
-    for w, (shape, _) in zip(widths, columns):
+    for w, (shape, _) in zip(widths, columns, strict=True):
         view = block[:, start : start + w]
         view = view[:, 0] if shape == () else view.reshape(capacity, *shape)
         assert np.shares_memory(view, block) or capacity * w == 0  # a view, never a copy

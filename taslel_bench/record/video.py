@@ -132,7 +132,7 @@ class RunFrames:
         import mujoco
 
         scene = self.renderer.scene
-        for foot, force in zip(self._feet[row], self._forces[row]):
+        for foot, force in zip(self._feet[row], self._forces[row], strict=True):
             norm = float(np.linalg.norm(force))
             if not np.isfinite(norm) or norm < 1.0 or scene.ngeom >= scene.maxgeom:
                 continue
@@ -314,5 +314,5 @@ def render_at_end_of_run(run_dir: Path, model, summary: dict, record) -> None:
         _, n = render_video(run_dir, model=model, summary=summary, fps=float(record.video_fps),
                             width=int(record.video_width), height=int(record.video_height))  # fmt: skip
         summary.update({"video_frames": n, "video_s": time.perf_counter() - t})
-    except Exception:  # noqa: BLE001 - a video must not lose the run
+    except Exception:  # a video must not lose the run
         summary["video_error"] = traceback.format_exc().strip().splitlines()[-1]

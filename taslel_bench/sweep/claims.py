@@ -76,7 +76,7 @@ def paper_claims(finished: pd.DataFrame) -> str:
     sections = []
     for keys, on_runs in settings:
         keys = keys if isinstance(keys, tuple) else (keys,)
-        label = ", ".join(f"`{c}={v}`" for c, v in zip(split, keys))
+        label = ", ".join(f"`{c}={v}`" for c, v in zip(split, keys, strict=True))
         body = _claims(pd.concat([nominal, on_runs]), level=4 if split else 3)
         if body:
             sections.append((f"### Filter setting {label}\n\n" if split else "") + body)

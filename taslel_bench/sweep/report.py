@@ -86,7 +86,7 @@ def read_steps(path: Path, columns: list[str] | None = None) -> pd.DataFrame | N
         return None
     try:
         return pd.read_parquet(path, columns=columns)
-    except Exception:  # noqa: BLE001 - ArrowInvalid, OSError, a missing column
+    except Exception:  # ArrowInvalid, OSError, a missing column
         return None
 
 
@@ -154,7 +154,7 @@ def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
     status = frame["status"] if "status" in frame else pd.Series("error", index=frame.index)
     for keys, g in groups:
         keys = keys if isinstance(keys, tuple) else (keys,)
-        row = dict(zip(cols, keys))
+        row = dict(zip(cols, keys, strict=True))
         solver = solver_label(row, frame)
         done = _finished(g)
         row.update({
@@ -200,7 +200,7 @@ def _fall_rate_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> bool:
     fixed = [f"{c} {keys[c].iloc[0]}" for c in keys if c not in shown]
     fig, ax = plt.subplots(figsize=(7, max(2.5, 0.22 * len(rates) + 1.2)))
     bars = ax.barh([" · ".join(row) for row in keys[shown].itertuples(index=False)], rates.to_numpy())
-    ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size())], fontsize=6, padding=2)
+    ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size(), strict=True)], fontsize=6, padding=2)
     ax.invert_yaxis()  # the table's order, top to bottom
     ax.set_xlim(0, 1.1)
     ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
@@ -289,7 +289,7 @@ def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
 
     try:
         return instantiate(OmegaConf.load(path).scenario).terrain.logs()
-    except Exception:  # noqa: BLE001 - a corrupt config.yaml: the figure is drawn without the logs
+    except Exception:  # a corrupt config.yaml: the figure is drawn without the logs
         return ()
 
 
@@ -398,7 +398,7 @@ def _run_commits(frame: pd.DataFrame) -> str:
     if "git_commit" not in frame.columns or frame.empty:
         return "an unrecorded code version"
     dirty = frame["git_dirty"] if "git_dirty" in frame.columns else pd.Series(False, index=frame.index)
-    labels = [f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}" for c, d in zip(frame["git_commit"], dirty)]
+    labels = [f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}" for c, d in zip(frame["git_commit"], dirty, strict=True)]
     counts = pd.Series(labels).value_counts()
     return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
 
@@ -462,7 +462,7 @@ def _guarded(make, what: str) -> tuple[list, str]:
     """(``make()``, "") or ([], a note naming the error): one bad run's files cost a figure, not the report."""
     try:
         return make(), ""
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error costs the figure, not the report
         return [], f"{what} skipped: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
 
 

@@ -310,7 +310,7 @@ def solve_time_figure(sweep_dir: Path, frame: pd.DataFrame, keys: list[str], plt
         return []
     period = 1e6 / float(done["control_rate_hz"].astype(float).iloc[0]) if "control_rate_hz" in done else ONE_MS_US
     fig, axes = plt.subplots(1, len(worlds), figsize=(4.2 * len(worlds) + 1, 3.4), squeeze=False, sharey=True)
-    for ax, w in zip(axes[0], worlds):
+    for ax, w in zip(axes[0], worlds, strict=True):
         for lab, t in sorted(data[w].items()):
             t = np.sort(t[np.isfinite(t)])
             if not t.size:

@@ -104,7 +104,7 @@ def _event_or_error(run_dir: Path, row: pd.Series) -> tuple[str, float] | str | 
     """:func:`event_of_run`, or the last line of its traceback when it fails (reported as the run's missing still)."""
     try:
         return event_of_run(run_dir, row)
-    except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+    except Exception:  # a still that cannot be drawn is reported, the report is still written
         return traceback.format_exc().strip().splitlines()[-1]
 
 
@@ -142,7 +142,7 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> li
             lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
                          f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link})\n\n"
                          f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
-        except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+        except Exception:  # a still that cannot be drawn is reported, the report is still written
             lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
     if not lines:
         return []
