@@ -195,7 +195,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="keep only the nominal-controller training episodes of these folders")
     a = ap.parse_args(argv)
     man = merge(a.out, a.base, a.extras, a.drop_filtered)
-    print(f"train: {man['splits']['train']['episodes']} episodes, {man['splits']['train']['windows']} windows -> {a.out}")
+    print(f"train: {man['splits']['train']['episodes']} episodes, {man['splits']['train']['windows']} windows -> "
+          f"{a.out}")
 
 
 if __name__ == "__main__":

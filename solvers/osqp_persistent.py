@@ -28,8 +28,8 @@ from solvers.settings import check_settings
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem, flag
 
-# Accurate u (docs/concepts.md, measured facts: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
-# Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
+# Accurate u (docs/concepts.md, measured facts: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no
+# relative one. Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
 # * condensed QPs (12 variables in u, no equality rows, P ~ I: well scaled): eps_abs 1e-6 without Ruiz
 #   scaling, rho adapted every 25 iterations -> max |du| 1e-6 N·m in 35 iterations, 28 % less time than
 #   eps_abs 1e-7 with scaling (7e-8 N·m); no answer rejected by the KKT check;
@@ -50,7 +50,8 @@ DEFAULT_SETTINGS: dict[str, Any] = {
     "verbose": False,
 }
 DEFAULT_SETTINGS_WITH_EQUALITIES: dict[str, Any] = {"eps_abs": 1e-8, "scaling": 10}
-OSQP_INFTY = 1e30  # OSQP's infinity (osqp.constant("OSQP_INFTY")): bounds beyond it are clipped to it, as osqp.OSQP does
+# OSQP's infinity (osqp.constant("OSQP_INFTY")): bounds beyond it are clipped to it, as osqp.OSQP does
+OSQP_INFTY = 1e30
 
 
 class OsqpPersistent(PersistentBackend):

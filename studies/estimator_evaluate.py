@@ -369,7 +369,8 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
     head = ["variant", "params", "train wall [s]", "train CPU [s]", "latency [ms]", "test MAE", "test RMSE",
             "test R²", "test bias", "test over", "shifted MAE", "shifted RMSE", "shifted bias", "shifted over"]
     head += [f"shifted over (k={k:g})" for k in ks] + [f"shifted MAE (k={k:g})" for k in ks]
-    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted over",
+    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted "
+                                                              "over",
              "bound chosen on val: test MAE / test over / shifted MAE / shifted over"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
@@ -397,8 +398,8 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
                   f"{100 * get(v, 'shifted', lo[0], 'overestimate_rate'):.1f} % ({lo[0]})" if lo else "—"]
         ch = [e for e in df[(df.variant == v) & (df.split == "shifted")].estimate if str(e).startswith("chosen")]  # type: ignore[attr-defined]
         cells += [f"{get(v, 'test', ch[0], 'mae'):.3f} / {100 * get(v, 'test', ch[0], 'overestimate_rate'):.1f} % / "
-                  f"{get(v, 'shifted', ch[0], 'mae'):.3f} / {100 * get(v, 'shifted', ch[0], 'overestimate_rate'):.1f} % "
-                  f"({ch[0][7:-1]})" if ch else "none ≤ 5 % on val"]
+                  f"{get(v, 'shifted', ch[0], 'mae'):.3f} / {100 * get(v, 'shifted', ch[0], 'overestimate_rate'):.1f} "
+                  f"% ({ch[0][7:-1]})" if ch else "none ≤ 5 % on val"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 

@@ -13,8 +13,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
 * useful share: share of the foot's loaded ticks with mu_hat >= min(mu, 0.5) - 0.1 (an estimate pinned at
   its floor is never over-estimated and scores 0 s to safe on a drop; this says whether it was any use);
-  ``useful_ready``: the same from the estimator's first ready tick on (the in-loop usefulness of the one-sided targets, c74fe88: after
-  the startup window, whose prior is the safe floor);
+  ``useful_ready``: the same from the estimator's first ready tick on (the in-loop usefulness of the one-sided targets,
+  c74fe88: after the startup window, whose prior is the safe floor);
 * over-estimation on the new surface: the same share over the foot's loaded ticks from that first loaded
   tick on (the drop target's "<= 5 % of that foot's ticks");
 * falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)

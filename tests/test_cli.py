@@ -55,7 +55,8 @@ def test_unknown_option_gets_did_you_mean_and_exit_2(tmp_path):
 
 
 def test_unknown_option_in_a_sweep_list_is_refused(tmp_path):
-    with pytest.raises(CliError, match="'claribel' is not an option of the config group 'solver'; did you mean clarabel"):
+    with pytest.raises(CliError, match="'claribel' is not an option of the config group 'solver'; did you mean "
+                                       "clarabel"):
         check_overrides(["-m", "solver=osqp,claribel"])
 
 

@@ -179,7 +179,8 @@ def test_signals_have_named_per_foot_fields(logs_run):
     _, _, joints, _ = messages["/joint_state"][5]
     assert joints["position_rad"]["FR_calf"] == pytest.approx(row["q_FR_calf_rad"])
     _, _, barrier, _ = messages["/barrier"][5]
-    assert {"h_m", "obstacle_h_m", "obstacle_h_e_mps", "obstacle_clearance_m"} <= set(barrier["FL"])  # logs: the obstacle family
+    # logs: the obstacle family
+    assert {"h_m", "obstacle_h_m", "obstacle_h_e_mps", "obstacle_clearance_m"} <= set(barrier["FL"])
 
 
 def test_the_shipped_layout_is_current_and_names_recorded_fields(logs_run):

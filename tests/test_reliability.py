@@ -50,7 +50,8 @@ def menagerie_like_scene(folder: Path) -> Path:
     (folder / "assets").mkdir(exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA_OBJ)
     xml = robot_spec().to_xml()
-    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>',
+    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" '
+                                         r'file="tetra.obj"/></asset>',
                  xml, count=1)
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
                                             'conaffinity="0" density="0" group="3"/>', 1)  # fmt: skip

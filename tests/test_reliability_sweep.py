@@ -35,7 +35,8 @@ def test_killed_worker_corrupt_folder_and_full_disk_leave_a_complete_table(tmp_p
     corrupt = folder / "duration=0.3,seed=1"
     old_summary = corrupt / "summary.json"
     old_summary.write_text(old_summary.read_text()[:300])  # truncated
-    old_files = {p.name: p.read_bytes() for p in corrupt.iterdir() if p.is_file() and p.suffix != ".log"}  # Hydra's log stays
+    # Hydra's log stays
+    old_files = {p.name: p.read_bytes() for p in corrupt.iterdir() if p.is_file() and p.suffix != ".log"}
 
     out = sweep(folder, "0,1,2,3", "kill=seed=2;enospc=seed=3")
     assert out.returncode == 1, out.stdout[-3000:] + out.stderr[-3000:]

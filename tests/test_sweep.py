@@ -78,7 +78,8 @@ def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
     assert "| flat | daqp | oracle | 2 | 0 | 0 | 0/2 |" in report  # runs, errors, degraded, falls
     # the first table: unsafe runs per group and why (the crashed job is not judged)
     assert report.index("## Unsafe runs per group (the verdict)") < report.index("## Safety and physics per group")
-    assert "| flat | daqp | oracle | 2 | 0/2 | 2 | 0 | 0 | 0 |" in report  # runs, unsafe, status_ok, not_judged, fell, tripped
+    # runs, unsafe, status_ok, not_judged, fell, tripped
+    assert "| flat | daqp | oracle | 2 | 0/2 | 2 | 0 | 0 | 0 |" in report
     assert "left no summary.json" in report
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
 

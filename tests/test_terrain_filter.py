@@ -256,7 +256,8 @@ def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
     from taslel_bench.config.settings import filter_settings
 
     assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is True  # the preset turns it
-    assert filter_settings(compose_cfg([]), load_robot("a1")).cone_edge_downhill is False  # the paper's filter does not have it
+    # the paper's filter does not have it
+    assert filter_settings(compose_cfg([]), load_robot("a1")).cone_edge_downhill is False
     with pytest.raises(Exception, match="cone_edge_downhill"):
         from taslel_bench.config.validate import validate
         validate(compose_cfg(["filter=terrain", "filter.cone_edge_downhill=maybe"]))

@@ -1,6 +1,6 @@
-"""The compiled terrain writes of ``filter=terrain`` (the terrain filter's cost work) against the code they replace: the same
-bits on walking states over terrains of every compiled kind (planes, logs, boxes, a ramp, a heightfield whose edge
-lies under the feet), with no foot in contact, every foot in contact and the gait's mix."""
+"""The compiled terrain writes of ``filter=terrain`` (the terrain filter's cost work) against the code they replace:
+the same bits on walking states over terrains of every compiled kind (planes, logs, boxes, a ramp, a heightfield whose
+edge lies under the feet), with no foot in contact, every foot in contact and the gait's mix."""
 
 from __future__ import annotations
 

@@ -193,5 +193,6 @@ class RobustJoblibLauncher(JoblibLauncher):
             except Exception as exc:  # e.g. unpicklable result: one job's error, not the sweep's
                 results[i] = settle(exc, job_overrides[i], folders[i])
         if died:
-            log.warning(f"a worker died; {len(died)} job(s) in flight are resubmitted: {sorted(first + i for i in died)}")
+            log.warning(f"a worker died; {len(died)} job(s) in flight are resubmitted: "
+                        f"{sorted(first + i for i in died)}")
         return died

@@ -6,7 +6,8 @@ the foot during stance, or on an edge itself, where the foot slides off. This pl
 along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen at
 lift-off (and again at mid-swing with the controller's ``replan_phase``) from the terrain object:
 
-* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to the robot's ``shin_axis_fraction`` of the
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to the robot's ``shin_axis_fraction`` of
+the
   way to the foot centre, radius ``shin_radius_m``) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
   height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far

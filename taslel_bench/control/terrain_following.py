@@ -70,7 +70,8 @@ class TerrainFollowingController(NominalController):
                  **kwargs) -> None:
         super().__init__(*args, **kwargs)
         if not 0.0 <= replan_phase < 1.0:
-            raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, 1)")
+            raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, "
+                             f"1)")
         self.terrain = terrain
         self.footholds = footholds
         self.replan_phase = replan_phase

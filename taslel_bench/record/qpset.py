@@ -333,7 +333,8 @@ def load(path: Path | str) -> QPSet:
     except QPSetError:
         raise
     except KeyError as exc:
-        raise QPSetError(f"{path}: not a complete {FORMAT} file: an array is missing ({exc.args[0] if exc.args else exc})") from None
+        raise QPSetError(f"{path}: not a complete {FORMAT} file: an array is missing "
+                         f"({exc.args[0] if exc.args else exc})") from None
     except Exception as exc:  # BadZipFile, EOFError, OSError, "contains pickled data" ...
         raise QPSetError(f"{path}: not a readable {FORMAT} file ({type(exc).__name__}: {exc})") from None
 

@@ -292,8 +292,8 @@ def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np
     """One tick: per foot (legs in :data:`quad.LEGS` order) the plant's and the filter's force arrows from the
     sphere's bottom point (``foot_w`` (4, 3) sphere centres [m], forces (4, 3) [N], world axes) and, for a
     swing foot with a barrier row, a sphere coloured by the smallest h [m] over ``barrier_h`` (name -> (4,))
-    and a line from the sphere's bottom down by that h (``foot_radius_m`` [m]: the plant's foot spheres). The update first deletes the previous tick's
-    entities of the topic."""
+    and a line from the sphere's bottom down by that h (``foot_radius_m`` [m]: the plant's foot spheres). The update
+    first deletes the previous tick's entities of the topic."""
     entities = []
     for i, leg in enumerate(quad.LEGS):
         prims = Primitives()

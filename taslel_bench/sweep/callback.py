@@ -94,5 +94,6 @@ class SweepCallback(Callback):
         tracker = config.get("tracker")
         if tracker is not None and tracker.get("name", "none") != "none" and not frame.empty:
             parent = log_sweep(tracker, sweep_dir, frame)
-            print(f"tracker {tracker.name}: {len(frame)} runs under parent run {parent} ({tracker.get('uri') or 'outputs/mlflow.db'})")
+            print(f"tracker {tracker.name}: {len(frame)} runs under parent run {parent} "
+                  f"({tracker.get('uri') or 'outputs/mlflow.db'})")
         return code

@@ -105,7 +105,8 @@ def _claims(frame: pd.DataFrame, level: int = 3) -> str:
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "nominal only", "filter on"])
-    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + f"\n{'#' * level} Claim by claim\n\n"
+    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + f"\n{'#' * level} Claim "
+                                                                                               f"by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
 
 
@@ -141,7 +142,8 @@ def _verdicts(runs: Runs, rows: list, sentences: list) -> None:
         parts.append(f"{scenario}: {_nominal_vs_filtered(off, on)}")
     if parts:
         sentences.append("**Safe runs** (the verdict: no fall, no trip, no sustained sliding, clearance and "
-                         "friction cone kept; the same rules with the filter on or off), unsafe runs of the judged ones: "
+                         "friction cone kept; the same rules with the filter on or off), unsafe runs of the judged "
+                         "ones: "
                          + "; ".join(parts) + ".")
 
 
@@ -288,8 +290,8 @@ def _intervention_and_falls(runs: Runs, rows: list, sentences: list) -> None:
         rows.append((f"falls, {scenario}", "no falls", _falls(off), _falls(on)))
         if len(on):
             parts.append(f"{scenario} {_mean(on, 'intervention_nm_mean'):.3g} N·m "
-                         f"({100 * _mean(on, 'intervention_nm_mean') / _mean(on, 'u_nom_nm_mean'):.0f} % of ||u_nom||), "
-                         f"falls {_falls(on)}")
+                         f"({100 * _mean(on, 'intervention_nm_mean') / _mean(on, 'u_nom_nm_mean'):.0f} % of "
+                         f"||u_nom||), falls {_falls(on)}")
     if parts:
         sentences.append("**Minimal intervention, no falls** (paper): the filter's mean ||u - u_nom|| against the "
                          "nominal torque's size, and its falls: " + "; ".join(parts) + ".")

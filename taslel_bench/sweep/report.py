@@ -481,7 +481,8 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     solver_text, solver_rows = solver_verdict(sweep_dir, frame, group_columns(frame)) if not frame.empty else ("", None)
     head = [
         "# taslel_bench sweep report\n",
-        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
+        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated "
+        f"{dt.datetime.now().isoformat(timespec='seconds')}\n",
         machine_busy_line(frame) if not frame.empty else "",
     ]
     lines = [

@@ -238,10 +238,11 @@ def _sentence(world: str, rows: pd.DataFrame) -> str:
         return (f"**{world}**: {_busy_note(rows)}no backend qualifies" + (f" ({rejected})." if rejected else ".")
                 + closest)
     best = ok.iloc[0]
-    text = (f"**{world}**: {_busy_note(rows)}ship **{best['backend']}** -- the fastest (solve p99 {best['solve_p99_us']:.0f} µs, median "
-            f"{best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) of the {len(ok)} backend(s) with no "
-            f"failed solve, no wrong answer in {int(best['checks'])} reference checks (u error <= "
-            f"{best['u_err_max_nm']:.1g} N·m) and no solve over the {best['period_us']:.0f} µs control period"
+    text = (f"**{world}**: {_busy_note(rows)}ship **{best['backend']}** -- the fastest (solve p99 "
+            f"{best['solve_p99_us']:.0f} µs, median {best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) "
+            f"of the {len(ok)} backend(s) with no failed solve, no wrong answer in {int(best['checks'])} reference "
+            f"checks (u error <= {best['u_err_max_nm']:.1g} N·m) and no solve over the {best['period_us']:.0f} µs "
+            f"control period"
             + _setups_text(best))
     return text + (f". Not qualified: {rejected}." if rejected else ".")
 

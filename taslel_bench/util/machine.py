@@ -1,5 +1,5 @@
-"""The machine, package versions and code version (git commit) a result was produced on (one place; reports of every package and
-axis use it: it is a leaf module with no dependency on the rest of the core)."""
+"""The machine, package versions and code version (git commit) a result was produced on (one place; reports of every
+package and axis use it: it is a leaf module with no dependency on the rest of the core)."""
 
 from __future__ import annotations
 
