@@ -110,7 +110,9 @@ def main(argv: list[str] | None = None) -> None:
     table = markdown(compare(a.checkpoints, sets, describe))
     print(table)
     if a.out is not None:
-        cmd = "python -m studies.estimator_compare " + " ".join(shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
+        cmd = "python -m studies.estimator_compare " + " ".join(
+            shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv)
+        )
         info = machine_info()
         head = [
             "# Estimator checkpoints on named window sets", "",

@@ -48,7 +48,9 @@ def predict(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.n
 
 
 @torch.no_grad()
-def predict_all(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def predict_all(
+    model: FrictionModel, X: np.ndarray, batch: int = 256
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(mean [-], sigma [-], lower quantile [-] or None) for windows X (N, 40, 36 or 38); windows with the
     filter features (38) serve a model without them too (sliced to ``model.cfg.n_raw``)."""
     X = X[..., : model.cfg.n_raw]
@@ -129,7 +131,9 @@ def fixture_mae(model: FrictionModel, subset: str | None = None) -> float:
         return float(np.abs(mean - f["y"][sel]).mean())
 
 
-def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], k: float) -> None:
+def scatter_png(
+    path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], k: float
+) -> None:
     """Predicted vs true friction for each split (the paper's regression figure), mean and mean - k sigma."""
     import matplotlib
 
@@ -417,7 +421,9 @@ def subset_table(df: object, names: list[str]) -> list[str]:
             cells = []
             for s in subs:
                 sel = d[(d.split == s) & (d.estimate == est)]
-                cells.append(f"{sel.mae.iloc[0]:.3f} / {100 * sel.overestimate_rate.iloc[0]:.1f} %" if len(sel) else "—")
+                cells.append(
+                    f"{sel.mae.iloc[0]:.3f} / {100 * sel.overestimate_rate.iloc[0]:.1f} %" if len(sel) else "—"
+                )
             lines.append(f"| {v} | {est} | " + " | ".join(cells) + " |")
     return lines
 
@@ -652,7 +658,9 @@ def main(argv: list[str] | None = None) -> None:
                          "deployed bound must over-estimate <= 5 %% (default: the validation split)")
     a = ap.parse_args(argv)
     rows = evaluate(a.data, a.variants, a.k, a.out, a.latency_runs, a.bound_set)
-    cmd = "python -m studies.estimator_evaluate " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+    cmd = "python -m studies.estimator_evaluate " + " ".join(
+        shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])
+    )
     write_report(rows, a.out, a.data, a.k, cmd)
     print(f"wrote {a.out}/report.md, metrics.csv")
 

@@ -513,7 +513,11 @@ def table(a: argparse.Namespace) -> None:
         vd = {n: off["variants"][v]["sets"][n]["verdict"] for n in sets}
         fo = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and r["low_ticks"]
               and r["over_low"] > OVER_TARGET]
-        fu = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and r["useful"] < USEFUL_TARGET]
+        fu = [
+            f.removeprefix("all ")
+            for f in fams
+            if (r := rows.get((f, f"{v} (staged)"))) and r["useful"] < USEFUL_TARGET
+        ]
         beats = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and (b := rows.get((f, fixed)))
                  and (r["distance_m"] > b["distance_m"] or r["intervention_nm_mean"] < b["intervention_nm_mean"])
                  and r["friction_saturated_rate"] <= b["friction_saturated_rate"]]

@@ -776,7 +776,10 @@ def main() -> None:
             try:
                 ok, detail = fn(Path(tmp))
             except Exception as exc:  # a crash of the case is a bad behaviour
-                ok, detail = False, f"crashed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:160]
+                ok, detail = (
+                    False,
+                    f"crashed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:160],
+                )
                 if os.environ.get("FAULT_MATRIX_DEBUG"):
                     traceback.print_exc()
         tried += 1

@@ -124,7 +124,9 @@ def test_gl_hint_is_one_line_naming_the_package():
 def test_unloadable_gl_library_gives_the_hint_not_a_traceback(tmp_path):
     out = _cli(tmp_path, "duration=0.1", env={"MUJOCO_GL": "no_such_gl"})
     assert out.returncode == 1
-    assert out.stderr.startswith("error: MUJOCO_GL=no_such_gl: MuJoCo could not load it") and "Traceback" not in out.stderr
+    assert (
+        out.stderr.startswith("error: MUJOCO_GL=no_such_gl: MuJoCo could not load it") and "Traceback" not in out.stderr
+    )
 
 
 def test_added_barrier_family_passes():

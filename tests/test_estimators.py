@@ -516,9 +516,14 @@ def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
     save_checkpoint(model, tmp_path / "tiny", {"training": {"epochs": 3, "train_windows": 12}})
     np.savez(tmp_path / "w.npz", X=X, y=y, window_filtered=np.arange(12) % 2 == 0)
     rows = compare([str(tmp_path / "tiny")], {"a": tmp_path / "w.npz"}, {"tiny": "test model"})
-    assert [(r["set"], r["estimate"], r["what"]) for r in rows] == [("a", "mean", "test model"), ("a", "lower", "test model")]
+    assert [(r["set"], r["estimate"], r["what"]) for r in rows] == [
+        ("a", "mean", "test model"),
+        ("a", "lower", "test model"),
+    ]
     assert set(rows[0]) >= {"mae[nominal]", "mae[filtered]", "over[all]"}
-    main([str(tmp_path / "tiny"), "--set", f"a={tmp_path / 'w.npz'}", "--out", str(tmp_path / "r.md"), "--threads", "1"])
+    main(
+        [str(tmp_path / "tiny"), "--set", f"a={tmp_path / 'w.npz'}", "--out", str(tmp_path / "r.md"), "--threads", "1"]
+    )
     assert "| tiny |" in (tmp_path / "r.md").read_text()
     with pytest.raises(SystemExit, match="expected NAME=PATH"):
         main([str(tmp_path / "tiny"), "--set", "nopath"])
@@ -533,7 +538,9 @@ def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> No
     name = cfg.get("checkpoint") or config
     meta = json.loads((Path(__file__).resolve().parents[1] / "estimators" / "checkpoints" / f"{name}.json").read_text())
     choice = meta["metrics"]["safety_calibration"]
-    assert (cfg.bound, float(cfg.conservative_k)) == (choice["bound"], float(choice["k"])), f"{config}.yaml vs {name}.json"
+    assert (cfg.bound, float(cfg.conservative_k)) == (choice["bound"], float(choice["k"])), (
+        f"{config}.yaml vs {name}.json"
+    )
     assert OmegaConf.to_container(cfg.band_margin) == choice["band_margin"], f"{config}.yaml vs {name}.json"
 
 

@@ -74,7 +74,9 @@ def test_packed_distance_equals_the_parts():
     terrain = Terrain((Plane(1.0), Log(1.0, -0.04, 0.1), Box((2.0, 0.0, 0.03), (0.3, 0.5, 0.03)),
                        Ramp(start_x_m=2.5, run_m=1.0, angle_deg=12.0)))  # fmt: skip
     c = np.column_stack([rng.uniform(0, 4, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.05, 0.3, 400)])
-    for a, b in zip(terrain.sphere_distance(c, 0.02), PackedTerrain(terrain.parts).sphere_distance(c, 0.02), strict=True):
+    for a, b in zip(
+        terrain.sphere_distance(c, 0.02), PackedTerrain(terrain.parts).sphere_distance(c, 0.02), strict=True
+    ):
         assert np.max(np.abs(a - b)) < 1e-12
 
 

@@ -59,11 +59,17 @@ def test_packed_query_with_the_heightfield_gives_the_old_bits():
     rng = np.random.default_rng(4)
     c = np.column_stack([rng.uniform(0.3, 2.7, 600), rng.uniform(-1.2, 1.2, 600), rng.uniform(-0.05, 0.3, 600)])
     c[:40, 0] = 0.5 + rng.uniform(-1e-3, 1e-3, 40)  # over the field's edge
-    for parts in ((Plane(1.0), field), (field,), (Plane(1.0), Log(1.0, 0.0, 0.05), field, Box((2.0, 0, 0.02), (0.2, 0.5, 0.02)))):
+    for parts in (
+        (Plane(1.0), field),
+        (field,),
+        (Plane(1.0), Log(1.0, 0.0, 0.05), field, Box((2.0, 0, 0.02), (0.2, 0.5, 0.02))),
+    ):
         packed = PackedTerrain(parts)
         assert packed.compiled and packed.has_field
         for tol in (0.0, 0.005):
-            for a, b in zip(old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol), strict=True):
+            for a, b in zip(
+                old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol), strict=True
+            ):
                 assert np.array_equal(a, b)
 
 
@@ -179,7 +185,10 @@ def test_with_mu_scaled_is_dataclass_replace(states):
     for name in TickInputs.__dataclass_fields__:
         va, vb = getattr(a, name), getattr(b, name)
         assert va is vb or np.array_equal(va, vb)
-    assert x.with_mu_scaled(0.9).mu_per_foot is not feet and replace(x, mu_per_foot=None).with_mu_scaled(0.9).mu_per_foot is None
+    assert (
+        x.with_mu_scaled(0.9).mu_per_foot is not feet
+        and replace(x, mu_per_foot=None).with_mu_scaled(0.9).mu_per_foot is None
+    )
 
 
 def test_heightfield_distance_within_a_cutoff_is_exact_below_it():

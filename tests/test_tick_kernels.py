@@ -35,7 +35,9 @@ def _tick_inputs(rng: np.random.Generator, fallback: bool, iterations: int | Non
 
 
 def _barrier(rng: np.random.Generator) -> SimpleNamespace:
-    return SimpleNamespace(name="clearance", h=rng.normal(size=4), h_e=rng.normal(size=4), psi_planned=rng.normal(size=4))
+    return SimpleNamespace(
+        name="clearance", h=rng.normal(size=4), h_e=rng.normal(size=4), psi_planned=rng.normal(size=4)
+    )
 
 
 @pytest.mark.parametrize("fallback", [False, True])

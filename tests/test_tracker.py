@@ -51,7 +51,9 @@ def test_a_two_run_sweep_is_logged_and_read_back(tmp_path):
         assert child.data.metrics["distance_m"] == pytest.approx(summary["distance_m"])
         assert child.data.metrics["fell"] == float(summary["fell"])
         assert child.data.tags["status"] == summary["status"] and child.data.tags["git_commit"] == summary["git_commit"]
-        assert child.data.tags["verdict"] == ("n/a" if "safe" not in summary else ("safe" if summary["safe"] else "unsafe"))
+        assert child.data.tags["verdict"] == (
+            "n/a" if "safe" not in summary else ("safe" if summary["safe"] else "unsafe")
+        )
         assert Path(child.data.tags["episode_mcap_path"]).is_file()
         names = {a.path for a in mlflow.MlflowClient(settings["uri"]).list_artifacts(child.info.run_id)}
         assert {"summary.json", "config.yaml", "events.json"} <= names

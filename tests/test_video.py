@@ -78,7 +78,11 @@ def test_record_video_renders_at_the_end_of_a_run(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert "video_error" not in summary, summary.get("video_error")
-    assert summary["video_frames"] == EXPECTED_FRAMES == imageio_ffmpeg.count_frames_and_secs(str(run_dir / "video.mp4"))[0]
+    assert (
+        summary["video_frames"]
+        == EXPECTED_FRAMES
+        == imageio_ffmpeg.count_frames_and_secs(str(run_dir / "video.mp4"))[0]
+    )
     assert len(pd.read_parquet(run_dir / "steps.parquet")) == 700
 
 

@@ -68,8 +68,10 @@ if submitit_config is not None:
             folders, _ = begin_launch(self.config, job_overrides, self.hydra_context, initial_job_idx)  # type: ignore[attr-defined]
             with _results_never_raise():
                 returns = super().launch(job_overrides, initial_job_idx)  # type: ignore[misc]
-            return [settle(ret, overrides, folder) for ret, overrides, folder in zip(returns, job_overrides, folders, strict=True)]
-
+            return [
+                settle(ret, overrides, folder)
+                for ret, overrides, folder in zip(returns, job_overrides, folders, strict=True)
+            ]
 
     class RobustLocalLauncher(_RobustSubmitit, LocalLauncher):
         """``hydra/launcher=submitit_local``: jobs as local processes through submitit."""

@@ -166,7 +166,9 @@ class SummaryStream:
         self.reference.mean("qp_solve_over_1ms_rate", solve > ONE_MS_US)
 
     def result(self) -> dict[str, object]:
-        out = {k: v for k, v in self.acc.result().items() if not k.startswith(("trunk_height", "intervention", "u_nom"))}
+        out = {
+            k: v for k, v in self.acc.result().items() if not k.startswith(("trunk_height", "intervention", "u_nom"))
+        }
         acc = self.acc.result()
         loco = self._locomotion_result(acc.get("trunk_height_mean_m", math.nan))
         filt = {k: acc[k] for k in ("intervention_nm_mean", "u_nom_nm_mean") if k in acc}

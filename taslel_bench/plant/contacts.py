@@ -168,7 +168,11 @@ class FootContactReader:
         on_obstacle = self._is_obstacle[np.where(robot_side[other, 0], pairs[:, 1], pairs[:, 0])]
         lower = self._is_lower_leg[robot_geom]
         body, shin, trip = ~lower, lower & ~on_obstacle, lower & on_obstacle
-        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = bool(body.any()), bool(shin.any()), bool(trip.any())
+        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = (
+            bool(body.any()),
+            bool(shin.any()),
+            bool(trip.any()),
+        )
         first = robot_geom[np.argmax(body)] if self.body_contact else robot_geom[0]
         self.non_foot_contact_name = self.model.body(self.model.geom_bodyid[first]).name
 

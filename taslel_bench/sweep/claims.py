@@ -170,7 +170,9 @@ def _grf(runs: Runs, rows: list, sentences: list) -> None:
     if on.empty:
         return
     for ax, label in (("z", "vertical"), ("xy", "lateral")):
-        rows.append((f"GRF MAE {label} [N], flat, stance", f"{PAPER_GRF_MAE_N[ax]}", "—", _stat(on, f"grf_mae_{ax}_n_stance")))
+        rows.append(
+            (f"GRF MAE {label} [N], flat, stance", f"{PAPER_GRF_MAE_N[ax]}", "—", _stat(on, f"grf_mae_{ax}_n_stance"))
+        )
         rows.append((f"GRF MAE {label} [N], flat, loaded", "—", "—", _stat(on, f"grf_mae_{ax}_n")))
     stance, loaded = _mean(on, "grf_mae_z_n_stance"), _mean(on, "grf_mae_z_n")
     outside = _mean(on, "contacts_loaded_outside_stance")

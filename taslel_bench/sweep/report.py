@@ -398,7 +398,10 @@ def _run_commits(frame: pd.DataFrame) -> str:
     if "git_commit" not in frame.columns or frame.empty:
         return "an unrecorded code version"
     dirty = frame["git_dirty"] if "git_dirty" in frame.columns else pd.Series(False, index=frame.index)
-    labels = [f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}" for c, d in zip(frame["git_commit"], dirty, strict=True)]
+    labels = [
+        f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}"
+        for c, d in zip(frame["git_commit"], dirty, strict=True)
+    ]
     counts = pd.Series(labels).value_counts()
     return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
 
@@ -469,10 +472,16 @@ def _guarded(make, what: str) -> tuple[list, str]:
 def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills: bool = False) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
-        frame = pd.read_parquet(sweep_dir / SUMMARY_TABLE) if (sweep_dir / SUMMARY_TABLE).is_file() else aggregate(sweep_dir)
+        frame = (
+            pd.read_parquet(sweep_dir / SUMMARY_TABLE)
+            if (sweep_dir / SUMMARY_TABLE).is_file()
+            else aggregate(sweep_dir)
+        )
     table = summary_table(sweep_dir, frame) if not frame.empty else pd.DataFrame()
     run_files.atomic_write(sweep_dir / "table.csv", lambda p: table.to_csv(p, index=False))
-    run_files.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
+    run_files.atomic_write(
+        sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g"))
+    )
     figures, skipped = _guarded(lambda: _figures(sweep_dir, frame, table) if not frame.empty else [], "figures")
     info = machine_info()
     keys = [c for c in group_columns(frame) if c in table]

@@ -207,7 +207,9 @@ def _busy_note(rows: pd.DataFrame) -> str:
 
 def _qualifies(r: pd.Series) -> bool:
     """No failed solve, no wrong answer (with reference checks), no deadline miss at the control period."""
-    return bool(r["success_rate"] == 1.0 and r["checks"] > 0 and r["wrong_rate"] == 0.0 and r["miss_period_rate"] == 0.0)
+    return bool(
+        r["success_rate"] == 1.0 and r["checks"] > 0 and r["wrong_rate"] == 0.0 and r["miss_period_rate"] == 0.0
+    )
 
 
 def _why_not(r: pd.Series) -> str:
