@@ -61,7 +61,8 @@ def compare(checkpoints: list[str], sets: dict[str, Path],
             for label, est in (("mean", mean), ("lower", lower)):
                 if est is None:
                     continue
-                rows.append({"checkpoint": Path(ck).name, **({"what": describe.get(Path(ck).name, "")} if describe else {}),
+                rows.append({"checkpoint": Path(ck).name,
+                             **({"what": describe.get(Path(ck).name, "")} if describe else {}),
                              "train windows": training.get("train_windows"), "epochs": training.get("epochs"),
                              "set": name,
                              "estimate": label, **score(np.maximum(est, 0.05) if label == "lower" else est, y, wf)})

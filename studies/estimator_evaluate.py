@@ -599,9 +599,9 @@ def _appendix_sections(table: object, train_rec: dict[str, dict], names: list[st
         "## Training records",
         "",
         "```",
-        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "members", "epochs", "global_steps",
-                                              "best_val_mae", "variance_scale_fitted_on_val", "torch_threads",
-                                              "note") if r.get(k) is not None}
+        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "members", "epochs",
+                                              "global_steps", "best_val_mae", "variance_scale_fitted_on_val",
+                                              "torch_threads", "note") if r.get(k) is not None}
                     for v, r in train_rec.items()}, indent=1),
         "```",
         "",

@@ -160,7 +160,8 @@ COLUMNS = (("falls", "falls", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
            ("time_to_safe_p95_s", "safe p95 [s]", "{:.3f}"), ("time_to_safe_max_s", "safe max [s]", "{:.3f}"),
            ("over_rate_new_mean", "over new", "{:.3f}"), ("over_rate_new_max", "over new max", "{:.3f}"),
            ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),
-           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"), ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
+           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"),
+           ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
            ("sliding_mps", "sliding [m/s]", "{:.4f}"))
 
 

@@ -183,8 +183,8 @@ def foxglove_view(mcap_path: Path, t_s: float, out: Path) -> tuple[float, int, n
     lo, hi = trunk - VIEW_HALF_M, trunk + VIEW_HALF_M
     fig = plt.figure(figsize=(4.8, 3.6), dpi=100)
     ax = fig.add_subplot(projection="3d", computed_zorder=False)  # drawn in order: terrain, robot, forces
-    drawn = sum(draw_entities(ax, scenes[topic], frames, lo, hi) for topic in ("/scene/terrain", "/scene/robot", "/scene/contact")
-                if topic in scenes)  # fmt: skip
+    drawn = sum(draw_entities(ax, scenes[topic], frames, lo, hi)
+                for topic in ("/scene/terrain", "/scene/robot", "/scene/contact") if topic in scenes)  # fmt: skip
     for axis, colour in zip(np.eye(3), ("red", "green", "blue"), strict=True):  # world axes under the trunk, 0.3 m
         ax.quiver(trunk[0], trunk[1], 0.0, *(0.3 * axis), color=colour, linewidth=1.5, arrow_length_ratio=0.15)
     ax.set_xlim(lo[0], hi[0])

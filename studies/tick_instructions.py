@@ -148,7 +148,8 @@ def report(counts: list[int]) -> str:
     glue = loop - limit_parts - per["contact-frame recording"]
     lines = [f"loop: {loop:,.0f} instructions per walking tick", *(f"  {p}: {x:,.0f}" for p, x in per.items()),
              f"  the limit's parts together: {limit_parts:,.0f} ({limit_parts / loop:.0%} of the loop)",
-             f"  the rest (glue between the parts, trace row copy included): {glue:,.0f} ({glue / loop:.0%})"]  # fmt: skip
+             f"  the rest (glue between the parts, trace row copy included): {glue:,.0f} "
+             f"({glue / loop:.0%})"]  # fmt: skip
     return "\n".join(lines)
 
 

@@ -348,8 +348,9 @@ def _fake_sweep(root: Path):
                 err[::wrong_every] = 2e-3
             run_dir = f"solver={solver},seed={seed}"
             (root / run_dir).mkdir(parents=True)
-            pd.DataFrame({"qp_solve_us": solve, "qp_iterations": np.full(n, 3, np.int32), "qp_u_error_nm": err,
-                          "qp_status": np.zeros(n, np.int8), "fell": False}).to_parquet(root / run_dir / "steps.parquet")
+            steps = pd.DataFrame({"qp_solve_us": solve, "qp_iterations": np.full(n, 3, np.int32), "qp_u_error_nm": err,
+                                  "qp_status": np.zeros(n, np.int8), "fell": False})
+            steps.to_parquet(root / run_dir / "steps.parquet")
             rows.append({"scenario": "flat", "solver": solver, "seed": seed, "status": "ok", "run_dir": run_dir,
                          "control_rate_hz": 1000.0, "qp_reference_tol_nm": 1e-3, "real_time_factor": 5.0,
                          "fell": False, "filter_enabled": True,

@@ -95,7 +95,8 @@ def test_leg_point_terms_are_the_models_foot_terms_at_the_foot(states):
 
 
 def test_friction_margin_shrinks_each_feet_cone_too(states):
-    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before commit 076b4de)."""
+    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before commit
+    076b4de)."""
     from taslel_bench.filter.robust import RobustSettings
 
     st, pm = states
@@ -333,7 +334,8 @@ def test_a_barrier_family_declares_its_rows(tmp_path):
     from taslel_bench.filter.barriers.attitude import TrunkAttitude
     from taslel_bench.sim.build import Built
 
-    over = ["filter=terrain", "+filter.barriers.attitude={_target_:taslel_bench.filter.barriers.attitude.TrunkAttitude}",
+    over = ["filter=terrain",
+            "+filter.barriers.attitude={_target_:taslel_bench.filter.barriers.attitude.TrunkAttitude}",
             "duration=0.3", "progress=false"]
     built = Built(compose_cfg(over))
     att = next(b for b in built.filter.barriers if isinstance(b, TrunkAttitude))

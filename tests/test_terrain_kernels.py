@@ -135,8 +135,8 @@ def families(terrain: Terrain, downhill: bool) -> SafetyFilter:
     barriers = [TerrainClearance(w), TerrainClearance(w, "tc_all", role=None), LegClearance(w, "shin"),
                 LegClearance(w, "shin_all", role=None, swing_only=True),
                 LegClearance(w, "knee", part="knee", radius_m=0.02)]  # fmt: skip
-    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill), TightReference(), barriers,
-                        terrain=terrain)  # fmt: skip
+    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill), TightReference(),
+                        barriers, terrain=terrain)  # fmt: skip
 
 
 def stance_variants(x: TickInputs) -> list[TickInputs]:

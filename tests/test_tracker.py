@@ -24,8 +24,9 @@ SHORT = ["duration=0.1", "progress=false", "filter.enabled=false"]
 
 
 def _settings(tmp_path: Path, **extra) -> dict:
-    return {"name": "mlflow", "uri": f"sqlite:///{tmp_path / 'mlflow.db'}", "artifact_root": str(tmp_path / "artifacts"),
-            "experiment": "test_sweep", "artifacts": ["summary", "report", "figures"], "large_files": "path", **extra}  # fmt: skip
+    return {"name": "mlflow", "uri": f"sqlite:///{tmp_path / 'mlflow.db'}",
+            "artifact_root": str(tmp_path / "artifacts"), "experiment": "test_sweep",
+            "artifacts": ["summary", "report", "figures"], "large_files": "path", **extra}  # fmt: skip
 
 
 def _two_run_sweep(sweep: Path) -> None:

@@ -127,8 +127,8 @@ def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:
         if options.urdf is None:
             raise
         reason = " ".join(str(exc).split())
-        raise fail("model.urdf", options.urdf, f"not a URDF of robot={robot.name} for the controller's model: {reason}") \
-            from exc
+        raise fail("model.urdf", options.urdf,
+                   f"not a URDF of robot={robot.name} for the controller's model: {reason}") from exc
 
 
 def plant_options(cfg: DictConfig, robot: RobotDescription) -> PlantOptions:

@@ -49,7 +49,8 @@ class FootholdPlanner:
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01, riser_ahead_m: float = 0.045,
                  riser_rise_m: float = 0.03, kinematics: LegKinematics | None = None) -> None:
-        """``kinematics``: the robot's legs (None: the default robot's); its foot radius and shin capsule are checked."""
+        """``kinematics``: the robot's legs (None: the default robot's); its foot radius and shin capsule are
+        checked."""
         self.terrain = terrain
         self.kinematics = kinematics if kinematics is not None else LegKinematics(default_robot())
         robot = self.kinematics.robot

@@ -151,8 +151,8 @@ def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[n
     return loaded & (f_t >= CONE_EDGE_FRACTION * mu_c.max(axis=2) * f_n), loaded
 
 
-def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,
-                   loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
+def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray,
+                   normals: np.ndarray, loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
                    suffix: str) -> None:
     """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
     filter's planned force against the true cone about the terrain normal under the foot."""

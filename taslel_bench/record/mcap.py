@@ -166,8 +166,8 @@ class McapStream:
         for i, t in enumerate(times):
             ns = self.log_ns(float(t))
             self._put("/tf", float(t), scene.body_transforms(p.tree, ns, pos[i], quat[i]).encode())
-            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()},
-                                         radius)
+            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i],
+                                         {n: v[i] for n, v in h.items()}, radius)
             self._put("/scene/contact", float(t), update.encode())
 
     def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:

@@ -76,8 +76,8 @@ def completed_summary(run_dir: Path) -> dict | None:
 
 
 SUPERSEDED = "superseded"
-RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt", "qps.npz",
-                "video.mp4")
+RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt",
+                "qps.npz", "video.mp4")
 MANIFEST_KEY = "result_files"  # in summary.json: {file name: size [bytes]} of the files the run wrote
 
 

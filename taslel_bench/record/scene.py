@@ -47,7 +47,8 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
     bw, bx, by, bz = np.moveaxis(b, -1, 0)
     return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)  # fmt: skip
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw],
+                    axis=-1)  # fmt: skip
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
@@ -308,8 +309,9 @@ def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np
             h_min = min(h.values())
             prims.sphere(foot_w[i], foot_radius_m + 0.01, barrier_rgba(h_min))
             end = bottom - np.array([0.0, 0.0, h_min])
-            prims.lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, pose=_pose((0, 0, 0), _IDENTITY),
-                                                thickness=0.004, scale_invariant=False,
+            prims.lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip,
+                                                pose=_pose((0, 0, 0), _IDENTITY), thickness=0.004,
+                                                scale_invariant=False,
                                                 points=[fm.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
                                                         for p in (bottom, end)],
                                                 color=_color(barrier_rgba(h_min))))  # fmt: skip

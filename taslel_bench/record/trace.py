@@ -459,7 +459,8 @@ def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...],
 @kernel
 def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock4, build_us, solve_us, margin,
                mu_hat_ready, nonfoot, shin, filtered, fallback, iterations, qpos, qvel, sensordata, u_nom, u,
-               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status, qp_iterations):  # pragma: no cover - compiled  # fmt: skip
+               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status,
+               qp_iterations):  # pragma: no cover - compiled  # fmt: skip
     """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order:
     :meth:`EpisodeTrace._allocate_loop_rows`) and of ``qp_status``, ``qp_iterations``: the tick's wall time and its
     parts from the perf_counter times ``clock0`` .. ``clock4`` [s]; the filter's columns only when ``filtered`` (else

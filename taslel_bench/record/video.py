@@ -265,7 +265,8 @@ def write_mp4(path: Path, frames, width: int, height: int, fps: float) -> int:
     def encode(tmp: Path) -> None:
         nonlocal count
         writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264", quality=6,
-                                             pix_fmt_out="yuv420p", macro_block_size=2, output_params=["-f", "mp4"])  # fmt: skip
+                                             pix_fmt_out="yuv420p", macro_block_size=2,
+                                             output_params=["-f", "mp4"])  # fmt: skip
         writer.send(None)
         try:
             for image in frames:

@@ -189,7 +189,8 @@ def _friction(runs: Runs, rows: list, sentences: list) -> None:
     if off.empty and on.empty:
         return
     for label, col in (("loaded contacts at the cone edge, mu=0.2", "friction_cone_edge_rate"),
-                       ("loaded contacts at the cone edge, worst 0.5 s, mu=0.2", "friction_cone_edge_rate_worst_window"),
+                       ("loaded contacts at the cone edge, worst 0.5 s, mu=0.2",
+                        "friction_cone_edge_rate_worst_window"),
                        ("stance contacts at the cone edge, mu=0.2", "friction_cone_edge_rate_stance"),
                        ("slip [m/s], loaded, mu=0.2", "slip_mps_mean"),
                        ("slip [m/s], stance, mu=0.2", "slip_mps_mean_stance"),
@@ -253,7 +254,8 @@ def _logs(runs: Runs, rows: list, sentences: list) -> None:
     if off.empty and on.empty:
         return
     for label, col in (("trips per run (foot + leg link)", "trips"), ("foot trips per run", "foot_trips"),
-                       ("leg-link trips per run", "shin_trips"), ("stance strikes on a flank per run", "stance_flank_strikes"),
+                       ("leg-link trips per run", "shin_trips"),
+                       ("stance strikes on a flank per run", "stance_flank_strikes"),
                        ("distance [m]", "distance_m"),
                        ("swing ticks touching a log", "obstacle_touch_swing_rate"),
                        ("filter's own barrier h < 0 on swing ticks", "barrier_negative_rate")):
@@ -287,8 +289,9 @@ def _intervention_and_falls(runs: Runs, rows: list, sentences: list) -> None:
         on, off = runs(scenario, True), runs(scenario, False)
         if on.empty and off.empty:
             continue
-        rows.append((f"intervention [N·m] (reference ||u_nom|| [N·m]), {scenario}", "minimal" if scenario == "obstacle" else "—",
-                     "—", f"{_stat(on, 'intervention_nm_mean')} ({_mean(on, 'u_nom_nm_mean'):.3g})"))
+        rows.append((f"intervention [N·m] (reference ||u_nom|| [N·m]), {scenario}",
+                     "minimal" if scenario == "obstacle" else "—", "—",
+                     f"{_stat(on, 'intervention_nm_mean')} ({_mean(on, 'u_nom_nm_mean'):.3g})"))
         rows.append((f"falls, {scenario}", "no falls", _falls(off), _falls(on)))
         if len(on):
             parts.append(f"{scenario} {_mean(on, 'intervention_nm_mean'):.3g} N·m "

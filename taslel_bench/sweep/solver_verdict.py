@@ -307,8 +307,8 @@ def solve_time_figure(sweep_dir: Path, frame: pd.DataFrame, keys: list[str], plt
     other = _varied(done, keys)
     labels = done.apply(lambda r: _label(r, other), axis=1)
     worlds = sorted(done["scenario"].astype(str).unique())
-    data = {w: {lab: _ticks(sweep_dir, runs)["qp_solve_us"] for lab, runs in done[done["scenario"] == w].groupby(labels)}
-            for w in worlds}  # fmt: skip
+    data = {w: {lab: _ticks(sweep_dir, runs)["qp_solve_us"]
+                for lab, runs in done[done["scenario"] == w].groupby(labels)} for w in worlds}  # fmt: skip
     if not any(np.isfinite(t).any() for d in data.values() for t in d.values()):
         return []
     period = 1e6 / float(done["control_rate_hz"].astype(float).iloc[0]) if "control_rate_hz" in done else ONE_MS_US

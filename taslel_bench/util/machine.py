@@ -117,4 +117,5 @@ class CpuWatch:
         d_total = total1 - self._steal0[1]
         steal = (steal1 - self._steal0[0]) / d_total if d_total > 0 else math.nan
         self.result = CpuShare(wall, (time.thread_time() - self._thread0) / wall, process / wall, self._load0,
-                               os.getloadavg()[0], steal, (usage.ru_nivcsw - self._usage0.ru_nivcsw) / wall)  # fmt: skip
+                               os.getloadavg()[0], steal,
+                               (usage.ru_nivcsw - self._usage0.ru_nivcsw) / wall)  # fmt: skip

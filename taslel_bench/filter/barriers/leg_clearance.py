@@ -118,8 +118,8 @@ def _leg_distance_rows(rows, field_heights, field_grid, has_field, k0, k1, k2, k
     # heightfield is not measured to it: _hfield_distance_within)
     terrain_distance_within(rows, field_heights, field_grid, has_field, points, radius, 0.0, activation, dist, normal,
                             closest)  # fmt: skip
-    _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation, legs,
-              h_out, he_out)
+    _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation,
+              legs, h_out, he_out)
 
 
 @kernel
