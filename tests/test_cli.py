@@ -164,3 +164,18 @@ def test_old_solver_name_is_refused_with_the_new_one_before_any_folder(tmp_path)
     assert "solver=osqp_persistent: 'osqp_persistent' is an old name, refused" in out.stderr
     assert "solver=osqp is now the persistent osqp" in out.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_console_logging_prints_the_package_info_lines_plainly_on_stderr(capsys):
+    """The entry points' console: a library module's INFO line appears as its bare text on the current stderr,
+    once (not repeated by the root logger's handlers)."""
+    import logging
+
+    from taslel_bench.util.log import console_logging
+
+    console_logging()
+    console_logging()  # idempotent: one handler
+    logging.getLogger("taslel_bench.sweep.stills").info("report: still strips and clips %d/%d", 0, 3)
+    logging.getLogger("taslel_bench.sweep.stills").debug("not shown")
+    captured = capsys.readouterr()
+    assert captured.err == "report: still strips and clips 0/3\n" and captured.out == ""

@@ -28,6 +28,7 @@ from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
+from taslel_bench.util.log import console_logging
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
@@ -532,6 +533,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--keep-stills", action="store_true",
                     help="keep still strips and clips newer than their run's files instead of drawing them again")
     args = ap.parse_args(argv)
+    console_logging()
     if not args.sweep_dir.is_dir():
         print(f"error: not a folder: {args.sweep_dir}", file=sys.stderr)
         raise SystemExit(2)
