@@ -21,7 +21,7 @@ EVENTS = "events.json"
 OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may hold commas and spaces)
 
 
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp_path)`` then rename to ``path`` (same folder, atomic on POSIX). An OSError (a full
     disk) is raised naming ``path``, not the temporary file."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
