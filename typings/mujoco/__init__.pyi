@@ -3,3 +3,6 @@
 from typing import Any
 
 def __getattr__(name: str) -> Any: ...
+
+# a module variable, not only an attribute read: the tick bench replaces it with its timed wrapper
+mj_step: Any
