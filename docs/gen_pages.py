@@ -171,7 +171,9 @@ def unit_of(key: str) -> str:
 def _source_definitions() -> dict[str, tuple[str, str]]:
     """key -> (where it is set, file:line; the comment on that line) for string keys set in the source."""
     found: dict[str, tuple[str, str]] = {}
-    pat = re.compile(r"""(?:out|summary|s|row|d)\[\s*["']([a-z][a-z0-9_]*)["']\s*\]\s*=|["']([a-z][a-z0-9_]*)["']\s*:\s""")
+    pat = re.compile(
+        r"""(?:out|summary|s|row|d)\[\s*["']([a-z][a-z0-9_]*)["']\s*\]\s*=|["']([a-z][a-z0-9_]*)["']\s*:\s"""
+    )
     for d in SOURCE_DIRS:
         for path in sorted((REPO / d).rglob("*.py")):
             for n, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
@@ -280,7 +282,11 @@ def results_pages() -> list[str]:
         names.append(name)
         dst = DOCS / "results" / name
         readme = folder / "README.md"
-        body = readme.read_text() if readme.is_file() else f"# `results/{name}/`\n\n(No README: see `results/README.md`.)\n"
+        body = (
+            readme.read_text()
+            if readme.is_file()
+            else f"# `results/{name}/`\n\n(No README: see `results/README.md`.)\n"
+        )
         # links into the folder's files are shown as paths (the reports live in the repository, not the site)
         body = re.sub(r"\]\((?!https?://)([^)#]+)\)", lambda m, name=name: f"] (`results/{name}/{m.group(1)}`)", body)
         figures = sorted(folder.glob("*.png"))

@@ -101,7 +101,10 @@ class WindowDataModule(L.LightningDataModule):
                 if self.crop_steps > X.shape[1]:
                     raise ValueError(f"crop_steps={self.crop_steps} exceeds the {X.shape[1]}-sample windows")
                 X = X[:, -self.crop_steps :]
-            self.tensors[split] = (torch.from_numpy(np.asarray(X, np.float32)), torch.from_numpy(np.asarray(y, np.float32)))
+            self.tensors[split] = (
+                torch.from_numpy(np.asarray(X, np.float32)),
+                torch.from_numpy(np.asarray(y, np.float32)),
+            )
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         return DataLoader(TensorDataset(*self.tensors[split]), batch_size=self.batch_size, shuffle=shuffle)

@@ -246,7 +246,8 @@ class LearnedEstimator:
                 f"checkpoint {checkpoint!r} holds a {meta['model']['variant']!r} model, not {variant!r}"
             )
         if bound == "quantile" and not float(meta["model"].get("lower_quantile", 0.0)) > 0:
-            raise ValueError(f"bound='quantile' needs a checkpoint with a lower-quantile head ({checkpoint or variant})")
+            raise ValueError(f"bound='quantile' needs a checkpoint with a lower-quantile head "
+                             f"({checkpoint or variant})")
         return model, meta
 
     def _init_buffers(self, hold_min_samples: int) -> None:

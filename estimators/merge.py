@@ -131,7 +131,7 @@ def _source_records(dirs: list[Path], manifests: list[dict],
          "filter_fraction": m.get("filter_fraction", 0.0), "filter_mu_scale": m.get("filter_mu_scale"),
          "filter_mu_range": m.get("filter_mu_range"),
          "dropped_filtered": dropped.get(str(d), {"episodes": 0, "windows": 0})}
-        for d, m in zip(dirs, manifests)
+        for d, m in zip(dirs, manifests, strict=True)
     ]
 
 
@@ -195,7 +195,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="keep only the nominal-controller training episodes of these folders")
     a = ap.parse_args(argv)
     man = merge(a.out, a.base, a.extras, a.drop_filtered)
-    print(f"train: {man['splits']['train']['episodes']} episodes, {man['splits']['train']['windows']} windows -> {a.out}")
+    print(f"train: {man['splits']['train']['episodes']} episodes, {man['splits']['train']['windows']} windows -> "
+          f"{a.out}")
 
 
 if __name__ == "__main__":

@@ -198,6 +198,6 @@ def fit_band_margin(y: np.ndarray, mean: np.ndarray, bound: np.ndarray, mu_min: 
     bm = BandMargin(tuple(float(e) for e in edges), tuple(float(grid[i]) for i in pick))
     mu = np.maximum(bm.apply(mean, bound), mu_min)
     info = {"useful": float(useful(y, mu).mean()), "useful_worst_band": float(worst[pick])}
-    for (lo, hi), sel in zip([b for b in BANDS if b[1] <= LOW_MU], low_bands):
+    for (lo, hi), sel in zip([b for b in BANDS if b[1] <= LOW_MU], low_bands, strict=True):
         info[f"over_{band_label(lo, hi)}"] = float(overestimates(y[sel], mu[sel]).mean()) if sel.any() else float("nan")
     return bm, info

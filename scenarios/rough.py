@@ -40,9 +40,12 @@ class RoughGround(FlatGround):
         def draw(rng: np.random.Generator) -> np.ndarray:
             return rough_heights(rng, nrow, ncol, amp, k, flat, blend)
 
-        heights = draw(np.random.default_rng(integer("scenario.seed", seed, 0, 2**31 - 1))) if seed is not None else None
-        field = HeightField(heights, draw=draw, centre_x_m=(x_lo + x_hi) / 2.0, centre_y_m=0.0, half_x_m=(x_hi - x_lo) / 2.0,
-                            half_y_m=half, friction=self.friction, role=OBSTACLE)  # fmt: skip
+        heights = (
+            draw(np.random.default_rng(integer("scenario.seed", seed, 0, 2**31 - 1))) if seed is not None else None
+        )
+        field = HeightField(heights, draw=draw, centre_x_m=(x_lo + x_hi) / 2.0, centre_y_m=0.0,
+                            half_x_m=(x_hi - x_lo) / 2.0, half_y_m=half, friction=self.friction,
+                            role=OBSTACLE)  # fmt: skip
         self.terrain = Terrain((SunkFloor(self.friction, -self.amplitude_m - 1e-3), field))
 
 

@@ -28,8 +28,8 @@ from solvers.settings import check_settings
 from solvers.sparse import PatternCSC
 from taslel_bench.interfaces import QPProblem, flag
 
-# Accurate u (docs/concepts.md, measured facts: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no relative one.
-# Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
+# Accurate u (docs/concepts.md, measured facts: defaults are off by ~0.05-0.08 N·m): tight absolute tolerance, no
+# relative one. Measured on consecutive filter QPs of obstacle and low_friction runs (warm started, against DAQP):
 # * condensed QPs (12 variables in u, no equality rows, P ~ I: well scaled): eps_abs 1e-6 without Ruiz
 #   scaling, rho adapted every 25 iterations -> max |du| 1e-6 N·m in 35 iterations, 28 % less time than
 #   eps_abs 1e-7 with scaling (7e-8 N·m); no answer rejected by the KKT check;
@@ -50,7 +50,8 @@ DEFAULT_SETTINGS: dict[str, Any] = {
     "verbose": False,
 }
 DEFAULT_SETTINGS_WITH_EQUALITIES: dict[str, Any] = {"eps_abs": 1e-8, "scaling": 10}
-OSQP_INFTY = 1e30  # OSQP's infinity (osqp.constant("OSQP_INFTY")): bounds beyond it are clipped to it, as osqp.OSQP does
+# OSQP's infinity (osqp.constant("OSQP_INFTY")): bounds beyond it are clipped to it, as osqp.OSQP does
+OSQP_INFTY = 1e30
 
 
 class OsqpPersistent(PersistentBackend):
@@ -163,10 +164,10 @@ class OsqpPersistent(PersistentBackend):
 
 
 @njit(cache=True, nogil=True)
-def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l,
-            u):  # pragma: no cover - compiled  # fmt: skip
+def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C_cols, Px, Cx, q_out, l_out,
+            u_out):  # pragma: no cover - compiled  # fmt: skip
     """OSQP's data in the fixed CSC orders: P's upper triangle, C = [A; G[g_rows]; unit rows of the
-    bounded variables]; l <= C x <= u with (b, b), (-inf, h), (lb, ub)."""
+    bounded variables]; l_out <= C x <= u_out with (b, b), (-inf, h), (lb, ub)."""
     m_eq, m_in = A.shape[0], g_rows.shape[0]
     for k in range(Px.shape[0]):
         Px[k] = P[P_rows[k], P_cols[k]]
@@ -175,9 +176,9 @@ def _gather(P, q, A, b, G, h, lb, ub, g_rows, bounded, P_rows, P_cols, C_rows, C
         Cx[k] = A[r, c] if r < m_eq else (G[g_rows[r - m_eq], c] if r < m_eq + m_in else 1.0)
     q_out[:] = q
     for r in range(m_eq):
-        l[r], u[r] = max(b[r], -OSQP_INFTY), min(b[r], OSQP_INFTY)
+        l_out[r], u_out[r] = max(b[r], -OSQP_INFTY), min(b[r], OSQP_INFTY)
     for r in range(m_in):
-        l[m_eq + r], u[m_eq + r] = -OSQP_INFTY, min(h[g_rows[r]], OSQP_INFTY)
+        l_out[m_eq + r], u_out[m_eq + r] = -OSQP_INFTY, min(h[g_rows[r]], OSQP_INFTY)
     for i in range(bounded.shape[0]):
-        l[m_eq + m_in + i] = max(lb[bounded[i]], -OSQP_INFTY)
-        u[m_eq + m_in + i] = min(ub[bounded[i]], OSQP_INFTY)
+        l_out[m_eq + m_in + i] = max(lb[bounded[i]], -OSQP_INFTY)
+        u_out[m_eq + m_in + i] = min(ub[bounded[i]], OSQP_INFTY)

@@ -97,7 +97,7 @@ class PersistentBackend:
         contract), so their bytes are read once per mask object (the objects are kept alive, so ``is``
         cannot match a different, new mask)."""
         masks = (problem.P_pattern, problem.A_pattern, problem.G_pattern)
-        if self._masks is None or any(a is not b for a, b in zip(masks, self._masks)):
+        if self._masks is None or any(a is not b for a, b in zip(masks, self._masks, strict=True)):
             self._masks = masks
             self._masks_key = layout_key(problem)[:6]
         return self._masks_key
@@ -154,7 +154,7 @@ class PersistentBackend:
             t2 = time.perf_counter()
             res = self._solve()
             t3, cpu3 = time.perf_counter(), time.thread_time()
-        except Exception as exc:  # a native failure must not end the episode  # noqa: BLE001
+        except Exception as exc:  # a native failure must not end the episode
             self.reset()
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
         out = checked(

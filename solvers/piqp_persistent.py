@@ -57,7 +57,9 @@ class PiqpPersistent(PersistentBackend):
         if self.backend == "dense":
             self._P, self._A, self._G = (np.asfortranarray(m) for m in (problem.P, problem.A, G))
         else:
-            self._P, self._A, self._G = (p.matrix(m) for p, m in zip(self._pats, (problem.P, problem.A, G)))
+            self._P, self._A, self._G = (
+                p.matrix(m) for p, m in zip(self._pats, (problem.P, problem.A, G), strict=True)
+            )
         self._c, self._b, self._h = problem.q.copy(), problem.b.copy(), problem.h[self._rows]
         self._xl, self._xu = problem.lb.copy(), problem.ub.copy()
 

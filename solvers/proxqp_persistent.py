@@ -1,9 +1,9 @@
 """Persistent ProxQP (``proxsuite.proxqp.dense.QP``): ``init`` once per layout, ``update`` each tick, warm
 started from the previous primal-dual solution (``WARM_START_WITH_PREVIOUS_RESULT``).
 
-Accuracy trap (docs/concepts.md, measured facts): warm started at ``eps_abs >= 1e-7`` ProxQP can stop after an iteration or two,
-primal/dual residuals fine, with u wrong by N·m -- its default termination does not look at the duality
-gap. So ``check_duality_gap`` is on with a tight absolute gap tolerance, and the harness check
+Accuracy trap (docs/concepts.md, measured facts): warm started at ``eps_abs >= 1e-7`` ProxQP can stop after an
+iteration or two, primal/dual residuals fine, with u wrong by N·m -- its default termination does not look at the
+duality gap. So ``check_duality_gap`` is on with a tight absolute gap tolerance, and the harness check
 (:mod:`solvers.checks`) tests the gap again on the original problem.
 
 Inequalities are ``-inf <= G x <= h`` (ProxQP takes infinite entries); bounds go in as ProxQP's native

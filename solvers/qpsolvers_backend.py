@@ -154,7 +154,7 @@ class QpsolversBackend:
         try:
             red = reduce(problem, self.bounds == "rows", self.presolve)
             qpp = self._qpsolvers_problem(red, problem)
-        except Exception as exc:  # malformed problem: report, do not raise  # noqa: BLE001
+        except Exception as exc:  # malformed problem: report, do not raise
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
         t1, cpu1 = time.perf_counter(), time.thread_time()
         try:
@@ -162,7 +162,7 @@ class QpsolversBackend:
                 warnings.simplefilter("ignore")  # failures are reported through the status instead
                 sol = qpsolvers.solve_problem(qpp, solver=self.solver, initvals=self._x_prev, **self.settings)
             t2, cpu2 = time.perf_counter(), time.thread_time()
-        except Exception as exc:  # qpsolvers raises ProblemError / SolverError on some failures  # noqa: BLE001
+        except Exception as exc:  # qpsolvers raises ProblemError / SolverError on some failures
             return BackendSolution(None, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t1)
         overhead = t1 - t0
         z, z_box = red.original_duals(problem.n, problem.G.shape[0], sol.z, sol.z_box)

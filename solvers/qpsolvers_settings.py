@@ -12,8 +12,8 @@ from typing import Any
 
 # name -> constructor arguments of QpsolversBackend (settings = native solver settings)
 QPSOLVERS_DEFAULTS: dict[str, dict[str, Any]] = {
-    # OSQP (ADMM). Default tolerances are off by ~0.05-0.26 N·m in u here (docs/concepts.md, measured facts); eps_abs 1e-6 with
-    # eps_rel 0 and solution polishing gives |u - u_ref| ~ 3e-7 N·m on the fixture (5e-7 max).
+    # OSQP (ADMM). Default tolerances are off by ~0.05-0.26 N·m in u here (docs/concepts.md, measured facts); eps_abs
+    # 1e-6 with eps_rel 0 and solution polishing gives |u - u_ref| ~ 3e-7 N·m on the fixture (5e-7 max).
     "osqp": {"settings": {"eps_abs": 1e-6, "eps_rel": 0.0, "polishing": True, "max_iter": 20000},
              "check": {"primal": 1e-6, "dual": 1e-5, "gap": 1e-5}},
     # Clarabel (interior point). The 1e-5 regularisation makes its KKT system ill-conditioned: at 1e-9
@@ -26,8 +26,8 @@ QPSOLVERS_DEFAULTS: dict[str, dict[str, Any]] = {
                  "check": {"primal": 1e-6, "dual": 1e-5, "gap": 1e-5}},
     # PIQP (proximal interior point, dense interface): 2e-7 N·m.
     "piqp": {"settings": {"eps_abs": 1e-9, "eps_rel": 0.0}, "check": {"primal": 1e-6, "dual": 1e-5, "gap": 1e-5}},
-    # ProxQP (dense), cold started. The duality-gap test is on (docs/concepts.md, measured facts: without it ProxQP can stop
-    # early with u wrong by N·m): 2e-8 N·m.
+    # ProxQP (dense), cold started. The duality-gap test is on (docs/concepts.md, measured facts: without it ProxQP can
+    # stop early with u wrong by N·m): 2e-8 N·m.
     "proxqp": {"settings": {"eps_abs": 1e-9, "eps_rel": 0.0, "check_duality_gap": True,
                             "eps_duality_gap_abs": 1e-9, "eps_duality_gap_rel": 0.0},
                "check": {"primal": 1e-6, "dual": 1e-5, "gap": 1e-5}},

@@ -71,9 +71,9 @@ SPEED_CASES: dict[str, list[str]] = {
     **{f"{name}_osqp": [*o, "duration=10", "solver=osqp"] for name, o in SPEED_WORLDS.items()
        if "filter.enabled=false" not in o},
 }
-# the terrain-filter set (the terrain filter's cost work): filter=terrain on the terrain worlds under the preset's nominal
-# (terrain following, foothold choice) and under the paper's flat-ground nominal, the landing barrier switched on,
-# the paper's filter under the preset's nominal; 5 s each, seeds 0 and 1
+# the terrain-filter set (the terrain filter's cost work): filter=terrain on the terrain worlds under the preset's
+# nominal (terrain following, foothold choice) and under the paper's flat-ground nominal, the landing barrier switched
+# on, the paper's filter under the preset's nominal; 5 s each, seeds 0 and 1
 FLAT_GROUND_NOMINAL = ["controller.terrain_following=false", "controller.foothold_search=0.0",
                        "controller.foothold_replan_phase=0.0", "controller.swing_from_measured_hips=false"]
 TERRAIN_WORLDS = ("steps", "rough", "logs", "slope", "friction_patch", "low_friction")

@@ -60,7 +60,9 @@ def compare(a: Path, b: Path) -> int:
         diff = [k for k in keys if not _volatile(k) and not same(sa.get(k), sb.get(k))]
         fa, fb = (pd.read_parquet(r / "steps.parquet") for r in (run_a, run_b))
         cols = [c for c in fa.columns if not c.startswith("tick_") and c not in ("qp_solve_us", "qp_build_us")]
-        cdiff = [c for c in cols if c not in fb or not np.array_equal(fa[c].to_numpy(), fb[c].to_numpy(), equal_nan=True)]
+        cdiff = [
+            c for c in cols if c not in fb or not np.array_equal(fa[c].to_numpy(), fb[c].to_numpy(), equal_nan=True)
+        ]
         if list(fa.columns) != list(fb.columns):
             cdiff.append("<column order or set>")
         print(f"{run_a.name}: {len(keys)} summary keys, {len(diff)} differ {diff[:8]}; steps {fa.shape} vs "

@@ -61,7 +61,8 @@ def compare(checkpoints: list[str], sets: dict[str, Path],
             for label, est in (("mean", mean), ("lower", lower)):
                 if est is None:
                     continue
-                rows.append({"checkpoint": Path(ck).name, **({"what": describe.get(Path(ck).name, "")} if describe else {}),
+                rows.append({"checkpoint": Path(ck).name,
+                             **({"what": describe.get(Path(ck).name, "")} if describe else {}),
                              "train windows": training.get("train_windows"), "epochs": training.get("epochs"),
                              "set": name,
                              "estimate": label, **score(np.maximum(est, 0.05) if label == "lower" else est, y, wf)})
@@ -110,7 +111,9 @@ def main(argv: list[str] | None = None) -> None:
     table = markdown(compare(a.checkpoints, sets, describe))
     print(table)
     if a.out is not None:
-        cmd = "python -m studies.estimator_compare " + " ".join(shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv))
+        cmd = "python -m studies.estimator_compare " + " ".join(
+            shlex.quote(x) for x in (sys.argv[1:] if argv is None else argv)
+        )
         info = machine_info()
         head = [
             "# Estimator checkpoints on named window sets", "",

@@ -48,7 +48,9 @@ def predict(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.n
 
 
 @torch.no_grad()
-def predict_all(model: FrictionModel, X: np.ndarray, batch: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def predict_all(
+    model: FrictionModel, X: np.ndarray, batch: int = 256
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(mean [-], sigma [-], lower quantile [-] or None) for windows X (N, 40, 36 or 38); windows with the
     filter features (38) serve a model without them too (sliced to ``model.cfg.n_raw``)."""
     X = X[..., : model.cfg.n_raw]
@@ -129,7 +131,9 @@ def fixture_mae(model: FrictionModel, subset: str | None = None) -> float:
         return float(np.abs(mean - f["y"][sel]).mean())
 
 
-def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], k: float) -> None:
+def scatter_png(
+    path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], k: float
+) -> None:
     """Predicted vs true friction for each split (the paper's regression figure), mean and mean - k sigma."""
     import matplotlib
 
@@ -137,7 +141,7 @@ def scatter_png(path: Path, variant: str, panels: dict[str, tuple[np.ndarray, np
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.6), squeeze=False)
-    for ax, (split, (y, mean, sigma)) in zip(axes[0], panels.items()):
+    for ax, (split, (y, mean, sigma)) in zip(axes[0], panels.items(), strict=True):
         ax.scatter(y, mean, s=3, alpha=0.35, label="mean")
         ax.scatter(y, mean - k * sigma, s=3, alpha=0.25, label=f"mean - {k:g} sigma")
         ax.plot([0, 1.3], [0, 1.3], "k--", lw=1)
@@ -369,7 +373,8 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
     head = ["variant", "params", "train wall [s]", "train CPU [s]", "latency [ms]", "test MAE", "test RMSE",
             "test R²", "test bias", "test over", "shifted MAE", "shifted RMSE", "shifted bias", "shifted over"]
     head += [f"shifted over (k={k:g})" for k in ks] + [f"shifted MAE (k={k:g})" for k in ks]
-    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted over",
+    head += ["test within 1σ / 2σ", "k for ≤5 % over on val", "lower-quantile head: test MAE / shifted MAE / shifted "
+                                                              "over",
              "bound chosen on val: test MAE / test over / shifted MAE / shifted over"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
@@ -397,8 +402,8 @@ def summary_table(df: object, names: list[str], ks: list[float], train_rec: dict
                   f"{100 * get(v, 'shifted', lo[0], 'overestimate_rate'):.1f} % ({lo[0]})" if lo else "—"]
         ch = [e for e in df[(df.variant == v) & (df.split == "shifted")].estimate if str(e).startswith("chosen")]  # type: ignore[attr-defined]
         cells += [f"{get(v, 'test', ch[0], 'mae'):.3f} / {100 * get(v, 'test', ch[0], 'overestimate_rate'):.1f} % / "
-                  f"{get(v, 'shifted', ch[0], 'mae'):.3f} / {100 * get(v, 'shifted', ch[0], 'overestimate_rate'):.1f} % "
-                  f"({ch[0][7:-1]})" if ch else "none ≤ 5 % on val"]
+                  f"{get(v, 'shifted', ch[0], 'mae'):.3f} / {100 * get(v, 'shifted', ch[0], 'overestimate_rate'):.1f} "
+                  f"% ({ch[0][7:-1]})" if ch else "none ≤ 5 % on val"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -416,7 +421,9 @@ def subset_table(df: object, names: list[str]) -> list[str]:
             cells = []
             for s in subs:
                 sel = d[(d.split == s) & (d.estimate == est)]
-                cells.append(f"{sel.mae.iloc[0]:.3f} / {100 * sel.overestimate_rate.iloc[0]:.1f} %" if len(sel) else "—")
+                cells.append(
+                    f"{sel.mae.iloc[0]:.3f} / {100 * sel.overestimate_rate.iloc[0]:.1f} %" if len(sel) else "—"
+                )
             lines.append(f"| {v} | {est} | " + " | ".join(cells) + " |")
     return lines
 
@@ -592,9 +599,9 @@ def _appendix_sections(table: object, train_rec: dict[str, dict], names: list[st
         "## Training records",
         "",
         "```",
-        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "members", "epochs", "global_steps",
-                                              "best_val_mae", "variance_scale_fitted_on_val", "torch_threads",
-                                              "note") if r.get(k) is not None}
+        json.dumps({v: {k: r.get(k) for k in ("train_wall_time_s", "train_cpu_time_s", "members", "epochs",
+                                              "global_steps", "best_val_mae", "variance_scale_fitted_on_val",
+                                              "torch_threads", "note") if r.get(k) is not None}
                     for v, r in train_rec.items()}, indent=1),
         "```",
         "",
@@ -651,7 +658,9 @@ def main(argv: list[str] | None = None) -> None:
                          "deployed bound must over-estimate <= 5 %% (default: the validation split)")
     a = ap.parse_args(argv)
     rows = evaluate(a.data, a.variants, a.k, a.out, a.latency_runs, a.bound_set)
-    cmd = "python -m studies.estimator_evaluate " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+    cmd = "python -m studies.estimator_evaluate " + " ".join(
+        shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])
+    )
     write_report(rows, a.out, a.data, a.k, cmd)
     print(f"wrote {a.out}/report.md, metrics.csv")
 

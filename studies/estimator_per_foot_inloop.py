@@ -13,8 +13,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   mu_hat >= min(mu, 0.5) - 0.1 (:func:`estimators.safety.useful`); inf if never, NaN as above;
 * useful share: share of the foot's loaded ticks with mu_hat >= min(mu, 0.5) - 0.1 (an estimate pinned at
   its floor is never over-estimated and scores 0 s to safe on a drop; this says whether it was any use);
-  ``useful_ready``: the same from the estimator's first ready tick on (the in-loop usefulness of the one-sided targets, c74fe88: after
-  the startup window, whose prior is the safe floor);
+  ``useful_ready``: the same from the estimator's first ready tick on (the in-loop usefulness of the one-sided targets,
+  c74fe88: after the startup window, whose prior is the safe floor);
 * over-estimation on the new surface: the same share over the foot's loaded ticks from that first loaded
   tick on (the drop target's "<= 5 % of that foot's ticks");
 * falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)
@@ -160,7 +160,8 @@ COLUMNS = (("falls", "falls", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
            ("time_to_safe_p95_s", "safe p95 [s]", "{:.3f}"), ("time_to_safe_max_s", "safe max [s]", "{:.3f}"),
            ("over_rate_new_mean", "over new", "{:.3f}"), ("over_rate_new_max", "over new max", "{:.3f}"),
            ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),
-           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"), ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
+           ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"),
+           ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
            ("sliding_mps", "sliding [m/s]", "{:.4f}"))
 
 
@@ -217,8 +218,10 @@ def main(argv: list[str] | None = None) -> None:
 
 def git_commit() -> str:
     """The checkout's commit (short hash; ``+`` if the tree has changes), ``unknown`` outside git."""
+    def run_(*c: str) -> str:
+        return subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
+
     try:
-        run_ = lambda *c: subprocess.run(["git", *c], capture_output=True, text=True, check=True).stdout.strip()
         return run_("rev-parse", "--short", "HEAD") + ("+" if run_("status", "--porcelain", "-uno") else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

@@ -1,8 +1,8 @@
 """How much friction the trot uses, and how well proprioception measures it: the signal an active friction
 probe would read (``python -m studies.estimator_probe_signal [--out FILE.md]``).
 
-The per-foot work (075da76) found that under ``filter=terrain`` no passive estimator can be useful above the friction the filter
-plans with. An active probe (a foot deliberately loaded towards a higher force ratio, with an internal force
+The per-foot work (075da76) found that under ``filter=terrain`` no passive estimator can be useful above the friction
+the filter plans with. An active probe (a foot deliberately loaded towards a higher force ratio, with an internal force
 between two stance feet so the trunk feels nothing) would need two things this study measures on flat floors:
 
 * **what the gait already uses**: the plant's force ratio |f_t| / f_n of each loaded foot (MuJoCo's contact

@@ -29,7 +29,9 @@ def _rss_mb() -> float:
     return pages * resource.getpagesize() / 2**20
 
 
-def measure_one(variant: str, steps: int, batch: int, d_model: int, k: int, threads: int, repeats: int) -> dict[str, float]:
+def measure_one(
+    variant: str, steps: int, batch: int, d_model: int, k: int, threads: int, repeats: int
+) -> dict[str, float]:
     """One training step timing of a 2-layer model on ``steps`` x 12 tokens (run in its own process)."""
     import torch
 

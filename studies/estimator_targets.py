@@ -160,7 +160,8 @@ def offline(a: argparse.Namespace) -> None:
     edges = tuple(a.edges)
     out: dict[str, object] = {"fit_set": {fit_name: [str(p) for p in fit_paths]},
                               "sets": {k: [str(p) for p in v] for k, v in sets.items()}, "mu_min": a.mu_min,
-                              "machine": machine_info(), "command": " ".join(["python -m studies.estimator_targets"] + sys.argv[1:]),
+                              "machine": machine_info(),
+                              "command": " ".join(["python -m studies.estimator_targets"] + sys.argv[1:]),
                               "variants": {}}
     for v in a.variants:
         dfit = predictions(v, fit_paths, a.cache)
@@ -174,7 +175,8 @@ def offline(a: argparse.Namespace) -> None:
             rec["sets"][name] = {"deployed": rows, "raw_mean": raw, "verdict": verdict(rows)}  # type: ignore[index]
         out["variants"][v] = rec  # type: ignore[index]
         print(f"{v}: {choice_text(choice)}; " + "; ".join(
-            f"{n}: over<0.5 {pct(s['deployed'][-1]['over'])} %, verdict {s['verdict']}" for n, s in rec["sets"].items()),
+            f"{n}: over<0.5 {pct(s['deployed'][-1]['over'])} %, verdict {s['verdict']}"
+            for n, s in rec["sets"].items()),
             flush=True)
         if a.record:
             from estimators.checkpoint import checkpoint_paths
@@ -198,13 +200,16 @@ def offline_markdown(out: dict[str, object]) -> str:
              f"- Deployed bound chosen on `{fit_name}` only ({', '.join(f'`{p}`' for p in fit_paths)}); the other "
              "sets are scored with it: " + "; ".join(f"`{k}` = {', '.join(f'`{p}`' for p in v)}"
                                                     for k, v in out["sets"].items()) + ".",  # type: ignore[union-attr]
-             (f"- over = P(mu_hat > mu + 0.05) per truth band (target ≤ {100 * OVER_TARGET:.0f} % below mu = {LOW_MU}); "
-             f"useful = P(mu_hat ≥ min(mu, 0.5) − 0.1) (target ≥ {100 * USEFUL_TARGET:.0f} %, or capped MAE ≤ 0.03 "
+             (f"- over = P(mu_hat > mu + 0.05) per truth band (target ≤ {100 * OVER_TARGET:.0f} % below mu = "
+             f"{LOW_MU}); useful = P(mu_hat ≥ min(mu, 0.5) − 0.1) (target ≥ {100 * USEFUL_TARGET:.0f} %, or capped MAE "
+             f"≤ 0.03 "
              "with both capped at 0.6); [95 % CI] from resampling episodes (2,000 bootstrap draws unless said)."),
-             (f"- Offline the bound is floored at {out['mu_min']} (the model's own bound); in the loop the configs floor it "
+             (f"- Offline the bound is floored at {out['mu_min']} (the model's own bound); in the loop the configs "
+              f"floor it "
              "at the safe floor 0.2, which can only over-estimate floors below 0.15 (the filtered trot falls there)."),
-             ("- Verdict per set: `over` = every band below 0.5 and the pooled one ≤ 5 % (point); `useful` = every band "
-             "≥ 95 % useful or capped MAE ≤ 0.03; `ci` = the 0.1-0.3 band's over-estimation CI half-width ≤ 2 %."), ""]
+             ("- Verdict per set: `over` = every band below 0.5 and the pooled one ≤ 5 % (point); `useful` = every "
+             "band ≥ 95 % useful or capped MAE ≤ 0.03; `ci` = the 0.1-0.3 band's over-estimation CI half-width "
+             "≤ 2 %."), ""]
     for v, rec in out["variants"].items():  # type: ignore[union-attr]
         c = rec["choice"]
         lines += [f"## {v}", "",
@@ -217,8 +222,8 @@ def offline_markdown(out: dict[str, object]) -> str:
             for est in ("deployed", "raw_mean"):
                 for r in s[est]:
                     cm = f"{r['capped_mae']:.3f} [{r['capped_mae_lo']:.3f}, {r['capped_mae_hi']:.3f}]"
-                    lines.append(f"| {name} | {est.replace('_', ' ')} | {r['band']} | {r['windows']} | {r['episodes']} | "
-                                 f"{ci_text(r, 'over')} | {ci_text(r, 'useful')} | {cm} |")
+                    lines.append(f"| {name} | {est.replace('_', ' ')} | {r['band']} | {r['windows']} | {r['episodes']} "
+                                 f"| {ci_text(r, 'over')} | {ci_text(r, 'useful')} | {cm} |")
         lines += ["", "Verdict (deployed): " + "; ".join(
             f"`{n}` " + ", ".join(f"{k} {'met' if ok else 'MISSED'}" for k, ok in s["verdict"].items())
             for n, s in rec["sets"].items()), ""]
@@ -289,7 +294,8 @@ def inloop(a: argparse.Namespace) -> None:
             "low_ticks": int(low.sum()), "over_low": o[0], "over_low_lo": o[1], "over_low_hi": o[2],
             "startup_over": os_[0], "startup_over_lo": os_[1], "startup_over_hi": os_[2],
             "useful": u[0], "useful_lo": u[1], "useful_hi": u[2],
-            "time_to_safe_s_max": max(tts) if tts else math.nan, "time_to_safe_s_mean": float(np.mean(tts)) if tts else math.nan,
+            "time_to_safe_s_max": max(tts) if tts else math.nan,
+            "time_to_safe_s_mean": float(np.mean(tts)) if tts else math.nan,
             "tick_us_p99": float(np.percentile(ticks, 99)), "tick_over_1ms": float(np.mean(ticks > 1000.0)),
             "tick_controller_us_p99": float(np.percentile(ctrl, 99)),
             "distance_m": mean_of("distance_m"), "intervention_nm_mean": mean_of("intervention_nm_mean"),
@@ -303,8 +309,8 @@ def inloop(a: argparse.Namespace) -> None:
         })
         print(f"{tag:28s} {est:28s} runs {len(runs)} over<0.5 {pct(o[0])} [{pct(o[1])},{pct(o[2])}] "
               f"startup {pct(os_[0])} useful {pct(u[0])} tts {res[-1]['time_to_safe_s_max']:.2f} "
-              f"p99 {res[-1]['tick_us_p99']:.0f} us dist {res[-1]['distance_m']:.2f} int {res[-1]['intervention_nm_mean']:.2f} "
-              f"sat {pct(res[-1]['friction_saturated_rate'])}", flush=True)
+              f"p99 {res[-1]['tick_us_p99']:.0f} us dist {res[-1]['distance_m']:.2f} int "
+              f"{res[-1]['intervention_nm_mean']:.2f} sat {pct(res[-1]['friction_saturated_rate'])}", flush=True)
     out = {"sweeps": [str(s) for s in a.sweeps], "machine": machine_info(), "n_boot": a.n_boot, "rows": res,
            "command": " ".join(["python -m studies.estimator_targets"] + sys.argv[1:])}
     a.out.parent.mkdir(parents=True, exist_ok=True)
@@ -358,29 +364,36 @@ def estimator_label(summary: dict, ec: dict, detector: bool = False) -> str:
 
 def inloop_markdown(out: dict[str, object]) -> str:
     lines = ["# Friction estimators in the loop: one-sided targets", "",
-             f"Generated by `{out['command']}` from the run folders of {', '.join(f'`{s}`' for s in out['sweeps'])}.", "",
+             f"Generated by `{out['command']}` from the run folders of "
+             f"{', '.join(f'`{s}`' for s in out['sweeps'])}.", "",
              f"- Machine: {out['machine']}.",
-             ("- Per scenario group × estimator, runs (seeds) pooled: `over<0.5` = P(mu_hat > mu + 0.05) over every tick "
-             "with mu < 0.5 (startup window and friction drops included), `startup over` = the same over the ticks "
-             "before the estimator is first ready (all mu), `useful` = P(mu_hat ≥ min(mu, 0.5) − 0.1) after the startup "
+             ("- Per scenario group × estimator, runs (seeds) pooled: `over<0.5` = P(mu_hat > mu + 0.05) over every "
+             "tick with mu < 0.5 (startup window and friction drops included), `startup over` = the same over the "
+             "ticks before the estimator is first ready (all mu), `useful` = P(mu_hat ≥ min(mu, 0.5) − 0.1) after the "
+             "startup "
              f"window; [95 % CI] from resampling runs ({out['n_boot']} draws). mu_hat is what the filter used; mu the "
              "floor under the trunk."),
              ("- `time-to-safe`: after the friction drop, until mu_hat ≤ mu + 0.05 from then on (max over runs). "
              "`tick p99`: wall time of the 1 ms control tick (all parts); `ctrl p99`: its state-read + estimator + "
-             "controller part. The 2 cores were shared with other jobs (see the notes), so tick times carry that load."),
+             "controller part. The 2 cores were shared with other jobs (see the notes), so tick times carry that "
+             "load."),
              ("- `sliding`: stance contacts with |f_t| ≥ 0.98 mu f_n (plant forces, the true mu under the foot; "
              "`friction_cone_edge_rate_stance`), mean over runs."), "",
              ("| scenario | estimator | runs | falls | over<0.5 % [CI] | startup over % [CI] | useful % [CI] | "
              "time-to-safe [s] | tick p99 [µs] | ctrl p99 [µs] | distance [m] | intervention [N·m] | sliding % | "
              "mean mu_hat |"), "|" + "---|" * 14]
     for r in out["rows"]:  # type: ignore[union-attr]
-        ci = lambda n, r=r: f"{pct(r[n])} [{pct(r[n + '_lo'])}, {pct(r[n + '_hi'])}]"
+        def ci(n: str, r=r) -> str:
+            return f"{pct(r[n])} [{pct(r[n + '_lo'])}, {pct(r[n + '_hi'])}]"
+
         tts = r["time_to_safe_s_max"]
         lines.append(
-            f"| {r['group']} | {r['estimator']} | {r['runs']} | {r['falls']} | {ci('over_low') if r['low_ticks'] else '—'} | "
-            f"{ci('startup_over')} | {ci('useful')} | {'—' if not np.isfinite(tts) and math.isnan(tts) else f'{tts:.2f}'} | "
-            f"{r['tick_us_p99']:.0f} | {r['tick_controller_us_p99']:.0f} | {r['distance_m']:.2f} | "
-            f"{r['intervention_nm_mean']:.2f} | {pct(r['friction_saturated_rate'])} | {r['mean_mu_hat_ready']:.3f} |")
+            f"| {r['group']} | {r['estimator']} | {r['runs']} | {r['falls']} | "
+            f"{ci('over_low') if r['low_ticks'] else '—'} | "
+            f"{ci('startup_over')} | {ci('useful')} | "
+            f"{'—' if not np.isfinite(tts) and math.isnan(tts) else f'{tts:.2f}'} | {r['tick_us_p99']:.0f} | "
+            f"{r['tick_controller_us_p99']:.0f} | {r['distance_m']:.2f} | {r['intervention_nm_mean']:.2f} | "
+            f"{pct(r['friction_saturated_rate'])} | {r['mean_mu_hat_ready']:.3f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -408,15 +421,16 @@ def table(a: argparse.Namespace) -> None:
         return str(p.resolve().relative_to(ROOT)) if p.resolve().is_relative_to(ROOT) else str(p)
 
     lines = ["# Friction estimators against the one-sided targets", "",
-             f"Generated by `{' '.join(['python -m studies.estimator_targets'] + sys.argv[1:])}` from `{rel(a.offline)}`, "
-             f"`{rel(a.inloop)}`" + (f", `{rel(a.tick)}`" if tick else "") + (f" and `{rel(a.latency)}`" if lat else "")
+             f"Generated by `{' '.join(['python -m studies.estimator_targets'] + sys.argv[1:])}` from "
+             f"`{rel(a.offline)}`, `{rel(a.inloop)}`" + (f", `{rel(a.tick)}`" if tick else "")
+             + (f" and `{rel(a.latency)}`" if lat else "")
              + " (each says how its numbers were measured).",
-             "", ("Targets: over-estimation P(mu_hat > mu + 0.05 | mu < 0.5) ≤ 5 %; usefulness P(mu_hat ≥ min(mu, 0.5) − 0.1) "
-             "≥ 95 % (or capped MAE ≤ 0.03); [95 % CI] from resampling episodes (offline) or runs (in the loop). "
-             "Offline: the deployed bound (chosen on shifted-val only), truth bands 0.1-0.3 / pooled below 0.5. In the "
-             "loop: every tick with mu < 0.5 (startup window and the drop included), runs pooled over the scenario's "
-             "frictions and seeds 0-2; the deployed configs (`conf/estimator/<variant>.yaml`: staged inference, the "
-             "safe-floor prior 0.2, the jump drop detector)."), "",
+             "", ("Targets: over-estimation P(mu_hat > mu + 0.05 | mu < 0.5) ≤ 5 %; usefulness P(mu_hat ≥ min(mu, 0.5) "
+             "− 0.1) ≥ 95 % (or capped MAE ≤ 0.03); [95 % CI] from resampling episodes (offline) or runs (in the "
+             "loop). Offline: the deployed bound (chosen on shifted-val only), truth bands 0.1-0.3 / pooled below 0.5. "
+             "In the loop: every tick with mu < 0.5 (startup window and the drop included), runs pooled over the "
+             "scenario's frictions and seeds 0-2; the deployed configs (`conf/estimator/<variant>.yaml`: staged "
+             "inference, the safe-floor prior 0.2, the jump drop detector)."), "",
              "## Over-estimation below mu = 0.5 [%]", "",
              "| variant | " + " | ".join(f"offline {n}: 0.1-0.3 / <0.5" for n in sets) + " | "
              + " | ".join(f"in loop {f.removeprefix('all ')}" for f in fams) + " |",
@@ -436,15 +450,19 @@ def table(a: argparse.Namespace) -> None:
                                      else "—" for f in fams]
         lines.append(f"| {ref} | " + " | ".join(cells) + " |")
     lines += ["", "## Usefulness [%], startup, time-to-safe, tick cost", "",
-              ("Offline: the worst truth band's useful share (its capped MAE); in the loop: ticks after the startup window, "
-              "runs pooled. Startup over-estimation: the ticks before the estimator is first ready, all runs of all "
-              "scenarios. Time-to-safe: after the drop of friction_patch (0.8 -> 0.2), until mu_hat ≤ mu + 0.05 for good, "
-              "max over seeds. Tick p99: the control tick's wall time in the loop on flat (staged / inline, one sweep per "
-              "variant with both modes, seeds 0-2, `tick_inline_vs_staged.md`), the 2 cores shared with other jobs; paced: the estimator's share of a 1 kHz tick paced at wall-clock time (wall p99, "
-              "staged / inline / thread; `studies.estimator_targets latency`)."), "",
+              ("Offline: the worst truth band's useful share (its capped MAE); in the loop: ticks after the startup "
+              "window, runs pooled. Startup over-estimation: the ticks before the estimator is first ready, all runs "
+              "of all scenarios. Time-to-safe: after the drop of friction_patch (0.8 -> 0.2), until mu_hat ≤ mu + 0.05 "
+              "for good, "
+              "max over seeds. Tick p99: the control tick's wall time in the loop on flat (staged / inline, one sweep "
+              "per "
+              "variant with both modes, seeds 0-2, `tick_inline_vs_staged.md`), the 2 cores shared with other jobs; "
+              "paced: the estimator's share of a 1 kHz tick paced at wall-clock time (wall p99, staged / inline / "
+              "thread; `studies.estimator_targets latency`)."), "",
               "| variant | " + " | ".join(f"offline {n}" for n in sets) + " | "
               + " | ".join(f"in loop {f.removeprefix('all ')}" for f in fams)
-              + " | startup over | time-to-safe [s] | loop tick p99 [µs] staged / inline | paced p99 [µs] staged / inline / thread |",
+              + " | startup over | time-to-safe [s] | loop tick p99 [µs] staged / inline | paced p99 [µs] staged / "
+                "inline / thread |",
               "|---|" + "---|" * (len(sets) + len(fams) + 4)]
     for v in variants:
         cells = []
@@ -477,9 +495,9 @@ def table(a: argparse.Namespace) -> None:
         cells += ["—", f"{tp['time_to_safe_s_max']:.2f}" if tp else "—", "—", "—"]
         lines.append(f"| {ref} | " + " | ".join(cells) + " |")
     lines += ["", "## Against the safe-floor constant in the loop", "",
-              ("Per scenario (runs pooled): distance [m] / intervention [N·m] / sliding [%] (stance contacts at the edge of "
-              "the true cone). `beats` = more distance or less intervention than `fixed` (0.2) with no more sliding "
-              "(point values, ≤ fixed's sliding)."), "",
+              ("Per scenario (runs pooled): distance [m] / intervention [N·m] / sliding [%] (stance contacts at the "
+              "edge of the true cone). `beats` = more distance or less intervention than `fixed` (0.2) with no more "
+              "sliding (point values, ≤ fixed's sliding)."), "",
               "| variant | " + " | ".join(f.removeprefix("all ") for f in fams) + " |", "|---|" + "---|" * len(fams)]
     for v in [fixed, "oracle", *[f"{x} (staged)" for x in variants]]:
         cells = []
@@ -497,13 +515,19 @@ def table(a: argparse.Namespace) -> None:
         lines.append(f"| {v} | " + " | ".join(cells) + " |")
     lines += ["", "## Verdict per variant", "",
               "| variant | over ≤ 5 % offline (" + ", ".join(sets) + ") | over ≤ 5 % in the loop | useful offline | "
-              "useful in the loop | low-band CI half-width ≤ 2 % | beats the safe floor |", "|---|---|---|---|---|---|---|"]
+              "useful in the loop | low-band CI half-width ≤ 2 % | beats the safe floor |",
+              "|---|---|---|---|---|---|---|"]
     for v in variants:
         vd = {n: off["variants"][v]["sets"][n]["verdict"] for n in sets}
         fo = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and r["low_ticks"]
               and r["over_low"] > OVER_TARGET]
-        fu = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and r["useful"] < USEFUL_TARGET]
-        beats = [f.removeprefix("all ") for f in fams if (r := rows.get((f, f"{v} (staged)"))) and (b := rows.get((f, fixed)))
+        fu = [
+            f.removeprefix("all ")
+            for f in fams
+            if (r := rows.get((f, f"{v} (staged)"))) and r["useful"] < USEFUL_TARGET
+        ]
+        beats = [f.removeprefix("all ") for f in fams
+                 if (r := rows.get((f, f"{v} (staged)"))) and (b := rows.get((f, fixed)))
                  and (r["distance_m"] > b["distance_m"] or r["intervention_nm_mean"] < b["intervention_nm_mean"])
                  and r["friction_saturated_rate"] <= b["friction_saturated_rate"]]
 
@@ -512,7 +536,8 @@ def table(a: argparse.Namespace) -> None:
 
         lines.append(
             f"| {v} | {yn(all(x['over'] for x in vd.values()), [n for n, x in vd.items() if not x['over']])} | "
-            f"{yn(not fo, fo)} | {yn(all(x['useful'] for x in vd.values()), [n for n, x in vd.items() if not x['useful']])} | "
+            f"{yn(not fo, fo)} | "
+            f"{yn(all(x['useful'] for x in vd.values()), [n for n, x in vd.items() if not x['useful']])} | "
             f"{yn(not fu, fu)} | {yn(all(x['ci'] for x in vd.values()), [n for n, x in vd.items() if not x['ci']])} | "
             f"{', '.join(beats) if beats else 'nowhere'} |")
     a.out.write_text("\n".join(lines) + "\n")
@@ -580,11 +605,11 @@ def latency(a: argparse.Namespace) -> None:
              "run, random proprioception; per tick the wall time of `estimator.step` and its thread CPU time "
              "(CPU time is immune to preemption by other jobs on the shared cores; wall time is not). Median over "
              f"{a.repeats} repeats of each statistic (repeats interleaved)."),
-             ("- `inline`: the model runs inside the sampling tick (1 tick in 30); `staged`: one slice of the model per "
-             "tick, result applied 20 ms after the sample; `thread`: a worker thread, result applied 20 ms after the "
-             "sample (waits if late: deadline misses)."), "",
-             ("| estimator | inference | wall p50 [µs] | wall p99 [µs] | wall max [µs] | ticks > 1 ms [%] | CPU p99 [µs] | "
-             "CPU max [µs] | deadline misses / samples |"), "|---|---|---|---|---|---|---|---|---|"]
+             ("- `inline`: the model runs inside the sampling tick (1 tick in 30); `staged`: one slice of the model "
+             "per tick, result applied 20 ms after the sample; `thread`: a worker thread, result applied 20 ms after "
+             "the sample (waits if late: deadline misses)."), "",
+             ("| estimator | inference | wall p50 [µs] | wall p99 [µs] | wall max [µs] | ticks > 1 ms [%] | CPU p99 "
+             "[µs] | CPU max [µs] | deadline misses / samples |"), "|---|---|---|---|---|---|---|---|---|"]
     import pandas as pd
 
     df = pd.DataFrame(rows)
@@ -602,7 +627,8 @@ def main(argv: list[str] | None = None) -> None:
     sub = ap.add_subparsers(dest="cmd", required=True)
     o = sub.add_parser("offline", help="choose the bound on the fit set and score it per band")
     o.add_argument("--variants", nargs="+", required=True, help="shipped checkpoint names or paths")
-    o.add_argument("--fit", required=True, help="NAME=a.npz[,b.npz]: the shifted validation set (the only one fitted on)")
+    o.add_argument("--fit", required=True, help="NAME=a.npz[,b.npz]: the shifted validation set (the only one fitted "
+                                                "on)")
     o.add_argument("--set", action="append", default=[], help="NAME=a.npz[,b.npz] (repeatable): sets to score")
     o.add_argument("--edges", type=float, nargs="+", default=[0.3, 0.5, 0.8], help="mean-band edges of the margin")
     o.add_argument("--mu-min", type=float, default=0.05)

@@ -86,7 +86,7 @@ def refused(overrides: list[str], out: Path, *texts: str) -> tuple[bool, str]:
         run(overrides, out)
     except Simulated:
         return False, "accepted: it would have been simulated"
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error is the case's answer: its message is checked
         msg = f"{type(exc).__name__}: {exc}"
         return all(t in msg for t in texts), msg.splitlines()[0][:160]
     finally:
@@ -99,7 +99,8 @@ def scene(folder: Path) -> Path:
 
     (folder / "assets").mkdir(parents=True, exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA)
-    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>',
+    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" '
+                                         r'file="tetra.obj"/></asset>',
                  robot_spec().to_xml(), count=1)
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
                                             'conaffinity="0" density="0" group="3"/>', 1)  # fmt: skip
@@ -410,7 +411,7 @@ def _(tmp: Path):
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             callback.SweepCallback().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}}))
-    except Exception as exc:  # noqa: BLE001 - Hydra turns this into a UserWarning and exits 0
+    except Exception as exc:  # Hydra turns this into a UserWarning and exits 0
         return False, f"raised {type(exc).__name__} (Hydra: a warning, exit 0)"
     code = callback.exit_code() if hasattr(callback, "exit_code") else 0
     return code == 1 and "report failed" in err.getvalue(), f"exit code {code}"
@@ -523,7 +524,8 @@ def _(tmp: Path):
         f.write_text(robot_spec().to_xml())
     over = [f"robot.plant_mjcf={tmp / 'm' / 'main.xml'}"]
     before = sha(over)
-    read = tmp / "m" / "a1.xml"  # MuJoCo looks in the main file's folder first (checked: tests/test_reliability_identity.py)
+    # MuJoCo looks in the main file's folder first (checked: tests/test_reliability_identity.py)
+    read = tmp / "m" / "a1.xml"
     read.write_text(read.read_text().replace('mass="6.001"', 'mass="7"'))
     return sha(over) != before, ""
 
@@ -583,7 +585,7 @@ def _(tmp: Path):
     (out / "run.lock").write_text(json.dumps({"pid": 1, "host": socket.gethostname(), "started": "x"}))
     try:
         s = run([], out)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error is the case's answer
         return False, f"{type(exc).__name__}: {str(exc)[:100]}"
     return s.get("status") == "ok", str(s.get("stale_lock_taken_over", ""))
 
@@ -753,7 +755,8 @@ def _(tmp: Path):
             "class Busy(CpuWatch):\n"
             "    def __exit__(self, *e): self.result = CpuShare(1.0, 0.41, 0.45, 3.0, 3.5, 0.0, 900.0)\n"
             "b.CpuWatch = Busy\nb.part_costs = lambda built, trace=None: {}\nb._print_table = lambda r, a: None\n"
-            f"b.main(['--duration', '0.1', '--solvers', 'daqp', '--formulations', 'condensed', '--out', r'{tmp / 't.md'}'])\n")  # fmt: skip
+            f"b.main(['--duration', '0.1', '--solvers', 'daqp', '--formulations', 'condensed', '--out', "
+            f"r'{tmp / 't.md'}'])\n")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], cwd=root(), capture_output=True, text=True, check=False)
     ok = out.returncode == 1 and "machine busy" in out.stderr and not (tmp / "t.md").exists()
     return ok, (out.stderr.strip().splitlines() or [""])[-1][:140]
@@ -761,7 +764,8 @@ def _(tmp: Path):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="run the cases whose name holds this text")
-    ap.add_argument("--klass", default="", help="run the cases of this class (stale, writers, superseded, table, messages, identity, outcome, locks, launchers, interruption, timing)")
+    ap.add_argument("--klass", default="", help="run the cases of this class (stale, writers, superseded, table, "
+                                                "messages, identity, outcome, locks, launchers, interruption, timing)")
     args = ap.parse_args()
     print(f"taslel_bench from {root()}")
     good = tried = 0
@@ -771,8 +775,11 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             try:
                 ok, detail = fn(Path(tmp))
-            except Exception as exc:  # noqa: BLE001 - a crash of the case is a bad behaviour
-                ok, detail = False, f"crashed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:160]
+            except Exception as exc:  # a crash of the case is a bad behaviour
+                ok, detail = (
+                    False,
+                    f"crashed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:160],
+                )
                 if os.environ.get("FAULT_MATRIX_DEBUG"):
                     traceback.print_exc()
         tried += 1

@@ -46,7 +46,10 @@ def read_tick(mcap_path: Path, t_s: float) -> tuple[float, dict, dict]:
     from mcap.reader import make_reader
 
     def decoder(schema):
-        pool, files = descriptor_pool.DescriptorPool(), list(descriptor_pb2.FileDescriptorSet.FromString(schema.data).file)
+        pool, files = (
+            descriptor_pool.DescriptorPool(),
+            list(descriptor_pb2.FileDescriptorSet.FromString(schema.data).file),
+        )
         while files:
             for f in list(files):
                 try:
@@ -111,7 +114,9 @@ def draw_entities(ax, update: dict, frames: dict, lo: np.ndarray, hi: np.ndarray
         p_f, r_f = frames.get(entity.get("frame_id", "world"), (None, None))
         if p_f is None:
             continue
-        centres = [p_f + r_f @ vec(pr["pose"]["position"]) for k in ("spheres", "cylinders") for pr in entity.get(k, [])]
+        centres = [
+            p_f + r_f @ vec(pr["pose"]["position"]) for k in ("spheres", "cylinders") for pr in entity.get(k, [])
+        ]
         if centres and not any(((c >= lo) & (c <= hi)).all() for c in centres):
             continue  # outside the drawn box (matplotlib does not clip 3D artists)
         for cube in entity.get("cubes", []):
@@ -131,7 +136,11 @@ def draw_entities(ax, update: dict, frames: dict, lo: np.ndarray, hi: np.ndarray
                 drawn += 1
         for arrow in entity.get("arrows", []):
             tail = p_f + r_f @ vec(arrow["pose"]["position"])
-            d = r_f @ rotation(arrow["pose"]["orientation"])[:, 0] * (arrow.get("shaft_length", 0) + arrow.get("head_length", 0))
+            d = (
+                r_f
+                @ rotation(arrow["pose"]["orientation"])[:, 0]
+                * (arrow.get("shaft_length", 0) + arrow.get("head_length", 0))
+            )
             ax.quiver(*tail, *d, color=_rgba(arrow)[:3], linewidth=2, arrow_length_ratio=0.2)
             drawn += 1
         for line in entity.get("lines", []):
@@ -174,9 +183,9 @@ def foxglove_view(mcap_path: Path, t_s: float, out: Path) -> tuple[float, int, n
     lo, hi = trunk - VIEW_HALF_M, trunk + VIEW_HALF_M
     fig = plt.figure(figsize=(4.8, 3.6), dpi=100)
     ax = fig.add_subplot(projection="3d", computed_zorder=False)  # drawn in order: terrain, robot, forces
-    drawn = sum(draw_entities(ax, scenes[topic], frames, lo, hi) for topic in ("/scene/terrain", "/scene/robot", "/scene/contact")
-                if topic in scenes)  # fmt: skip
-    for axis, colour in zip(np.eye(3), ("red", "green", "blue")):  # world axes under the trunk, 0.3 m
+    drawn = sum(draw_entities(ax, scenes[topic], frames, lo, hi)
+                for topic in ("/scene/terrain", "/scene/robot", "/scene/contact") if topic in scenes)  # fmt: skip
+    for axis, colour in zip(np.eye(3), ("red", "green", "blue"), strict=True):  # world axes under the trunk, 0.3 m
         ax.quiver(trunk[0], trunk[1], 0.0, *(0.3 * axis), color=colour, linewidth=1.5, arrow_length_ratio=0.15)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])

@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=DEFAULT_PATH)
     args = ap.parse_args(argv)
     qps, xs = record_episode(args.seconds, args.mu)
-    tags = [binding(p, x) for p, x in zip(qps, xs)]
+    tags = [binding(p, x) for p, x in zip(qps, xs, strict=True)]
     keep = select(tags, args.count)
     meta = {
         "seconds": args.seconds, "mu": args.mu, "clearance_coeffs": list(BUMP),

@@ -17,8 +17,8 @@ import pandas as pd
 
 from studies.study_table import table_study
 
-HEADER = ["| sweep | world | robot | controller | runs | falls | unsafe | speed / commanded | commanded [m/s] | QP solved | "
-          "vertical GRF error [N] | cone-edge share | tick median [µs] |",
+HEADER = ["| sweep | world | robot | controller | runs | falls | unsafe | speed / commanded | commanded [m/s] | QP "
+          "solved | vertical GRF error [N] | cone-edge share | tick median [µs] |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 WORLD_COLUMNS = ("scenario", "friction_true")
 
@@ -34,8 +34,8 @@ def rows(args: argparse.Namespace) -> list[str]:
         solved = f"{1.0 - g['qp_failed'].sum() / filtered:.4f}" if filtered else "—"
         grf = f"{g['grf_mae_z_n'].mean():.2f}" if g["grf_mae_z_n"].notna().any() else "—"
         unsafe = int((~g["safe"].astype(bool)).sum())
-        out.append(f"| {sweep} | {scenario} mu={mu:g} | {robot} | {variant} | {len(g)} | {int(g['fell'].sum())} | {unsafe} | "
-                   f"{speed:.2f} | {g['commanded_speed_mps'].iloc[0]:.3f} | {solved} | {grf} | "
+        out.append(f"| {sweep} | {scenario} mu={mu:g} | {robot} | {variant} | {len(g)} | {int(g['fell'].sum())} | "
+                   f"{unsafe} | {speed:.2f} | {g['commanded_speed_mps'].iloc[0]:.3f} | {solved} | {grf} | "
                    f"{g['friction_cone_edge_rate'].mean():.3f} | {g['tick_us_median'].median():.0f} |")
     return out
 

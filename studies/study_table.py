@@ -10,9 +10,9 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 
-def table_study(module: str, doc: str, header: list[str], rows: Iterable[str] | Callable[[argparse.Namespace],
-                Iterable[str]], argv: list[str] | None, add_args: Callable[[argparse.ArgumentParser], None] | None = None
-                ) -> None:  # fmt: skip
+def table_study(module: str, doc: str, header: list[str],
+                rows: Iterable[str] | Callable[[argparse.Namespace], Iterable[str]], argv: list[str] | None,
+                add_args: Callable[[argparse.ArgumentParser], None] | None = None) -> None:
     """Parse ``--out`` (and what ``add_args`` adds; ``rows`` is then a function of the parsed arguments), print
     ``header`` and each row of ``rows`` as it comes (rows are computed lazily: a long study shows progress),
     then write the table to ``--out`` (refused if the file exists: results are not overwritten) under the

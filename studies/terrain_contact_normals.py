@@ -44,13 +44,13 @@ def row(world: str, controller: str, seed: int) -> str:
     off = np.degrees(np.arccos(np.clip((normal * surface).sum(axis=1), -1.0, 1.0)))
     edge = ft[keep] >= 0.98 * mu[keep] * fn[keep]
     slip = tr.contact_slip_mps[k0:n][keep]
-    return (f"| {world} | {controller} | {seed} | {len(edge)} | {edge.mean():.3f} | {(off[edge] > OFF_DEG).mean():.2f} | "
-            f"{edge[off < ON_DEG].mean():.3f} | {np.median(slip[edge]):.3f} | {np.median(slip[~edge]):.3f} |")
+    return (f"| {world} | {controller} | {seed} | {len(edge)} | {edge.mean():.3f} | {(off[edge] > OFF_DEG).mean():.2f} "
+            f"| {edge[off < ON_DEG].mean():.3f} | {np.median(slip[edge]):.3f} | {np.median(slip[~edge]):.3f} |")
 
 
 def main(argv: list[str] | None = None) -> None:
-    header = [("| world | controller | seed | loaded contacts | cone-edge share | edge contacts > 20 deg off the surface "
-               "| edge share within 5 deg of the surface | slip at edge [m/s] | slip elsewhere [m/s] |"),
+    header = [("| world | controller | seed | loaded contacts | cone-edge share | edge contacts > 20 deg off the "
+               "surface | edge share within 5 deg of the surface | slip at edge [m/s] | slip elsewhere [m/s] |"),
               "|---|---|---|---|---|---|---|---|---|"]
     table_study("studies.terrain_contact_normals", __doc__, header, (row(*case) for case in CASES), argv)
 

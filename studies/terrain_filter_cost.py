@@ -1,5 +1,5 @@
-"""The terrain study's cost target: the tick median with ``filter=terrain`` against the paper's filter on the same backend,
-measured in one process with the two filters interleaved (machine noise hits both alike).
+"""The terrain study's cost target: the tick median with ``filter=terrain`` against the paper's filter on the same
+backend, measured in one process with the two filters interleaved (machine noise hits both alike).
 
     python studies/terrain_filter_cost.py [--worlds steps,rough,logs,slope] [--nominals flat,preset]
                                           [--repeats 7] [--out results/terrain/cost.md]

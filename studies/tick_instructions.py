@@ -104,7 +104,7 @@ def _child(helper: str, overrides: list[str]) -> None:
     problem, backend = b.filter.backend_problem, b.backend
     backend.reset()
     for i, values in enumerate(seq.values):
-        for field, value in zip(QPSequence.FIELDS, values):
+        for field, value in zip(QPSequence.FIELDS, values, strict=True):
             np.copyto(getattr(problem, field), value)
         if i:
             cg.cg_begin()
@@ -149,7 +149,8 @@ def report(counts: list[int]) -> str:
     glue = loop - limit_parts - per["contact-frame recording"]
     lines = [f"loop: {loop:,.0f} instructions per walking tick", *(f"  {p}: {x:,.0f}" for p, x in per.items()),
              f"  the limit's parts together: {limit_parts:,.0f} ({limit_parts / loop:.0%} of the loop)",
-             f"  the rest (glue between the parts, trace row copy included): {glue:,.0f} ({glue / loop:.0%})"]  # fmt: skip
+             f"  the rest (glue between the parts, trace row copy included): {glue:,.0f} "
+             f"({glue / loop:.0%})"]  # fmt: skip
     return "\n".join(lines)
 
 

@@ -73,8 +73,9 @@ def main(argv: list[str] | None = None) -> None:
         a = np.array([np.median(alone[p]) for p in PARTS if p in alone])
         b = np.array([np.median(bare[p]) for p in PARTS if p in bare])
         for way, x in (("alone", a), ("bare", b)):
-            print(f"| {r} | {way} | " + " | ".join(f"{v:.1f}" for v in x) + f" | {x.sum():.1f} | {a.sum() / x.sum():.2f} |")
-        parts = ", ".join(f"{k} {v:.1f}" for k, v in zip(TICK_PARTS, np.median(loop, axis=0)))
+            print(f"| {r} | {way} | " + " | ".join(f"{v:.1f}" for v in x) + f" | {x.sum():.1f} | "
+                                                                            f"{a.sum() / x.sum():.2f} |")
+        parts = ", ".join(f"{k} {v:.1f}" for k, v in zip(TICK_PARTS, np.median(loop, axis=0), strict=True))
         tick = float(np.median(loop.sum(axis=1)))
         print(f"| {r} | loop tick, median ({parts}) |" + " |" * len(PARTS) + f" {tick:.1f} | {a.sum() / tick:.2f} |")
         print(f"| {r} | loop wall per tick, mean |" + " |" * len(PARTS) + f" {wall_us:.1f} | {a.sum() / wall_us:.2f} |")

@@ -9,6 +9,9 @@ ran, an unknown group option or key, a ``+key`` no part of the run reads (:mod:`
 any other mistake Hydra refuses before the first job, a job list that maps two jobs to one run folder).
 """
 
+# The GL check runs before the imports that load MuJoCo, which reads MUJOCO_GL once, at import:
+# ruff: noqa: E402
+
 from __future__ import annotations
 
 import errno
@@ -39,6 +42,7 @@ from taslel_bench.sweep.launchers import (
     register_submitit_launchers,
 )
 from taslel_bench.util.fields import ConfigError
+from taslel_bench.util.log import console_logging
 
 EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 _single_run_exit = [EXIT_OK]
@@ -166,6 +170,7 @@ def _signal_number(name: str) -> int:
 
 def cli() -> None:
     """``python -m taslel_bench`` and the ``taslel-bench`` command."""
+    console_logging()
     argv = sys.argv[1:]
     if any(a in HELP_FLAGS for a in argv) and not any(a.startswith("hydra/help=") for a in argv):
         sys.argv.append("hydra/help=taslel")  # conf/hydra/help/taslel.yaml: groups and options, one line each

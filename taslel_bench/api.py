@@ -26,6 +26,7 @@ from taslel_bench.config.compose import compose
 from taslel_bench.config.settings import build_barriers, filter_settings, robot_description
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import NominalController, PDGains
+from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
 from taslel_bench.interfaces import ClearanceProfile, Terrain
@@ -102,7 +103,7 @@ def build_safety_filter(cfg: DictConfig, terrain: Terrain | None = None,
     return SafetyFilter(fs, instantiate(cfg.solver), barriers, terrain)
 
 
-def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> NominalController:
+def build_controller(cfg: DictConfig, terrain: Terrain | None = None) -> NominalControl:
     """The nominal controller of ``cfg.controller`` for the robot ``cfg.robot``."""
     return settings.build_controller(cfg, robot_description(cfg), terrain)
 

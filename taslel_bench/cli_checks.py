@@ -159,7 +159,8 @@ def check_overrides(argv: Sequence[str]) -> None:
         if o.is_delete():
             continue
         if key.startswith(("hydra.", "hydra/")):
-            continue  # Hydra's own groups also hold its plugins' options (submitit_local, joblib ...): Hydra checks them
+            # Hydra's own groups also hold its plugins' options (submitit_local, joblib ...): Hydra checks them
+            continue
         if key in groups:
             values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [str(o.value())]
             _check_group(o.input_line, key, values, groups)
@@ -172,7 +173,7 @@ def check_overrides(argv: Sequence[str]) -> None:
 
     try:
         cfg = compose(group_args)
-    except Exception:  # noqa: BLE001 -- a composition error is reported by Hydra itself, with its own message
+    except Exception:  # a composition error is reported by Hydra itself, with its own message
         return
     known = _keys(cfg)
     optional = _optional_keys_read()

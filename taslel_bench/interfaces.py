@@ -2,8 +2,8 @@
 ``estimators`` implement and the types they exchange with the core.
 
 The axis packages import from the core only this module (types, protocols, the terrain vocabulary, the
-the core's quadruped vocabulary, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core services);
-the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
+the core's quadruped vocabulary, the field checks that name a bad config value) and :mod:`taslel_bench.api` (core
+services); the core builds them from Hydra ``_target_`` entries and talks to them only through these protocols.
 
 Joint vectors are in the core order (:data:`taslel_bench.robot.quadruped.JOINT_NAMES`, legs FL, FR, RL, RR).
 """
@@ -220,7 +220,7 @@ class Estimator(Protocol):
         ...
 
 
-__all__ = [  # noqa: RUF022 - grouped by topic
+__all__ = [  # grouped by topic
     # QP
     "SOLVED", "QPBackend", "QPProblem", "QPSolution", "all_finite",
     # scenario and terrain

@@ -10,7 +10,7 @@ from taslel_bench.gl_hint import import_mujoco_or_exit
 
 import_mujoco_or_exit()  # MUJOCO_GL naming a library that cannot be loaded: one line, not a traceback
 
-from taslel_bench.record.video_cli import main
+from taslel_bench.record.video_cli import main  # noqa: E402 - MUJOCO_GL is set and checked first
 
 if __name__ == "__main__":
     main()

@@ -1,4 +1,5 @@
-"""``python -m taslel_bench.replay <qps.npz>``: replay a QP test set on every backend (:mod:`taslel_bench.qp.replay`)."""
+"""``python -m taslel_bench.replay <qps.npz>``: replay a QP test set on every backend
+(:mod:`taslel_bench.qp.replay`)."""
 
 from taslel_bench.qp.replay import main
 

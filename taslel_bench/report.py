@@ -1,4 +1,5 @@
-"""``python -m taslel_bench.report <sweep folder>``: rebuild a sweep's table and report (:mod:`taslel_bench.sweep.report`)."""
+"""``python -m taslel_bench.report <sweep folder>``: rebuild a sweep's table and report
+(:mod:`taslel_bench.sweep.report`)."""
 
 from taslel_bench.sweep.report import main
 

@@ -55,7 +55,8 @@ def test_unknown_option_gets_did_you_mean_and_exit_2(tmp_path):
 
 
 def test_unknown_option_in_a_sweep_list_is_refused(tmp_path):
-    with pytest.raises(CliError, match="'claribel' is not an option of the config group 'solver'; did you mean clarabel"):
+    with pytest.raises(CliError, match="'claribel' is not an option of the config group 'solver'; did you mean "
+                                       "clarabel"):
         check_overrides(["-m", "solver=osqp,claribel"])
 
 
@@ -123,7 +124,9 @@ def test_gl_hint_is_one_line_naming_the_package():
 def test_unloadable_gl_library_gives_the_hint_not_a_traceback(tmp_path):
     out = _cli(tmp_path, "duration=0.1", env={"MUJOCO_GL": "no_such_gl"})
     assert out.returncode == 1
-    assert out.stderr.startswith("error: MUJOCO_GL=no_such_gl: MuJoCo could not load it") and "Traceback" not in out.stderr
+    assert (
+        out.stderr.startswith("error: MUJOCO_GL=no_such_gl: MuJoCo could not load it") and "Traceback" not in out.stderr
+    )
 
 
 def test_added_barrier_family_passes():
@@ -161,3 +164,18 @@ def test_old_solver_name_is_refused_with_the_new_one_before_any_folder(tmp_path)
     assert "solver=osqp_persistent: 'osqp_persistent' is an old name, refused" in out.stderr
     assert "solver=osqp is now the persistent osqp" in out.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_console_logging_prints_the_package_info_lines_plainly_on_stderr(capsys):
+    """The entry points' console: a library module's INFO line appears as its bare text on the current stderr,
+    once (not repeated by the root logger's handlers)."""
+    import logging
+
+    from taslel_bench.util.log import console_logging
+
+    console_logging()
+    console_logging()  # idempotent: one handler
+    logging.getLogger("taslel_bench.sweep.stills").info("report: still strips and clips %d/%d", 0, 3)
+    logging.getLogger("taslel_bench.sweep.stills").debug("not shown")
+    captured = capsys.readouterr()
+    assert captured.err == "report: still strips and clips 0/3\n" and captured.out == ""

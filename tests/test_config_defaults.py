@@ -52,7 +52,7 @@ def _same(yaml_value, default) -> bool:
     if isinstance(default, tuple):
         default = list(default)
     if isinstance(yaml_value, list) and isinstance(default, list) and len(yaml_value) == len(default):
-        return all(_same(a, b) for a, b in zip(yaml_value, default))
+        return all(_same(a, b) for a, b in zip(yaml_value, default, strict=True))
     if isinstance(yaml_value, dict) and isinstance(default, dict) and yaml_value.keys() == default.keys():
         return all(_same(yaml_value[k], default[k]) for k in yaml_value)
     return yaml_value == default

@@ -237,7 +237,7 @@ def test_checkpoint_round_trip(tmp_path: Path) -> None:
     assert meta["note"] == "test" and meta["model"]["tokens"] == "step"
     x = torch.from_numpy(X)
     with torch.no_grad():
-        for a, b in zip(model(x), loaded(x)):
+        for a, b in zip(model(x), loaded(x), strict=True):
             torch.testing.assert_close(a, b)
     with pytest.raises(FileNotFoundError, match="shipped checkpoints"):
         load_checkpoint(tmp_path / "missing")
@@ -278,7 +278,7 @@ def test_ensemble_combines_members_and_round_trips(tmp_path: Path) -> None:
     assert isinstance(loaded, EnsembleModel) and meta["ensemble"]["members"] == 3
     assert len(meta["normalisation"]) == 3
     with torch.no_grad():
-        for a, b in zip(ens.predict(x), loaded.predict(x)):
+        for a, b in zip(ens.predict(x), loaded.predict(x), strict=True):
             torch.testing.assert_close(a, b)
     est = LearnedEstimator("attention", checkpoint=tmp_path / "ens", prior_mu=0.5, conservative_k=1.0)
     for i in range(WINDOW_STEPS):
@@ -495,7 +495,9 @@ def test_plant_beta_favours_range_edges_and_one_factor_shift() -> None:
     lo, hi = TRAIN_RANGES.motor_strength_scale
     for draws in (uni, edge):
         assert all(lo <= d.motor_strength_scale <= hi for d in draws)
-    near = lambda ds: np.mean([min(d.motor_strength_scale - lo, hi - d.motor_strength_scale) < 0.1 * (hi - lo) for d in ds])
+    def near(ds):
+        return np.mean([min(d.motor_strength_scale - lo, hi - d.motor_strength_scale) < 0.1 * (hi - lo) for d in ds])
+
     assert near(uni) == pytest.approx(0.2, abs=0.03) and near(edge) > 0.35
     # friction and operator settings are still uniform
     assert np.mean([d.friction for d in edge]) == pytest.approx(np.mean(TRAIN_RANGES.friction), abs=0.03)
@@ -525,9 +527,14 @@ def test_compare_scores_checkpoints_on_named_sets(tmp_path: Path) -> None:
     save_checkpoint(model, tmp_path / "tiny", {"training": {"epochs": 3, "train_windows": 12}})
     np.savez(tmp_path / "w.npz", X=X, y=y, window_filtered=np.arange(12) % 2 == 0)
     rows = compare([str(tmp_path / "tiny")], {"a": tmp_path / "w.npz"}, {"tiny": "test model"})
-    assert [(r["set"], r["estimate"], r["what"]) for r in rows] == [("a", "mean", "test model"), ("a", "lower", "test model")]
+    assert [(r["set"], r["estimate"], r["what"]) for r in rows] == [
+        ("a", "mean", "test model"),
+        ("a", "lower", "test model"),
+    ]
     assert set(rows[0]) >= {"mae[nominal]", "mae[filtered]", "over[all]"}
-    main([str(tmp_path / "tiny"), "--set", f"a={tmp_path / 'w.npz'}", "--out", str(tmp_path / "r.md"), "--threads", "1"])
+    main(
+        [str(tmp_path / "tiny"), "--set", f"a={tmp_path / 'w.npz'}", "--out", str(tmp_path / "r.md"), "--threads", "1"]
+    )
     assert "| tiny |" in (tmp_path / "r.md").read_text()
     with pytest.raises(SystemExit, match="expected NAME=PATH"):
         main([str(tmp_path / "tiny"), "--set", "nopath"])
@@ -542,7 +549,9 @@ def test_estimator_config_uses_the_bound_chosen_on_validation(config: str) -> No
     name = cfg.get("checkpoint") or config
     meta = json.loads((Path(__file__).resolve().parents[1] / "estimators" / "checkpoints" / f"{name}.json").read_text())
     choice = meta["metrics"]["safety_calibration"]
-    assert (cfg.bound, float(cfg.conservative_k)) == (choice["bound"], float(choice["k"])), f"{config}.yaml vs {name}.json"
+    assert (cfg.bound, float(cfg.conservative_k)) == (choice["bound"], float(choice["k"])), (
+        f"{config}.yaml vs {name}.json"
+    )
     assert OmegaConf.to_container(cfg.band_margin) == choice["band_margin"], f"{config}.yaml vs {name}.json"
 
 

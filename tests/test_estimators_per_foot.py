@@ -10,9 +10,10 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS
-from estimators.models import ModelConfig, build_model, foot_kinematics, slip_features
-from taslel_bench.interfaces import Proprioception
+# the estimator modules import torch: they come after the skip
+from estimators.features import N_FEATURES, WINDOW_DT_S, WINDOW_STEPS  # noqa: E402
+from estimators.models import ModelConfig, build_model, foot_kinematics, slip_features  # noqa: E402
+from taslel_bench.interfaces import Proprioception  # noqa: E402
 
 STAND_LEG = [0.0, 0.8, -1.6]  # [rad] hip, thigh, calf of a standing A1 leg
 

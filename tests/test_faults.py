@@ -177,7 +177,7 @@ def test_error_summary_of_a_job_with_an_invalid_seed(tmp_path):
         cfg = compose_cfg(overrides)
         try:
             run(cfg, tmp_path / "run")
-        except Exception as exc:  # noqa: BLE001 - what __main__ does in a multirun
+        except Exception as exc:  # what __main__ does in a multirun
             summary = record_job_error(tmp_path / "run", {"scenario": "flat"}, cfg, exc)
         assert summary["seed"] == -1 and summary["status"] == "error" and "seed" in summary["message"]
 

@@ -421,7 +421,9 @@ def test_contact_velocity_gain_brakes_stance_feet(states, formulation):
     J vdot + J̇v = -k_v J v (both formulations), and the equations of motion still hold."""
     st, pm = states
     kv = 50.0
-    f = SafetyFilter(FilterSettings(contact_velocity_gain=kv, formulation=formulation), TightReference(), clearance_rows())
+    f = SafetyFilter(
+        FilterSettings(contact_velocity_gain=kv, formulation=formulation), TightReference(), clearance_rows()
+    )
     for s in st:
         res = f.filter(inputs_for(pm, s, 0.6), s[3])
         assert res.status == "solved"

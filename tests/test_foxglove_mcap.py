@@ -154,7 +154,7 @@ def test_terrain_entities_are_the_plant_logs(logs_run):
     logs = [e for e in entities if {"key": "kind", "value": "Log"} in e["metadata"]]
     capsules = [g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
     assert len(logs) == len(capsules) > 0
-    for entity, g in zip(logs, capsules):
+    for entity, g in zip(logs, capsules, strict=True):
         cyl = entity["cylinders"][0]
         p = cyl["pose"]["position"]
         np.testing.assert_allclose([p.get("x", 0.0), p.get("y", 0.0), p.get("z", 0.0)], d.geom_xpos[g], atol=1e-12)
@@ -179,7 +179,8 @@ def test_signals_have_named_per_foot_fields(logs_run):
     _, _, joints, _ = messages["/joint_state"][5]
     assert joints["position_rad"]["FR_calf"] == pytest.approx(row["q_FR_calf_rad"])
     _, _, barrier, _ = messages["/barrier"][5]
-    assert {"h_m", "obstacle_h_m", "obstacle_h_e_mps", "obstacle_clearance_m"} <= set(barrier["FL"])  # logs: the obstacle family
+    # logs: the obstacle family
+    assert {"h_m", "obstacle_h_m", "obstacle_h_e_mps", "obstacle_clearance_m"} <= set(barrier["FL"])
 
 
 def test_the_shipped_layout_is_current_and_names_recorded_fields(logs_run):

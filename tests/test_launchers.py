@@ -48,7 +48,9 @@ def test_launcher_config_composes_to_a_hydra_plugin(name, target_class, key, val
     ("launcher", "extra"), [("ray", "ray"), ("slurm", "slurm"), ("submitit_local", "slurm")]
 )
 def test_missing_launcher_package_names_the_pip_extra(launcher, extra):
-    nothing_installed = lambda module: False
+    def nothing_installed(module):
+        return False
+
     hint = rf'hydra/launcher={launcher} needs .*pip install -e "\.\[{extra}\]"'
     with pytest.raises(LauncherNotInstalled, match=hint):
         check_launcher_overrides(["-m", f"hydra/launcher={launcher}", "seed=0,1"], nothing_installed)

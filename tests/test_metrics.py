@@ -113,7 +113,9 @@ def test_virtual_clearance_counts_every_swing_tick_and_reports_loaded_ones_besid
     assert m["clearance_min_m"] == -0.03 and m["clearance_violation_depth_max_m"] == pytest.approx(0.03)
     assert m["clearance_violation_depth_p50_m"] == pytest.approx(0.01)
     assert m["clearance_violation_rate_unloaded"] == pytest.approx(3 / 8)
-    assert m["clearance_violation_rate_early_touchdown"] == 1.0 and math.isnan(m["clearance_violation_rate_lift_off_lag"])
+    assert m["clearance_violation_rate_early_touchdown"] == 1.0 and math.isnan(
+        m["clearance_violation_rate_lift_off_lag"]
+    )
     assert m["clearance_loaded_swing_rate"] == pytest.approx(0.2)
 
 

@@ -13,10 +13,10 @@ from taslel_bench.plant.contacts import FootContactReader, foot_geom_ids, measur
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.kinematics import LegKinematics
+from taslel_bench.robot.model import RobotModel
 
 A1 = load_robot("a1")
 KIN = LegKinematics(A1)
-from taslel_bench.robot.model import RobotModel
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +170,9 @@ def test_leg_ik_inverts_fk_and_matches_pinocchio(setup):
     _, _, _, pm = setup
     rng = np.random.default_rng(4)
     for _ in range(50):
-        qj = np.concatenate([[rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 1.5), rng.uniform(-2.5, -1.0)] for _ in range(4)])
+        qj = np.concatenate(
+            [[rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 1.5), rng.uniform(-2.5, -1.0)] for _ in range(4)]
+        )
         q = pin.neutral(pm.model)
         q[7:] = qj
         pm.update(q, np.zeros(quad.NV))

@@ -144,7 +144,7 @@ def test_coulomb_frictionloss_disturbance_against_mujoco():
     assert saturated > 50  # most of the 120 joint samples
 
 
-def test_model_group_reaches_the_episode_and_is_validated(tmp_path, no_episode):  # noqa: F811
+def test_model_group_reaches_the_episode_and_is_validated(tmp_path, no_episode):  # noqa: F811 - the fixture imported above
     built = Built(
         compose_cfg(
             [

@@ -50,7 +50,8 @@ def menagerie_like_scene(folder: Path) -> Path:
     (folder / "assets").mkdir(exist_ok=True)
     (folder / "assets" / "tetra.obj").write_text(TETRA_OBJ)
     xml = robot_spec().to_xml()
-    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" file="tetra.obj"/></asset>',
+    xml = re.sub(r"<compiler ([^/]*)/>", r'<compiler \1 meshdir="assets"/>\n  <asset><mesh name="tetra" '
+                                         r'file="tetra.obj"/></asset>',
                  xml, count=1)
     xml = xml.replace('<site name="imu"/>', '<site name="imu"/>\n      <geom type="mesh" mesh="tetra" contype="0" '
                                             'conaffinity="0" density="0" group="3"/>', 1)  # fmt: skip
@@ -332,7 +333,7 @@ def test_report_never_crashes_on_bad_runs_and_names_the_file(tmp_path, capsys):
     assert exited.value.code == 1
     table = pd.read_parquet(sweep / "summary.parquet")
     assert len(table) == 3 and (table["status"] == "error").all()
-    messages = dict(zip(table["run_dir"], table["message"]))
+    messages = dict(zip(table["run_dir"], table["message"], strict=True))
     assert str(steps) in messages["seed=0"]
     assert str(sweep / "seed=1" / "config.yaml") in messages["seed=1"]
     assert str(sweep / "seed=2" / "summary.json") in messages["seed=2"]

@@ -119,7 +119,7 @@ def test_ctrl_c_of_a_sweep_stops_its_runs_starts_no_more_and_writes_the_table(tm
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 130, err[-3000:]
     table = pd.read_parquet(folder / "summary.parquet")
-    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"), strict=True)}
     assert sorted(rows) == [0, 1, 2, 3] and {r["status"] for r in rows.values()} == {"interrupted"}
     assert sum("not run: the sweep was interrupted by SIGINT" in r["message"] for r in rows.values()) == 2
     assert "Traceback" not in err and not (folder / ".sweep_interrupted").exists()

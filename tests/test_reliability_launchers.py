@@ -24,7 +24,7 @@ def test_submitit_local_with_a_killed_job_ends_with_its_table(tmp_path):
     out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900, check=False)
     assert out.returncode == 1, out.stderr[-3000:]
     table = pd.read_parquet(tmp_path / "summary.parquet")
-    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"), strict=True)}
     assert rows[0]["status"] == "ok"
     assert rows[1]["status"] == "error" and "LostJob" in rows[1]["message"] and "seed=1" in rows[1]["message"]
     assert (tmp_path / "report.md").is_file() and "Traceback" not in out.stderr

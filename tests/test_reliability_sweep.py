@@ -5,6 +5,7 @@ with error rows, nothing is lost, the exit code says so."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -34,12 +35,13 @@ def test_killed_worker_corrupt_folder_and_full_disk_leave_a_complete_table(tmp_p
     corrupt = folder / "duration=0.3,seed=1"
     old_summary = corrupt / "summary.json"
     old_summary.write_text(old_summary.read_text()[:300])  # truncated
-    old_files = {p.name: p.read_bytes() for p in corrupt.iterdir() if p.is_file() and p.suffix != ".log"}  # Hydra's log stays
+    # Hydra's log stays
+    old_files = {p.name: p.read_bytes() for p in corrupt.iterdir() if p.is_file() and p.suffix != ".log"}
 
     out = sweep(folder, "0,1,2,3", "kill=seed=2;enospc=seed=3")
     assert out.returncode == 1, out.stdout[-3000:] + out.stderr[-3000:]
     table = pd.read_parquet(folder / "summary.parquet")
-    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"), strict=True)}
     assert sorted(rows) == [0, 1, 2, 3]  # every job has its row
     assert rows[0]["status"] == "ok" and rows[1]["status"] == "ok"
     assert rows[2]["status"] == "error" and "died twice" in rows[2]["message"] and "SIGKILL" in rows[2]["message"]
@@ -81,7 +83,7 @@ def test_ray_launcher_turns_a_dead_worker_into_an_error_row(tmp_path):
     out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900, check=False)
     assert out.returncode == 1, out.stdout[-3000:] + out.stderr[-3000:]
     table = pd.read_parquet(folder / "summary.parquet")
-    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"))}
+    rows = {int(s): r for s, r in zip(table["seed"], table.to_dict("records"), strict=True)}
     assert sorted(rows) == [0, 1, 2]
     assert rows[0]["status"] == "ok" and rows[2]["status"] == "ok"
     assert rows[1]["status"] == "error" and "died twice" in rows[1]["message"]
@@ -103,10 +105,8 @@ def test_workers_exit_when_the_sweep_process_is_killed(tmp_path):
     while time.monotonic() < deadline and len(pids) < 2:
         pids = []
         for lock in folder.glob("*/run.lock"):
-            try:
+            with contextlib.suppress(OSError, ValueError, KeyError):
                 pids.append(int(json.loads(lock.read_text())["pid"]))
-            except (OSError, ValueError, KeyError):
-                pass
         time.sleep(0.5)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()

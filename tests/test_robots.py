@@ -129,6 +129,12 @@ def test_the_trot_scaled_to_the_a1_is_the_tuned_trot():
 
     ctl = build_controller(compose_cfg([]))
     p = ctl.gait.p
-    assert (p.speed_mps, p.swing_height_m, p.stand_height_m, ctl.gains.kp, ctl.gains.kd) == (0.4, 0.06, 0.27, 100.0, 3.0)
+    assert (p.speed_mps, p.swing_height_m, p.stand_height_m, ctl.gains.kp, ctl.gains.kd) == (
+        0.4,
+        0.06,
+        0.27,
+        100.0,
+        3.0,
+    )
     heavy = build_controller(compose_cfg(["robot=anymal_c"]))
     assert heavy.gains.kp > 500 and heavy.gait.p.speed_mps > 0.45 and heavy.robot.name == "anymal_c"

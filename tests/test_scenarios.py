@@ -42,7 +42,8 @@ def test_friction_patch_changes_the_friction_the_feet_get():
 def test_push_moves_the_trunk_sideways(tmp_path):
     base = ["duration=1.0", "progress=false", "record.mcap=false", "filter.enabled=false"]
     quiet = run(compose_cfg(base), tmp_path / "quiet")
-    pushed = run(compose_cfg([*base, "scenario=push", "scenario.pushes=[{t_s: 0.8, force_n: [0, 80, 0], duration_s: 0.1}]"]),
+    pushed = run(compose_cfg([*base, "scenario=push", "scenario.pushes=[{t_s: 0.8, force_n: [0, 80, 0], duration_s: "
+                                                      "0.1}]"]),
                  tmp_path / "pushed")
     assert quiet["status"] == "ok" and quiet["residual_alarm_rate"] == 0.0
     # the push is a force the controller's model does not know: the residual sees 80 N during it, only then

@@ -55,7 +55,7 @@ def test_fixture_covers_binding_constraints(qps):
 
 def test_reference_reproduces_stored_solutions(qps, solutions):
     u = qps.problems[0].layout["u"]
-    for sol, x_ref in zip(solutions["reference"], qps.x_ref):
+    for sol, x_ref in zip(solutions["reference"], qps.x_ref, strict=True):
         assert sol.ok, sol.status
         assert np.max(np.abs(sol.x[u] - x_ref[u])) <= 1e-9
 
@@ -63,7 +63,7 @@ def test_reference_reproduces_stored_solutions(qps, solutions):
 @pytest.mark.parametrize("name", available_backends())
 def test_backend_u_matches_reference(name, qps, solutions):
     u, tol = qps.problems[0].layout["u"], U_TOL.get(name, DEFAULT_U_TOL)
-    for k, (sol, x_ref) in enumerate(zip(solutions[name], qps.x_ref)):
+    for k, (sol, x_ref) in enumerate(zip(solutions[name], qps.x_ref, strict=True)):
         assert sol.ok, f"{name} QP {k}: {sol.status}"
         assert np.max(np.abs(sol.x[u] - x_ref[u])) <= tol, f"{name} QP {k}"
 
@@ -71,7 +71,7 @@ def test_backend_u_matches_reference(name, qps, solutions):
 @pytest.mark.parametrize("name", available_backends())
 def test_equalities_and_contact_forces(name, qps, solutions):
     mu_t = qps.meta["mu"] / np.sqrt(2.0)
-    for p, sol in zip(qps.problems, solutions[name]):
+    for p, sol in zip(qps.problems, solutions[name], strict=True):
         assert np.max(np.abs(p.A @ sol.x - p.b)) <= 1e-6  # equations of motion + contact / swing rows
         lam = sol.x[p.layout["lambda"]].reshape(4, 3)  # per foot (x, y, z), world axes
         assert np.all(lam[:, 2] >= -1e-6)  # unilateral
@@ -348,8 +348,9 @@ def _fake_sweep(root: Path):
                 err[::wrong_every] = 2e-3
             run_dir = f"solver={solver},seed={seed}"
             (root / run_dir).mkdir(parents=True)
-            pd.DataFrame({"qp_solve_us": solve, "qp_iterations": np.full(n, 3, np.int32), "qp_u_error_nm": err,
-                          "qp_status": np.zeros(n, np.int8), "fell": False}).to_parquet(root / run_dir / "steps.parquet")
+            steps = pd.DataFrame({"qp_solve_us": solve, "qp_iterations": np.full(n, 3, np.int32), "qp_u_error_nm": err,
+                                  "qp_status": np.zeros(n, np.int8), "fell": False})
+            steps.to_parquet(root / run_dir / "steps.parquet")
             rows.append({"scenario": "flat", "solver": solver, "seed": seed, "status": "ok", "run_dir": run_dir,
                          "control_rate_hz": 1000.0, "qp_reference_tol_nm": 1e-3, "real_time_factor": 5.0,
                          "fell": False, "filter_enabled": True,
@@ -389,7 +390,7 @@ def test_osqp_infinity_is_the_installed_osqps():
 
     from solvers.osqp_persistent import OSQP_INFTY
 
-    assert OSQP_INFTY == constant("OSQP_INFTY")
+    assert constant("OSQP_INFTY") == OSQP_INFTY
 
 
 def test_verdict_tolerances_of_osqp_follow_the_formulation():
@@ -476,11 +477,11 @@ def test_reference_checks_kept_and_flushed_equal_checks_solved_at_once(qps):
     backend = ShiftedU(1e-3)
     answers = [backend.solve(p) for p in qps.problems]
     at_once = ReferenceCheck(make_backend("reference"), every=3, tol_nm=1e-3)
-    expected = {k: at_once.on_tick(k, p, sol) for k, (p, sol) in enumerate(zip(qps.problems, answers))}
+    expected = {k: at_once.on_tick(k, p, sol) for k, (p, sol) in enumerate(zip(qps.problems, answers, strict=True))}
     kept = ReferenceCheck(make_backend("reference"), every=3, tol_nm=1e-3, batch=10)
     problem = qps.problems[0].copy()  # one problem overwritten tick after tick, as the filter's
     flushed: dict[int, float] = {}
-    for k, (p, sol) in enumerate(zip(qps.problems, answers)):
+    for k, (p, sol) in enumerate(zip(qps.problems, answers, strict=True)):
         for name in ("P", "q", "A", "b", "G", "h", "lb", "ub"):
             np.copyto(getattr(problem, name), getattr(p, name))
         kept.keep(k, problem, sol)

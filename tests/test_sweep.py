@@ -78,7 +78,8 @@ def test_aggregate_includes_crashed_job_and_report_renders(tmp_path):
     assert "| flat | daqp | oracle | 2 | 0 | 0 | 0/2 |" in report  # runs, errors, degraded, falls
     # the first table: unsafe runs per group and why (the crashed job is not judged)
     assert report.index("## Unsafe runs per group (the verdict)") < report.index("## Safety and physics per group")
-    assert "| flat | daqp | oracle | 2 | 0/2 | 2 | 0 | 0 | 0 |" in report  # runs, unsafe, status_ok, not_judged, fell, tripped
+    # runs, unsafe, status_ok, not_judged, fell, tripped
+    assert "| flat | daqp | oracle | 2 | 0/2 | 2 | 0 | 0 | 0 |" in report
     assert "left no summary.json" in report
     assert (tmp_path / "qp_solve_times.png").stat().st_size > 1000
 
@@ -185,7 +186,7 @@ def test_a_swept_none_level_splits_the_report_rows_and_the_fall_figure(tmp_path)
     frame = expand_overrides(pd.DataFrame(rows))
     assert group_columns(frame) == ["scenario", "solver", "estimator", "mismatch_plant"]
     table = summary_table(tmp_path, frame)
-    assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"])) == [("lossy", 2, "1/2"),
+    assert sorted(zip(table["mismatch_plant"], table["runs"], table["fall_rate"], strict=True)) == [("lossy", 2, "1/2"),
                                                                                        ("none", 2, "0/2")]
     assert "figures skipped" not in write_report(tmp_path, frame).read_text()
     assert (tmp_path / "fall_rates.png").is_file()

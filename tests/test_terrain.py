@@ -161,7 +161,9 @@ def test_terrain_scenarios_are_real_geometry():
     from taslel_bench.sim.build import build_plant
 
     steps = Steps(height_m=0.05)
-    assert [steps.terrain.height_at(x, 0.0) for x in (0.5, 1.0, 1.5, 2.1, 3.0)] == pytest.approx([0, 0.05, 0.1, 0.05, 0])
+    assert [steps.terrain.height_at(x, 0.0) for x in (0.5, 1.0, 1.5, 2.1, 3.0)] == pytest.approx(
+        [0, 0.05, 0.1, 0.05, 0]
+    )
     slope = Slope(angle_deg=10.0, start_x_m=0.6, run_m=2.0)
     assert slope.terrain.height_at(1.6, 0.0) == pytest.approx(math.tan(math.radians(10.0)))
     assert np.allclose(slope.terrain.normal_at(1.6, 0.0), [-math.sin(math.radians(10)), 0, math.cos(math.radians(10))])

@@ -40,12 +40,12 @@ def test_every_combination_composes_validates_and_builds_its_scenario():
     params = _sweeper_params()
     keys = [k for k in params if k != "seed"]
     for values in itertools.product(*(params[k] for k in keys)):
-        overrides = ["+experiment=terrain", *(f"{k}={v}" for k, v in zip(keys, values))]
+        overrides = ["+experiment=terrain", *(f"{k}={v}" for k, v in zip(keys, values, strict=True))]
         cfg = compose_cfg(overrides)
         validate(cfg)
         scenario = build_axis(cfg, "scenario")
         assert scenario.name == cfg.scenario.name
-        variant = dict(zip(keys, values))["+filter_variant"]
+        variant = dict(zip(keys, values, strict=True))["+filter_variant"]
         assert bool(cfg.filter.enabled) == (variant != "nominal"), overrides
         assert (cfg.filter.get("friction_cone") == "terrain") == (variant == "terrain"), overrides
 

@@ -74,7 +74,9 @@ def test_packed_distance_equals_the_parts():
     terrain = Terrain((Plane(1.0), Log(1.0, -0.04, 0.1), Box((2.0, 0.0, 0.03), (0.3, 0.5, 0.03)),
                        Ramp(start_x_m=2.5, run_m=1.0, angle_deg=12.0)))  # fmt: skip
     c = np.column_stack([rng.uniform(0, 4, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.05, 0.3, 400)])
-    for a, b in zip(terrain.sphere_distance(c, 0.02), PackedTerrain(terrain.parts).sphere_distance(c, 0.02)):
+    for a, b in zip(
+        terrain.sphere_distance(c, 0.02), PackedTerrain(terrain.parts).sphere_distance(c, 0.02), strict=True
+    ):
         assert np.max(np.abs(a - b)) < 1e-12
 
 
@@ -93,7 +95,8 @@ def test_leg_point_terms_are_the_models_foot_terms_at_the_foot(states):
 
 
 def test_friction_margin_shrinks_each_feet_cone_too(states):
-    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before commit 076b4de)."""
+    """robust.friction_margin scales the per-foot values as it scales the single mu (it did not before commit
+    076b4de)."""
     from taslel_bench.filter.robust import RobustSettings
 
     st, pm = states
@@ -203,7 +206,7 @@ def test_packed_heightfield_distance_equals_the_part():
     rng = np.random.default_rng(6)
     c = np.column_stack([rng.uniform(0.6, 2.4, 300), rng.uniform(-0.6, 0.6, 300), rng.uniform(-0.04, 0.2, 300)])
     ours = PackedTerrain((field,)).sphere_distance(c, 0.02)
-    for a, b in zip(field.sphere_distance_reference(c, 0.02), ours):
+    for a, b in zip(field.sphere_distance_reference(c, 0.02), ours, strict=True):
         finite = np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1)
         assert np.array_equal(np.isfinite(a), np.isfinite(b))
         assert np.max(np.abs(a[finite] - b[finite])) < 1e-12
@@ -246,7 +249,7 @@ def test_downhill_edge_pyramid_holds_a_vertical_force_on_a_40_deg_log_side_insid
             f_n = f @ n
             assert np.linalg.norm(f - f_n * n) <= 1.0 * f_n + 1e-9  # inside the true cone, mu = 1
     for level in (np.array([0.0, 0.0, 1.0]),):
-        assert all(np.allclose(a, b) for a, b in zip(downhill_edge_basis(level), tangent_basis(level)))
+        assert all(np.allclose(a, b) for a, b in zip(downhill_edge_basis(level), tangent_basis(level), strict=True))
 
 
 def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
@@ -256,7 +259,8 @@ def test_cone_edge_downhill_is_an_option_of_the_terrain_cone():
     from taslel_bench.config.settings import filter_settings
 
     assert compose_cfg(["filter=terrain"]).filter.cone_edge_downhill is True  # the preset turns it
-    assert filter_settings(compose_cfg([]), load_robot("a1")).cone_edge_downhill is False  # the paper's filter does not have it
+    # the paper's filter does not have it
+    assert filter_settings(compose_cfg([]), load_robot("a1")).cone_edge_downhill is False
     with pytest.raises(Exception, match="cone_edge_downhill"):
         from taslel_bench.config.validate import validate
         validate(compose_cfg(["filter=terrain", "filter.cone_edge_downhill=maybe"]))
@@ -317,10 +321,10 @@ def test_scalar_cross_and_compiled_merge_give_numpys_bits():
         point, p_p = rng.normal(size=(24, 3)), rng.normal(size=(24, 3))
         closer = (dp < d - tol) | ((dp < d + tol) & (n_p[:, 2] > normal[:, 2])) if tol else dp < d
         want = [x.copy() for x in (d, normal, point)]
-        for w, o in zip(want, (dp, n_p, p_p)):
+        for w, o in zip(want, (dp, n_p, p_p), strict=True):
             w[closer] = o[closer]
         _take_closer(d, normal, point, dp, n_p, p_p, tol)
-        assert all(np.array_equal(w, g) for w, g in zip(want, (d, normal, point)))
+        assert all(np.array_equal(w, g) for w, g in zip(want, (d, normal, point), strict=True))
         assert 0 < closer.sum() < 24
 
 
@@ -330,7 +334,8 @@ def test_a_barrier_family_declares_its_rows(tmp_path):
     from taslel_bench.filter.barriers.attitude import TrunkAttitude
     from taslel_bench.sim.build import Built
 
-    over = ["filter=terrain", "+filter.barriers.attitude={_target_:taslel_bench.filter.barriers.attitude.TrunkAttitude}",
+    over = ["filter=terrain",
+            "+filter.barriers.attitude={_target_:taslel_bench.filter.barriers.attitude.TrunkAttitude}",
             "duration=0.3", "progress=false"]
     built = Built(compose_cfg(over))
     att = next(b for b in built.filter.barriers if isinstance(b, TrunkAttitude))

@@ -13,9 +13,9 @@ from taslel_bench.interfaces import OBSTACLE, Box, Plane, Terrain
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import load_robot
 from taslel_bench.robot.kinematics import LegKinematics
+from tests.conftest import compose_cfg
 
 KIN = LegKinematics(load_robot("a1"))
-from tests.conftest import compose_cfg
 
 LEVEL_POSE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0])  # trunk at the origin, level, heading +x
 STEP_M = 0.05
@@ -88,7 +88,8 @@ def test_terrain_following_is_a_config_switch_refused_unless_boolean():
 def test_touchdown_aim_ends_the_swing_above_the_ground_and_descends_early_in_the_stance():
     """``touchdown_height_m``: a leg's foot target (hip frame) is that much above the plain terrain-following
     target at the swing's end, back on it :data:`TOUCHDOWN_DESCENT_S` into the stance, unchanged in the first
-    half of the swing, in the stance the walk starts in, and moves by no more than the eased descent's steepest step per tick (continuous)."""
+    half of the swing, in the stance the walk starts in, and moves by no more than the eased descent's steepest step
+    per tick (continuous)."""
     from taslel_bench.control.terrain_following import TOUCHDOWN_DESCENT_S
 
     aim = 0.02  # [m]

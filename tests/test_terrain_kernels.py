@@ -1,6 +1,6 @@
-"""The compiled terrain writes of ``filter=terrain`` (the terrain filter's cost work) against the code they replace: the same
-bits on walking states over terrains of every compiled kind (planes, logs, boxes, a ramp, a heightfield whose edge
-lies under the feet), with no foot in contact, every foot in contact and the gait's mix."""
+"""The compiled terrain writes of ``filter=terrain`` (the terrain filter's cost work) against the code they replace:
+the same bits on walking states over terrains of every compiled kind (planes, logs, boxes, a ramp, a heightfield whose
+edge lies under the feet), with no foot in contact, every foot in contact and the gait's mix."""
 
 from __future__ import annotations
 
@@ -59,11 +59,17 @@ def test_packed_query_with_the_heightfield_gives_the_old_bits():
     rng = np.random.default_rng(4)
     c = np.column_stack([rng.uniform(0.3, 2.7, 600), rng.uniform(-1.2, 1.2, 600), rng.uniform(-0.05, 0.3, 600)])
     c[:40, 0] = 0.5 + rng.uniform(-1e-3, 1e-3, 40)  # over the field's edge
-    for parts in ((Plane(1.0), field), (field,), (Plane(1.0), Log(1.0, 0.0, 0.05), field, Box((2.0, 0, 0.02), (0.2, 0.5, 0.02)))):
+    for parts in (
+        (Plane(1.0), field),
+        (field,),
+        (Plane(1.0), Log(1.0, 0.0, 0.05), field, Box((2.0, 0, 0.02), (0.2, 0.5, 0.02))),
+    ):
         packed = PackedTerrain(parts)
         assert packed.compiled and packed.has_field
         for tol in (0.0, 0.005):
-            for a, b in zip(old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol)):
+            for a, b in zip(
+                old_sphere_distance(packed, field, c, 0.02, tol), packed.sphere_distance(c, 0.02, tol), strict=True
+            ):
                 assert np.array_equal(a, b)
 
 
@@ -118,7 +124,7 @@ def test_a_part_of_another_kind_keeps_the_python_query(states):
     old, new = families(Terrain((Plane(1.0), Pillar())), True), families(Terrain((Plane(1.0), Pillar())), True)
     for state in st[:3]:
         x = inputs_for(pm, state, 0.8)
-        for f_old, f_new in zip(old.ineq_families, new.ineq_families):
+        for f_old, f_new in zip(old.ineq_families, new.ineq_families, strict=True):
             f_old.write_python(old.problem, x)
             f_new.write(new.problem, x)
         assert np.array_equal(old.problem.G, new.problem.G) and np.array_equal(old.problem.h, new.problem.h)
@@ -129,8 +135,8 @@ def families(terrain: Terrain, downhill: bool) -> SafetyFilter:
     barriers = [TerrainClearance(w), TerrainClearance(w, "tc_all", role=None), LegClearance(w, "shin"),
                 LegClearance(w, "shin_all", role=None, swing_only=True),
                 LegClearance(w, "knee", part="knee", radius_m=0.02)]  # fmt: skip
-    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill), TightReference(), barriers,
-                        terrain=terrain)  # fmt: skip
+    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill), TightReference(),
+                        barriers, terrain=terrain)  # fmt: skip
 
 
 def stance_variants(x: TickInputs) -> list[TickInputs]:
@@ -149,11 +155,11 @@ def test_compiled_family_writes_give_the_python_writes_bits(states, downhill):
         active = 0
         for state in st:
             for x in stance_variants(inputs_for(pm, state, 0.8)):
-                for f_old, f_new in zip(old.ineq_families, new.ineq_families):
+                for f_old, f_new in zip(old.ineq_families, new.ineq_families, strict=True):
                     f_old.write_python(old.problem, x)
                     f_new.write(new.problem, x)
                 assert np.array_equal(old.problem.G, new.problem.G) and np.array_equal(old.problem.h, new.problem.h)
-                for b_old, b_new in zip(old.barriers, new.barriers):
+                for b_old, b_new in zip(old.barriers, new.barriers, strict=True):
                     assert np.array_equal(b_old.h, b_new.h, equal_nan=True)
                     assert np.array_equal(b_old.h_e, b_new.h_e, equal_nan=True)
                     active += int(np.isfinite(b_new.h).sum())
@@ -179,7 +185,10 @@ def test_with_mu_scaled_is_dataclass_replace(states):
     for name in TickInputs.__dataclass_fields__:
         va, vb = getattr(a, name), getattr(b, name)
         assert va is vb or np.array_equal(va, vb)
-    assert x.with_mu_scaled(0.9).mu_per_foot is not feet and replace(x, mu_per_foot=None).with_mu_scaled(0.9).mu_per_foot is None
+    assert (
+        x.with_mu_scaled(0.9).mu_per_foot is not feet
+        and replace(x, mu_per_foot=None).with_mu_scaled(0.9).mu_per_foot is None
+    )
 
 
 def test_heightfield_distance_within_a_cutoff_is_exact_below_it():

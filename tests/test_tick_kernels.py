@@ -28,14 +28,17 @@ def _tick_inputs(rng: np.random.Generator, fallback: bool, iterations: int | Non
     gs = SimpleNamespace(phi=float(rng.random()), swing_phase=rng.random(4), in_stance=rng.random(4) < 0.5)
     gs.swing_phase.flags.writeable = False
     sol = QPSolution(rng.normal(size=12), "solved", float(rng.random()) * 1e-5, iterations)
-    fres = FilterResult(rng.normal(size=12), rng.normal(size=12), rng.normal(size=NV), "max_iter" if fallback else "solved",
-                        fallback, float(rng.random()) * 1e-5, sol, float(rng.random()))  # fmt: skip
+    fres = FilterResult(rng.normal(size=12), rng.normal(size=12), rng.normal(size=NV),
+                        "max_iter" if fallback else "solved", fallback, float(rng.random()) * 1e-5, sol,
+                        float(rng.random()))  # fmt: skip
     plant = (rng.normal(size=NQ), rng.normal(size=NV), rng.normal(size=NSENSOR))
     return gs, fres, plant
 
 
 def _barrier(rng: np.random.Generator) -> SimpleNamespace:
-    return SimpleNamespace(name="clearance", h=rng.normal(size=4), h_e=rng.normal(size=4), psi_planned=rng.normal(size=4))
+    return SimpleNamespace(
+        name="clearance", h=rng.normal(size=4), h_e=rng.normal(size=4), psi_planned=rng.normal(size=4)
+    )
 
 
 @pytest.mark.parametrize("fallback", [False, True])
@@ -50,8 +53,8 @@ def test_trace_record_writes_every_row_the_numpy_assignments_wrote(fallback):
     r = 2
     assert tr.n == 3 and tr.t_s[r] == 0.25 and tr.gait_phase[r] == gs.phi
     for got, want in ((tr.qpos_mj, plant[0]), (tr.qvel_mj, plant[1]), (tr.sensordata_mj, plant[2]), (tr.u_nom, u_nom),
-                      (tr.u, u), (tr.in_stance, stance), (tr.scheduled_stance, gs.in_stance), (tr.swing_phase, gs.swing_phase),
-                      (tr.vdot_filter, fres.vdot)):  # fmt: skip
+                      (tr.u, u), (tr.in_stance, stance), (tr.scheduled_stance, gs.in_stance),
+                      (tr.swing_phase, gs.swing_phase), (tr.vdot_filter, fres.vdot)):  # fmt: skip
         np.testing.assert_array_equal(got[r], want)
     np.testing.assert_array_equal(tr.grf_filter_w[r].ravel(), fres.lam)
     assert (tr.mu_hat[r], tr.mu_true[r], tr.mu_hat_ready[r]) == (0.7, 0.9, False)
@@ -169,7 +172,7 @@ def test_controller_references_are_rows_of_one_array():
     np.testing.assert_allclose(ctl.q_des, fresh.q_des, atol=1e-12)
     np.testing.assert_allclose(ctl.qd_des, fresh.qd_des, atol=1e-8)
     assert ctl.q_des.base is ctl._references and ctl.qd_des.base is ctl._references
-    assert quad.N_JOINTS == ctl.q_des.shape[0]
+    assert ctl.q_des.shape[0] == quad.N_JOINTS
 
 
 def _record_numpy(reader, data: mujoco.MjData, log, k: int) -> None:

@@ -24,8 +24,9 @@ SHORT = ["duration=0.1", "progress=false", "filter.enabled=false"]
 
 
 def _settings(tmp_path: Path, **extra) -> dict:
-    return {"name": "mlflow", "uri": f"sqlite:///{tmp_path / 'mlflow.db'}", "artifact_root": str(tmp_path / "artifacts"),
-            "experiment": "test_sweep", "artifacts": ["summary", "report", "figures"], "large_files": "path", **extra}  # fmt: skip
+    return {"name": "mlflow", "uri": f"sqlite:///{tmp_path / 'mlflow.db'}",
+            "artifact_root": str(tmp_path / "artifacts"), "experiment": "test_sweep",
+            "artifacts": ["summary", "report", "figures"], "large_files": "path", **extra}  # fmt: skip
 
 
 def _two_run_sweep(sweep: Path) -> None:
@@ -51,7 +52,9 @@ def test_a_two_run_sweep_is_logged_and_read_back(tmp_path):
         assert child.data.metrics["distance_m"] == pytest.approx(summary["distance_m"])
         assert child.data.metrics["fell"] == float(summary["fell"])
         assert child.data.tags["status"] == summary["status"] and child.data.tags["git_commit"] == summary["git_commit"]
-        assert child.data.tags["verdict"] == ("n/a" if "safe" not in summary else ("safe" if summary["safe"] else "unsafe"))
+        assert child.data.tags["verdict"] == (
+            "n/a" if "safe" not in summary else ("safe" if summary["safe"] else "unsafe")
+        )
         assert Path(child.data.tags["episode_mcap_path"]).is_file()
         names = {a.path for a in mlflow.MlflowClient(settings["uri"]).list_artifacts(child.info.run_id)}
         assert {"summary.json", "config.yaml", "events.json"} <= names

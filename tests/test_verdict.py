@@ -75,7 +75,10 @@ def test_a_touchdown_tolerance_leaves_out_top_landings_just_before_the_schedule_
     assert "trips=4" in judge({**base, **tolerant}, SafetyLimits())[1]  # the default reads every trip
     limits = SafetyLimits(trips_max=3, trip_touchdown_tolerance_s=0.02)
     assert judge({**base, **tolerant}, limits) == (True, "")
-    assert "trips_beyond_touchdown_tolerance=3" in judge({**base, **tolerant}, SafetyLimits(trip_touchdown_tolerance_s=0.02))[1]
+    assert (
+        "trips_beyond_touchdown_tolerance=3"
+        in judge({**base, **tolerant}, SafetyLimits(trip_touchdown_tolerance_s=0.02))[1]
+    )
     with pytest.raises(ConfigError, match="safety.trip_touchdown_tolerance_s"):
         validate(compose_cfg(["safety.trip_touchdown_tolerance_s=0.5"]))
 

@@ -78,14 +78,19 @@ def test_record_video_renders_at_the_end_of_a_run(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert "video_error" not in summary, summary.get("video_error")
-    assert summary["video_frames"] == EXPECTED_FRAMES == imageio_ffmpeg.count_frames_and_secs(str(run_dir / "video.mp4"))[0]
+    assert (
+        summary["video_frames"]
+        == EXPECTED_FRAMES
+        == imageio_ffmpeg.count_frames_and_secs(str(run_dir / "video.mp4"))[0]
+    )
     assert len(pd.read_parquet(run_dir / "steps.parquet")) == 700
 
 
 def test_verdict_text_reads_the_safety_keys_when_present():
     assert verdict_text({"safe": True}) == "verdict: safe"
     assert verdict_text({"safe": False, "unsafe_reasons": "fell"}) == "verdict: UNSAFE fell"
-    assert verdict_text({"fell": True, "fall_reason": "trunk_height", "trips": 2}).endswith("fell (trunk_height), 2 trips")
+    assert verdict_text({"fell": True, "fall_reason": "trunk_height", "trips": 2}).endswith("fell (trunk_height), 2 "
+                                                                                            "trips")
 
 
 def test_overlay_fit_cuts_to_the_longest_prefix_that_fits():
@@ -129,7 +134,8 @@ def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(
     png = tmp_path / "sweep" / "stills" / "r0.png"
     assert Image.open(png).size == (STILL_SIZE[0] * len(STRIP_OFFSETS_S), STILL_SIZE[1])
     clip = tmp_path / "sweep" / "stills" / "r0.mp4"
-    assert "(stills/r0.mp4)" in lines[1] and imageio_ffmpeg.count_frames_and_secs(str(clip))[0] == EXPECTED_FRAMES  # 0 .. 0.7 s (the run ends)
+    # 0 .. 0.7 s (the run ends)
+    assert "(stills/r0.mp4)" in lines[1] and imageio_ffmpeg.count_frames_and_secs(str(clip))[0] == EXPECTED_FRAMES
     drawn = png.stat().st_mtime_ns, clip.stat().st_mtime_ns
     assert still_strips(tmp_path / "sweep", pd.DataFrame([row]), keep=True) == lines  # --keep-stills: not drawn again
     assert (png.stat().st_mtime_ns, clip.stat().st_mtime_ns) == drawn

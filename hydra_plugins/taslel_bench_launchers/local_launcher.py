@@ -19,6 +19,7 @@ hydra-joblib-launcher (same settings, same per-job function), with three differe
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
@@ -107,10 +108,8 @@ class _SweepSignals:
         for future in getattr(self.launcher, "_futures", {}).values():
             future.cancel()  # only those not started yet
         for pid in list(getattr(getattr(self.launcher, "_executor", None), "_processes", {}) or {}):
-            try:
+            with contextlib.suppress(OSError):
                 os.kill(pid, signum)
-            except OSError:
-                pass
 
     def __enter__(self) -> Self:
         if threading.current_thread() is threading.main_thread():
@@ -191,8 +190,9 @@ class RobustJoblibLauncher(JoblibLauncher):
                 results[i] = _not_run(job_overrides[i], folders[i])
             except BrokenProcessPool as exc:  # TerminatedWorkerError is one
                 died[i] = death_reason(exc)
-            except Exception as exc:  # noqa: BLE001 - e.g. unpicklable result: one job's error, not the sweep's
+            except Exception as exc:  # e.g. unpicklable result: one job's error, not the sweep's
                 results[i] = settle(exc, job_overrides[i], folders[i])
         if died:
-            log.warning(f"a worker died; {len(died)} job(s) in flight are resubmitted: {sorted(first + i for i in died)}")
+            log.warning(f"a worker died; {len(died)} job(s) in flight are resubmitted: "
+                        f"{sorted(first + i for i in died)}")
         return died

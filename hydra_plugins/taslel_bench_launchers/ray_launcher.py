@@ -109,5 +109,5 @@ def _outcome(ray, ref, overrides: Sequence[str], folder) -> JobReturn:
                             f"{type(exc).__name__}); the other jobs ran on")  # fmt: skip
     except ray.exceptions.RayTaskError as exc:
         return settle(exc.cause if isinstance(exc.cause, BaseException) else exc, overrides, folder)
-    except Exception as exc:  # noqa: BLE001 - one job's error, not the sweep's
+    except Exception as exc:  # one job's error, not the sweep's
         return settle(exc, overrides, folder)

@@ -48,7 +48,7 @@ def _results_never_raise() -> Iterator[None]:
     def results(job: Any) -> list[Any]:
         try:
             return original(job)
-        except Exception as exc:  # noqa: BLE001 - the job's error becomes its row, not the sweep's end
+        except Exception as exc:  # the job's error becomes its row, not the sweep's end
             first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
             return [LostJob(f"submitit job {getattr(job, 'job_id', '?')}: {type(exc).__name__}: {first}")]
 
@@ -68,8 +68,10 @@ if submitit_config is not None:
             folders, _ = begin_launch(self.config, job_overrides, self.hydra_context, initial_job_idx)  # type: ignore[attr-defined]
             with _results_never_raise():
                 returns = super().launch(job_overrides, initial_job_idx)  # type: ignore[misc]
-            return [settle(ret, overrides, folder) for ret, overrides, folder in zip(returns, job_overrides, folders)]
-
+            return [
+                settle(ret, overrides, folder)
+                for ret, overrides, folder in zip(returns, job_overrides, folders, strict=True)
+            ]
 
     class RobustLocalLauncher(_RobustSubmitit, LocalLauncher):
         """``hydra/launcher=submitit_local``: jobs as local processes through submitit."""

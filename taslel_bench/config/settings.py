@@ -127,8 +127,8 @@ def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:
         if options.urdf is None:
             raise
         reason = " ".join(str(exc).split())
-        raise fail("model.urdf", options.urdf, f"not a URDF of robot={robot.name} for the controller's model: {reason}") \
-            from exc
+        raise fail("model.urdf", options.urdf,
+                   f"not a URDF of robot={robot.name} for the controller's model: {reason}") from exc
 
 
 def plant_options(cfg: DictConfig, robot: RobotDescription) -> PlantOptions:
@@ -159,7 +159,7 @@ def build_barriers(cfg: DictConfig, robot: RobotDescription, terrain: Terrain, p
         path = f"filter.barriers.{name}"
         try:
             cls = get_class(node["_target_"])
-        except Exception as exc:  # noqa: BLE001 - a bad target is a config error naming the field
+        except Exception as exc:  # a bad target is a config error naming the field
             raise fail(f"{path}._target_", node.get("_target_"), f"cannot be imported: {exc}") from None
         if not (isinstance(cls, type) and issubclass(cls, Barrier)):
             raise fail(f"{path}._target_", node["_target_"], "must name a subclass of "

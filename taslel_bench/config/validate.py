@@ -60,7 +60,8 @@ MAX_STAND_DURATION_S = 60.0  # [s]
 MAX_KP_PER_NM = 30.0  # [1/rad] joint PD stiffness at most this x the robot's largest torque limit (A1: 1005 N·m/rad)
 MAX_KD_PER_NM = 3.0  # [s/rad] joint PD damping at most this x the largest torque limit (A1: 100.5 N·m·s/rad)
 MAX_FOOTHOLD_SEARCH_M = 0.08  # [m] half the 0.16 m between touchdowns of one foot at the default gait
-MAX_TOUCHDOWN_HEIGHT_M = 0.03  # [m] a swing that ends this far above the expected ground still lands within the stance's first 30 ms at ~0.9 m/s
+# [m] a swing that ends this far above the expected ground still lands within the stance's first 30 ms at ~0.9 m/s
+MAX_TOUCHDOWN_HEIGHT_M = 0.03
 MAX_LAMBDA_MIN_N = 100.0  # [N] about the A1's weight (12.5 kg): a stance foot cannot be asked for more
 MAX_TORQUE_LIMIT_NM = 500.0  # [N·m] per joint (the A1's motors give 33.5, ANYmal C's 80)
 MAX_JOINT_NOISE_RAD = 0.5  # [rad] std of the initial joint perturbation
@@ -126,7 +127,7 @@ def _raw(cfg: DictConfig, path: str) -> Any:
         for part in re.findall(r"[^.\[\]]+", path):
             node = node._get_node(int(part) if isinstance(node, ListConfig) else part)
         return node._value()
-    except Exception:  # noqa: BLE001 - only for the message
+    except Exception:  # only for the message
         return "?"
 
 
@@ -316,7 +317,8 @@ def _trot_terrain_following(cfg: DictConfig) -> None:
         raise fail(f"{c}.foothold_search", search, "foothold choice is part of the terrain-following nominal: "
                     "set controller.terrain_following=true, or foothold_search=0")
     replan = number(f"{c}.foothold_replan_phase", _get(cfg, f"{c}.foothold_replan_phase", 0.0), 0.0, 1.0,
-                    hi_open=True, why="0 plans each touchdown at lift-off only; a swing phase in (0, 1) plans it again there")
+                    hi_open=True, why="0 plans each touchdown at lift-off only; a swing phase in (0, 1) plans it again "
+                                      "there")
     if replan > 0.0 and search == 0.0:
         raise fail(f"{c}.foothold_replan_phase", replan, "re-planning needs foothold choice: set "
                     "controller.foothold_search > 0, or foothold_replan_phase=0")

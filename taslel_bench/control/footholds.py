@@ -6,7 +6,8 @@ the foot during stance, or on an edge itself, where the foot slides off. This pl
 along the trunk's heading by an offset ``delta`` [m] in [-search, +search] (steps of ``step_m``), chosen at
 lift-off (and again at mid-swing with the controller's ``replan_phase``) from the terrain object:
 
-* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to the robot's ``shin_axis_fraction`` of the
+* **shin clearance**: the lower-leg capsule of the filter's shin barrier (knee to the robot's ``shin_axis_fraction`` of
+the
   way to the foot centre, radius ``shin_radius_m``) at the touchdown, mid-stance and lift-off poses of the
   planned stance, with the foot resting on the ground at the candidate point and the trunk level at the gait's
   height: its distance to the terrain should be >= ``shin_clearance_m`` (3 cm: with 2 cm, touchdowns moved far
@@ -48,7 +49,8 @@ class FootholdPlanner:
     def __init__(self, terrain: Terrain, search_m: float, step_m: float = 0.01, shin_clearance_m: float = 0.03,
                  edge_radius_m: float = 0.03, edge_rise_m: float = 0.01, riser_ahead_m: float = 0.045,
                  riser_rise_m: float = 0.03, kinematics: LegKinematics | None = None) -> None:
-        """``kinematics``: the robot's legs (None: the default robot's); its foot radius and shin capsule are checked."""
+        """``kinematics``: the robot's legs (None: the default robot's); its foot radius and shin capsule are
+        checked."""
         self.terrain = terrain
         self.kinematics = kinematics if kinematics is not None else LegKinematics(default_robot())
         robot = self.kinematics.robot
@@ -80,7 +82,7 @@ class FootholdPlanner:
         x0, y0 = touchdown_xy_w
         px = x0 + c * self.offsets_m
         py = y0 + s * self.offsets_m
-        h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py)])
+        h = np.array([self.terrain.height_at(float(a), float(b)) for a, b in zip(px, py, strict=True)])
         feet_w = np.stack([px, py, h + self._foot_radius_m], axis=1)  # (n, 3) foot centres resting on the ground
         return (self._shin_violation(leg, feet_w, h, heading, foot_in_hip_td, stroke_m, ground_ref_m)
                 + self._edge_violation(feet_w, h, heading) + SIZE_TIE * np.abs(self.offsets_m))

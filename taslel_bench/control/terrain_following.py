@@ -70,7 +70,8 @@ class TerrainFollowingController(NominalController):
                  **kwargs) -> None:
         super().__init__(*args, **kwargs)
         if not 0.0 <= replan_phase < 1.0:
-            raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, 1)")
+            raise ValueError(f"replan_phase={replan_phase}: valid is 0 (plan at lift-off only) or a swing phase in (0, "
+                             f"1)")
         self.terrain = terrain
         self.footholds = footholds
         self.replan_phase = replan_phase
@@ -154,7 +155,9 @@ class TerrainFollowingController(NominalController):
                    for i, (hx, hy) in enumerate(self._hips_xy) if gs.in_stance[i]]
         if heights:
             sag = self.gait.p.stand_height_m - sum(heights) / len(heights)
-            self.sag_m += (min(max(sag, -MAX_SAG_M), MAX_SAG_M) - self.sag_m) * min(1.0, self.fd_dt_s / SAG_TIME_CONSTANT_S)
+            self.sag_m += (min(max(sag, -MAX_SAG_M), MAX_SAG_M) - self.sag_m) * min(
+                1.0, self.fd_dt_s / SAG_TIME_CONSTANT_S
+            )
         for i in range(quad.N_LEGS):
             if not gs.in_stance[i]:
                 rows[i][2] += self.sag_m * _ease(float(gs.swing_phase[i]) / SWING_SAG_RAMP)
@@ -224,7 +227,9 @@ class TerrainFollowingController(NominalController):
                     self._offset_plan_m[i] = self._plan_offset(i, phase, rows[i][1], trunk_xy, heading, half, t_swing)
                 e0 = self._ease_from[i]
                 done = (_ease(phase) - e0) / (1.0 - e0) if e0 < 1.0 else 1.0
-                self.foothold_offset_m[i] = self._offset_from_m[i] + (self._offset_plan_m[i] - self._offset_from_m[i]) * done
+                self.foothold_offset_m[i] = (
+                    self._offset_from_m[i] + (self._offset_plan_m[i] - self._offset_from_m[i]) * done
+                )
             rows[i][0] += self.foothold_offset_m[i]
 
     def _plan_offset(self, leg: int, phase: float, target_y: float, trunk_xy: tuple[float, float],

@@ -42,7 +42,9 @@ def trot_controller(
 ) -> NominalController:
     """The trot of ``robot`` at the control period ``control_dt_s`` [s]; the keys are ``conf/controller/trot.yaml``'s
     (meanings and units there). ``terrain_following`` needs the world's ``terrain``."""
-    v = trot_values(robot, TrotScaling(**scaling), speed=speed, swing_height=swing_height, stand_height=stand_height, kp=kp, kd=kd)
+    v = trot_values(
+        robot, TrotScaling(**scaling), speed=speed, swing_height=swing_height, stand_height=stand_height, kp=kp, kd=kd
+    )
     gait = GaitParams(period_s=float(period), duty=float(duty), swing_height_m=v["swing_height"],
                       stand_height_m=v["stand_height"], speed_mps=v["speed"])
     gains = PDGains(kp=v["kp"], kd=v["kd"])

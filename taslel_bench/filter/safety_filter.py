@@ -252,7 +252,7 @@ class SafetyFilter:
             if self._condensed_ok:
                 return self.backend.solve(self.condensed)
             return QPSolution(None, "error: singular (vdot, lambda) block of the equality rows", 0.0)
-        except Exception as exc:  # noqa: BLE001 - a backend bug must not end the episode: record it
+        except Exception as exc:  # a backend bug must not end the episode: record it
             return QPSolution(None, f"error: {type(exc).__name__}: {exc}", 0.0)
 
     def _relax(self, qp: QPProblem, u_nom: np.ndarray, sol: QPSolution) -> tuple[QPSolution, tuple[str, ...]]:
@@ -334,10 +334,7 @@ class SafetyFilter:
             self.observer.remember(inputs.v, inputs.model.M, inputs.model.h, u_nom, None, inputs.in_stance)
         if robust:
             self.robust.remember(self.barriers)
-        if self.settings.fallback == "hold_last" and self._last_u is not None:
-            u = self._last_u.copy()
-        else:
-            u = u_nom.copy()
+        u = self._last_u.copy() if self.settings.fallback == "hold_last" and self._last_u is not None else u_nom.copy()
         status = sol.status if sol.status != "solved" else "non-finite solution"
         return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
 

@@ -98,9 +98,9 @@ class TerrainFrictionCone(FrictionCone):
             return
         mu = self._feet_mu(x)
         _cone_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, packed.surface_rows,
-                   x.model.foot_pos_in_world, x.model.robot.foot_radius_m, self.flat, self.edge_downhill, x.in_stance, mu, self.lambda_min_n,
-                   self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written, self._dist,
-                   self._point)  # fmt: skip
+                   x.model.foot_pos_in_world, x.model.robot.foot_radius_m, self.flat, self.edge_downhill, x.in_stance,
+                   mu, self.lambda_min_n, self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written,
+                   self._dist, self._point)  # fmt: skip
 
     def _feet_mu(self, x: TickInputs) -> np.ndarray:
         """``mu_used`` (4,) [-] set to this tick's coefficient of each foot: ``mu_per_foot``, or ``mu`` for all four
@@ -176,7 +176,8 @@ def _downhill_edge_basis_into(n, t1, t2):
 
 @kernel
 def _foot_rows_about(G, hvec, r, c, n, mu, lambda_min, downhill):
-    """A stance foot's 5 rows about the normal ``n`` with coefficient ``mu`` (:meth:`TerrainFrictionCone._write_foot_about`)."""
+    """A stance foot's 5 rows about the normal ``n`` with coefficient ``mu``
+    (:meth:`TerrainFrictionCone._write_foot_about`)."""
     t1, t2 = np.empty(3), np.empty(3)
     if downhill:
         _downhill_edge_basis_into(n, t1, t2)
@@ -206,8 +207,8 @@ def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot
 
 
 @kernel
-def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, flat, downhill, in_stance, mu,
-               lambda_min, r0, G, hvec, normals, stance, mu_written, written, dist, point):  # fmt: skip
+def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, flat, downhill,
+               in_stance, mu, lambda_min, r0, G, hvec, normals, stance, mu_written, written, dist, point):  # fmt: skip
     """:meth:`TerrainFrictionCone.write_python` in one call: the normals (unless ``flat``), then per foot its rows
     rewritten when its mode, normal or mu changed (``stance``, ``mu_written``, ``written``: what they were written
     with)."""

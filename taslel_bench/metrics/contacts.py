@@ -15,8 +15,8 @@ reported separately, ``_stand``):
 
 Cone edge: |f_t| >= 0.98 mu f_n with the contact's own mu (sliding or about to); beside it, per foot
 (``friction_cone_edge_rate_foot``), the foot's net force against its mean contact normal (a heightfield's tilted
-prism contacts can sit at their edges while the foot holds: ``studies/terrain_contact_normals.py``). Slip rates are per loaded
-contact; the sliding distance integrates, per plant-loaded foot, the slip of its most loaded contact. The
+prism contacts can sit at their edges while the foot holds: ``studies/terrain_contact_normals.py``). Slip rates are per
+loaded contact; the sliding distance integrates, per plant-loaded foot, the slip of its most loaded contact. The
 filter's planned lambda is judged against the true cone about the terrain normal under the foot (mu = the
 terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mod:`taslel_bench.metrics.windows`).
 """
@@ -53,7 +53,7 @@ def terrain_normals(tr: EpisodeTrace, ticks: slice, sel: np.ndarray) -> np.ndarr
     if terrain is None or not sel.any():
         return out
     cache: dict[tuple[int, int], np.ndarray] = {}
-    for k, i in zip(*np.nonzero(sel)):
+    for k, i in zip(*np.nonzero(sel), strict=True):
         key = (round(xy[k, i, 0] * 1000), round(xy[k, i, 1] * 1000))
         if key not in cache:
             cache[key] = np.asarray(terrain.normal_at(key[0] / 1000, key[1] / 1000), float)
@@ -136,8 +136,8 @@ FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg fr
 
 def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((n, 4) at the edge, (n, 4) loaded) per foot from its net terrain force (the foot sensor's, world axes:
-    every contact's force summed) against its mean contact normal (the contacts' normals weighted by their normal force): loaded
-    where the net normal force >= MIN_NORMAL_FORCE_N, at the edge where |net tangential| >= 0.98 mu x net
+    every contact's force summed) against its mean contact normal (the contacts' normals weighted by their normal
+    force): loaded where the net normal force >= MIN_NORMAL_FORCE_N, at the edge where |net tangential| >= 0.98 mu x net
     normal (mu = the foot's contacts' largest). Beside the per-contact rule: a foot wedged between contacts whose
     frames tilt away from the surface (a heightfield's prisms) can hold each of them at its cone edge while the
     foot as a whole is well inside the cone."""
@@ -151,8 +151,8 @@ def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[n
     return loaded & (f_t >= CONE_EDGE_FRACTION * mu_c.max(axis=2) * f_n), loaded
 
 
-def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray, normals: np.ndarray,
-                   loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
+def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray,
+                   normals: np.ndarray, loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
                    suffix: str) -> None:
     """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
     filter's planned force against the true cone about the terrain normal under the foot."""

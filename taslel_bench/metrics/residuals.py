@@ -6,8 +6,8 @@ For tick k (start state x_k = (q_k, v_k), applied torque u_k, next recorded stat
 * **dynamics residual** r_k = M(q_k) vdot_k + h(q_k, v_k) - S u_k - sum_i Jc_i(q_k)' f_i,k  (18 rows, the
   model's M, h, Jacobians; vdot_k the plant's realised acceleration (v_{k+1} - v_k) / dt in Pinocchio's
   convention; f_i,k the force (and torque) MuJoCo applied on foot i, world axes, at the centroid of its
-  contact points, from the foot's contact sensor). Rows 0:3 are the trunk force [N] and 3:6 the trunk torque [N·m] in trunk axes, 6: the
-  joints [N·m], core order. Zero up to rounding when the model is the plant (MuJoCo integrates
+  contact points, from the foot's contact sensor). Rows 0:3 are the trunk force [N] and 3:6 the trunk torque [N·m] in
+  trunk axes, 6: the joints [N·m], core order. Zero up to rounding when the model is the plant (MuJoCo integrates
   v_{k+1} = v_k + dt qacc_k); a damping, armature, friction, mass or actuator the model lacks shows here.
   Exact for one physics step per control tick; with more, f is the last step's force (approximate).
 * **foot acceleration error** [m/s²]: the filter's predicted J vdot_filter + J̇v minus the realised

@@ -22,6 +22,7 @@ Order of the result: the order in which keys were first fed.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,7 @@ class ExactSum:
         sum_hi, sum_lo = np.zeros(exps.size, np.int64), np.zeros(exps.size, np.int64)
         np.add.at(sum_hi, inverse, hi)
         np.add.at(sum_lo, inverse, lo)
-        for e, h, low in zip(exps.tolist(), sum_hi.tolist(), sum_lo.tolist()):
+        for e, h, low in zip(exps.tolist(), sum_hi.tolist(), sum_lo.tolist(), strict=True):
             self.scaled += ((h << 26) + low) << (int(e) - 53 + _SCALE_BITS)
 
     def divided(self, count: int) -> float:
@@ -236,8 +237,8 @@ class Reducer:
     """One reduction per key (see the module doc); :meth:`result` gives the summary numbers."""
 
     def __init__(self) -> None:
-        self.ops: dict[str, object] = {}
-        self.fixed: dict[str, object] = {}  # values set once (counts of flags, first times ...)
+        self.ops: dict[str, Any] = {}  # key -> its reduction (_Mean, Quantiles, ...; None: a value in fixed)
+        self.fixed: dict[str, float] = {}  # values set once (counts of flags, first times ...)
 
     def _op(self, key: str, make):
         op = self.ops.get(key)
@@ -285,7 +286,7 @@ class Reducer:
             self.fixed[key] = float(x)
         self.ops.setdefault(key, None)
 
-    def result(self) -> dict[str, object]:
+    def result(self) -> dict[str, float]:
         return {k: (op.value() if op is not None else self.fixed[k]) for k, op in self.ops.items()}
 
     def sketched_keys(self) -> list[str]:

@@ -204,7 +204,8 @@ class SummaryStream:
                 "contacts": contacts, "model": self.residuals.result(), "estimator": self.estimator.result(self.n)}
 
     def sketched_keys(self) -> list[str]:
-        """The percentile keys of this episode read from a histogram (:class:`taslel_bench.metrics.stream.Quantiles`)."""
+        """The percentile keys of this episode read from a histogram
+        (:class:`taslel_bench.metrics.stream.Quantiles`)."""
         parts = (self.acc, self.walk_contacts.acc, self.stand_contacts.acc, self.clearance.acc, self.residuals.acc,
                  self.estimator.acc)
         return [k for acc in parts for k in acc.sketched_keys()]
@@ -313,7 +314,8 @@ class EstimatorStream:
             "estimator_settle_s": self.settle.value(),
             "estimator_low_overestimate_rate": a["estimator_low_overestimate_rate"],
             "estimator_startup_s": float(first_ready * dt),
-            "estimator_startup_overestimate_rate": a["estimator_startup_overestimate_rate"] if first_ready else math.nan,
+            "estimator_startup_overestimate_rate": (a["estimator_startup_overestimate_rate"] if first_ready
+                                                    else math.nan),
             "estimator_ready_overestimate_rate": a["estimator_ready_overestimate_rate"],
             "estimator_notready_after_startup_s": float(a["notready_after"] * dt),
             "estimator_useful_rate": a["estimator_useful_rate"],

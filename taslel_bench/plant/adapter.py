@@ -379,8 +379,8 @@ def _torque_motors(
 ) -> dict:
     """Make each chosen actuator a torque motor taking joint torque [N·m] as ctrl (gain 1, gear 1); delete
     other actuators on the 12 joints. A servo (affine bias: tau = kp (ctrl - q) - kv qdot) becomes a motor
-    with ctrlrange +- its joint's ``torque_limit_nm`` (12, core order; the robot's by default); a motor with gear x gain g != 1
-    gets gear 1 and its ctrlrange scaled by g. Returns the record: ``actuators_converted`` [[core joint,
+    with ctrlrange +- its joint's ``torque_limit_nm`` (12, core order; the robot's by default); a motor with gear x
+    gain g != 1 gets gear 1 and its ctrlrange scaled by g. Returns the record: ``actuators_converted`` [[core joint,
     what], ...], ``actuators_removed`` [names]."""
     converted, removed = [], []
     for core, act in chosen.items():

@@ -65,7 +65,9 @@ def _strip_unloadable_meshes(spec: mujoco.MjSpec) -> None:
 def _urdf_text(robot: RobotDescription) -> str:
     """The URDF without ``<visual>`` elements, mesh paths ``package://<pkg>/...`` made absolute (found above the
     URDF's folder), and without the foot links' collisions where the plant puts its own foot sphere."""
-    text = re.sub(r"<visual>.*?</visual>", "", physical_urdf_text(robot.urdf_path, robot.trunk_link)[0], flags=re.DOTALL)
+    text = re.sub(
+        r"<visual>.*?</visual>", "", physical_urdf_text(robot.urdf_path, robot.trunk_link)[0], flags=re.DOTALL
+    )
     text = re.sub(r'filename="package://([^/"]+)/([^"]*)"',
                   lambda m: f'filename="{_package_file(robot.urdf_path, m.group(1), m.group(2))}"', text)
     if not robot.foot_from_urdf:
@@ -117,7 +119,7 @@ def robot_spec(robot: RobotDescription | None = None, options: PlantOptions | No
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 1, 0
         geom.condim = 3
-    for leg, foot in enumerate(quad.FOOT_FRAMES):
+    for foot in quad.FOOT_FRAMES:
         geom = spec.geom(foot)
         geom.parent.add_site(name=foot, pos=list(geom.pos))
     spec.body(quad.TRUNK_BODY).add_site(name="imu", pos=[0, 0, 0])
@@ -276,7 +278,9 @@ def compile_error_message(source: Path, exc: BaseException) -> str:
     message = f"robot.plant_mjcf={str(source)!r}: MuJoCo cannot compile the plant: {reason}"
     missing = [str(p) for p in mjcf_files(source) if not p.is_file()]
     if missing:
-        message += f"; files it names that do not exist: {', '.join(missing[:8])}" + (" ..." if len(missing) > 8 else "")
+        message += f"; files it names that do not exist: {', '.join(missing[:8])}" + (
+            " ..." if len(missing) > 8 else ""
+        )
     if "mjMINVAL" in reason:
         message += ("; every moving body needs mass and inertia: give it an <inertial> or geoms with density "
                     "(compiler inertiafromgeom)")

@@ -34,7 +34,7 @@ def foot_geom_ids(model: mujoco.MjModel) -> np.ndarray:
 
 def measure_contact_friction(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, float]]:
     """(foot name, sliding friction coefficient) of every active foot contact, read from ``data.contact``."""
-    feet = {int(g): name for g, name in zip(foot_geom_ids(model), quad.FOOT_FRAMES)}
+    feet = {int(g): name for g, name in zip(foot_geom_ids(model), quad.FOOT_FRAMES, strict=True)}
     out = []
     for i in range(data.ncon):
         c = data.contact[i]
@@ -168,7 +168,11 @@ class FootContactReader:
         on_obstacle = self._is_obstacle[np.where(robot_side[other, 0], pairs[:, 1], pairs[:, 0])]
         lower = self._is_lower_leg[robot_geom]
         body, shin, trip = ~lower, lower & ~on_obstacle, lower & on_obstacle
-        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = bool(body.any()), bool(shin.any()), bool(trip.any())
+        self.body_contact, self.shin_contact, self.non_foot_obstacle_contact = (
+            bool(body.any()),
+            bool(shin.any()),
+            bool(trip.any()),
+        )
         first = robot_geom[np.argmax(body)] if self.body_contact else robot_geom[0]
         self.non_foot_contact_name = self.model.body(self.model.geom_bodyid[first]).name
 

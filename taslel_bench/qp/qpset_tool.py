@@ -68,7 +68,8 @@ def _merge(args: argparse.Namespace) -> None:
             raise qpset.QPSetError(f"{p}: no such file or folder")
     files = qpset.find_sets(args.paths)
     if not files:
-        raise qpset.QPSetError(f"no {qpset.FILENAME} under {', '.join(map(str, args.paths))} (run with record.qps=true)")
+        raise qpset.QPSetError(f"no {qpset.FILENAME} under {', '.join(map(str, args.paths))} (run with "
+                               f"record.qps=true)")
     sets = [qpset.load(f) for f in files]  # every file checked before any work
     qs = qpset.merge(sets, {"merged_from": [str(f) for f in files]})
     if args.reference:

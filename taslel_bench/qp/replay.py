@@ -256,7 +256,7 @@ def replay(
                 t0 = time.perf_counter()
                 try:
                     f = replay_backend(qs, lambda c=cfg: make_backend(c), mode, seqs, repeats, tol, labels)
-                except Exception as exc:  # noqa: BLE001  a backend bug must not stop the others
+                except Exception as exc:  # a backend bug must not stop the others
                     frames.append(unavailable_row(labels, f"crashed: {type(exc).__name__}: {exc}"))
                     traceback.print_exc()
                     continue

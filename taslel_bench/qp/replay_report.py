@@ -59,7 +59,7 @@ def summarize(frame: pd.DataFrame, deadlines_hz: tuple[float, ...] = (1000.0, 50
 def _summarize_group(key: tuple, g: pd.DataFrame, deadlines_hz: tuple[float, ...]) -> dict:
     """The summary row of one backend x profile x mode: its status (the reason when it did not run), else
     outcome, solve times [µs], deadline misses [%] at each rate [Hz] and the per-QP cost breakdown [µs]."""
-    row = dict(zip(KEYS, key))
+    row = dict(zip(KEYS, key, strict=True))
     row["backend"] = g["backend"].iloc[0] if "backend" in g else ""
     if (g["qp"] < 0).all():
         row["status"] = str(g["status"].iloc[0])
@@ -172,7 +172,7 @@ def _pivot(summary: pd.DataFrame, value: str, fmt: str, second: str | None = Non
 
     cells = [f(v) for v in s.get(value, pd.Series(np.nan, index=s.index))]
     if second is not None:
-        cells = [c if c == "-" else f"{c} / {f(w)}" for c, w in zip(cells, s.get(second, np.nan))]
+        cells = [c if c == "-" else f"{c} / {f(w)}" for c, w in zip(cells, s.get(second, np.nan), strict=True)]
     s["cell"] = cells
     s["column"] = s["profile"] + " / " + s["mode"]
     cols = list(dict.fromkeys(s["column"]))
@@ -194,7 +194,7 @@ def _figure(frame: pd.DataFrame, out: Path) -> str | None:
     ran = frame[frame["qp"] >= 0]
     profiles = list(dict.fromkeys(ran["profile"]))
     fig, axes = plt.subplots(1, len(profiles), figsize=(7 * len(profiles), 5), squeeze=False, sharey=True)
-    for ax, prof in zip(axes[0], profiles):
+    for ax, prof in zip(axes[0], profiles, strict=True):
         sub = ran[ran["profile"] == prof]
         colors = {name: f"C{k % 10}" for k, name in enumerate(sorted(ran["solver"].unique()))}
         for (solver, mode), g in sub.groupby(["solver", "mode"]):

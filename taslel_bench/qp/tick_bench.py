@@ -87,7 +87,7 @@ def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
     backend.reset()
     times = np.empty(len(seq.values))
     for i, values in enumerate(seq.values):
-        for field, value in zip(QPSequence.FIELDS, values):
+        for field, value in zip(QPSequence.FIELDS, values, strict=True):
             np.copyto(getattr(problem, field), value)
         t0 = time.perf_counter()
         backend.solve(problem)

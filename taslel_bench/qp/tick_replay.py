@@ -201,9 +201,9 @@ def _check_faithful(built: Built, rec: TickRecorder, answers: list, after_step: 
     ppt, steps = built.episode.physics_per_tick, rec.rows["mj_step"]
     recorded = [steps[i * ppt + 1][0] for i in range(len(after_step)) if i * ppt + 1 < len(steps)]  # the
     # state before the physics step after each tick's first one (the next tick's first with one step a tick)
-    worst_q = max((float(np.max(np.abs(a - b))) for a, b in zip(after_step, recorded)), default=0.0)
+    worst_q = max((float(np.max(np.abs(a - b))) for a, b in zip(after_step, recorded, strict=False)), default=0.0)
     u = built.filter.backend_problem.layout["u"] if built.filter is not None else slice(0)
-    worst_u = max((_u_difference(a, b, u) for a, b in zip(answers, rec.solutions)), default=0.0)
+    worst_u = max((_u_difference(a, b, u) for a, b in zip(answers, rec.solutions, strict=False)), default=0.0)
     if not (worst_u <= answer_tol_nm and worst_q <= STATE_TOLERANCE):
         raise RuntimeError(f"the replay does not redo the loop's work: max |u - u_loop| {worst_u:.3g} N·m "
                            f"(tolerance {answer_tol_nm:g}), max |qpos - qpos_loop| {worst_q:.3g} "

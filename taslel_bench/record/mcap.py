@@ -103,7 +103,9 @@ class McapStream:
                 "force_arrow_m_per_n": str(scene.FORCE_SCALE_M_PER_N)}  # fmt: skip
 
     def _register_json(self, topic: str, schema: dict) -> None:
-        sid = self._writer.register_schema(name=topic.strip("/"), encoding="jsonschema", data=json.dumps(schema).encode())
+        sid = self._writer.register_schema(
+            name=topic.strip("/"), encoding="jsonschema", data=json.dumps(schema).encode()
+        )
         self._channels[topic] = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
 
     def _register_protobuf(self, topic: str, cls) -> None:
@@ -144,7 +146,7 @@ class McapStream:
     def _write_signals(self, frame: pd.DataFrame, channels: dict) -> None:
         times = frame["t_s"].tolist()
         for topic, spec in channels.items():
-            for t, msg in zip(times, signals.messages(frame, spec)):
+            for t, msg in zip(times, signals.messages(frame, spec), strict=True):
                 self._put_json(topic, t, msg)
 
     def _write_3d(self, qpos_rows: np.ndarray, frame: pd.DataFrame) -> None:
@@ -155,14 +157,17 @@ class McapStream:
         self._put("/scene/terrain", t0, scene.terrain_scene(p.terrain, p.model, self.log_ns(t0)).encode())
         pos, quat = p.tree.relative_poses(qpos_rows)
         feet = _leg_array(frame, "{leg}_foot_{ax}_w_m")
-        plant_f, filter_f = _leg_array(frame, "{leg}_grf_plant_{ax}_w_n"), _leg_array(frame, "{leg}_grf_filter_{ax}_w_n")
+        plant_f, filter_f = (
+            _leg_array(frame, "{leg}_grf_plant_{ax}_w_n"),
+            _leg_array(frame, "{leg}_grf_filter_{ax}_w_n"),
+        )
         h = {name: frame[[f"{leg}_barrier_{name}_h_m" for leg in quad.LEGS]].to_numpy() for name in self.barrier_names}
         radius = foot_radius_m(p.model)  # [m]
         for i, t in enumerate(times):
             ns = self.log_ns(float(t))
             self._put("/tf", float(t), scene.body_transforms(p.tree, ns, pos[i], quat[i]).encode())
-            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i], {n: v[i] for n, v in h.items()},
-                                         radius)
+            update = scene.contact_scene(ns, float(t), feet[i], plant_f[i], filter_f[i],
+                                         {n: v[i] for n, v in h.items()}, radius)
             self._put("/scene/contact", float(t), update.encode())
 
     def close(self, trace: EpisodeTrace, events: list[dict], summary: dict) -> Path:
@@ -171,10 +176,14 @@ class McapStream:
         self(trace, self.ticks_written, trace.n)
         t_end = float(trace.t_s[trace.n - 1 - trace.offset]) if trace.n else 0.0
         for e in [*events, {"t_s": t_end, "kind": "end", "message": str(summary.get("status", ""))}]:
-            self._write_event(float(e.get("t_s") if e.get("t_s") is not None else t_end), str(e["kind"]), str(e["message"]))
+            self._write_event(
+                float(e.get("t_s") if e.get("t_s") is not None else t_end), str(e["kind"]), str(e["message"])
+            )
         safe = {k: (v if not (isinstance(v, float) and not np.isfinite(v)) else None) for k, v in summary.items()}
         self._put_json("/summary", t_end, {"summary": safe})
-        self._writer.add_metadata("summary", {k: json.dumps(v) if not isinstance(v, str) else v for k, v in safe.items()})
+        self._writer.add_metadata(
+            "summary", {k: json.dumps(v) if not isinstance(v, str) else v for k, v in safe.items()}
+        )
         self._writer.finish()
         self._file.close()
         os.replace(self.partial, self.final)

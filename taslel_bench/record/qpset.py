@@ -261,7 +261,7 @@ class QPRecorder:
         c["active_rows"].append(rows)
         c["active_bounds"].append(bounds)
         self._builders[b].members.append(len(self))
-        for k, v in zip(COLUMNS, (b, 0, tick, t_s, status, build_time_s, solve_time_s)):
+        for k, v in zip(COLUMNS, (b, 0, tick, t_s, status, build_time_s, solve_time_s), strict=True):
             self._rows[k].append(v)
 
     def _builder(self, p: QPProblem) -> int:
@@ -333,8 +333,9 @@ def load(path: Path | str) -> QPSet:
     except QPSetError:
         raise
     except KeyError as exc:
-        raise QPSetError(f"{path}: not a complete {FORMAT} file: an array is missing ({exc.args[0] if exc.args else exc})") from None
-    except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, OSError, "contains pickled data" ...
+        raise QPSetError(f"{path}: not a complete {FORMAT} file: an array is missing "
+                         f"({exc.args[0] if exc.args else exc})") from None
+    except Exception as exc:  # BadZipFile, EOFError, OSError, "contains pickled data" ...
         raise QPSetError(f"{path}: not a readable {FORMAT} file ({type(exc).__name__}: {exc})") from None
 
 
@@ -363,7 +364,7 @@ def from_problems(problems: list[QPProblem], x_ref: np.ndarray, ticks: Iterable[
                   run: dict | None = None) -> QPSet:  # fmt: skip
     """A set from in-memory QPs whose solution used is the reference (the solver tests' fixture)."""
     rec = QPRecorder(run)
-    for p, x, k in zip(problems, x_ref, ticks):
+    for p, x, k in zip(problems, x_ref, ticks, strict=True):
         rec.add(p, x, tick=int(k), x_ref=x)
     return rec.to_set(meta)
 

@@ -21,7 +21,7 @@ EVENTS = "events.json"
 OVERRIDE_SEPARATOR = "\n"  # between the overrides kept in a summary (values may hold commas and spaces)
 
 
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp_path)`` then rename to ``path`` (same folder, atomic on POSIX). An OSError (a full
     disk) is raised naming ``path``, not the temporary file."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
@@ -48,10 +48,7 @@ def _json_safe(value: object) -> object:
 
 def write_json(path: Path, data: object) -> None:
     def dump(tmp: Path) -> None:
-        if isinstance(data, dict):
-            payload = {k: _json_safe(v) for k, v in data.items()}
-        else:
-            payload = data
+        payload = {k: _json_safe(v) for k, v in data.items()} if isinstance(data, dict) else data
         tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n")
 
     atomic_write(path, dump)
@@ -79,8 +76,8 @@ def completed_summary(run_dir: Path) -> dict | None:
 
 
 SUPERSEDED = "superseded"
-RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt", "qps.npz",
-                "video.mp4")
+RESULT_FILES = (SUMMARY, STEPS, EVENTS, "episode.mcap", "episode.partial.mcap", "config.yaml", "traceback.txt",
+                "qps.npz", "video.mp4")
 MANIFEST_KEY = "result_files"  # in summary.json: {file name: size [bytes]} of the files the run wrote
 
 

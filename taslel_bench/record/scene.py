@@ -47,7 +47,8 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
     bw, bx, by, bz = np.moveaxis(b, -1, 0)
     return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)  # fmt: skip
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw],
+                    axis=-1)  # fmt: skip
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
@@ -125,7 +126,7 @@ def body_transforms(tree: BodyTree, stamp_ns: int, pos: np.ndarray, quat: np.nda
         fm.FrameTransform(timestamp=ts, parent_frame_id=parent, child_frame_id=child,
                           translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
                           rotation=fm.Quaternion(w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3])))
-        for parent, child, p, q in zip(tree.parent_names, tree.names, pos, quat)
+        for parent, child, p, q in zip(tree.parent_names, tree.names, pos, quat, strict=True)
     ])  # fmt: skip
 
 
@@ -192,7 +193,7 @@ class Primitives:
 def robot_scene(m: mujoco.MjModel, tree: BodyTree, stamp_ns: int) -> fm.SceneUpdate:
     """The robot's collision geometry: one entity per body (id = body name), locked to the body frame."""
     entities = []
-    for body, name in zip(tree.ids, tree.names):
+    for body, name in zip(tree.ids, tree.names, strict=True):
         prims = Primitives()
         for g in range(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body]):
             is_foot = m.geom(g).name in quad.FOOT_FRAMES
@@ -218,7 +219,7 @@ def _part_primitives(part, prims: Primitives) -> bool:
         _floor(prims, *FLOOR_EXTENT_X_M, part.friction)
     elif isinstance(part, FrictionStrips):
         edges = [FLOOR_EXTENT_X_M[0], *part.edges_x_m, FLOOR_EXTENT_X_M[1]]
-        for x0, x1, mu in zip(edges[:-1], edges[1:], part.frictions):
+        for x0, x1, mu in zip(edges[:-1], edges[1:], part.frictions, strict=True):
             _floor(prims, x0, x1, mu)
     elif isinstance(part, Log):
         prims.capsule((part.x_m, part.y_m, part.z_m), _Z_TO_Y, part.radius_m, part.half_width_m, LOG_RGBA)
@@ -292,8 +293,8 @@ def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np
     """One tick: per foot (legs in :data:`quad.LEGS` order) the plant's and the filter's force arrows from the
     sphere's bottom point (``foot_w`` (4, 3) sphere centres [m], forces (4, 3) [N], world axes) and, for a
     swing foot with a barrier row, a sphere coloured by the smallest h [m] over ``barrier_h`` (name -> (4,))
-    and a line from the sphere's bottom down by that h (``foot_radius_m`` [m]: the plant's foot spheres). The update first deletes the previous tick's
-    entities of the topic."""
+    and a line from the sphere's bottom down by that h (``foot_radius_m`` [m]: the plant's foot spheres). The update
+    first deletes the previous tick's entities of the topic."""
     entities = []
     for i, leg in enumerate(quad.LEGS):
         prims = Primitives()
@@ -308,8 +309,9 @@ def contact_scene(stamp_ns: int, t_s: float, foot_w: np.ndarray, grf_plant_w: np
             h_min = min(h.values())
             prims.sphere(foot_w[i], foot_radius_m + 0.01, barrier_rgba(h_min))
             end = bottom - np.array([0.0, 0.0, h_min])
-            prims.lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, pose=_pose((0, 0, 0), _IDENTITY),
-                                                thickness=0.004, scale_invariant=False,
+            prims.lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip,
+                                                pose=_pose((0, 0, 0), _IDENTITY), thickness=0.004,
+                                                scale_invariant=False,
                                                 points=[fm.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
                                                         for p in (bottom, end)],
                                                 color=_color(barrier_rgba(h_min))))  # fmt: skip

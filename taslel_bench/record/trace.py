@@ -124,7 +124,8 @@ class EpisodeTrace:
         self._blocks = ((floats.block, floats.init), (flags.block, flags.init))
         self.qp_status = np.full(c, -1, np.int8)
         self.qp_iterations = np.full(c, -1, np.int32)
-        self.qp_u_error_nm = np.full(c, np.nan)  # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
+        # [N·m] max |u - u_ref| on reference-checked ticks (record.reference_every)
+        self.qp_u_error_nm = np.full(c, np.nan)
         self.qp_solve_cpu_us = np.full(c, np.nan)  # [µs] thread CPU time of the solve (taslel_bench.sim.solve_clock)
         self.qp_setup = np.zeros(c, np.bool_)  # the backend's first build for this QP layout (sim.solve_clock)
         self.barriers = {name: BarrierLog(name, c, self._barrier_rows.get(name, quad.LEGS))  # the filter's families
@@ -442,11 +443,11 @@ def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...],
     """One array holding ``columns`` side by side, each (shape of one tick's value, initial value), and a view
     of shape (capacity, *shape) per column group (no copies: rows are written through the block)."""
     widths = [int(np.prod(shape)) for shape, _ in columns]
-    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns)])
+    init = np.concatenate([np.full(w, fill, dtype) for w, (_, fill) in zip(widths, columns, strict=True)])
     block = np.empty((capacity, init.shape[0]), dtype)
     block[:] = init
     views, start = [], 0
-    for w, (shape, _) in zip(widths, columns):
+    for w, (shape, _) in zip(widths, columns, strict=True):
         view = block[:, start : start + w]
         view = view[:, 0] if shape == () else view.reshape(capacity, *shape)
         assert np.shares_memory(view, block) or capacity * w == 0  # a view, never a copy
@@ -458,11 +459,12 @@ def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...],
 @kernel
 def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock4, build_us, solve_us, margin,
                mu_hat_ready, nonfoot, shin, filtered, fallback, iterations, qpos, qvel, sensordata, u_nom, u,
-               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status, qp_iterations):  # pragma: no cover - compiled  # fmt: skip
-    """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order: :meth:`EpisodeTrace._allocate_loop_rows`)
-    and of ``qp_status``, ``qp_iterations``: the tick's wall time and its parts from the perf_counter times
-    ``clock0`` .. ``clock4`` [s]; the filter's columns only when ``filtered`` (else they keep their initial
-    values: nan, status -1)."""
+               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status,
+               qp_iterations):  # pragma: no cover - compiled  # fmt: skip
+    """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order:
+    :meth:`EpisodeTrace._allocate_loop_rows`) and of ``qp_status``, ``qp_iterations``: the tick's wall time and its
+    parts from the perf_counter times ``clock0`` .. ``clock4`` [s]; the filter's columns only when ``filtered`` (else
+    they keep their initial values: nan, status -1)."""
     F[k, 0], F[k, 1], F[k, 2], F[k, 3] = t, phi, mu_hat, mu_true
     F[k, 4] = (clock4 - clock0) * 1e6
     F[k, 5], F[k, 6], F[k, 7], F[k, 8] = clock1 - clock0, clock2 - clock1, clock3 - clock2, clock4 - clock3

@@ -132,7 +132,7 @@ class RunFrames:
         import mujoco
 
         scene = self.renderer.scene
-        for foot, force in zip(self._feet[row], self._forces[row]):
+        for foot, force in zip(self._feet[row], self._forces[row], strict=True):
             norm = float(np.linalg.norm(force))
             if not np.isfinite(norm) or norm < 1.0 or scene.ngeom >= scene.maxgeom:
                 continue
@@ -265,7 +265,8 @@ def write_mp4(path: Path, frames, width: int, height: int, fps: float) -> int:
     def encode(tmp: Path) -> None:
         nonlocal count
         writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264", quality=6,
-                                             pix_fmt_out="yuv420p", macro_block_size=2, output_params=["-f", "mp4"])  # fmt: skip
+                                             pix_fmt_out="yuv420p", macro_block_size=2,
+                                             output_params=["-f", "mp4"])  # fmt: skip
         writer.send(None)
         try:
             for image in frames:
@@ -314,5 +315,5 @@ def render_at_end_of_run(run_dir: Path, model, summary: dict, record) -> None:
         _, n = render_video(run_dir, model=model, summary=summary, fps=float(record.video_fps),
                             width=int(record.video_width), height=int(record.video_height))  # fmt: skip
         summary.update({"video_frames": n, "video_s": time.perf_counter() - t})
-    except Exception:  # noqa: BLE001 - a video must not lose the run
+    except Exception:  # a video must not lose the run
         summary["video_error"] = traceback.format_exc().strip().splitlines()[-1]

@@ -371,7 +371,7 @@ def _tuple3(v: Sequence[float]) -> tuple[float, float, float]:
 # ------------------------------------------------------------------------------------- Pinocchio model
 
 
-def pinocchio_model(robot: RobotDescription, urdf: Path | None = None) -> pin.Model:
+def pinocchio_model(robot: RobotDescription, urdf: str | Path | None = None) -> pin.Model:
     """The robot's Pinocchio model (free flyer + 12 joints) with its joints in the core order.
 
     Pinocchio orders a URDF's branches by the name of the joint that starts each one (urdfdom keeps joints in a

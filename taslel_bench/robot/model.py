@@ -4,8 +4,8 @@ All per-tick rigid-body quantities the nominal controller and the safety filter 
 by :meth:`RobotModel.update` into preallocated arrays (no allocation per tick beyond Pinocchio's own).
 
 Frames and units: ``q`` is Pinocchio's (position of the trunk origin in world [m], quaternion xyzw,
-12 joint angles [rad] in the core order of :mod:`taslel_bench.robot.quadruped`); ``v`` is (trunk linear velocity in the **trunk**
-frame [m/s], angular velocity in the trunk frame [rad/s], joint velocities [rad/s]). Foot quantities are
+12 joint angles [rad] in the core order of :mod:`taslel_bench.robot.quadruped`); ``v`` is (trunk linear velocity in the
+**trunk** frame [m/s], angular velocity in the trunk frame [rad/s], joint velocities [rad/s]). Foot quantities are
 expressed at the foot-sphere centre in LOCAL_WORLD_ALIGNED axes (world orientation).
 
 What the model believes about the robot (URDF file, joint damping, armature, Coulomb friction, trunk mass

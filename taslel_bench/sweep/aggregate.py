@@ -87,7 +87,7 @@ def _unreadable(run_dir: Path, summary: dict) -> str:
         try:
             if path.is_file():
                 read(path)
-        except Exception as exc:  # noqa: BLE001 - ArrowInvalid, yaml errors, OSError: the row names the file
+        except Exception as exc:  # ArrowInvalid, yaml errors, OSError: the row names the file
             return f"{path}: unreadable ({type(exc).__name__}: {(str(exc).splitlines() or [''])[0]})"
     return ""
 

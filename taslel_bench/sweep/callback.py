@@ -71,7 +71,7 @@ class SweepCallback(Callback):
         _state["ended"] = True
         try:
             _state["code"] = self._end(config)
-        except Exception as exc:  # noqa: BLE001 - never only a warning: say it and exit non-zero
+        except Exception as exc:  # never only a warning: say it and exit non-zero
             print(f"error: the sweep's end failed: {type(exc).__name__}: {exc}", file=sys.stderr)
             _state["code"] = EXIT_RUNS_FAILED
 
@@ -84,7 +84,7 @@ class SweepCallback(Callback):
             aggregate(sweep_dir, dict(JOB_OUTCOMES), frame=frame)
             report = write_report(sweep_dir, frame)
             table_set.seal(sweep_dir, len(frame))
-        except Exception as exc:  # noqa: BLE001 - the table is still printed below
+        except Exception as exc:  # the table is still printed below
             print(_one_line(f"the sweep's table or report in {sweep_dir}", exc), file=sys.stderr)
             print(f"sweep: {status_line(frame)} (table not written)")
             print_failed_rows(frame)
@@ -94,5 +94,6 @@ class SweepCallback(Callback):
         tracker = config.get("tracker")
         if tracker is not None and tracker.get("name", "none") != "none" and not frame.empty:
             parent = log_sweep(tracker, sweep_dir, frame)
-            print(f"tracker {tracker.name}: {len(frame)} runs under parent run {parent} ({tracker.get('uri') or 'outputs/mlflow.db'})")
+            print(f"tracker {tracker.name}: {len(frame)} runs under parent run {parent} "
+                  f"({tracker.get('uri') or 'outputs/mlflow.db'})")
         return code

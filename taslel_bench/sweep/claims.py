@@ -76,7 +76,7 @@ def paper_claims(finished: pd.DataFrame) -> str:
     sections = []
     for keys, on_runs in settings:
         keys = keys if isinstance(keys, tuple) else (keys,)
-        label = ", ".join(f"`{c}={v}`" for c, v in zip(split, keys))
+        label = ", ".join(f"`{c}={v}`" for c, v in zip(split, keys, strict=True))
         body = _claims(pd.concat([nominal, on_runs]), level=4 if split else 3)
         if body:
             sections.append((f"### Filter setting {label}\n\n" if split else "") + body)
@@ -105,7 +105,8 @@ def _claims(frame: pd.DataFrame, level: int = 3) -> str:
     if not rows:
         return ""
     table = pd.DataFrame(rows, columns=["quantity", "paper", "nominal only", "filter on"])
-    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + f"\n{'#' * level} Claim by claim\n\n"
+    return ((backend_note + "\n\n" if backend_note else "") + markdown_table(table, fmt=str) + f"\n{'#' * level} Claim "
+                                                                                               f"by claim\n\n"
             + "\n".join(f"- {s}" for s in sentences) + "\n")
 
 
@@ -141,7 +142,8 @@ def _verdicts(runs: Runs, rows: list, sentences: list) -> None:
         parts.append(f"{scenario}: {_nominal_vs_filtered(off, on)}")
     if parts:
         sentences.append("**Safe runs** (the verdict: no fall, no trip, no sustained sliding, clearance and "
-                         "friction cone kept; the same rules with the filter on or off), unsafe runs of the judged ones: "
+                         "friction cone kept; the same rules with the filter on or off), unsafe runs of the judged "
+                         "ones: "
                          + "; ".join(parts) + ".")
 
 
@@ -168,7 +170,9 @@ def _grf(runs: Runs, rows: list, sentences: list) -> None:
     if on.empty:
         return
     for ax, label in (("z", "vertical"), ("xy", "lateral")):
-        rows.append((f"GRF MAE {label} [N], flat, stance", f"{PAPER_GRF_MAE_N[ax]}", "—", _stat(on, f"grf_mae_{ax}_n_stance")))
+        rows.append(
+            (f"GRF MAE {label} [N], flat, stance", f"{PAPER_GRF_MAE_N[ax]}", "—", _stat(on, f"grf_mae_{ax}_n_stance"))
+        )
         rows.append((f"GRF MAE {label} [N], flat, loaded", "—", "—", _stat(on, f"grf_mae_{ax}_n")))
     stance, loaded = _mean(on, "grf_mae_z_n_stance"), _mean(on, "grf_mae_z_n")
     outside = _mean(on, "contacts_loaded_outside_stance")
@@ -185,7 +189,8 @@ def _friction(runs: Runs, rows: list, sentences: list) -> None:
     if off.empty and on.empty:
         return
     for label, col in (("loaded contacts at the cone edge, mu=0.2", "friction_cone_edge_rate"),
-                       ("loaded contacts at the cone edge, worst 0.5 s, mu=0.2", "friction_cone_edge_rate_worst_window"),
+                       ("loaded contacts at the cone edge, worst 0.5 s, mu=0.2",
+                        "friction_cone_edge_rate_worst_window"),
                        ("stance contacts at the cone edge, mu=0.2", "friction_cone_edge_rate_stance"),
                        ("slip [m/s], loaded, mu=0.2", "slip_mps_mean"),
                        ("slip [m/s], stance, mu=0.2", "slip_mps_mean_stance"),
@@ -249,7 +254,8 @@ def _logs(runs: Runs, rows: list, sentences: list) -> None:
     if off.empty and on.empty:
         return
     for label, col in (("trips per run (foot + leg link)", "trips"), ("foot trips per run", "foot_trips"),
-                       ("leg-link trips per run", "shin_trips"), ("stance strikes on a flank per run", "stance_flank_strikes"),
+                       ("leg-link trips per run", "shin_trips"),
+                       ("stance strikes on a flank per run", "stance_flank_strikes"),
                        ("distance [m]", "distance_m"),
                        ("swing ticks touching a log", "obstacle_touch_swing_rate"),
                        ("filter's own barrier h < 0 on swing ticks", "barrier_negative_rate")):
@@ -283,13 +289,14 @@ def _intervention_and_falls(runs: Runs, rows: list, sentences: list) -> None:
         on, off = runs(scenario, True), runs(scenario, False)
         if on.empty and off.empty:
             continue
-        rows.append((f"intervention [N·m] (reference ||u_nom|| [N·m]), {scenario}", "minimal" if scenario == "obstacle" else "—",
-                     "—", f"{_stat(on, 'intervention_nm_mean')} ({_mean(on, 'u_nom_nm_mean'):.3g})"))
+        rows.append((f"intervention [N·m] (reference ||u_nom|| [N·m]), {scenario}",
+                     "minimal" if scenario == "obstacle" else "—", "—",
+                     f"{_stat(on, 'intervention_nm_mean')} ({_mean(on, 'u_nom_nm_mean'):.3g})"))
         rows.append((f"falls, {scenario}", "no falls", _falls(off), _falls(on)))
         if len(on):
             parts.append(f"{scenario} {_mean(on, 'intervention_nm_mean'):.3g} N·m "
-                         f"({100 * _mean(on, 'intervention_nm_mean') / _mean(on, 'u_nom_nm_mean'):.0f} % of ||u_nom||), "
-                         f"falls {_falls(on)}")
+                         f"({100 * _mean(on, 'intervention_nm_mean') / _mean(on, 'u_nom_nm_mean'):.0f} % of "
+                         f"||u_nom||), falls {_falls(on)}")
     if parts:
         sentences.append("**Minimal intervention, no falls** (paper): the filter's mean ||u - u_nom|| against the "
                          "nominal torque's size, and its falls: " + "; ".join(parts) + ".")

@@ -151,5 +151,5 @@ def settle(ret: Any, overrides: Sequence[str], folder: Path) -> JobReturn:
     return error_return(overrides, folder, f"{type(exc).__name__}: {exc}", tb)
 
 
-__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SWEEP_INTERRUPTED", "SweepRefused", "check_one_folder_per_job", "error_return",
-           "job_folders", "settle"]
+__all__ = ["EXIT_BAD_INPUT", "JOB_AXES", "JOB_OUTCOMES", "SWEEP_INTERRUPTED", "SweepRefused",
+           "check_one_folder_per_job", "error_return", "job_folders", "settle"]

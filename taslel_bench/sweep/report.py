@@ -28,6 +28,7 @@ from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
 from taslel_bench.sweep.stills import still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
+from taslel_bench.util.log import console_logging
 from taslel_bench.util.machine import machine_info
 from taslel_bench.util.stats import SHGEOM_SHIFT_US, shifted_geometric_mean
 from taslel_bench.util.tables import markdown_table
@@ -86,7 +87,7 @@ def read_steps(path: Path, columns: list[str] | None = None) -> pd.DataFrame | N
         return None
     try:
         return pd.read_parquet(path, columns=columns)
-    except Exception:  # noqa: BLE001 - ArrowInvalid, OSError, a missing column
+    except Exception:  # ArrowInvalid, OSError, a missing column
         return None
 
 
@@ -154,7 +155,7 @@ def summary_table(sweep_dir: Path, frame: pd.DataFrame) -> pd.DataFrame:
     status = frame["status"] if "status" in frame else pd.Series("error", index=frame.index)
     for keys, g in groups:
         keys = keys if isinstance(keys, tuple) else (keys,)
-        row = dict(zip(cols, keys))
+        row = dict(zip(cols, keys, strict=True))
         solver = solver_label(row, frame)
         done = _finished(g)
         row.update({
@@ -200,7 +201,7 @@ def _fall_rate_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> bool:
     fixed = [f"{c} {keys[c].iloc[0]}" for c in keys if c not in shown]
     fig, ax = plt.subplots(figsize=(7, max(2.5, 0.22 * len(rates) + 1.2)))
     bars = ax.barh([" · ".join(row) for row in keys[shown].itertuples(index=False)], rates.to_numpy())
-    ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size())], fontsize=6, padding=2)
+    ax.bar_label(bars, [f"{int(k)}/{n}" for k, n in zip(fell.sum(), fell.size(), strict=True)], fontsize=6, padding=2)
     ax.invert_yaxis()  # the table's order, top to bottom
     ax.set_xlim(0, 1.1)
     ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
@@ -289,7 +290,7 @@ def _run_obstacles(sweep_dir: Path, row: pd.Series | None) -> tuple:
 
     try:
         return instantiate(OmegaConf.load(path).scenario).terrain.logs()
-    except Exception:  # noqa: BLE001 - a corrupt config.yaml: the figure is drawn without the logs
+    except Exception:  # a corrupt config.yaml: the figure is drawn without the logs
         return ()
 
 
@@ -398,7 +399,10 @@ def _run_commits(frame: pd.DataFrame) -> str:
     if "git_commit" not in frame.columns or frame.empty:
         return "an unrecorded code version"
     dirty = frame["git_dirty"] if "git_dirty" in frame.columns else pd.Series(False, index=frame.index)
-    labels = [f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}" for c, d in zip(frame["git_commit"], dirty)]
+    labels = [
+        f"{str(c)[:12]}{' (uncommitted changes)' if d is True else ''}"
+        for c, d in zip(frame["git_commit"], dirty, strict=True)
+    ]
     counts = pd.Series(labels).value_counts()
     return ", ".join(f"commit {label} ({n} runs)" for label, n in counts.items())
 
@@ -462,17 +466,23 @@ def _guarded(make, what: str) -> tuple[list, str]:
     """(``make()``, "") or ([], a note naming the error): one bad run's files cost a figure, not the report."""
     try:
         return make(), ""
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # any error costs the figure, not the report
         return [], f"{what} skipped: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
 
 
 def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills: bool = False) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
-        frame = pd.read_parquet(sweep_dir / SUMMARY_TABLE) if (sweep_dir / SUMMARY_TABLE).is_file() else aggregate(sweep_dir)
+        frame = (
+            pd.read_parquet(sweep_dir / SUMMARY_TABLE)
+            if (sweep_dir / SUMMARY_TABLE).is_file()
+            else aggregate(sweep_dir)
+        )
     table = summary_table(sweep_dir, frame) if not frame.empty else pd.DataFrame()
     run_files.atomic_write(sweep_dir / "table.csv", lambda p: table.to_csv(p, index=False))
-    run_files.atomic_write(sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g")))
+    run_files.atomic_write(
+        sweep_dir / "table.tex", lambda p: p.write_text(table.to_latex(index=False, float_format="%.3g"))
+    )
     figures, skipped = _guarded(lambda: _figures(sweep_dir, frame, table) if not frame.empty else [], "figures")
     info = machine_info()
     keys = [c for c in group_columns(frame) if c in table]
@@ -481,7 +491,8 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     solver_text, solver_rows = solver_verdict(sweep_dir, frame, group_columns(frame)) if not frame.empty else ("", None)
     head = [
         "# taslel_bench sweep report\n",
-        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated {dt.datetime.now().isoformat(timespec='seconds')}\n",
+        f"Sweep folder: `{sweep_dir}` · {len(frame)} runs · generated "
+        f"{dt.datetime.now().isoformat(timespec='seconds')}\n",
         machine_busy_line(frame) if not frame.empty else "",
     ]
     lines = [
@@ -522,6 +533,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--keep-stills", action="store_true",
                     help="keep still strips and clips newer than their run's files instead of drawing them again")
     args = ap.parse_args(argv)
+    console_logging()
     if not args.sweep_dir.is_dir():
         print(f"error: not a folder: {args.sweep_dir}", file=sys.stderr)
         raise SystemExit(2)

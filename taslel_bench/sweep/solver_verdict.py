@@ -207,7 +207,9 @@ def _busy_note(rows: pd.DataFrame) -> str:
 
 def _qualifies(r: pd.Series) -> bool:
     """No failed solve, no wrong answer (with reference checks), no deadline miss at the control period."""
-    return bool(r["success_rate"] == 1.0 and r["checks"] > 0 and r["wrong_rate"] == 0.0 and r["miss_period_rate"] == 0.0)
+    return bool(
+        r["success_rate"] == 1.0 and r["checks"] > 0 and r["wrong_rate"] == 0.0 and r["miss_period_rate"] == 0.0
+    )
 
 
 def _why_not(r: pd.Series) -> str:
@@ -238,10 +240,11 @@ def _sentence(world: str, rows: pd.DataFrame) -> str:
         return (f"**{world}**: {_busy_note(rows)}no backend qualifies" + (f" ({rejected})." if rejected else ".")
                 + closest)
     best = ok.iloc[0]
-    text = (f"**{world}**: {_busy_note(rows)}ship **{best['backend']}** -- the fastest (solve p99 {best['solve_p99_us']:.0f} µs, median "
-            f"{best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) of the {len(ok)} backend(s) with no "
-            f"failed solve, no wrong answer in {int(best['checks'])} reference checks (u error <= "
-            f"{best['u_err_max_nm']:.1g} N·m) and no solve over the {best['period_us']:.0f} µs control period"
+    text = (f"**{world}**: {_busy_note(rows)}ship **{best['backend']}** -- the fastest (solve p99 "
+            f"{best['solve_p99_us']:.0f} µs, median {best['solve_p50_us']:.0f} µs, max {best['solve_max_us']:.0f} µs) "
+            f"of the {len(ok)} backend(s) with no failed solve, no wrong answer in {int(best['checks'])} reference "
+            f"checks (u error <= {best['u_err_max_nm']:.1g} N·m) and no solve over the {best['period_us']:.0f} µs "
+            f"control period"
             + _setups_text(best))
     return text + (f". Not qualified: {rejected}." if rejected else ".")
 
@@ -304,13 +307,13 @@ def solve_time_figure(sweep_dir: Path, frame: pd.DataFrame, keys: list[str], plt
     other = _varied(done, keys)
     labels = done.apply(lambda r: _label(r, other), axis=1)
     worlds = sorted(done["scenario"].astype(str).unique())
-    data = {w: {lab: _ticks(sweep_dir, runs)["qp_solve_us"] for lab, runs in done[done["scenario"] == w].groupby(labels)}
-            for w in worlds}  # fmt: skip
+    data = {w: {lab: _ticks(sweep_dir, runs)["qp_solve_us"]
+                for lab, runs in done[done["scenario"] == w].groupby(labels)} for w in worlds}  # fmt: skip
     if not any(np.isfinite(t).any() for d in data.values() for t in d.values()):
         return []
     period = 1e6 / float(done["control_rate_hz"].astype(float).iloc[0]) if "control_rate_hz" in done else ONE_MS_US
     fig, axes = plt.subplots(1, len(worlds), figsize=(4.2 * len(worlds) + 1, 3.4), squeeze=False, sharey=True)
-    for ax, w in zip(axes[0], worlds):
+    for ax, w in zip(axes[0], worlds, strict=True):
         for lab, t in sorted(data[w].items()):
             t = np.sort(t[np.isfinite(t)])
             if not t.size:

@@ -12,8 +12,8 @@ again (a 420-run sweep's 210 strips and clips take ~15 min); a change of the dra
 
 from __future__ import annotations
 
+import logging
 import re
-import sys
 import traceback
 from pathlib import Path
 
@@ -23,6 +23,8 @@ from omegaconf import OmegaConf
 
 from taslel_bench.record import run_files
 from taslel_bench.robot import quadruped as quad
+
+logger = logging.getLogger(__name__)
 
 STILLS_DIR = "stills"
 STRIP_OFFSETS_S = (-1.0, -0.75, -0.5, -0.25, 0.0)  # [s] frame times relative to the event
@@ -104,7 +106,7 @@ def _event_or_error(run_dir: Path, row: pd.Series) -> tuple[str, float] | str | 
     """:func:`event_of_run`, or the last line of its traceback when it fails (reported as the run's missing still)."""
     try:
         return event_of_run(run_dir, row)
-    except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+    except Exception:  # a still that cannot be drawn is reported, the report is still written
         return traceback.format_exc().strip().splitlines()[-1]
 
 
@@ -127,7 +129,7 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> li
     events = [e for e in events if e[2] is not None]
     for i, (run_dir, row, event) in enumerate(events):
         if i % PROGRESS_EVERY == 0:  # ~3 s per run: a large sweep's report renders for minutes
-            print(f"report: still strips and clips {i}/{len(events)}", file=sys.stderr, flush=True)
+            logger.info("report: still strips and clips %d/%d", i, len(events))
         if isinstance(event, str):  # event_of_run failed
             lines.append(f"- `{run_dir}`: no still ({event})\n")
             continue
@@ -142,7 +144,7 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> li
             lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
                          f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link})\n\n"
                          f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
-        except Exception:  # noqa: BLE001 - a still that cannot be drawn is reported, the report is still written
+        except Exception:  # a still that cannot be drawn is reported, the report is still written
             lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
     if not lines:
         return []

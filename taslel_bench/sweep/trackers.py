@@ -56,7 +56,8 @@ def check_settings(settings) -> None:
     choice("tracker.large_files", settings.get("large_files", "path"), LARGE_FILES)
     for item in settings.get("artifacts", []) or []:
         if item not in ARTIFACT_SETS:
-            raise fail("tracker.artifacts", list(settings.get("artifacts")), f"items must be among {', '.join(ARTIFACT_SETS)}")
+            raise fail("tracker.artifacts", list(settings.get("artifacts")), f"items must be among "
+                                                                             f"{', '.join(ARTIFACT_SETS)}")
 
 
 def log_sweep(settings, sweep_dir: Path, frame: pd.DataFrame | None = None) -> str | None:
@@ -214,7 +215,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--large-files", default="path", choices=LARGE_FILES)
     args = ap.parse_args(argv)
     if not (args.sweep_dir / SUMMARY_TABLE).is_file():
-        raise SystemExit(f"error: no {SUMMARY_TABLE} in {args.sweep_dir} (python -m taslel_bench.report <folder> makes it)")
+        raise SystemExit(f"error: no {SUMMARY_TABLE} in {args.sweep_dir} (python -m taslel_bench.report <folder> makes "
+                         f"it)")
     settings = {"name": "mlflow", "uri": args.uri, "experiment": args.experiment, "artifacts": list(ARTIFACT_SETS),
                 "large_files": args.large_files}  # fmt: skip
     print(f"parent run {log_sweep(settings, args.sweep_dir)} in {settings['uri'] or default_store()[0]}")

@@ -17,7 +17,7 @@ def verdict_table(frame: pd.DataFrame, group_cols: list[str]) -> pd.DataFrame:
     groups = frame.groupby(group_cols, dropna=False) if group_cols else [((), frame)]
     for keys, g in groups:
         keys = keys if isinstance(keys, tuple) else (keys,)
-        row: dict[str, object] = dict(zip(group_cols, keys))
+        row: dict[str, object] = dict(zip(group_cols, keys, strict=True))
         texts = g.get("unsafe_reasons", pd.Series([""] * len(g), index=g.index))
         typed = g.get("unsafe_reason_tags", pd.Series([None] * len(g), index=g.index))  # absent in older summaries
         tags = [reason_tags(r, t) for r, t in zip(texts, typed, strict=True)]

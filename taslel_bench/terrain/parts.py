@@ -108,7 +108,7 @@ class FrictionStrips:
     def add_to(self, spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, rng: np.random.Generator) -> None:
         spec.delete(spec.geom("floor"))
         names = ("floor_before", "floor_after") if len(self.frictions) == 2 else None
-        for i, ((cx, half_x), mu) in enumerate(zip(self._strip_boxes(), self.frictions)):
+        for i, ((cx, half_x), mu) in enumerate(zip(self._strip_boxes(), self.frictions, strict=True)):
             shade = 0.55 + 0.35 * i / max(1, len(self.frictions) - 1)
             add_terrain_geom(spec, name=names[i] if names else f"floor_{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
                              size=[half_x, self.half_length_m, self.thickness_m / 2], friction=mu,

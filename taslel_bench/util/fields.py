@@ -27,7 +27,7 @@ def _show(value: Any) -> str:
             from omegaconf import OmegaConf
 
             return repr(OmegaConf.to_container(value) if hasattr(value, "_content") else value)
-        except Exception:  # noqa: BLE001 - only for the message
+        except Exception:  # only for the message
             return repr(value)
     return repr(value)
 

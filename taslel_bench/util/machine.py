@@ -1,5 +1,5 @@
-"""The machine, package versions and code version (git commit) a result was produced on (one place; reports of every package and
-axis use it: it is a leaf module with no dependency on the rest of the core)."""
+"""The machine, package versions and code version (git commit) a result was produced on (one place; reports of every
+package and axis use it: it is a leaf module with no dependency on the rest of the core)."""
 
 from __future__ import annotations
 
@@ -117,4 +117,5 @@ class CpuWatch:
         d_total = total1 - self._steal0[1]
         steal = (steal1 - self._steal0[0]) / d_total if d_total > 0 else math.nan
         self.result = CpuShare(wall, (time.thread_time() - self._thread0) / wall, process / wall, self._load0,
-                               os.getloadavg()[0], steal, (usage.ru_nivcsw - self._usage0.ru_nivcsw) / wall)  # fmt: skip
+                               os.getloadavg()[0], steal,
+                               (usage.ru_nivcsw - self._usage0.ru_nivcsw) / wall)  # fmt: skip

@@ -3,8 +3,8 @@ the test's sweep (main process and loky workers) through PYTHONPATH. Nothing hap
 ``TASLEL_FAULTS`` is set: ``kill=<text>`` SIGKILLs the process that starts a run whose folder contains
 <text> (a worker dying as under the OOM killer); ``enospc=<text>`` makes writing that run's steps.parquet
 fail with ENOSPC (a full disk); ``eacces=<text>`` makes taking that run folder's lock fail with EACCES
-(a folder this process cannot write; root ignores file modes, so a chmod cannot show it). Entries are separated by ``;``. The patch is applied when
-``taslel_bench.sim.run`` is first imported (nothing is imported at startup)."""
+(a folder this process cannot write; root ignores file modes, so a chmod cannot show it). Entries are separated by
+``;``. The patch is applied when ``taslel_bench.sim.run`` is first imported (nothing is imported at startup)."""
 
 import os
 import sys

@@ -45,7 +45,8 @@ class Barrier:
 
     ``name`` is the family's config key (``filter.barriers.<name>``), the suffix of its row labels
     (``FL_<name>``), and the middle of its trace columns (``FL_barrier_<name>_h_m``). Only the families whose rows
-    are the legs enter the per-leg readings (``FL_barrier_h_m``, the psi columns, the MCAP's per-foot spheres). Subclasses override
+    are the legs enter the per-leg readings (``FL_barrier_h_m``, the psi columns, the MCAP's per-foot spheres).
+    Subclasses override
     :meth:`write`, and :meth:`applies` when they need something of the world (a profile, obstacles)."""
 
     rows: tuple[str, ...] = quad.LEGS  # the family's row names (one QP row each)

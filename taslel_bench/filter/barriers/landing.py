@@ -37,7 +37,7 @@ class LandingVelocity(Barrier):
         if legs.size == 0:
             return
         dist, normal, _ = self.terrain.near_distance(m.foot_pos_in_world[legs], self.foot_radius_m)
-        for d, n, i in zip(dist, normal, legs):
+        for d, n, i in zip(dist, normal, legs, strict=True):
             if not np.isfinite(d) or d >= self.activation_m:
                 continue
             v = m.foot_vel_in_world[i]

@@ -110,14 +110,16 @@ def _leg_distance_rows(rows, field_heights, field_grid, has_field, k0, k1, k2, k
         knee = k0 if i == 0 else k1 if i == 1 else k2 if i == 2 else k3
         for j in range(n_per_leg):
             for a in range(3):
-                points[i * n_per_leg + j, a] = knee[a] if knee_only else knee[a] + fractions[j] * (foot_pos[i, a] - knee[a])
+                points[i * n_per_leg + j, a] = (
+                    knee[a] if knee_only else knee[a] + fractions[j] * (foot_pos[i, a] - knee[a])
+                )
         legs[i] = not in_stance[i] if swing_only else True
     # exact below the activation distance, the only distances the rows use (a point at least that far from a
     # heightfield is not measured to it: _hfield_distance_within)
     terrain_distance_within(rows, field_heights, field_grid, has_field, points, radius, 0.0, activation, dist, normal,
                             closest)  # fmt: skip
-    _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation, legs,
-              h_out, he_out)
+    _leg_rows(G, hvec, r0, dist, normal, points, n_per_leg, J_world, dJ_world, cols, v, alpha1, alpha2, activation,
+              legs, h_out, he_out)
 
 
 @kernel

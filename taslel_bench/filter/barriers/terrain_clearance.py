@@ -37,8 +37,8 @@ class TerrainClearance(Barrier):
     ``max_normal_z``: a row only where the unit normal from the closest terrain point has n_z below this value
     (default 1.0: every swing foot). With e.g. 0.7 a foot above the top of a step, a log or a bump (n_z near 1:
     the surface it is about to land on) gets no row, and a foot beside a riser face or at an edge (the normal
-    tilts toward the horizontal) keeps it. Measured on steps with the terrain-following nominal (+experiment=terrain): the
-    row bound on ~30 % of swing ticks, mostly braking the descent onto a step's top in the second half of the
+    tilts toward the horizontal) keeps it. Measured on steps with the terrain-following nominal (+experiment=terrain):
+    the row bound on ~30 % of swing ticks, mostly braking the descent onto a step's top in the second half of the
     swing (swing phase p10-p90 0.44-0.95 for the front feet)."""
 
     def __init__(self, world: BarrierWorld, name: str = "terrain_clearance", lift_m: float = 0.02,
