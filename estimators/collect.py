@@ -1,14 +1,15 @@
 """Collect friction-labelled proprioception windows from MuJoCo episodes (``python -m estimators.collect``).
 
-Each episode: the A1 stands ``stand_duration_s`` then trots under the nominal controller (trot, IK, joint
-PD at 1 kHz) on a flat floor whose friction and plant parameters are drawn by
-:mod:`estimators.randomisation`. Every ``WINDOW_DT_S`` the 36 features (q, qdot, commanded tau; core
-joint order; tau is the torque commanded on the previous tick, exactly what the core episode runner passes
-as ``Proprioception.tau_joints``) are sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples from
-``first_window_s`` on, are labelled with the floor friction. Splits are by episode (train / val / test
-from the training ranges, ``shifted`` from :data:`SHIFTED_RANGES`). Episodes run in the core episode loop
-(:mod:`taslel_bench.api`), so a fall is the benchmark's (:mod:`taslel_bench.sim.terminations`) and ends the
-episode; windows ending later than ``fall_margin_s`` before the fall are dropped. Episodes run in parallel processes; the throughput is printed in env-steps/s (physics steps).
+Each episode: the A1 stands ``stand_duration_s`` then trots under the nominal controller (trot, IK, joint PD
+at 1 kHz) on a flat floor whose friction and plant parameters are drawn by :mod:`estimators.randomisation`.
+Every ``WINDOW_DT_S`` the 36 features (q, qdot, commanded tau; core joint order; tau is the torque commanded
+on the previous tick, exactly what the core episode runner passes as ``Proprioception.tau_joints``) are
+sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples from ``first_window_s`` on,
+are labelled with the floor friction. Splits are by episode (train / val / test from the training ranges,
+``shifted`` from :data:`SHIFTED_RANGES`). Episodes run in the core episode loop (:mod:`taslel_bench.api`), so
+a fall is the benchmark's (:mod:`taslel_bench.sim.terminations`) and ends the episode; windows ending later
+than ``fall_margin_s`` before the fall are dropped. Episodes run in parallel processes; the throughput is
+printed in env-steps/s (physics steps).
 
 With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
 the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
@@ -104,8 +105,8 @@ class WindowSampler:
     """An observer of the core episode loop (:mod:`taslel_bench.sim.observers`) that records every
     ``every_ticks`` control ticks the 36 features the loop hands estimators (q and qdot at the tick's start,
     the torque applied on the previous tick: the tick's ``Proprioception``), the friction under the trunk
-    (the tick's ``GroundTruth``: the label) and the plant's sensors after the tick's physics (the feet's contact sensors);
-    it counts the ticks on which the filter's QP failed (fallback torque used)."""
+    (the tick's ``GroundTruth``: the label) and the plant's sensors after the tick's physics (the feet's contact
+    sensors); it counts the ticks on which the filter's QP failed (fallback torque used)."""
 
     def __init__(self, every_ticks: int) -> None:
         self.every = int(every_ticks)
@@ -355,7 +356,7 @@ def _draw_jobs(seed: int, counts: dict[str, int], train_r: Ranges, shifted_r: Ra
     other counts."""
     root = np.random.SeedSequence(seed)
     jobs: list[Job] = []
-    for split_ss, split in zip(root.spawn(len(_SPLITS)), _SPLITS):
+    for split_ss, split in zip(root.spawn(len(_SPLITS)), _SPLITS, strict=True):
         n = counts.get(split, 0)
         for ep_ss in split_ss.spawn(n):
             rng = np.random.default_rng(ep_ss)
@@ -544,7 +545,7 @@ def collect(
                                filters, friction_range, plant_beta)
     manifest.update(patches.manifest_fields())
     for split in _SPLITS:
-        rs = [r for job, r in zip(jobs, results) if job[0] == split]
+        rs = [r for job, r in zip(jobs, results, strict=True) if job[0] == split]
         if not rs:
             continue
         n_windows = _write_split(out_dir, split, rs)

@@ -4,19 +4,20 @@ Every model maps raw windows ``x`` (B, T=40, 36) — q [rad], qdot [rad/s], tau 
 order — to a Gaussian over the friction coefficient: ``(mean, log_var)`` each (B,), in physical units
 ([-] and log [-]^2). With ``lower_quantile = q > 0`` the head has a third output, a lower-quantile estimate
 ``lower = mean - softplus(.) * y_std`` (never above the mean), trained with the pinball loss at level q
-(:meth:`FrictionModel.predict` returns it; ``forward`` keeps returning ``(mean, log_var)``). Feature and label normalisation statistics are buffers of the model, so a saved
-``state_dict`` is self-contained.
+(:meth:`FrictionModel.predict` returns it; ``forward`` keeps returning ``(mean, log_var)``). Feature and
+label normalisation statistics are buffers of the model, so a saved ``state_dict`` is self-contained.
 
 Tokenisation for the transformers (paper, "Network Architecture", ViT-like):
 * ``"joint"``: one token per joint per time step (T x 12 = 480 tokens of 3 features q, qdot, tau), with a
   learned temporal embedding (T, d) plus a learned spatial (joint) embedding (12, d);
 * ``"step"``: one token per time step (T = 40 tokens of 36 features) with a learned temporal embedding.
-Pooling is the mean over tokens or a learned CLS token. Options tried in the round-3 design study and
+Pooling is the mean over tokens or a learned CLS token. Options tried in the estimators' design study and
 kept (not used by the shipped checkpoints, ``studies/notes/estimators/design.md``): ``window_norm`` (per-window
 torque scale removed, :func:`window_features`) and ``kinematic_features`` (:func:`foot_kinematics`).
 With ``filter_mu_input`` the raw windows carry 2 more features per step after the 36 (filter in the loop
-0 / 1, the friction it assumed [-]; :func:`estimators.features.filter_channels`), step tokens and the mlp only. Linformer projects keys and values along the
-sequence from n to ``linformer_k`` with learned (k, n) matrices (Wang et al. 2020), one pair per layer.
+0 / 1, the friction it assumed [-]; :func:`estimators.features.filter_channels`), step tokens and the mlp
+only. Linformer projects keys and values along the sequence from n to ``linformer_k`` with learned (k, n)
+matrices (Wang et al. 2020), one pair per layer.
 """
 
 from __future__ import annotations
@@ -161,6 +162,9 @@ def window_features(x: torch.Tensor, mode: str) -> torch.Tensor:
 N_KIN_FEATURES = 24  # foot positions (4 x 3) and velocities (4 x 3)
 
 
+Prediction = tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]  # (mean, variance, lower quantile or None)
+
+
 def foot_kinematics(x: torch.Tensor, robot: RobotDescription | None = None) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 24): ``[p_foot (4 x 3) [m], v_foot (4 x 3) [m/s]]``, legs FL, FR, RL,
     RR, foot-sphere centres relative to the trunk origin, in trunk axes; v_foot = J_leg(q) qdot (the foot's
@@ -181,7 +185,8 @@ STANCE_PARTNER = (3, 2, 1, 0)  # trot pairs in LEGS order: FL-RR, FR-RL
 def slip_features(x: torch.Tensor, robot: RobotDescription | None = None) -> torch.Tensor:
     """Raw windows (B, T, 36) -> (B, T, 8): a slip signal from leg kinematics alone (``[d (4) [m/s], h (4)
     [m]]``, LEGS order). ``d_i`` = |v_i - v_j|, horizontal (trunk x, y), of foot i's velocity relative to the
-    trunk (:func:`foot_kinematics` on ``robot``'s chain, None: the A1) against its trot partner j's: two stance feet that hold both move at
+    trunk (:func:`foot_kinematics` on ``robot``'s chain, None: the A1) against its trot partner j's: two stance
+    feet that hold both move at
     -(v_trunk + omega x p), so d_i is the rotation term |omega x (p_i - p_j)| (small in a trot) plus the
     slip of either foot. ``h_i`` = foot i's height above the lowest foot in trunk axes: near 0 for the stance
     pair, so the model can tell the stance pair's d (a slip) from a swing foot's. The trunk's angular rate
@@ -294,7 +299,8 @@ class FrictionModel(nn.Module):
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """``x`` (B, T, n_raw) raw -> (mean [-], log_var [log -^2], lower-quantile [-] or None) each (B,), or
-        (B, 4) per foot (``per_foot``, LEGS order). The lower quantile is computed from the *detached* mean, so its loss never moves the mean."""
+        (B, 4) per foot (``per_foot``, LEGS order). The lower quantile is computed from the *detached* mean, so
+        its loss never moves the mean."""
         return run_stages(self.predict_stages(x))
 
     def encode_stages(self, x: torch.Tensor) -> Generator[None, None, torch.Tensor]:
@@ -303,7 +309,7 @@ class FrictionModel(nn.Module):
         return self.encode(x)
         yield
 
-    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
+    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, Prediction]:
         """:meth:`predict` as a generator that yields between slices of the network (embedding, each
         attention / feed-forward half-block, each MLP layer) and returns predict's result: the in-loop
         estimator runs one slice per control tick (``inference="staged"``)."""
@@ -492,7 +498,7 @@ class EnsembleModel(nn.Module):
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         return run_stages(self.predict_stages(x))
 
-    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
+    def predict_stages(self, x: torch.Tensor) -> Generator[None, None, Prediction]:
         """The members' slices one after the other (:meth:`FrictionModel.predict_stages`)."""
         outs = []
         for i, m in enumerate(self.members):

@@ -144,10 +144,8 @@ def caps(xy, t, cap, ceil, foot, arrived, feet_xy, heading, t_s, behind_m, ahead
     for e in range(len(t)):
         for j in range(4):
             ahead = (feet_xy[j, 0] - xy[e, 0]) * heading[0] + (feet_xy[j, 1] - xy[e, 1]) * heading[1]
-            if foot[e] == j:
-                reach = ahead <= own_ahead_m
-            else:
-                reach = propagate and -behind_m <= ahead <= ahead_m
+            own = foot[e] == j  # the event's own foot reaches ahead only; the others both ways (propagate)
+            reach = ahead <= own_ahead_m if own else propagate and -behind_m <= ahead <= ahead_m
             if not reach:
                 continue
             if np.isinf(arrived[e, j]):

@@ -48,9 +48,9 @@ def _child(helper: str, overrides: list[str]) -> None:
     from taslel_bench.api import compose
     from taslel_bench.filter.layout import TickInputs
     from taslel_bench.qp.tick_bench import QPSequence
-    from taslel_bench.sim.observers import FilterQPs
     from taslel_bench.record.trace import EpisodeTrace
     from taslel_bench.sim.build import Built
+    from taslel_bench.sim.observers import FilterQPs
 
     cg = ctypes.CDLL(helper)
     b = Built(compose(["duration=1.0", "scenario=obstacle", "progress=false", "record.reference_every=0", *overrides]))

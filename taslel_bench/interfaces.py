@@ -227,7 +227,8 @@ __all__ = [  # grouped by topic
     "GROUND", "OBSTACLE", "Box", "ClearanceProfile", "FrictionStrips", "HeightField", "Log", "Plane", "Ramp",
     "Scenario", "Terrain", "TerrainPart", "rough_heights",
     # estimator
-    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "GroundTruth", "ImuSample", "Proprioception",
+    "MAX_FRICTION", "OVERESTIMATE_MARGIN", "Estimator", "FrictionEstimate", "GroundTruth", "ImuSample",
+    "Proprioception",
     "overestimates",
     # the plant's perturbations
     "ActuatorDelay", "PlantPerturbation",

@@ -47,7 +47,8 @@ def test_feet_and_jacobians_match_leg_kinematics_and_pinocchio(name: str) -> Non
             fk = kin.leg_fk(leg, q[k, 3 * leg : 3 * leg + 3]) + robot.hip_positions_in_trunk[leg]
             leg_cols = pm.foot_jac_in_world[leg][:, 6 + 3 * leg : 9 + 3 * leg]
             worst["leg_fk"] = max(worst["leg_fk"], np.abs(feet[k, leg] - fk).max())
-            worst["pinocchio_feet"] = max(worst["pinocchio_feet"], np.abs(feet[k, leg] - pm.foot_pos_in_world[leg]).max())
+            feet_error = np.abs(feet[k, leg] - pm.foot_pos_in_world[leg]).max()
+            worst["pinocchio_feet"] = max(worst["pinocchio_feet"], feet_error)
             worst["pinocchio_jacobians"] = max(worst["pinocchio_jacobians"], np.abs(jac[k, leg] - leg_cols).max())
     assert max(worst.values()) < TOL, (name, worst)
 

@@ -258,7 +258,6 @@ def test_the_summary_is_typed_sections_flattened_once_with_reasons_as_values():
     from taslel_bench.metrics.sections import SECTIONS, RunSummary, Verdict
     from taslel_bench.metrics.summary import summarize, summary_sections
     from taslel_bench.metrics.verdict import Reason
-
     from taslel_bench.sim.build import Built
 
     built = Built(compose_cfg(["scenario=logs", "filter.enabled=false", "duration=3", "seed=0"]))

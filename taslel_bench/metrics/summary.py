@@ -199,7 +199,8 @@ class SummaryStream:
             iterations = acc.get("qp_iterations_median", math.nan)
             if not math.isnan(iterations):
                 filt["qp_iterations_median"] = iterations
-        contacts = {**self.walk_contacts.result(), **stand_part(self.stand_contacts.result()), **self.clearance.result()}
+        contacts = {**self.walk_contacts.result(), **stand_part(self.stand_contacts.result()),
+                    **self.clearance.result()}
         return {"timing": {k: v for k, v in acc.items() if k.startswith("tick_")}, "locomotion": loco, "filter": filt,
                 "contacts": contacts, "model": self.residuals.result(), "estimator": self.estimator.result(self.n)}
 

@@ -109,7 +109,7 @@ class Built:
         self.mj_model = build_plant_model(cfg, self.robot, self.scenario, self.rng)
         self.controller = build_controller(cfg, self.robot, self.scenario.terrain)
         barriers = build_barriers(cfg, self.robot, self.scenario.terrain, self.scenario.clearance_profile())
-        self.filter = SafetyFilter(fs, self.backend, barriers, self.scenario.terrain) if self.backend is not None else None
+        self.filter = None if self.backend is None else SafetyFilter(fs, self.backend, barriers, self.scenario.terrain)
         self.stance = stance_source(cfg, fs.stance_source if self.filter is not None else "schedule")
         # record.reference_every: the backend's answers checked against the tight reference (None: off)
         self.reference_check = reference_check(cfg) if self.filter is not None else None

@@ -430,7 +430,8 @@ class Episode:
             return
         t0 = time.perf_counter()
         alpha2 = self.filter.settings.ecbf_alpha2 if self.filter is not None else 20.0
-        setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s, alpha2)
+        setup = ResidualSetup(self.bridge, self.model, self.initial_qpos, self.initial_qvel, self.s.control_dt_s,
+                              alpha2)
         try:
             residuals.compute_rows(trace, setup, rows, *self._state_before)
         except Exception:  # a metric must not lose the run: note it

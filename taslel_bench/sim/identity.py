@@ -27,7 +27,7 @@ import importlib.metadata
 import importlib.util
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from functools import lru_cache
 from pathlib import Path
 
@@ -38,7 +38,7 @@ ENTRY_MODULES = ("taslel_bench.sim.run",)  # runs an episode and writes its fold
 MISSING = "<missing>"
 
 
-class FileRole(str, Enum):
+class FileRole(StrEnum):
     """Why a file is part of a run's identity."""
 
     PLANT = "plant"

@@ -6,8 +6,8 @@ observer has):
 * ``start(episode)`` -- a run begins (the plant at its initial state): open files, reset counters;
 * ``after_tick(k, t, fres)`` -- control tick ``k`` at episode time ``t`` [s] is done: the plant has stepped,
   the trace (if any) holds the tick, ``episode.sensed`` is still the tick's proprioception (joint state at the
-  tick's start, the torque applied on the previous tick) and ``episode.truth`` its ground truth, ``fres`` the filter's result (None: no filter this
-  tick), the filter's QP is still the tick's (``episode.filter.backend_problem``);
+  tick's start, the torque applied on the previous tick) and ``episode.truth`` its ground truth, ``fres`` the
+  filter's result (None: no filter this tick), the filter's QP is still the tick's (``episode.filter.backend_problem``);
 * ``between_ticks(k, trace)`` -- after tick ``k`` outside the ticks' timers (work that may wait a while);
 * ``on_chunk(trace, k0, k1)`` -- ticks ``k0 .. k1 - 1`` of the trace are complete and analysed (derived
   quantities, model residuals), in list order; the trace drops them afterwards (``record.chunk_ticks``);

@@ -7,6 +7,7 @@ each config group (``{"scenario": "flat", "solver": "daqp", ...}``).
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import resource
 import sys
@@ -26,7 +27,7 @@ from taslel_bench.metrics.summary import SummaryStream, summary_sections
 from taslel_bench.plant.build import urdf_mesh_files
 from taslel_bench.plant.comparison import plant_vs_model
 from taslel_bench.qp.reference_check import reference_metrics
-from taslel_bench.record import qpset, run_files
+from taslel_bench.record import run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.run_files import OVERRIDE_SEPARATOR
 from taslel_bench.record.run_lock import RunFolderLocked, RunLock
@@ -37,6 +38,8 @@ from taslel_bench.sim.run_recorders import SWEEP_LEVEL_KEYS, RunRecorders, chunk
 from taslel_bench.sim.solve_clock import time_solves_by_cpu
 from taslel_bench.util.machine import CpuWatch
 from taslel_bench.util.provenance import code_version
+
+logger = logging.getLogger(__name__)
 
 
 def file_sha256(path: Path) -> str:
@@ -172,7 +175,7 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
         notes["superseded"] = str(moved.relative_to(out_dir))
         notes["superseded_files"] = ",".join(sorted(p.name for p in moved.iterdir()))
         notes["superseded_why"] = why
-        print(f"{out_dir}: held {why}; moved {notes['superseded_files']} to {moved}", file=sys.stderr)
+        logger.warning("%s: held %s; moved %s to %s", out_dir, why, notes["superseded_files"], moved)
     return None, notes
 
 
@@ -394,7 +397,7 @@ def _seed_or_minus_one(cfg: DictConfig) -> int:
     """The run's seed for an error summary, -1 when it is not a valid one (``seed=abc``, ``seed=${oops}``)."""
     try:
         seed = cfg.get("seed")
-    except Exception:  # noqa: BLE001 - an interpolation error must not hide the job's own error
+    except Exception:  # an interpolation error must not hide the job's own error
         return -1
     return seed if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0 else -1
 
@@ -406,7 +409,7 @@ def earlier_unfinished(out_dir: Path, cfg: DictConfig) -> list[str]:
     out_dir = Path(out_dir)
     try:
         mine = run_config_yaml(cfg)
-    except Exception:  # noqa: BLE001 - a config that does not resolve is refused by run() itself
+    except Exception:  # a config that does not resolve is refused by run() itself
         return []
     lines = []
     for folder in sorted(out_dir.parent.iterdir()) if out_dir.parent.is_dir() else []:
