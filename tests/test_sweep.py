@@ -46,8 +46,8 @@ def test_run_that_raises_leaves_readable_mcap_and_error_summary(tmp_path, monkey
     cfg = compose_cfg(["duration=1", "progress=false", "filter.enabled=false"])
     original = Built.__init__
 
-    def sabotaged(self, cfg):
-        original(self, cfg)
+    def sabotaged(self, cfg, *args, **kwargs):
+        original(self, cfg, *args, **kwargs)
 
         def explode(model, data, t):
             if t > 0.4:
