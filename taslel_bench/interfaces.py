@@ -68,8 +68,10 @@ class QPProblem:
 
     def copy(self) -> QPProblem:
         """Deep copy (for recording / replay): the filter overwrites its own instance each tick."""
+        P, q, A, b, G, h, lb, ub = (np.array(a, copy=True)
+                                    for a in (self.P, self.q, self.A, self.b, self.G, self.h, self.lb, self.ub))
         return QPProblem(
-            *(np.array(a, copy=True) for a in (self.P, self.q, self.A, self.b, self.G, self.h, self.lb, self.ub)),
+            P, q, A, b, G, h, lb, ub,
             self.P_pattern,
             self.A_pattern,
             self.G_pattern,

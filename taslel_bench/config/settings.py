@@ -24,7 +24,7 @@ from taslel_bench.sim.episode import EpisodeSettings
 from taslel_bench.sim.terminations import FallRule
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
-from taslel_bench.util.fields import fail
+from taslel_bench.util.fields import fail, plain_dict
 
 
 def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
@@ -35,7 +35,7 @@ def robot_description(cfg: DictConfig) -> RobotDescription:
     """The run's robot (``cfg.robot``, one of ``conf/robot/``) as a :class:`RobotDescription`. A run folder's
     config written before robots were described (no ``robot.name``) was an A1 run: ``conf/robot/a1.yaml`` under its
     own robot values."""
-    return describe_robot(complete_robot_node(OmegaConf.to_container(cfg.robot, resolve=True)))
+    return describe_robot(complete_robot_node(plain_dict(cfg.robot, "robot")))
 
 
 def build_controller(cfg: DictConfig, robot: RobotDescription, terrain: Terrain | None = None) -> NominalControl:

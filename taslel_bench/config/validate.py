@@ -44,7 +44,7 @@ from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import RobotDescription, describe_robot
 from taslel_bench.robot.model_options import ModelOptions
-from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers
+from taslel_bench.util.fields import ConfigError, choice, fail, flag, integer, number, numbers, plain_dict
 
 AXES = ("scenario", "solver", "estimator")
 TROT_TARGET = "taslel_bench.control.trot.trot_controller"  # conf/controller/trot.yaml's builder
@@ -402,7 +402,7 @@ def _robot(cfg: DictConfig) -> RobotDescription:
     r = "robot"
     if not isinstance(_get(cfg, r), DictConfig):
         raise fail(r, _get(cfg, r), "must be a robot config (conf/robot/<name>.yaml)")
-    robot = describe_robot(OmegaConf.to_container(cfg.robot, resolve=True))
+    robot = describe_robot(plain_dict(cfg.robot, r))
     if max(robot.torque_limit_nm) > MAX_TORQUE_LIMIT_NM:
         raise fail(f"{r}.torque_limit_nm", _get(cfg, f"{r}.torque_limit_nm"),
                    f"every joint's limit must be in (0, {MAX_TORQUE_LIMIT_NM:g}] N·m")

@@ -55,13 +55,14 @@ def summary_sections(res: EpisodeResult, control_dt_s: float, stand_duration_s: 
     else from the whole trace (which must then hold every tick)."""
     settings = (control_dt_s, stand_duration_s, stance_duration_s, limits, swing_duration_s,
                 safety.trip_touchdown_tolerance_s)  # fmt: skip
+    trace = res.traced()
     if not isinstance(stream, SummaryStream) or stream.settings != settings:
-        if res.trace.offset:
+        if trace.offset:
             raise ValueError("summarize: the trace holds only the last chunk and the episode's metrics were "
                              "made with other settings")
         stream = SummaryStream(*settings)
-        stream.feed(res.trace, res.trace.n)
-    n = res.trace.n
+        stream.feed(trace, trace.n)
+    n = trace.n
     outcome: dict[str, object] = {
         "status": res.status, "message": res.message, "fell": bool(res.fell),
         "time_to_fall_s": float(res.time_to_fall_s), "fall_reason": res.fall_reason,
@@ -260,8 +261,9 @@ def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[s
 def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
     """mu_hat (what the filter used) vs the true friction under the trunk, every tick."""
     stream = EstimatorStream()
-    stream.feed(res.trace, res.trace.n - res.trace.offset)
-    return stream.result(res.trace.n)
+    trace = res.traced()
+    stream.feed(trace, trace.n - trace.offset)
+    return stream.result(trace.n)
 
 
 class EstimatorStream:

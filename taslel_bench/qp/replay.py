@@ -43,6 +43,7 @@ from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.interfaces import SOLVED, QPBackend, QPProblem
 from taslel_bench.qp.replay_report import JOB_INFO, QP_TABLE, write_report
 from taslel_bench.record import qpset, run_files
+from taslel_bench.util.fields import plain_dict
 
 SOLVER_DIR = CONF_DIR / "solver"
 MODES = ("cold", "warm", "persistent")
@@ -272,7 +273,7 @@ def replay(
 
 
 def profiles_from(cfg: DictConfig) -> dict[str, dict]:
-    all_over = OmegaConf.to_container(cfg.profile_overrides, resolve=True)
+    all_over = plain_dict(cfg.profile_overrides, "profile_overrides")
     return {p: dict(all_over.get(p) or {}) for p in cfg.profiles}
 
 
@@ -312,7 +313,7 @@ def run_job(cfg: DictConfig, out_dir: Path, solver: str | None = None) -> pd.Dat
     qs = qpset.load(cfg.testset)
     out_dir.mkdir(parents=True, exist_ok=True)
     names = base_names() if solver is None else [solver]
-    tol = Tolerances(**OmegaConf.to_container(cfg.tolerances, resolve=True))
+    tol = Tolerances(**plain_dict(cfg.tolerances, "tolerances"))
     print(f"replay {cfg.testset}: {len(qs)} QPs, {len(qs.runs)} runs; {', '.join(names)}", file=sys.stderr)
     frame = replay(qs, names, list(cfg.modes), profiles_from(cfg), int(cfg.repeats), tol, int(cfg.max_qps),
                    log=lambda s: print(s, file=sys.stderr, flush=True))  # fmt: skip

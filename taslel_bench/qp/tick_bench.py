@@ -132,7 +132,7 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
         e.controller.compute(t[0], qj, qdj)
 
     if trace is None:
-        trace = e.run().trace
+        trace = e.run().traced()
     costs = {
         "mj_step": replayed_mj_step_us(built, trace),
         "controller": _median_us(ctrl),
@@ -374,7 +374,8 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
     built = Built(cfg)
     res = built.episode.run()
-    tr, n = res.trace, res.trace.n
+    tr = res.traced()
+    n = tr.n
     rtf = n * 1e-3 * (1000.0 / float(cfg.control_rate_hz)) / res.wall_time_s
     in_loop = {part: float(np.median(tr.tick_parts_us[:n, j])) for j, part in enumerate(TICK_PARTS)}
     if built.filter is None:

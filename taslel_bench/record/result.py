@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 from taslel_bench.record.trace import EpisodeTrace
 
 
 @dataclass
 class EpisodeResult:
-    trace: EpisodeTrace
+    trace: EpisodeTrace | None  # None: an episode run without one (Episode(trace=False))
     status: str = "ok"  # "ok" or "error" (the episode could not run to its end)
     message: str = ""
     fell: bool = False
@@ -18,4 +19,10 @@ class EpisodeResult:
     fall_reason: str = ""
     n_ticks: int = 0
     wall_time_s: float = 0.0  # [s] the episode loop, recording excluded
-    extras: dict[str, object] = field(default_factory=dict)  # warmup_s, recording_s, residuals_s, fall_term ...
+    extras: dict[str, Any] = field(default_factory=dict)  # warmup_s, recording_s, residuals_s, fall_term ...
+
+    def traced(self) -> EpisodeTrace:
+        """The episode's trace; ValueError for an episode run without one."""
+        if self.trace is None:
+            raise ValueError("the episode was run without a trace (Episode(trace=False))")
+        return self.trace

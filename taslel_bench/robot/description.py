@@ -19,13 +19,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
 
 from taslel_bench.robot import quadruped as quad
-from taslel_bench.util.fields import ConfigError
+from taslel_bench.util.fields import ConfigError, plain_dict
+
+if TYPE_CHECKING:
+    from xml.etree.ElementTree import Element
 
 ROBOT_CONFIG_DIR = Path(__file__).resolve().parents[2] / "conf" / "robot"
 AXIS_TOL = 1e-6  # [-] a joint axis must be +-x (hip) or +-y (thigh, calf) of the trunk to this tolerance
@@ -116,7 +119,8 @@ def load_robot(name: str) -> RobotDescription:
     """The description of a shipped robot by name (``conf/robot/<name>.yaml``)."""
     from omegaconf import OmegaConf
 
-    return describe_robot(OmegaConf.to_container(OmegaConf.load(robot_config_path(name)), resolve=True))
+    path = robot_config_path(name)
+    return describe_robot(plain_dict(OmegaConf.load(path), str(path)))
 
 
 def complete_robot_node(node: Mapping[str, Any]) -> dict[str, Any]:
@@ -126,7 +130,8 @@ def complete_robot_node(node: Mapping[str, Any]) -> dict[str, Any]:
         return dict(node)
     from omegaconf import OmegaConf
 
-    a1 = OmegaConf.to_container(OmegaConf.load(robot_config_path("a1")), resolve=True)
+    a1_path = robot_config_path("a1")
+    a1 = plain_dict(OmegaConf.load(a1_path), str(a1_path))
     return {**a1, **node}
 
 
@@ -229,7 +234,7 @@ def _distribution_file(dist_name: str, inner: str, field: str) -> Path:
             from None
     for f in dist.files or ():
         if str(f).endswith(inner):
-            path = Path(dist.locate_file(f))
+            path = Path(str(dist.locate_file(f)))  # typed as the abstract SimplePath; a pathlib.Path here
             if path.is_file():
                 return path.resolve()
     raise ConfigError(f"{field}: {dist_name} is installed but has no file ending in {inner!r}")
@@ -305,15 +310,18 @@ def _feet(urdf: Path, feet: tuple[str, ...], radius: Any, where: str
         return float(radius), tuple((0.0, 0.0, 0.0) for _ in feet), False
     radii, centres = [], []
     for foot in feet:
-        spheres = [(c, c.find("geometry/sphere")) for c in links[foot].findall("collision")
-                   if c.find("geometry/sphere") is not None]
+        spheres = [(c, sphere) for c in links[foot].findall("collision")
+                   if (sphere := c.find("geometry/sphere")) is not None]
         if len(spheres) != 1:
             raise ConfigError(f"{where}.foot_radius_m: null needs one collision sphere on {foot} in {urdf} "
                               f"(found {len(spheres)}); give the radius to use instead")
         collision, sphere = spheres[0]
         origin = collision.find("origin")
         xyz = [float(x) for x in origin.get("xyz", "0 0 0").split()] if origin is not None else [0.0] * 3
-        radii.append(float(sphere.get("radius")))
+        radius_text = sphere.get("radius")
+        if radius_text is None:
+            raise ConfigError(f"{where}.foot_radius_m: the collision sphere of {foot} in {urdf} has no radius")
+        radii.append(float(radius_text))
         centres.append((xyz[0], xyz[1], xyz[2]))
     if max(radii) - min(radii) > 1e-12:
         raise ConfigError(f"{where}: the foot spheres of {urdf} differ in radius ({radii}); the core needs one")
@@ -442,11 +450,20 @@ def physical_urdf_text(path: Path, trunk_link: str) -> tuple[str, list[str]]:
     return text, fixed
 
 
+def _joint_link(joint: Element, end: str) -> str:
+    """The link a URDF joint names in its ``<parent link=...>`` or ``<child link=...>`` (``end``)."""
+    element = joint.find(end)
+    link = element.get("link") if element is not None else None
+    if link is None:
+        raise ConfigError(f"URDF joint {joint.get('name')!r}: no <{end} link=...>")
+    return link
+
+
 def _links_above(text: str, link: str) -> list[str]:
     """The links on the path from the URDF's root to ``link`` (exclusive)."""
     import xml.etree.ElementTree as ET
 
-    parent = {j.find("child").get("link"): j.find("parent").get("link") for j in ET.fromstring(text).findall("joint")}
+    parent = {_joint_link(j, "child"): _joint_link(j, "parent") for j in ET.fromstring(text).findall("joint")}
     out = []
     while link in parent:
         link = parent[link]
@@ -460,11 +477,11 @@ def _core_ordered_urdf(text: str, robot: RobotDescription) -> str:
     import xml.etree.ElementTree as ET
 
     root = ET.fromstring(text)
-    parent_joint = {j.find("child").get("link"): j for j in root.findall("joint")}
+    parent_joint = {_joint_link(j, "child"): j for j in root.findall("joint")}
     for leg in range(quad.N_LEGS):
         joint = next((j for j in root.findall("joint") if j.get("name") == robot.joint_names[3 * leg]), None)
-        while joint is not None and joint.find("parent").get("link") != robot.trunk_link:
-            joint = parent_joint.get(joint.find("parent").get("link"))
+        while joint is not None and _joint_link(joint, "parent") != robot.trunk_link:
+            joint = parent_joint.get(_joint_link(joint, "parent"))
         if joint is None:  # not the robot's URDF: the caller names the joint order it finds
             return text
         name = joint.get("name")

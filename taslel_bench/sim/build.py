@@ -5,7 +5,7 @@ terrain's before the first step."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import mujoco
@@ -96,7 +96,7 @@ class Built:
     ``record.reference_every``);
     ``chunk_ticks``: the episode's trace in chunks of that many ticks (None: the whole episode)."""
 
-    def __init__(self, cfg: DictConfig, observers: Callable[[Built], Sequence[object]] | None = None,
+    def __init__(self, cfg: DictConfig, observers: Callable[[Built], Iterable[object]] | None = None,
                  chunk_ticks: int | None = None) -> None:
         validate(cfg)
         self.cfg = cfg
@@ -114,7 +114,7 @@ class Built:
         # record.reference_every: the backend's answers checked against the tight reference (None: off)
         self.reference_check = reference_check(cfg) if self.filter is not None else None
         checks = [ReferenceChecks(self.reference_check)] if self.reference_check is not None else []
-        self.recorders = observers(self) if observers is not None else ()
+        self.recorders: Iterable[object] = observers(self) if observers is not None else ()
         self.episode = Episode(
             episode_settings(cfg, self.robot), self.scenario, self.mj_model, self.controller, self.filter,
             self.estimator, self.rng, model=build_model(cfg, self.robot), stance=self.stance,

@@ -23,6 +23,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
+from typing import Protocol, cast
 
 import mujoco
 import numpy as np
@@ -48,6 +49,12 @@ from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
 PROGRESS_EVERY_TICKS = 500
 DEFAULT_FALL_RULE = FallRule(height_m=0.12, tilt_deg=57.0)  # conf/robot/a1.yaml's
+
+
+class _ReadsGroundTruth(Protocol):
+    """An estimator with ``reads_ground_truth = True`` (an oracle): ``step`` also gets the tick's truth."""
+
+    def step(self, obs: Proprioception, truth: GroundTruth) -> FrictionEstimate: ...
 
 
 @dataclass(frozen=True)
@@ -207,7 +214,7 @@ class Episode:
         for fres in results:
             for state, stance in ((gs, gs.in_stance), (writable, gs.in_stance.copy())):
                 scratch.record(0, 0.0, self._plant_rows, state, stance, self._tau_prev, self._tau_prev, fres, 1.0,
-                               True, 1.0, (0.0,) * 5, self._barriers, False, False)  # fmt: skip
+                               True, 1.0, (0.0, 0.0, 0.0, 0.0, 0.0), self._barriers, False, False)  # fmt: skip
 
     def _new_trace(self, capacity: int) -> EpisodeTrace:
         return EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
@@ -263,7 +270,7 @@ class Episode:
         self.imu.reset(self._v_trunk_w)
         self._t0_plant = self.d.time
         self._ticks_done = 0
-        self._clock = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)  # [s] off the loop's clock
+        self._clock: dict[str, float] = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)  # [s] off the loop's clock
         self._hooks = {hook: hooks_of(self.observers, hook) for hook in HOOKS}
         for _, clock in (pair for pairs in self._hooks.values() for pair in pairs):
             self._clock.setdefault(clock, 0.0)
@@ -322,7 +329,8 @@ class Episode:
         self.truth = truth = GroundTruth(true_mu, mu_feet)  # what only the simulator knows
         self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, filter_mu=self._mu_filter_prev,
                                               imu=self._imu_sample())  # what the robot measures
-        est = self.estimator.step(sensed, truth) if self._estimator_reads_truth else self.estimator.step(sensed)
+        est = (cast(_ReadsGroundTruth, self.estimator).step(sensed, truth) if self._estimator_reads_truth
+               else self.estimator.step(sensed))
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.contact_plan(t)
         in_stance = self.stance.stance(gs, self.contacts)

@@ -35,7 +35,7 @@ DEFAULT_CLOCK = "recording_s"
 class QPRecorder(Protocol):
     """What records the filter's QP of a tick (:class:`taslel_bench.record.qpset.QPRecorder`)."""
 
-    def on_tick(self, k: int, t_s: float, problem: Any, result: Any) -> None: ...
+    def on_tick(self, k: int, t_s: float, problem: Any, result: Any, /) -> None: ...  # called positionally
 
 
 class FilterQPs:

@@ -12,7 +12,7 @@ import math
 import resource
 import sys
 import traceback
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,7 @@ from taslel_bench.sim.identity import RunIdentity, config_files, mjcf_files, run
 from taslel_bench.sim.interrupt import INTERRUPTED, InterruptGuard, RunInterrupted, StopRequested
 from taslel_bench.sim.run_recorders import SWEEP_LEVEL_KEYS, RunRecorders, chunk_ticks, run_config_yaml, run_recorders
 from taslel_bench.sim.solve_clock import time_solves_by_cpu
+from taslel_bench.util.fields import plain_dict
 from taslel_bench.util.machine import CpuWatch
 from taslel_bench.util.provenance import code_version
 
@@ -88,7 +89,7 @@ def summary_choices(cfg: DictConfig, choices: dict[str, str] | None) -> dict[str
 def hashed_config(cfg: DictConfig) -> dict:
     """The resolved config as hashed: without ``progress``, ``force``, ``max_memory_gb`` (they only change what
     is printed or refused), the sweep-level keys and ``record.chunk_ticks`` (how the trace is processed)."""
-    plain = OmegaConf.to_container(cfg, resolve=True)
+    plain = plain_dict(cfg, "config")
     for key in ("progress", "force", "max_memory_gb", *SWEEP_LEVEL_KEYS):
         plain.pop(key, None)
     plain.get("record", {}).pop("chunk_ticks", None)
@@ -121,7 +122,7 @@ def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = (), choices: di
 
 def estimator_files(built: Built) -> list[Path]:
     """The files the run's estimator loaded (its optional ``input_files()``: checkpoints), [] if none."""
-    files = getattr(built.estimator, "input_files", None)
+    files: Callable[[], Iterable[str | Path]] | None = getattr(built.estimator, "input_files", None)
     return [Path(p) for p in files()] if callable(files) else []
 
 
@@ -161,7 +162,7 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
     if not problem and previous is not None and previous.get("status") == INTERRUPTED:
         problem = INTERRUPTED  # a partial episode: never reused as complete
     same = previous is not None and previous.get("config_sha256") == config_hash
-    if not problem and same and not cfg.get("force", False):
+    if not problem and same and previous is not None and not cfg.get("force", False):
         return {**previous, "skipped": True}, {}
     notes: dict[str, object] = {}
     stale = run_files.remove_stale(out_dir)
@@ -210,7 +211,8 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
     ``interrupted`` run (:mod:`taslel_bench.sim.interrupt`); a signal while the files are written is held
     until they are complete, then ends the run (:class:`RunInterrupted`)."""
     run_files.atomic_write(out_dir / "config.yaml", lambda p: p.write_text(run_config_yaml(cfg)))
-    recorders: RunRecorders = built.recorders  # steps.parquet, metrics, record.mcap, record.qps
+    recorders = built.recorders  # steps.parquet, metrics, record.mcap, record.qps
+    assert isinstance(recorders, RunRecorders)  # run() builds them with run_recorders
     show = _progress_printer(float(cfg.controller.stand_duration) + float(cfg.duration), bool(cfg.progress))
     time_solves_by_cpu(built)  # each solve also by the thread's CPU time (qp_solve_cpu_us)
     guard.defer = True
@@ -223,6 +225,7 @@ def _run_into(cfg: DictConfig, out_dir: Path, built: Built, choices: dict[str, s
         sections = _episode_summary(cfg, built, res, recorders.metrics)
         sections.identity = {**_run_identity(cfg, built, choices, overrides, config_hash), **notes}
         sections.plant = _plant_summary(cfg, built)
+        assert watch.result is not None  # set when the with block ends
         sections.machine = watch.result.record()  # machine_cpu_share, machine_busy, ... (taslel_bench.util.machine)
         summary = sections.flat()  # the run's files add their keys when they are written
         if stopped:
@@ -305,7 +308,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics:
     out.timing["recording_s"] = float(res.extras.get("recording_s", 0.0))
     out.timing["reference_s"] = float(res.extras.get("reference_s", 0.0))
     out.filter.update(_reference_summary(built, metrics, dt))  # record.reference_every: u error against the reference
-    diagnostics = getattr(built.estimator, "diagnostics", None)
+    diagnostics: Callable[[], dict[str, float]] | None = getattr(built.estimator, "diagnostics", None)
     if callable(diagnostics):
         out.estimator.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.filter is not None:  # filter.relaxation=priority: ticks solved only after dropping barrier families
@@ -333,16 +336,17 @@ def _events(cfg: DictConfig, res: EpisodeResult, out_dir: Path, metrics: Summary
     """QP failures, residual alarms, the fall and the error of the run (with simulated times); an error's
     traceback goes to ``traceback.txt``."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    events = list(res.trace.events)
-    if res.trace.qp_failures_not_listed:
-        events.append({"t_s": res.trace.n * dt, "kind": "qp_failure",
-                       "message": f"{res.trace.qp_failures_not_listed} more QP failures not listed "
+    trace = res.traced()
+    events = list(trace.events)
+    if trace.qp_failures_not_listed:
+        events.append({"t_s": trace.n * dt, "kind": "qp_failure",
+                       "message": f"{trace.qp_failures_not_listed} more QP failures not listed "
                                   "(every one is counted in summary.json's qp_failed)"})  # fmt: skip
     events += metrics.alarm_events()
     if res.fell:
         events.append({"t_s": res.time_to_fall_s, "kind": "fall", "message": res.fall_reason})
     if res.status == "error":
-        events.append({"t_s": res.trace.n * dt, "kind": "error", "message": res.message})
+        events.append({"t_s": trace.n * dt, "kind": "error", "message": res.message})
         if "traceback" in res.extras:
             run_files.atomic_write(out_dir / "traceback.txt", lambda p: p.write_text(str(res.extras["traceback"])))
     return events

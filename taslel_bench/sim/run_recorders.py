@@ -19,6 +19,7 @@ from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
 from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.sim.observers import FilterQPs, MetricsFeed, StepsTable, StreamedChunks
+from taslel_bench.util.fields import plain_dict
 
 DEFAULT_CHUNK_TICKS = 5000  # record.chunk_ticks when the config has none
 SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
@@ -26,7 +27,7 @@ SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a
 
 def run_config_yaml(cfg: DictConfig) -> str:
     """The run's resolved config as written to its config.yaml (without :data:`SWEEP_LEVEL_KEYS`)."""
-    plain = OmegaConf.to_container(cfg, resolve=True)
+    plain = plain_dict(cfg, "config")
     for key in SWEEP_LEVEL_KEYS:
         plain.pop(key, None)
     return OmegaConf.to_yaml(OmegaConf.create(plain))

@@ -75,7 +75,7 @@ def markdown(rows: list[dict[str, object]], command: str, seconds: float) -> str
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
     ap.add_argument("--seeds", default="0:2000", help="first:last+1 (default 0:2000)")
     ap.add_argument("--no-stand", action="store_true", help="only build (no stand simulation)")
     ap.add_argument("--out", type=Path, help="markdown report to write")

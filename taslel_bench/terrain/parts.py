@@ -36,7 +36,8 @@ Distances = tuple[np.ndarray, np.ndarray, np.ndarray]  # (n,) [m], (n, 3) unit n
 
 @runtime_checkable
 class TerrainPart(Protocol):
-    role: str
+    @property
+    def role(self) -> str: ...  # GROUND or OBSTACLE; read-only, so frozen dataclasses match
 
     def add_to(self, spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, rng: np.random.Generator) -> None: ...
 
@@ -198,7 +199,7 @@ class Box:
 
     def add_to(self, spec: mujoco.MjSpec, body: mujoco.MjsBody, name: str, rng: np.random.Generator) -> None:
         add_terrain_geom(spec, name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=list(self.half_size_m),
-                         friction=self.friction, pos=tuple(self.centre_m), body=body,
+                         friction=self.friction, pos=self.centre_m, body=body,
                          rgba=(0.5, 0.5, 0.55, 1.0))  # fmt: skip
 
     def top_z(self, x: float, y: float) -> float:

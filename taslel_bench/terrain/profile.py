@@ -4,7 +4,7 @@ ground-clearance ECBF (:mod:`taslel_bench.filter.barriers.phase_profile`) and th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -15,6 +15,11 @@ class ClearanceProfile:
     z(s) = sum_k coeffs[k] s^k  [m, world z of the foot-sphere *bottom*]."""
 
     coeffs: tuple[float, ...]
+    # derived in __post_init__ (ascending powers, length K): exponents, coefficients of z, dz/ds, d²z/ds²
+    _k: np.ndarray = field(init=False, repr=False, compare=False)
+    _c: np.ndarray = field(init=False, repr=False, compare=False)
+    _c1: np.ndarray = field(init=False, repr=False, compare=False)
+    _c2: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __call__(self, s: float) -> tuple[float, float, float]:
         """(z, dz/ds, d²z/ds²) at phase ``s``."""

@@ -94,7 +94,7 @@ class HeightField:
     base_m: float = 0.05  # [m] depth of MuJoCo's solid base below the lowest vertex
     role: str = GROUND
     draw: Callable[[np.random.Generator], np.ndarray] | None = None  # heights from the terrain's generator
-    _grid: tuple = field(init=False, repr=False)
+    _grid: tuple[float, float, float, float] | None = field(init=False, repr=False)  # (x0, y0, dx, dy); None: not drawn
 
     def __post_init__(self) -> None:
         if self.heights_m is None:
@@ -118,7 +118,7 @@ class HeightField:
         generator of the terrain, seeded from the run seed)."""
         if self.draw is not None and self.heights_m is None:
             self._set_heights(self.draw(rng))
-        h = self.heights_m
+        h, _ = self._drawn()  # given, or drawn just above (__post_init__ rejects a field with neither)
         lo, span = float(h.min()), max(float(h.max() - h.min()), 1e-9)
         spec.add_hfield(name=f"{name}_hfield", size=[self.half_x_m, self.half_y_m, span, self.base_m],
                         nrow=h.shape[0], ncol=h.shape[1], userdata=((h - lo) / span).ravel().tolist())  # fmt: skip
@@ -127,12 +127,16 @@ class HeightField:
         make_terrain(geom, self.friction)
 
     # ------------------------------------------------------------------------------------- surface
-    def _cell(self, x: float, y: float) -> tuple[int, int, float, float] | None:
-        if self._grid is None:
+    def _drawn(self) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+        """(heights, grid (x0, y0, dx, dy)) once the heights exist."""
+        if self.heights_m is None or self._grid is None:
             raise RuntimeError("HeightField: heights are drawn when the plant is built (Terrain.build) first")
-        x0, y0, dx, dy = self._grid
+        return self.heights_m, self._grid
+
+    def _cell(self, x: float, y: float) -> tuple[int, int, float, float] | None:
+        h, (x0, y0, dx, dy) = self._drawn()
         u, w = (x - x0) / dx, (y - y0) / dy
-        nrow, ncol = self.heights_m.shape
+        nrow, ncol = h.shape
         if not (0.0 <= u <= ncol - 1 and 0.0 <= w <= nrow - 1):
             return None
         c, r = min(int(u), ncol - 2), min(int(w), nrow - 2)
@@ -144,7 +148,7 @@ class HeightField:
         if cell is None:
             return None
         r, c, a, b = cell
-        h, (_, _, dx, dy) = self.heights_m, self._grid
+        h, (_, _, dx, dy) = self._drawn()
         h00, h11 = h[r, c], h[r + 1, c + 1]
         if a >= b:  # triangle (r, c), (r, c + 1), (r + 1, c + 1)
             ga, gb = h[r, c + 1] - h00, h11 - h[r, c + 1]
@@ -172,14 +176,13 @@ class HeightField:
     # ------------------------------------------------------------------------------------ distance
     def _triangles_near(self, x: float, y: float, reach: int) -> np.ndarray:
         """(T, 3, 3) world vertices of the triangles of the cells within ``reach`` cells of (x, y)."""
-        x0, y0, dx, dy = self._grid
-        nrow, ncol = self.heights_m.shape
+        h, (x0, y0, dx, dy) = self._drawn()
+        nrow, ncol = h.shape
         c = min(max(math.floor((x - x0) / dx), 0), ncol - 2)
         r = min(max(math.floor((y - y0) / dy), 0), nrow - 2)
         rows = np.arange(max(r - reach, 0), min(r + reach, nrow - 2) + 1)
         cols = np.arange(max(c - reach, 0), min(c + reach, ncol - 2) + 1)
         rr, cc = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
-        h = self.heights_m
 
         def vertex(ri, ci):
             return np.stack([x0 + ci * dx, y0 + ri * dy, h[ri, ci]], axis=-1)

@@ -37,9 +37,9 @@ class Terrain:
     def __post_init__(self) -> None:
         # a part with one coefficient has ``friction``; one whose friction varies (FrictionStrips) has not
         frictions = {getattr(p, "friction", None) for p in self.parts}
-        uniform = len(frictions) == 1 and None not in frictions
+        one = frictions.pop() if len(frictions) == 1 else None  # None: a part without one, or several
         object.__setattr__(self, "parts", tuple(self.parts))
-        object.__setattr__(self, "_uniform_friction", float(frictions.pop()) if uniform else None)
+        object.__setattr__(self, "_uniform_friction", float(one) if one is not None else None)
         object.__setattr__(self, "_packs", {})  # role -> PackedTerrain (packed())
 
     # ------------------------------------------------------------------------------------------ plant
@@ -51,6 +51,7 @@ class Terrain:
         n_ground = n_obstacle = 0
         for part in self.parts:
             if part.role == OBSTACLE:
+                assert body is not None  # made above: there are obstacle parts
                 part.add_to(spec, body, f"{body.name}_{n_obstacle}", rng)
                 n_obstacle += 1
             else:
@@ -136,8 +137,8 @@ class Terrain:
         for part in self.parts:
             if role is not None and part.role != role:
                 continue
-            if reach_m is not None and hasattr(part, "x_range"):
-                a, b = part.x_range()
+            if reach_m is not None and (x_range := getattr(part, "x_range", None)) is not None:
+                a, b = x_range()
                 if a - x_hi > reach_m or x_lo - b > reach_m:
                     continue
             dp, n_p, p_p = part.sphere_distance(c, radius)

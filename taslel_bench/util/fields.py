@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import numbers as _numbers
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, cast
 
 
 class ConfigError(ValueError):
@@ -35,6 +35,17 @@ def _show(value: Any) -> str:
 def fail(path: str, value: Any, rule: str) -> ConfigError:
     """The error for ``path=value`` breaking ``rule`` (raise it)."""
     return ConfigError(f"{path}={_show(value)}: {rule}")
+
+
+def plain_dict(node: Any, path: str) -> dict[str, Any]:
+    """An OmegaConf mapping node as a plain dict, interpolations resolved (``OmegaConf.to_container``);
+    :class:`ConfigError` naming ``path`` when the node is not a mapping."""
+    from omegaconf import OmegaConf
+
+    plain = OmegaConf.to_container(node, resolve=True)
+    if not isinstance(plain, dict):
+        raise fail(path, node, "must be a mapping")
+    return cast(dict[str, Any], plain)  # config keys are strings (YAML and Hydra's overrides)
 
 
 def interval(lo: float | None, hi: float | None, lo_open: bool = False, hi_open: bool = False) -> str:
