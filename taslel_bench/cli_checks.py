@@ -163,6 +163,7 @@ def check_overrides(argv: Sequence[str]) -> None:
             continue
         if key in groups:
             values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [str(o.value())]
+            assert o.input_line is not None  # parse_overrides keeps each override's text
             _check_group(o.input_line, key, values, groups)
             group_args.append(f"{'+' if o.is_add() else ''}{key}={values[0]}")
         else:

@@ -106,7 +106,7 @@ def template_yaml(conf_dir: Path = CONF_DIR) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
     p.add_argument("--write", action="store_true", help=f"write {HELP_FILE.relative_to(CONF_DIR.parent)}")
     args = p.parse_args(argv)
     text = template_yaml()

@@ -4,6 +4,7 @@ validated before anything is simulated (every field named with its value and the
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -24,7 +25,7 @@ def safety_limits(cfg: DictConfig) -> SafetyLimits:
     if not isinstance(block, DictConfig):
         raise fail("safety", block, "must be a mapping of the verdict's limits")
     fields = {f.name for f in dataclasses.fields(SafetyLimits)}
-    values: dict[str, object] = {}
+    values: dict[str, Any] = {}  # int (trips_max) or float: SafetyLimits' fields
     for key, value in block.items():
         path = f"safety.{key}"
         if key not in fields:

@@ -62,6 +62,9 @@ def _ease(x: float) -> float:
     return 0.5 * (1.0 - math.cos(math.pi * min(max(x, 0.0), 1.0)))
 
 
+_NEEDS_POSE = "controller.terrain_following=true needs the trunk pose: compute(..., base_pose=q[:7])"
+
+
 class TerrainFollowingController(NominalController):
     """The nominal trot with foot targets shifted by the ground height under each foot (module doc)."""
 
@@ -107,9 +110,15 @@ class TerrainFollowingController(NominalController):
         """Nominal torques [N·m] at episode time ``t`` [s]; ``base_pose`` = Pinocchio's first 7 coordinates
         (trunk position [m, world], quaternion x, y, z, w)."""
         if base_pose is None:
-            raise ValueError("controller.terrain_following=true needs the trunk pose: compute(..., base_pose=q[:7])")
+            raise ValueError(_NEEDS_POSE)
         self._base_pose = base_pose
         return super().compute(t, q_joints, qd_joints)
+
+    def _pose(self) -> np.ndarray:
+        """The trunk pose of the last :meth:`compute` call."""
+        if self._base_pose is None:
+            raise ValueError(_NEEDS_POSE)
+        return self._base_pose
 
     def update_references(self, t: float) -> None:
         """The flat gait's ``q_des`` / ``qd_des``, then ``q_des`` from the terrain-shifted foot targets
@@ -117,7 +126,7 @@ class TerrainFollowingController(NominalController):
         super().update_references(t)
         rows = self.gait.foot_targets_list(self.gait_time(t))
         gs = self.contact_plan(t)
-        ground = self._ground_references(gs, self._base_pose, rows)
+        ground = self._ground_references(gs, self._pose(), rows)
         h_ref = float(np.mean(ground))
         for i in range(quad.N_LEGS):
             rows[i][2] += ground[i] - h_ref
@@ -148,7 +157,7 @@ class TerrainFollowingController(NominalController):
         """Swing feet's target z (hip frame) += the stance legs' sag (module doc): stand height - the mean of the
         stance legs' measured hip height [m, world z] above their ground + foot radius, low-passed
         (:data:`SAG_TIME_CONSTANT_S`) and eased in over the swing's start; ``gs`` this tick's gait state."""
-        pose = self._base_pose
+        pose = self._pose()
         qx, qy, qz, qw = (float(v) for v in pose[3:7])
         r20, r21 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx)  # trunk x, y axes' world z components
         heights = [float(pose[2]) + r20 * hx + r21 * hy - float(ground[i]) - self.robot.foot_radius_m
@@ -241,4 +250,5 @@ class TerrainFollowingController(NominalController):
         td = self._touchdown_w(leg, phase, self._hips_xy[leg][1] + target_y, trunk_xy, heading, half, t_swing, 0.0)
         target_td = [half, target_y, -self.gait.p.stand_height_m]
         ground_ref = float(np.mean(self.ground_ref_m))  # the trunk's, last tick
+        assert self.footholds is not None  # called from _apply_foothold_offsets, only with a planner
         return self.footholds.offset(leg, td, heading, target_td, 2.0 * half, ground_ref)

@@ -17,7 +17,7 @@ def trot_values(robot: RobotDescription, scaling: TrotScaling, **given: float | 
     """speed [m/s], swing_height [m], stand_height [m], kp [N·m/rad], kd [N·m·s/rad]: ``given`` where not None,
     else the robot's (``scaling``)."""
     defaults = scaling.values(robot.mass_kg, robot.leg_length_m, robot.stand_height_m)
-    return {key: float(given[key]) if given.get(key) is not None else value for key, value in defaults.items()}
+    return {key: float(v) if (v := given.get(key)) is not None else value for key, value in defaults.items()}
 
 
 def trot_controller(

@@ -217,6 +217,7 @@ class SafetyFilter:
         """Write :attr:`condensed` from the full ``qp``: (vdot, lambda) = z0 - Z u from the equality rows.
         Returns False if the (vdot, lambda) block is singular."""
         c, sv = self.condensed, self._equalities
+        assert c is not None  # called only when the filter condenses (self.condensed made)
         return _condense(qp.A, qp.b, qp.G, qp.h, u_nom, self.settings.regularization,
                          self.settings.regularization_target == "nominal", sv.rows, sv.workspace, self._rhs,
                          c.P, c.q, c.G, c.h)  # fmt: skip

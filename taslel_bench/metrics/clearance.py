@@ -42,6 +42,7 @@ between ``trips`` and ``trips_strikes``.
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -103,7 +104,8 @@ class ClearanceStream:
     def feed(self, tr: EpisodeTrace, w: slice) -> None:
         acc, dt = self.acc, self.dt
         swing = ~tr.in_stance[w]
-        loaded = (tr.contact_fn_n[w] >= MIN_NORMAL_FORCE_N).any(axis=2)
+        # (n, 4); cast: numpy's stub types a reduction over an axis as bool | array
+        loaded = cast(np.ndarray, (tr.contact_fn_n[w] >= MIN_NORMAL_FORCE_N).any(axis=2))
         early = tr.swing_phase[w] >= 0.5
         c = tr.clearance_m[w]
         judged = swing & np.isfinite(c)  # without a profile c is nan: nothing is judged
@@ -127,11 +129,12 @@ class ClearanceStream:
         acc = self.acc
         acc.mean("shin_floor_contact_rate", tr.shin_floor_contact[w])
         flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-        acc.count("stance_flank_strikes", (self.flank(flank.any(axis=2)) & ~swing).sum())
+        flank_feet = cast(np.ndarray, flank.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
+        acc.count("stance_flank_strikes", (self.flank(flank_feet) & ~swing).sum())
         d = tr.obstacle_clearance_m[w]
         if not np.isfinite(d).any():  # no obstacles in the terrain (nan distances): no obstacle keys
             return
-        on_obstacle = tr.contact_on_obstacle[w].any(axis=2)  # (n, 4) foot touches an obstacle
+        on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))  # (n, 4) foot touches an obstacle
         new = self.foot(on_obstacle)
         link_new = self.link(tr.leg_link_obstacle_contact[w])
         foot_trips = new & swing
@@ -159,7 +162,7 @@ class ClearanceStream:
         acc.count("trips_beyond_touchdown_20ms", n_foot + n_link - near_report)
         acc.count("stance_obstacle_contacts", (new & ~swing).sum())
         # [s] episode time of the first trip (the report's still strips start there); nan without one
-        acc.first("first_trip_s", tr.t_s[w][trip_ticks[0]] if trip_ticks.size else math.nan)
+        acc.first("first_trip_s", float(tr.t_s[w][trip_ticks[0]]) if trip_ticks.size else math.nan)
         acc.mean("obstacle_touch_swing_rate", touch[swing])
         acc.min("obstacle_clearance_min_m", d[swing])
         _depths(acc, -d[touch & (d < 0)], "obstacle_penetration")

@@ -24,6 +24,7 @@ terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mo
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -97,7 +98,7 @@ class ContactStream:
         fn, ft = tr.contact_fn_n[ticks], tr.contact_ft_n[ticks]  # [N] (n, 4, K) in each contact's frame
         mu_c, slip = tr.contact_mu[ticks], tr.contact_slip_mps[ticks]  # [-], [m/s]
         loaded_c = fn >= MIN_NORMAL_FORCE_N  # (n, 4, K) loaded contacts
-        plant_loaded = loaded_c.any(axis=2)  # (n, 4) feet
+        plant_loaded = cast(np.ndarray, loaded_c.any(axis=2))  # (n, 4) feet (numpy's stub: bool | array)
         in_stance = tr.in_stance[ticks]
         stance_c = loaded_c & in_stance[..., None]
         edge = loaded_c & (ft >= CONE_EDGE_FRACTION * mu_c * fn)
@@ -128,6 +129,7 @@ class ContactStream:
         acc.window(f"friction_cone_edge_rate_foot_worst_window{suffix}", foot_edge, foot_loaded, window_ticks(dt))
         acc.mean(f"touchdown_slip_mps_mean{suffix}", slip_main[self.touchdowns(plant_loaded)])
         if tr.filter_on:
+            assert normals is not None  # set above when the filter is on
             _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix)
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -70,10 +71,10 @@ def compute_rows(trace: EpisodeTrace, setup: ResidualSetup, n: int, qpos_before:
     forces = plant_side["forces_in_world"]  # [N] on each foot, world axes (MuJoCo's, last physics step)
     torques = plant_side["torques_in_world"]  # [N·m] about the contact point
     points = plant_side["contact_point_in_world"]  # [m] force-weighted centroid of the foot's contacts
-    loaded = np.abs(forces).sum(axis=2) > 0.0
+    loaded = cast(np.ndarray, np.abs(forces).sum(axis=2) > 0.0)  # (n, 4) (numpy's stub: bool | array)
     u_in_v = np.zeros((n, quad.NV))
     u_in_v[:, 6:] = trace.u[:n]  # S u: the torques act on the joint rows
-    filtered = np.isfinite(trace.vdot_filter[:n]).all(axis=1)
+    filtered = cast(np.ndarray, np.isfinite(trace.vdot_filter[:n]).all(axis=1))  # (n,) (numpy's stub: bool | array)
     local = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     for k in range(n):
         m.update(q_all[k], v_all[k])

@@ -157,6 +157,7 @@ class Quantiles:
         idx = np.ceil(np.log(np.minimum(np.abs(x), _SKETCH_MAX_ABS)) / _LOG_GAMMA).astype(np.int64) - _I_MIN
         np.clip(idx, 0, _N_BUCKETS - 1, out=idx)
         positive = x > 0
+        assert self.pos is not None and self.neg is not None  # made (together) before the first _bucket
         self.pos += np.bincount(idx[positive], minlength=_N_BUCKETS)
         self.neg += np.bincount(idx[~positive], minlength=_N_BUCKETS)
 
@@ -168,6 +169,7 @@ class Quantiles:
             return float(np.median(v) if self.p == 50.0 else np.percentile(v, self.p))
         if self.nans:
             return math.nan
+        assert self.neg is not None  # made with pos
         # the values in ascending order: negatives (largest magnitude first), zeros, positives
         counts = np.concatenate([self.neg[::-1], [self.zeros], self.pos])
         n = int(counts.sum())

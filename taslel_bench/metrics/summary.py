@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -184,12 +185,12 @@ class SummaryStream:
         """Every metric, one dict (:meth:`result_sections` merged)."""
         return {k: v for part in self.result_sections().values() for k, v in part.items()}
 
-    def result_sections(self) -> dict[str, dict[str, object]]:
+    def result_sections(self) -> dict[str, dict[str, Any]]:
         """The metrics by summary section: timing (the tick's parts), locomotion, filter, contacts (walking,
         stand, clearance, trips), model (residuals), estimator."""
         acc = self.acc.result()
         loco = self._locomotion_result(acc.get("trunk_height_mean_m", math.nan))
-        filt = {k: acc[k] for k in ("intervention_nm_mean", "u_nom_nm_mean") if k in acc}
+        filt: dict[str, float | None] = {k: acc[k] for k in ("intervention_nm_mean", "u_nom_nm_mean") if k in acc}
         if not self.filter_on:
             filt.update(qp_solves=0, qp_failed_rate=math.nan)
         else:
@@ -238,7 +239,7 @@ class SummaryStream:
         return np.concatenate(self._u_errors) if self._u_errors else np.zeros(0)
 
 
-def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[str, float]:
+def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[str, object]:
     """Distance = world-x displacement of the trunk origin from the start of walking to the last tick;
     mean speed = that distance / walking time; drift = |y| displacement; yaw change in degrees."""
     keys = ("distance_m", "mean_speed_mps", "lateral_drift_m", "yaw_change_deg", "trunk_height_mean_m")
@@ -246,7 +247,7 @@ def locomotion_metrics(res: EpisodeResult, dt: float, stand_s: float) -> dict[st
     return {k: full[k] for k in keys if k in full}
 
 
-def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[str, float]:
+def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[str, object]:
     """Intervention = mean over the walking ticks ``k0:n`` of ||u - u_nom||_2 [N·m], beside its reference
     magnitude ``u_nom_nm_mean`` = mean ||u_nom||_2 over the same ticks (what the nominal controller asks for);
     QP counts and timings from the backend's own timer (solve) and the filter's (build), every filtered tick;
@@ -365,6 +366,7 @@ class _UntilClear:
             return 0.0
         if self.last_bad == self.end - 1:
             return math.inf
+        assert self.t_after is not None  # the tick after the last bad one was fed (last_bad < end - 1)
         return float(self.t_after - self.t0)
 
 

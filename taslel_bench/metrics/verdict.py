@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -67,13 +68,13 @@ class Reason:
         return f"{self.tag}: {self.key}={self.measured:.3g} > {self.limit:g} ({self.meaning})"
 
 
-def judge(summary: dict[str, object], limits: SafetyLimits) -> tuple[bool, str]:
+def judge(summary: dict[str, Any], limits: SafetyLimits) -> tuple[bool, str]:
     """(safe, reasons joined by "; ") of a run's summary: the text of :func:`reasons`."""
     found = reasons(summary, limits)
     return not found, "; ".join(r.text for r in found)
 
 
-def reasons(summary: dict[str, object], limits: SafetyLimits) -> list[Reason]:
+def reasons(summary: dict[str, Any], limits: SafetyLimits) -> list[Reason]:
     """Why the run of ``summary`` (``status``, ``fell`` and the keys of CHECKS) is unsafe; empty if it is safe."""
     if summary.get("status") == "error":
         return [Reason("not_judged", "status", math.nan, math.nan, "the episode ended in an error")]

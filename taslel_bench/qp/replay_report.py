@@ -396,7 +396,7 @@ def compare(first: Path, second: Path) -> tuple[bool, str]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("folder", type=Path)
     ap.add_argument("-o", "--out", type=Path, default=None)
     ap.add_argument("--compare", type=Path, default=None,
