@@ -16,7 +16,7 @@ import pytest
 import qpsolvers
 
 from taslel_bench.interfaces import QPSolution
-from taslel_bench.qp import replay
+from taslel_bench.qp import replay, replay_report
 from taslel_bench.qp.replay_report import compare, summarize, write_report
 from taslel_bench.record import qpset
 from taslel_bench.sim.run import run
@@ -137,6 +137,14 @@ def test_uninstalled_backend_is_unavailable_not_a_failure(runs_set):
     for mode in ("cold", "persistent", "warm"):
         assert s.loc[("daqp", mode), "status"] == "ran"
         assert s.loc[("daqp", mode), "correct_pct"] == 100.0
+
+
+def test_report_tables_of_a_rate_not_measured(runs_set):
+    """deadlines_hz without 500: the report's 500 Hz table has '-' cells (it raised a TypeError)."""
+    s = summarize(replay.replay(runs_set, ["daqp"], ["cold"], HIGH, 1, TOL, max_qps=4), (1000.0,))
+    assert "miss_500hz_minpass_pct" not in s
+    assert (replay_report._pivot(s, "miss_500hz_pct", "{:.2f}", "miss_500hz_minpass_pct") == "-").all().all()
+    assert any("at 500 Hz" in line for line in replay_report._rate_lines(s))
 
 
 def test_replaying_twice_gives_the_same_tables(runs_set, tmp_path):

@@ -13,8 +13,9 @@ config asks for. Both return a record of what they changed, kept in the compiled
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, cast
 
 import mujoco
 import numpy as np
@@ -89,7 +90,7 @@ def _fmt(values) -> str:
 
 
 def rename(
-    spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, object], new_names: dict[str, str]
+    spec: mujoco.MjSpec, objtype: mujoco.mjtObj, elements: dict[str, Any], new_names: dict[str, str]
 ) -> None:
     """Give each element (``elements[old] -> element``) its name ``new_names[old]`` -- through unique
     temporary names, so swaps work -- and rewrite the string references of that type to it."""
@@ -203,7 +204,7 @@ def _joint_problems(file_joint: dict[str, str], joints: dict[str, mujoco.MjsJoin
 
 
 def _foot_problems(feet: dict[str, str], geoms: dict[str, mujoco.MjsGeom],
-                   unnamed: list[mujoco.MjsGeom] = ()) -> list[str]:  # fmt: skip
+                   unnamed: Sequence[mujoco.MjsGeom] = ()) -> list[str]:  # fmt: skip
     """The *feet* problem (as a list of at most one) when a core foot's file name is not a sphere geom; with
     a hint naming the bodies of unnamed sphere geoms (Menagerie-style files leave the feet unnamed)."""
     sphere = mujoco.mjtGeom.mjGEOM_SPHERE
@@ -474,7 +475,8 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: PlantOverrides, timestep_s: 
             continue
         for g in geoms:
             note(f"{g.name}.{attr}", _fmt(getattr(g, attr)), _fmt(value))
-            setattr(g, attr, list(np.atleast_1d(value)) if attr != "margin" else float(value))
+            # cast: "margin" is o.foot_margin_m, a number
+            setattr(g, attr, list(np.atleast_1d(value)) if attr != "margin" else float(cast(float, value)))
     return changes
 
 

@@ -136,7 +136,7 @@ class ContactFrameReader:
         used = geom[..., 0] >= 0
         terrain_pair = used & (robot[..., 0] != robot[..., 1])
         touching = log.dist[t] <= 0.0
-        out = {"leg_link_obstacle_contact": np.zeros((n, quad.N_LEGS), bool),
+        out: dict[str, np.ndarray] = {"leg_link_obstacle_contact": np.zeros((n, quad.N_LEGS), bool),
                "leg_link_obstacle_contact_off_foot": np.zeros((n, quad.N_LEGS), bool)}
         link = self._link_leg[geom]
         for side in (0, 1):

@@ -56,7 +56,7 @@ def mjcf_files(main: Path) -> list[Path]:
         for inc in tree.iter("include"):
             if inc.get("file"):
                 todo.append(_resolve(inc.get("file", ""), (root_dir, path.parent)).resolve())  # MuJoCo's order
-    dirs = {"meshdir": None, "texturedir": None, "assetdir": None}
+    dirs: dict[str, str | None] = {"meshdir": None, "texturedir": None, "assetdir": None}
     for tree in trees:
         for compiler in tree.iter("compiler"):
             for key in dirs:

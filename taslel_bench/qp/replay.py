@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from hydra.experimental.callback import Callback  # hydra-core >= 1.3.2 (a dependency) has it
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.compose import CONF_DIR
@@ -110,7 +111,10 @@ def solver_conf(name: str) -> DictConfig:
     path = SOLVER_DIR / f"{name}.yaml"
     if not path.is_file():
         raise Unavailable(f"no conf/solver/{name}.yaml")
-    return OmegaConf.load(path)
+    cfg = OmegaConf.load(path)
+    if not isinstance(cfg, DictConfig):
+        raise Unavailable(f"conf/solver/{name}.yaml: not a mapping")
+    return cfg
 
 
 def base_names() -> list[str]:
@@ -173,9 +177,9 @@ def reference_solutions(qs: qpset.QPSet, reference: QPBackend | None = None) -> 
     if not have.all():
         reference = reference or make_backend(solver_conf("reference"))
         for i in np.flatnonzero(~have):
-            sol = reference.solve(qs.problem(i))
+            sol = reference.solve(qs.problem(int(i)))
             ok = getattr(sol, "ok", False)
-            qs.set_x_ref(i, sol.x if ok else None)
+            qs.set_x_ref(int(i), sol.x if ok else None)
             have[i] = ok
     return have
 
@@ -325,12 +329,6 @@ def run_job(cfg: DictConfig, out_dir: Path, solver: str | None = None) -> pd.Dat
 
 
 # -------------------------------------------------------------------------------------------- CLI
-
-
-try:
-    from hydra.experimental.callback import Callback
-except ImportError:  # pragma: no cover
-    Callback = object  # type: ignore[misc,assignment]
 
 
 class ReplayCallback(Callback):

@@ -84,7 +84,8 @@ def _outcome_columns(g: pd.DataFrame, first: pd.DataFrame) -> dict:
     solved = first["success"]
     return {
         "passes": int(g["repeat"].nunique()),
-        "passes_agree": bool(all((outcome[c].nunique(axis=1) == 1).all() for c in ("success", "correct"))),
+        "passes_agree": bool(all((outcome[c].nunique(axis=1) == 1).all()  # pyright: ignore[reportCallIssue] pandas-stubs: df[key] is a Series, but on these MultiIndex columns a DataFrame
+                                 for c in ("success", "correct"))),
         "n": len(first),
         "success_pct": 100.0 * solved.mean(),
         "correct_pct": 100.0 * first["correct"].mean(),
@@ -170,9 +171,10 @@ def _pivot(summary: pd.DataFrame, value: str, fmt: str, second: str | None = Non
     def f(v: object) -> str:
         return fmt.format(v) if isinstance(v, float) and np.isfinite(v) else "-"
 
-    cells = [f(v) for v in s.get(value, pd.Series(np.nan, index=s.index))]
+    missing = pd.Series(np.nan, index=s.index)  # a column no backend wrote (none ran): every cell '-'
+    cells = [f(v) for v in s.get(value, missing)]
     if second is not None:
-        cells = [c if c == "-" else f"{c} / {f(w)}" for c, w in zip(cells, s.get(second, np.nan), strict=True)]
+        cells = [c if c == "-" else f"{c} / {f(w)}" for c, w in zip(cells, s.get(second, missing), strict=True)]
     s["cell"] = cells
     s["column"] = s["profile"] + " / " + s["mode"]
     cols = list(dict.fromkeys(s["column"]))
