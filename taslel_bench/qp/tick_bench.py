@@ -28,6 +28,7 @@ import time
 from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -81,6 +82,8 @@ def replayed_solve_us(built: Built, n: int = REPLAY_TICKS) -> float:
     one tick's QP again and again would warm-start each solve from its own answer (no iterations): a
     lower bound the loop cannot reach."""
     e = built.episode
+    if built.filter is None or built.backend is None:
+        raise ValueError("replayed_solve_us: the run has no safety filter (no QP to solve)")
     seq = QPSequence(round(e.controller.stand_duration_s / e.s.control_dt_s) + 1, n)
     e.with_observers([FilterQPs(seq)], analyse=False).run()
     problem, backend = built.filter.backend_problem, built.backend
@@ -138,12 +141,12 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
         "controller": _median_us(ctrl),
         "contact_check": _median_us(lambda: e.contacts.check_non_foot_contact(d)),
     }
-    if built.filter is not None:
+    if (safety_filter := built.filter) is not None:
         costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
         gs = e.controller.contact_plan(t[0])
         u = e.controller.compute(t[0], qj, qdj)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
-        costs["qp_build"] = _median_us(lambda: built.filter.build(inputs, u), 1000)
+        costs["qp_build"] = _median_us(lambda: safety_filter.build(inputs, u), 1000)
         costs["qp_solve"] = replayed_solve_us(built)
     return costs
 
@@ -225,10 +228,11 @@ def cold_vs_warm(built: Built) -> dict[str, tuple[float, float]]:
         e.s = replace(e.s, analyse=analyse)
         for obj, name in calls.values():
             delattr(obj, name)  # the instance attribute: the method again
-    return {k: tuple(float(x) for x in np.median(np.array(v[1:]) * 1e6, axis=0)) for k, v in times.items() if v}
+    medians = {k: np.median(np.array(v[1:]) * 1e6, axis=0) for k, v in times.items() if v}  # (n, 2) -> (2,)
+    return {k: (float(m[0]), float(m[1])) for k, m in medians.items()}
 
 
-def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -> dict[str, float]:
+def back_to_back(built: Built, wall_per_tick_us: float, n: int = REPLAY_TICKS) -> dict[str, Any]:
     """The limit's parts replayed on ``n`` of the loop's walking ticks (:mod:`taslel_bench.qp.tick_replay`,
     one more run of the episode records them): the sums of their medians [µs] alone and back to back with no
     glue (mj_step x physics steps per tick, as the limit), the share alone / back to back (the most a loop
@@ -287,6 +291,7 @@ def main(argv: list[str] | None = None) -> None:
     for label, extra in _loop_configs(args.solvers, args.formulations):
         with CpuWatch() as watch:
             rows.append(_run_loop(label, extra, args))
+        assert watch.result is not None  # set when the with block ends
         if watch.result.busy_reason:
             busy.append(f"{label}: {watch.result.busy_reason}")
     main_rtf = main_command(args.main, busy) if args.main else {}
@@ -439,7 +444,7 @@ def _cold_text(rows: list[tuple]) -> str:
 DISTURBED_SHARE = 1.05  # a share above this: the parts alone timed slower than the same parts with more around them
 
 
-def _disturbed(b: dict[str, float]) -> str:
+def _disturbed(b: dict[str, Any]) -> str:
     """Empty, or why the row's shares cannot be read: the replay failed, or the parts alone timed slower than
     the same parts back to back or than the whole loop (the machine's speed changed between the runs)."""
     if "error" in b:
@@ -448,7 +453,7 @@ def _disturbed(b: dict[str, float]) -> str:
     return f"{' and '.join(over)} > {DISTURBED_SHARE}: the machine's speed changed between the runs" if over else ""
 
 
-def _back_to_back_cells(b: dict[str, float]) -> tuple[str, ...]:
+def _back_to_back_cells(b: dict[str, Any]) -> tuple[str, ...]:
     """The numbers of one :func:`back_to_back` row (dashes when it was not replayed)."""
     if "error" in b:
         return ("-",) * 6

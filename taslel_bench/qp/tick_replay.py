@@ -99,6 +99,7 @@ class TickRecorder:
     def _mj_step(self, m, d):
         if self._on():
             self.rows["mj_step"].append((d.qpos.copy(), d.qvel.copy(), d.ctrl.copy(), d.qacc_warmstart.copy()))
+        assert self._step is not None  # installed (as mujoco.mj_step) only between __enter__ and __exit__
         return self._step(m, d)
 
 
@@ -133,7 +134,7 @@ def _calls(built: Built, rec: TickRecorder) -> tuple[dict[str, Callable], Callab
         qpos, qvel, u, warm = states[i]
         d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos, qvel, u, warm
 
-    calls = {"controller": lambda i: ctrl(*rows["controller"][i])}
+    calls: dict[str, Callable] = {"controller": lambda i: ctrl(*rows["controller"][i])}
     if f is not None:
         inputs = []
         for v, stance, mu, phase, rate, mu_feet, u_nom in rows["qp_build"]:
