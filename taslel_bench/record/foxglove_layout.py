@@ -29,8 +29,9 @@ def _plot(title: str, series: list[tuple[str, str]], y_label: str, **series_opti
 
 
 def _three_d() -> fl.ThreeDeePanel:
-    scene_topics = {topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)
-                    for topic in ("/scene/robot", "/scene/terrain", "/scene/contact")}  # fmt: skip
+    scene_topics: dict[str, fl.BaseRendererTopicSettings] = {
+        topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)
+        for topic in ("/scene/robot", "/scene/terrain", "/scene/contact")}  # fmt: skip
     return fl.ThreeDeePanel(title="robot (trunk followed; blue: MuJoCo contact force, orange: filter lambda)",
                             config=fl.ThreeDeeConfig(
                                 follow_tf=quad.TRUNK_BODY, fixed_frame="world", follow_mode="follow-position",

@@ -29,7 +29,7 @@ import importlib.metadata
 import json
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -152,6 +152,7 @@ class McapStream:
     def _write_3d(self, qpos_rows: np.ndarray, frame: pd.DataFrame) -> None:
         """/scene/robot and /scene/terrain once (the chunk's first tick), /tf and /scene/contact per tick."""
         p, times = self.plant, frame["t_s"].to_numpy()
+        assert p is not None  # called only with a plant to draw
         t0 = float(times[0])
         self._put("/scene/robot", t0, scene.robot_scene(p.model, p.tree, self.log_ns(t0)).encode())
         self._put("/scene/terrain", t0, scene.terrain_scene(p.terrain, p.model, self.log_ns(t0)).encode())
@@ -256,9 +257,9 @@ def read_messages(path: Path, with_publish_time: bool = False) -> Iterator[tuple
     and protobuf channels, both as dicts; with ``with_publish_time`` a 4th item, the publish time = the
     simulated time [ns]); a partial file (a killed run) is read up to its last complete chunk."""
     topics: dict[int, str] = {}
-    decoders: dict[int, object] = {}
+    decoders: dict[int, Callable[[bytes], object]] = {}
     schemas: dict[int, Schema] = {}
-    by_schema: dict[int, object] = {}  # protobuf decoders, built once per schema
+    by_schema: dict[int, Callable[[bytes], object]] = {}  # protobuf decoders, built once per schema
     with open(path, "rb") as f:
         try:
             for record in StreamReader(f).records:  # chunks are expanded into their records

@@ -23,6 +23,7 @@ import json
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class Group:
     active_rows: np.ndarray  # bool (k, m_in) G rows active at x_used
     active_bounds: np.ndarray  # bool (k, n) variables at a finite bound at x_used
     members: np.ndarray  # (k,) global QP indices
-    _work: QPProblem | None = field(default=None, repr=False)
+    _work: QPProblem | None = field(default=None, init=False, repr=False)  # problem()'s reused instance
 
     def key(self) -> tuple:
         return layout_key(self.P, self.lb, self.ub, self.P_pattern, self.A_pattern, self.G_pattern, self.row_labels)
@@ -313,7 +314,8 @@ def save(path: Path | str, qs: QPSet) -> None:
 
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as f:  # a file object: np.savez would append ".npz" to the temporary name
-            np.savez_compressed(f, **arrays)
+            # cast: pyright matches **arrays against savez_compressed's allow_pickle keyword too (no key is)
+            np.savez_compressed(f, **cast(dict[str, Any], arrays))
 
     atomic_write(Path(path), write)
 
@@ -347,12 +349,13 @@ def _load(path: Path) -> QPSet:
         for gi in range(int(d["n_groups"])):
             pre = f"g{gi}__"
             layout = {k: slice(a, b) for k, (a, b) in json.loads(str(d[pre + "layout"])).items()}
-            consts = [d[pre + k].copy() for k in ("P", "lb", "ub", "P_pattern", "A_pattern", "G_pattern")]
+            P, lb, ub, P_pattern, A_pattern, G_pattern = (
+                d[pre + k].copy() for k in ("P", "lb", "ub", "P_pattern", "A_pattern", "G_pattern"))
             per = {k: d[pre + k].copy() for k in (*PER_QP, "members") if pre + k in d}
             if "P_values" not in per:  # format /2: one P per group
-                P, mask = consts[0], consts[3]
-                per["P_values"] = np.tile(P[mask], (per["members"].size, 1))
-            groups.append(Group(*consts, layout, [str(s) for s in d[pre + "row_labels"]], **per))
+                per["P_values"] = np.tile(P[P_pattern], (per["members"].size, 1))
+            groups.append(Group(P, lb, ub, P_pattern, A_pattern, G_pattern, layout,
+                                [str(s) for s in d[pre + "row_labels"]], **per))
         return QPSet(
             groups, d["group"].copy(), d["index"].copy(), d["run"].copy(), d["tick"].copy(), d["t_s"].copy(),
             np.asarray([str(s) for s in d["status"]], dtype=object), d["build_time_s"].copy(),

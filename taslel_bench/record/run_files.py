@@ -10,6 +10,7 @@ import math
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import pandas as pd
 
@@ -38,11 +39,11 @@ def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
             tmp.unlink()
 
 
-def _json_safe(value: object) -> object:
+def _json_safe(value: Any) -> Any:
     if isinstance(value, float) and math.isnan(value):
         return None  # None = "not measured"; +-inf (e.g. "never settled") stays Infinity
-    if hasattr(value, "item"):
-        return _json_safe(value.item())
+    if hasattr(value, "item"):  # numpy scalars (np.float64 is a float too: cast, pyright would say float has none)
+        return _json_safe(cast(Any, value).item())
     return value
 
 

@@ -10,6 +10,7 @@ axes, ``_b`` trunk axes.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -98,7 +99,7 @@ def channels(barrier_names: Sequence[str] = ()) -> dict[str, Spec]:
 
 def json_schema(title: str, spec: Spec) -> dict:
     """The JSON schema of a channel's messages (``t_s`` and the spec's fields)."""
-    def node(s):
+    def node(s) -> dict[str, Any]:
         if isinstance(s, str):
             return {"type": "boolean"} if s.endswith(BOOLEAN_SUFFIXES) else {"type": ["number", "null"]}
         return {"type": "object", "properties": {k: node(v) for k, v in s.items()}}

@@ -46,7 +46,8 @@ class StepsWriter:
         table = pa.Table.from_pandas(frame, preserve_index=False)
         if self._writer is None:  # the file exists from the first chunk on (a kill leaves it, named temporary)
             stats = [c for c in STATISTICS_COLUMNS if c in table.schema.names]
-            self._writer = pq.ParquetWriter(self.tmp, table.schema, write_statistics=stats or False,
+            self._writer = pq.ParquetWriter(self.tmp, table.schema,
+                                            write_statistics=stats or False,  # pyright: ignore[reportArgumentType] pyarrow is unannotated: bool inferred from the default; it takes a bool or a list of columns
                                             use_dictionary=False)
         self._buffer.append(table)
         self._buffered_bytes += table.nbytes
@@ -59,6 +60,7 @@ class StepsWriter:
         if not self._buffer:
             return
         table = pa.concat_tables(self._buffer)
+        assert self._writer is not None  # made by the first append (the buffer is not empty)
         self._writer.write_table(table, row_group_size=max(1, table.num_rows))
         self._buffer, self._buffered_bytes = [], 0
 

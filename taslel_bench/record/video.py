@@ -19,14 +19,18 @@ import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.plant.contacts import foot_radius_m
 from taslel_bench.record import run_files
 from taslel_bench.robot import quadruped as quad
+
+if TYPE_CHECKING:
+    from PIL import ImageFont
 
 VIDEO_NAME = "video.mp4"
 FORCE_SCALE_M_PER_N = 0.004  # [m/N] arrow length per newton (as in the Foxglove scene)
@@ -194,12 +198,13 @@ def _overlay(image: np.ndarray, lines: list[tuple[str, tuple[int, int, int]]]) -
     return np.asarray(img)
 
 
-_FONTS: dict[int, object] = {}  # PIL's default font per size (loading it costs more than drawing a line)
+# PIL's default font per size (loading it costs more than drawing a line)
+_FONTS: dict[int, ImageFont.FreeTypeFont | ImageFont.ImageFont] = {}
 _FITTED: dict[tuple[str, int, int], str] = {}  # (text, font size, width) -> the text cut to fit: lines repeat
 _FITTED_MAX = 4096  # entries kept (a long video's lines change every frame only in their time stamp)
 
 
-def _font(size: int):
+def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
     """PIL's default font at ``size`` px, loaded once."""
     from PIL import ImageFont
 
@@ -241,7 +246,10 @@ def plant_of_run(run_dir: Path):
     from taslel_bench.config.settings import robot_description
     from taslel_bench.sim.build import build_plant_model
 
-    cfg = OmegaConf.load(Path(run_dir) / "config.yaml")
+    path = Path(run_dir) / "config.yaml"
+    cfg = OmegaConf.load(path)
+    if not isinstance(cfg, DictConfig):
+        raise ValueError(f"{path}: not a run config (a mapping)")
     return build_plant_model(cfg, robot_description(cfg), build_axis(cfg, "scenario"),
                              np.random.default_rng(int(cfg.seed)))
 
@@ -264,7 +272,8 @@ def write_mp4(path: Path, frames, width: int, height: int, fps: float) -> int:
 
     def encode(tmp: Path) -> None:
         nonlocal count
-        writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264", quality=6,
+        writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), codec="libx264", quality=6,
+                                             fps=fps,  # pyright: ignore[reportArgumentType] imageio_ffmpeg is unannotated: int inferred from the default; it takes a float
                                              pix_fmt_out="yuv420p", macro_block_size=2,
                                              output_params=["-f", "mp4"])  # fmt: skip
         writer.send(None)
