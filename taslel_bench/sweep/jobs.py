@@ -53,7 +53,7 @@ def job_folders(config: DictConfig, job_overrides: Sequence[Sequence[str]],
         folders.append(Path(sweep_dir, subdir).absolute())
         JOB_AXES[str(folders[-1])] = _axes(job_cfg)
     if before is not None:
-        HydraConfig.instance().set_config(before)
+        HydraConfig.instance().set_config(before)  # pyright: ignore[reportArgumentType] hydra annotates cfg as HydraConf; it holds the DictConfig set_config was given
     return folders
 
 

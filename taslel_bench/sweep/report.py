@@ -206,7 +206,7 @@ def _fall_rate_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> bool:
     ax.set_xlim(0, 1.1)
     ax.set_xlabel("fall rate (seeds pooled; falls/runs beside each bar)")
     ax.tick_params(axis="y", labelsize=7)
-    title = f"Fall rate per {' · '.join(shown)}" + (f" ({', '.join(fixed)})" if fixed else "")
+    title = f"Fall rate per {' · '.join(map(str, shown))}" + (f" ({', '.join(fixed)})" if fixed else "")
     ax.set_title(textwrap.fill(title, 70), fontsize=8)
     fig.tight_layout()
     fig.savefig(sweep_dir / "fall_rates.png", dpi=120)
@@ -214,7 +214,7 @@ def _fall_rate_figure(sweep_dir: Path, frame: pd.DataFrame, plt) -> bool:
     return True
 
 
-def _first_run(frame: pd.DataFrame, scenario: str, filter_on: bool) -> pd.Series | None:
+def _first_run(frame: pd.DataFrame, scenario: str | None, filter_on: bool) -> pd.Series | None:
     if "filter_enabled" not in frame or "scenario" not in frame:
         return None
     done = _finished(frame)

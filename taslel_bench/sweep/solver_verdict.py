@@ -122,7 +122,7 @@ def verdict_rows(sweep_dir: Path, frame: pd.DataFrame, keys: list[str]) -> pd.Da
     groups = [(scenario, label, runs, _ticks(sweep_dir, runs))
               for (scenario, label), runs in done.groupby([done["scenario"], labels], sort=True)]  # fmt: skip
     timing = {w: _timing([t for s, _, _, t in groups if s == w]) for w in {g[0] for g in groups}}
-    return pd.DataFrame([_row(scenario, label, runs, t, timing[scenario], done[done["scenario"] == scenario])
+    return pd.DataFrame([_row(str(scenario), str(label), runs, t, timing[scenario], done[done["scenario"] == scenario])
                          for scenario, label, runs, t in groups])  # fmt: skip
 
 
@@ -292,7 +292,7 @@ def machine_busy_line(frame: pd.DataFrame) -> str:
     busy = frame[frame["machine_busy"].fillna(False).astype(bool)]
     if busy.empty:
         return ""
-    share = pd.to_numeric(busy.get("machine_cpu_share"), errors="coerce").min()
+    share = pd.to_numeric(busy.get("machine_cpu_share", pd.Series(dtype=float)), errors="coerce").min()
     return (f"**Machine busy** during {len(busy)} of {len(frame)} runs (their loop had a CPU {share:.0%} of the time "
             f"at the least): their wall-clock timings (tick, real-time factor, `wall_*`) measure the machine, not "
             f"the code; the solver verdict's deadline figures are the solves' thread CPU time.\n")

@@ -126,7 +126,7 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> li
     lines: list[str] = []
     runs = [(str(row["run_dir"]), row) for _, row in frame[frame["status"].isin(("ok", "degraded"))].iterrows()]
     events = [(run_dir, row, _event_or_error(sweep_dir / run_dir, row)) for run_dir, row in runs]
-    events = [e for e in events if e[2] is not None]
+    events = [(run_dir, row, event) for run_dir, row, event in events if event is not None]
     for i, (run_dir, row, event) in enumerate(events):
         if i % PROGRESS_EVERY == 0:  # ~3 s per run: a large sweep's report renders for minutes
             logger.info("report: still strips and clips %d/%d", i, len(events))

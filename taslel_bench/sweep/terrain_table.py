@@ -206,7 +206,7 @@ def _cost_target(frame: pd.DataFrame) -> list[str]:
             ratios[world] = on / paper
     if not ratios:
         return []
-    worst = max(ratios, key=ratios.get)
+    worst = max(ratios, key=ratios.__getitem__)
     solvers = sorted(set(frame["solver"].dropna().astype(str)) - {"none", ""}) if "solver" in frame else []
     met = ratios[worst] <= MAX_TICK_COST_RATIO
     each = ", ".join(f"{w} {r:.2f}x" for w, r in ratios.items())
