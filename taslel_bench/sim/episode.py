@@ -270,7 +270,8 @@ class Episode:
         self.imu.reset(self._v_trunk_w)
         self._t0_plant = self.d.time
         self._ticks_done = 0
-        self._clock: dict[str, float] = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)  # [s] off the loop's clock
+        # [s] off the loop's clock, per observer clock
+        self._clock: dict[str, float] = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)
         self._hooks = {hook: hooks_of(self.observers, hook) for hook in HOOKS}
         for _, clock in (pair for pairs in self._hooks.values() for pair in pairs):
             self._clock.setdefault(clock, 0.0)
