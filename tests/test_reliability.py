@@ -1,5 +1,5 @@
-"""Reliability, round 2 (issue 24): nothing lost, nothing stale, nothing silent. One test per fault class
-and per example of the issue; each failed on the main of before (see studies/notes/reliability.md).
+"""Reliability: nothing lost, nothing stale, nothing silent. One test per fault class
+and per example of the reliability work; each failed on the code before it (see studies/notes/reliability.md).
 
 Classes: (1) stale results reported as current, (2) two writers in one folder, (3) results replaced
 without a copy, (4) a sweep or report that ends without its table or with exit 0, (5) sizing and messages.

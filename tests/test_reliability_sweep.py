@@ -1,4 +1,4 @@
-"""The issue-24 sweep: one worker killed (SIGKILL, as the OOM killer does), one run folder corrupted, the
+"""The fault sweep: one worker killed (SIGKILL, as the OOM killer does), one run folder corrupted, the
 disk full for one run (ENOSPC injected at its steps.parquet writer, tests/fault_injection/sitecustomize.py;
 and, where this machine lets the test mount one, a real tiny tmpfs that fills up): the table is complete
 with error rows, nothing is lost, the exit code says so."""
