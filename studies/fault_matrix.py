@@ -592,50 +592,12 @@ def _(tmp: Path):
 
 @case("locks", "stale lock released to 4 processes at once: one holder (15 trials)")
 def _(tmp: Path):
-    out = subprocess.run([sys.executable, "-c", _RACE, str(tmp), "15"], cwd=root(), capture_output=True, text=True,
-                         timeout=600, check=False)  # fmt: skip
+    race = [sys.executable, "-m", "studies.lock_race", str(tmp), "15"]  # 15 trials
+    out = subprocess.run(race, cwd=root(), capture_output=True, text=True, timeout=600, check=False)
     over = out.stdout.strip()
     return over == "0", f"{over or out.stderr[-100:]} of 15 trials had more than one holder"
 
 
-_RACE = r"""
-import json, multiprocessing as mp, os, socket, sys, time
-from pathlib import Path
-from taslel_bench.record.run_lock import RunFolderLocked, RunLock
-
-def contender(folder, barrier, log):
-    barrier.wait()
-    try:
-        lock = RunLock(folder).acquire()
-    except RunFolderLocked:
-        return
-    with open(log, "a") as f:
-        f.write(f"{os.getpid()} in\n")
-    time.sleep(0.2)
-    with open(log, "a") as f:
-        f.write(f"{os.getpid()} out\n")
-    lock.release()
-
-folder, trials, overlaps = Path(sys.argv[1]), int(sys.argv[2]), 0
-for trial in range(trials):
-    d = folder / f"t{trial}"
-    d.mkdir()
-    dead = mp.Process(target=time.sleep, args=(0,)); dead.start(); dead.join()
-    (d / "run.lock").write_text(json.dumps({"pid": dead.pid, "host": socket.gethostname(), "started": "x"}))
-    log = d / "log"
-    log.write_text("")
-    barrier = mp.Barrier(4)
-    procs = [mp.Process(target=contender, args=(d, barrier, log)) for _ in range(4)]
-    for p in procs: p.start()
-    for p in procs: p.join()
-    held = most = 0
-    for line in log.read_text().split("\n"):
-        if line:
-            held += 1 if line.split()[1] == "in" else -1
-            most = max(most, held)
-    overlaps += most > 1
-print(overlaps)
-"""
 
 
 # ------------------------------------------------------------------------------------------------ launchers

@@ -14,46 +14,6 @@ from taslel_bench.record.run_lock import LOCK_NAME, RunFolderLocked, RunLock
 
 ROOT = Path(__file__).resolve().parent.parent
 
-RACE = r"""
-import json, multiprocessing as mp, os, socket, sys, time
-from pathlib import Path
-from taslel_bench.record.run_lock import RunFolderLocked, RunLock
-
-def contender(folder, barrier, log):
-    barrier.wait()
-    try:
-        lock = RunLock(folder).acquire()
-    except RunFolderLocked:
-        return
-    with open(log, "a") as f:
-        f.write(f"{os.getpid()} in {time.monotonic()}\n")
-    time.sleep(0.2)
-    with open(log, "a") as f:
-        f.write(f"{os.getpid()} out {time.monotonic()}\n")
-    lock.release()
-
-folder, trials = Path(sys.argv[1]), int(sys.argv[2])
-overlaps = 0
-for trial in range(trials):
-    d = folder / f"t{trial}"
-    d.mkdir()
-    dead = mp.Process(target=time.sleep, args=(0,)); dead.start(); dead.join()  # a killed run's pid
-    (d / "run.lock").write_text(json.dumps({"pid": dead.pid, "host": socket.gethostname(), "started": "x"}))
-    log = d / "log"
-    log.write_text("")
-    barrier = mp.Barrier(4)
-    procs = [mp.Process(target=contender, args=(d, barrier, log)) for _ in range(4)]
-    for p in procs: p.start()
-    for p in procs: p.join()
-    held, most = 0, 0
-    for line in log.read_text().split("\n"):
-        if not line: continue
-        held += 1 if line.split()[1] == "in" else -1
-        most = max(most, held)
-    overlaps += most > 1
-print(overlaps)
-"""
-
 
 def test_lock_left_by_pid_1_in_a_container_is_taken_over(tmp_path):
     """A run that is pid 1 in its PID namespace (a container) and was killed: pid 1 is alive here (another
@@ -84,6 +44,6 @@ def test_live_holder_in_another_process_is_refused_and_named(tmp_path):
 
 
 def test_a_stale_lock_released_to_four_processes_at_once_is_held_by_one(tmp_path):
-    out = subprocess.run([sys.executable, "-c", RACE, str(tmp_path), "15"], cwd=ROOT, capture_output=True,
-                         text=True, timeout=300, check=True)  # fmt: skip
+    race = [sys.executable, "-m", "studies.lock_race", str(tmp_path), "15"]  # 15 trials (studies/lock_race.py)
+    out = subprocess.run(race, cwd=ROOT, capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip() == "0", f"{out.stdout.strip()} of 15 trials had more than one holder"
