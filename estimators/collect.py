@@ -54,8 +54,9 @@ from estimators.randomisation import (
     ranges_dict,
     shifted_ranges,
 )
+from estimators.simple import FixedEstimator
 from taslel_bench import api
-from taslel_bench.interfaces import FrictionEstimate, FrictionStrips, Plane, Proprioception, Terrain, quad
+from taslel_bench.interfaces import FrictionStrips, Plane, Proprioception, Terrain, quad
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -111,6 +112,9 @@ class WindowSampler:
     def __init__(self, every_ticks: int) -> None:
         self.every = int(every_ticks)
         self._episode = None
+        self._clear()
+
+    def _clear(self) -> None:
         self.samples: list[np.ndarray] = []
         self.trunk_friction: list[float] = []  # [-] the friction under the trunk at each sample
         self.sensors: list[np.ndarray] = []  # MuJoCo sensordata after each sample's tick
@@ -119,8 +123,7 @@ class WindowSampler:
 
     def start(self, episode) -> None:
         self._episode, self._sensordata = episode, episode.d.sensordata
-        self.samples, self.trunk_friction, self.sensors, self.ticks = [], [], [], []
-        self.filter_fallbacks = 0
+        self._clear()
 
     def after_tick(self, k: int, t: float, fres) -> None:
         if fres is not None and fres.used_fallback:
@@ -131,21 +134,6 @@ class WindowSampler:
             self.trunk_friction.append(self._episode.truth.friction_under_trunk)
             self.sensors.append(self._sensordata.copy())
             self.ticks.append(k)
-
-
-class AssumedFriction:
-    """The estimator slot of a collection episode: the friction ``mu`` [-] the filter assumes, every tick."""
-
-    name = "assumed_friction"
-
-    def __init__(self, mu: float) -> None:
-        self.mu = float(mu)
-
-    def reset(self) -> None:
-        pass
-
-    def step(self, obs: Proprioception) -> FrictionEstimate:
-        return FrictionEstimate(self.mu)
 
 
 def episode_terrain(p: EpisodeParams, patch: SurfacePatch | None = None) -> Terrain:
@@ -191,7 +179,7 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     elif not (math.isfinite(filter_mu) and filter_mu > 0):
         raise ValueError(f"filter_mu must be positive and finite, got {filter_mu!r}")
     sampler = WindowSampler(round(WINDOW_DT_S / cfg.timestep_s))
-    estimator = AssumedFriction(filter_mu if filtered else float(p.friction))
+    estimator = FixedEstimator(filter_mu if filtered else float(p.friction))  # the friction the filter assumes
     episode = build_episode(p, cfg, estimator, filtered, patch, observers=[sampler], trace=False)
     res = episode.run()
     if res.status == "error":

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.simple import FixedEstimator
 from solvers.reference import reference_backend
 from taslel_bench.interfaces import ClearanceProfile, QPProblem
 from taslel_bench.record.qpset import active_sets, binding_tags, from_problems
@@ -44,23 +45,6 @@ class _Recorder:
         self.xs.append(result.solve.x.copy())
 
 
-class _AssumedFriction:
-    """Gives the filter the friction ``mu`` every tick (an estimator that knows nothing else)."""
-
-    name = "assumed"
-
-    def __init__(self, mu: float) -> None:
-        self.mu = mu
-
-    def reset(self) -> None:
-        return None
-
-    def step(self, obs):
-        from taslel_bench.interfaces import FrictionEstimate
-
-        return FrictionEstimate(self.mu)
-
-
 def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProblem], np.ndarray]:
     """Run the core episode loop for ``seconds`` (stand included) at 1 kHz; return every tick's QP (copies)
     and solution x. The filter is the project's (``conf/filter``) with the tight reference backend
@@ -77,7 +61,7 @@ def record_episode(seconds: float, mu: float, backend=None) -> tuple[list[QPProb
     controller = api.build_controller(cfg)
     settings = replace(api.episode_settings(cfg), duration_s=seconds - controller.stand_duration_s, analyse=False)
     recorder = _Recorder()
-    episode = api.Episode(settings, world, api.build_plant(world), controller, sf, _AssumedFriction(mu),
+    episode = api.Episode(settings, world, api.build_plant(world), controller, sf, FixedEstimator(mu),
                           np.random.default_rng(0), observers=[api.FilterQPs(recorder)])
     res = episode.run()
     if res.status != "ok" or res.fell:

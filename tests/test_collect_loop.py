@@ -8,8 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from estimators.collect import AssumedFriction, EpisodeConfig, WindowSampler, build_episode, run_episode
+from estimators.collect import EpisodeConfig, WindowSampler, build_episode, run_episode
 from estimators.randomisation import TRAIN_RANGES, SurfacePatch, draw
+from estimators.simple import FixedEstimator
 from taslel_bench.sim.observers import MetricsFeed
 
 EVERY = 30  # ticks between samples (WINDOW_DT_S at 1 kHz)
@@ -17,7 +18,7 @@ EVERY = 30  # ticks between samples (WINDOW_DT_S at 1 kHz)
 
 def _sampled(p, cfg: EpisodeConfig, trace: bool, filtered: bool = False):
     sampler = WindowSampler(EVERY)
-    res = build_episode(p, cfg, AssumedFriction(p.friction), filtered, observers=[sampler], trace=trace).run()
+    res = build_episode(p, cfg, FixedEstimator(p.friction), filtered, observers=[sampler], trace=trace).run()
     return res, sampler
 
 
@@ -51,7 +52,7 @@ def test_filtered_collection_counts_the_filters_fallbacks_and_a_bare_loop_refuse
     p = draw(np.random.default_rng(3), TRAIN_RANGES, seed=3)
     traced, a = _sampled(p, EpisodeConfig(duration_s=1.0), trace=True, filtered=True)
     assert a.filter_fallbacks == int(traced.trace.qp_fallback[: traced.trace.n].sum())
-    episode = build_episode(p, EpisodeConfig(duration_s=0.6), AssumedFriction(p.friction),
+    episode = build_episode(p, EpisodeConfig(duration_s=0.6), FixedEstimator(p.friction),
                             observers=[MetricsFeed(None)], trace=False)
     with pytest.raises(ValueError, match="on_chunk"):
         episode.run()

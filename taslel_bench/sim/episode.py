@@ -23,7 +23,6 @@ import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
-from typing import Protocol, cast
 
 import mujoco
 import numpy as np
@@ -49,12 +48,6 @@ from taslel_bench.sim.terminations import Fall, FallRule, Terminations
 INITIAL_PENETRATION_M = 1e-4  # [m] the lowest foot sphere starts this far into the terrain: touching
 PROGRESS_EVERY_TICKS = 500
 DEFAULT_FALL_RULE = FallRule(height_m=0.12, tilt_deg=57.0)  # conf/robot/a1.yaml's
-
-
-class _ReadsGroundTruth(Protocol):
-    """An estimator with ``reads_ground_truth = True`` (an oracle): ``step`` also gets the tick's truth."""
-
-    def step(self, obs: Proprioception, truth: GroundTruth) -> FrictionEstimate: ...
 
 
 @dataclass(frozen=True)
@@ -300,7 +293,11 @@ class Episode:
         self._mu_filter_prev = math.nan  # [-] friction the filter assumed on the previous tick (NaN: no filter)
         self._v_trunk_w = self._qvel[self.bridge.free_dadr : self.bridge.free_dadr + 3]  # [m/s] view, world axes
         self._imu_on = bool(getattr(self.estimator, "reads_imu", False))
-        self._estimator_reads_truth = bool(getattr(self.estimator, "reads_ground_truth", False))
+        # an oracle's step also gets the tick's ground truth (resolved once: None for every other estimator); the
+        # Estimator protocol declares the one-argument step only, hence the ignore
+        reads_truth = bool(getattr(self.estimator, "reads_ground_truth", False))
+        self._truth_step: Callable[[Proprioception, GroundTruth], FrictionEstimate] | None = (
+            self.estimator.step if reads_truth else None)  # pyright: ignore[reportAttributeAccessIssue]
         self._read_feet_after_step = self.stance.reads_feet_after_step
 
     def _observe(self, hooks: list[tuple[Callable, str]], *args) -> None:
@@ -330,8 +327,7 @@ class Episode:
         self.truth = truth = GroundTruth(true_mu, mu_feet)  # what only the simulator knows
         self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, filter_mu=self._mu_filter_prev,
                                               imu=self._imu_sample())  # what the robot measures
-        est = (cast(_ReadsGroundTruth, self.estimator).step(sensed, truth) if self._estimator_reads_truth
-               else self.estimator.step(sensed))
+        est = self.estimator.step(sensed) if self._truth_step is None else self._truth_step(sensed, truth)
         u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
         gs = self.controller.contact_plan(t)
         in_stance = self.stance.stance(gs, self.contacts)
