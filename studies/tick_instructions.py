@@ -41,16 +41,10 @@ def _child(helper: str, overrides: list[str]) -> None:
     recording, the trace row copy and an empty loop."""
     from dataclasses import replace
 
-    import mujoco
-    import numpy as np
-
-    import taslel_bench.sim.episode as episode_module
     from taslel_bench.api import compose
     from taslel_bench.filter.layout import TickInputs
-    from taslel_bench.qp.tick_bench import QPSequence
     from taslel_bench.record.trace import EpisodeTrace
     from taslel_bench.sim.build import Built
-    from taslel_bench.sim.observers import FilterQPs
 
     cg = ctypes.CDLL(helper)
     b = Built(compose(["duration=1.0", "scenario=obstacle", "progress=false", "record.reference_every=0", *overrides]))
@@ -58,6 +52,38 @@ def _child(helper: str, overrides: list[str]) -> None:
     e.s = replace(e.s, analyse=False)
     e.run()  # every kernel loaded
     cg.cg_instr_on()
+    seq, trace = _count_loop(cg, e)
+    _count_replayed_steps(cg, e, trace)
+    d, br = e.d, e.bridge
+    q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
+    qj, qdj, t = q[7:].copy(), v[6:].copy(), e.controller.stand_duration_s + 0.4
+    gs = e.controller.contact_plan(t)
+    u = e.controller.compute(t, qj, qdj)
+    inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
+    fres = b.filter.filter(inputs, u)
+    _count_each(cg, [lambda: e.controller.compute(t, qj, qdj), lambda: e.contacts.check_non_foot_contact(d),
+                     lambda: e.model.update(q, v), lambda: b.filter.build(inputs, u)])  # fmt: skip
+    _count_replayed_solves(cg, b, seq)
+    m = e.m
+    scratch = EpisodeTrace(8, True, m.nq, m.nv, m.nsensordata, [x.name for x in b.filter.barriers])
+    plant = (d.qpos, d.qvel, d.sensordata)
+    clock = (0.0, 1.0, 2.0, 3.0, 4.0)
+
+    def empty():
+        pass
+
+    _count_each(cg, [lambda: e.contact_frames.record(d, scratch.contact_log, 3),
+                     lambda: scratch.record(3, t, plant, gs, gs.in_stance, u, u, fres, 1.0, True, 1.0, clock,
+                                            b.filter.barriers, False, False), empty])  # fmt: skip
+
+
+def _count_loop(cg, e):
+    """One dump over the loop's walking ticks LOOP_TICKS (an extra run that also records their QPs); returns
+    (the QP sequence of the REPLAYED ticks from LOOP_TICKS[0], the run's trace)."""
+    import taslel_bench.sim.episode as episode_module
+    from taslel_bench.qp.tick_bench import QPSequence
+    from taslel_bench.sim.observers import FilterQPs
+
     tick = episode_module.Episode._tick
 
     def counted_tick(self, k, trace, res):
@@ -70,18 +96,20 @@ def _child(helper: str, overrides: list[str]) -> None:
 
     episode_module.Episode._tick = counted_tick
     seq = QPSequence(LOOP_TICKS[0], REPLAYED)
-    trace = e.with_observers([FilterQPs(seq)]).run().trace
-    episode_module.Episode._tick = tick
-    m, d, br = e.m, e.d, e.bridge
-    q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
-    qj, qdj, t = q[7:].copy(), v[6:].copy(), e.controller.stand_duration_s + 0.4
-    gs = e.controller.contact_plan(t)
-    u = e.controller.compute(t, qj, qdj)
-    inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
-    fres = b.filter.filter(inputs, u)
-    scratch = EpisodeTrace(8, True, m.nq, m.nv, m.nsensordata, [x.name for x in b.filter.barriers])
+    try:
+        trace = e.with_observers([FilterQPs(seq)]).run().trace
+    finally:
+        episode_module.Episode._tick = tick
+    return seq, trace
+
+
+def _count_replayed_steps(cg, e, trace) -> None:
+    """One dump per mj_step from the loop's recorded states (setting the state is not counted)."""
+    import mujoco
+
+    m, br = e.m, e.bridge
     dm = mujoco.MjData(m)
-    for k in range(LOOP_TICKS[0], LOOP_TICKS[0] + REPLAYED):  # one dump per step: the state setting not counted
+    for k in range(LOOP_TICKS[0], LOOP_TICKS[0] + REPLAYED):
         dm.qpos[:], dm.qvel[:] = trace.qpos_mj[k - 1], trace.qvel_mj[k - 1]
         dm.ctrl[br.actuator_ids] = trace.u[k]
         if k > LOOP_TICKS[0]:
@@ -90,17 +118,23 @@ def _child(helper: str, overrides: list[str]) -> None:
         if k > LOOP_TICKS[0]:
             cg.cg_end()
 
-    def empty():
-        pass
 
-    parts = [lambda: e.controller.compute(t, qj, qdj), lambda: e.contacts.check_non_foot_contact(d),
-             lambda: e.model.update(q, v), lambda: b.filter.build(inputs, u)]  # fmt: skip
+def _count_each(cg, parts) -> None:
+    """One dump per part: N calls after one uncounted call."""
     for fn in parts:
         fn()
         cg.cg_begin()
         for _ in range(N):
             fn()
         cg.cg_end()
+
+
+def _count_replayed_solves(cg, b, seq) -> None:
+    """One dump per replayed QP solve, in order from a fresh backend (the first, its setup, not counted)."""
+    import numpy as np
+
+    from taslel_bench.qp.tick_bench import QPSequence
+
     problem, backend = b.filter.backend_problem, b.backend
     backend.reset()
     for i, values in enumerate(seq.values):
@@ -111,16 +145,6 @@ def _child(helper: str, overrides: list[str]) -> None:
         backend.solve(problem)
         if i:
             cg.cg_end()
-    plant = (d.qpos, d.qvel, d.sensordata)
-    clock = (0.0, 1.0, 2.0, 3.0, 4.0)
-    for fn in (lambda: e.contact_frames.record(d, scratch.contact_log, 3),
-               lambda: scratch.record(3, t, plant, gs, gs.in_stance, u, u, fres, 1.0, True, 1.0, clock,
-                                      b.filter.barriers, False, False), empty):  # fmt: skip
-        fn()
-        cg.cg_begin()
-        for _ in range(N):
-            fn()
-        cg.cg_end()
 
 
 def _summary(out: str) -> list[int]:

@@ -99,7 +99,7 @@ def _episode_timing(res: EpisodeResult, sim_time_s: float) -> dict[str, float]:
 
 class SummaryStream:
     """Every metric of :func:`summarize` fed chunk by chunk: :meth:`feed` after each chunk of the episode
-    (its derived quantities and residuals computed), :meth:`result` at the end. Memory: a few numbers per
+    (its derived quantities and residuals computed), :meth:`result_sections` at the end. Memory: a few numbers per
     key; a percentile key keeps at most :data:`taslel_bench.metrics.stream.EXACT_QUANTILE_VALUES` values,
     then a fixed-size histogram; the reference-checked ticks' u errors are kept whole (8 bytes per check)."""
 
@@ -180,10 +180,6 @@ class SummaryStream:
         acc.median("qp_iterations_median", it[it >= 0])
         self.reference.mean("qp_deadline_miss_rate", solve > self.dt * 1e6)
         self.reference.mean("qp_solve_over_1ms_rate", solve > ONE_MS_US)
-
-    def result(self) -> dict[str, object]:
-        """Every metric, one dict (:meth:`result_sections` merged)."""
-        return {k: v for part in self.result_sections().values() for k, v in part.items()}
 
     def result_sections(self) -> dict[str, dict[str, Any]]:
         """The metrics by summary section: timing (the tick's parts), locomotion, filter, contacts (walking,

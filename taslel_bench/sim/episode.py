@@ -266,6 +266,8 @@ class Episode:
         # [s] off the loop's clock, per observer clock
         self._clock: dict[str, float] = dict.fromkeys(("recording_s", "reference_s", "residuals_s"), 0.0)
         self._hooks = {hook: hooks_of(self.observers, hook) for hook in HOOKS}
+        # the hooks called every tick, looked up once
+        self._after_tick, self._between_ticks_hooks = self._hooks["after_tick"], self._hooks["between_ticks"]
         for _, clock in (pair for pairs in self._hooks.values() for pair in pairs):
             self._clock.setdefault(clock, 0.0)
         if trace is None and self._hooks["on_chunk"]:
@@ -341,8 +343,8 @@ class Episode:
             frames0 = time.perf_counter()
             self.contact_frames.record(self.d, trace.contact_log, k - trace.offset)  # the tick's last physics step
             self._clock["recording_s"] += time.perf_counter() - frames0  # recording for the metrics
-        if self._hooks["after_tick"]:
-            self._observe(self._hooks["after_tick"], k, t, fres)
+        if self._after_tick:
+            self._observe(self._after_tick, k, t, fres)
         self._tau_prev[:] = u
         return self._ended(t, fall, unstable, res)
 
@@ -404,8 +406,8 @@ class Episode:
         condition of its last tick needs the next one), then dropped from the trace."""
         if progress is not None and k % PROGRESS_EVERY_TICKS == 0:
             progress(k * self.s.control_dt_s)
-        if self._hooks["between_ticks"]:
-            self._observe(self._hooks["between_ticks"], k, trace)
+        if self._between_ticks_hooks:
+            self._observe(self._between_ticks_hooks, k, trace)
         if self.chunk_ticks and trace is not None and trace.n - trace.offset == self.chunk_ticks + 1:
             self._process_chunk(trace, None, self.chunk_ticks)
             trace.roll(self.chunk_ticks)
