@@ -31,6 +31,7 @@ from omegaconf import DictConfig
 
 from taslel_bench.cli_checks import CliError, check_overrides
 from taslel_bench.config.compose import CONF_DIR
+from taslel_bench.config.schema import register as register_schema
 from taslel_bench.sim.console import print_summary
 from taslel_bench.sim.interrupt import INTERRUPTED, RunInterrupted
 from taslel_bench.sim.run import earlier_unfinished, record_job_error
@@ -44,6 +45,7 @@ from taslel_bench.sweep.launchers import (
 from taslel_bench.util.fields import ConfigError
 from taslel_bench.util.log import console_logging
 
+register_schema()  # the run config's structured schema, before Hydra composes conf/config.yaml
 EXIT_OK, EXIT_RUNS_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 _single_run_exit = [EXIT_OK]
 _task_started = [False]  # a Hydra error before the first job is a mistake on the command line: exit 2

@@ -2,6 +2,8 @@
 
 * ``group=option`` with an option that does not exist: refused with the closest options ("did you mean").
 * ``key=value`` with a key the config does not have: refused with the closest keys.
+* ``key=value`` with a value the schema's type or range refuses (``controller.period=abc``): refused with the
+  key's valid range and unit (:mod:`taslel_bench.config.schema`), before Hydra's own type error.
 * ``+key=value`` (Hydra's "append"): refused when no part of the run reads the key. A key is read when its
   value is an object with a ``_target_``, when it is an entry of a node the run reads whole
   (:data:`WHOLE_NODES`, e.g. ``filter.barriers``), when the config node holding it is built by a ``_target_``
@@ -139,6 +141,49 @@ def _check_group(line: str, key: str, values: list[str], groups: dict[str, tuple
                            f"{_did_you_mean(v, shown)} (options: {', '.join(shown)})")
 
 
+def _values(override) -> list:
+    """The value of an override, or each value of a sweep over a list of choices (a range or a glob: none)."""
+    if not override.is_sweep_override():
+        return [override.value()]
+    try:
+        return list(override.sweep_iterator())
+    except Exception:  # a sweep kind without a finite list of values: the run's validation judges each job
+        return []
+
+
+def _check_typed_value(cfg, key: str, value) -> None:
+    """Refuse ``key=value`` where the schema's field type refuses the value, with the field's range and unit (the
+    text of :func:`taslel_bench.util.params.check_value`), else OmegaConf's own reason."""
+    import dataclasses
+
+    from omegaconf import OmegaConf
+    from omegaconf.errors import ValidationError
+
+    from taslel_bench.util.fields import ConfigError
+    from taslel_bench.util.params import check_value, schema_fields, spec_of
+
+    trial = OmegaConf.create(OmegaConf.to_container(cfg, resolve=False))
+    parent_key, _, leaf = key.rpartition(".")
+    parent = OmegaConf.select(cfg, parent_key) if parent_key else cfg
+    schema = OmegaConf.get_type(parent) if parent is not None else None
+    try:
+        typed = OmegaConf.merge(OmegaConf.structured(schema), OmegaConf.select(trial, parent_key) or {}) \
+            if dataclasses.is_dataclass(schema) else None
+        if typed is not None:
+            OmegaConf.update(typed, leaf, value, merge=True)
+        return
+    except ValidationError as exc:
+        reason = str(exc).splitlines()[0]
+    assert isinstance(schema, type)
+    for field, tp, _optional in schema_fields(schema):
+        if field.name == leaf:
+            try:
+                check_value(key, value, tp, spec_of(field), lambda other: OmegaConf.select(cfg, other))
+            except ConfigError as exc:
+                raise CliError(str(exc)) from None
+    raise CliError(f"{key}={value!r}: {reason}")
+
+
 def check_overrides(argv: Sequence[str]) -> None:
     """Refuse unknown group options, unknown keys and unread ``+key=value`` overrides (see the module doc)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -185,6 +230,8 @@ def check_overrides(argv: Sequence[str]) -> None:
             if not exists:
                 raise CliError(f"{o.input_line}: the config has no key '{key}'{_did_you_mean(key, known)} "
                                f"(the keys: python -m taslel_bench --cfg job)")
+            for value in _values(o):
+                _check_typed_value(cfg, key, value)
             continue
         if exists:
             continue  # Hydra refuses to append an existing key itself; ++ sets it

@@ -12,6 +12,9 @@ CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 
 
 def compose_cfg(overrides: list[str] | None = None) -> DictConfig:
+    from taslel_bench.config.schema import register
+
+    register()  # the structured schema conf/config.yaml builds on
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return compose(config_name="config", overrides=list(overrides or []))
 

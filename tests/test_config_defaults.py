@@ -12,7 +12,6 @@ from omegaconf import OmegaConf
 
 from taslel_bench.config import settings
 from taslel_bench.config.compose import CONF_DIR, compose
-from taslel_bench.config.safety import safety_limits
 from taslel_bench.control.gait import GaitParams
 from taslel_bench.control.nominal import PDGains
 from taslel_bench.filter.robust import RobustSettings
@@ -38,7 +37,7 @@ def test_core_settings_defaults_are_the_configs():
         "filter.robust": (settings.robust_settings(cfg.filter.robust), RobustSettings()),
         "episode": (settings.episode_settings(cfg, robot), EpisodeSettings()),
         "health": (settings.health_limits(cfg), HealthLimits()),
-        "safety": (safety_limits(cfg), SafetyLimits()),
+        "safety": (settings.safety_limits(cfg), SafetyLimits()),
         "model": (settings.model_options(cfg), ModelOptions()),
         "plant": (settings.plant_options(cfg, robot), PlantOptions()),
         "controller gait": (controller.gait.p, GaitParams()),

@@ -10,7 +10,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from hydra.errors import ConfigCompositionException
 
+from taslel_bench.cli_checks import CliError, check_overrides
 from taslel_bench.config.validate import ConfigError
 from taslel_bench.sim.episode import Episode
 from taslel_bench.sim.run import record_job_error, run
@@ -113,10 +115,17 @@ def no_episode(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def assert_refused(overrides: list[str], out_dir: Path, *expected: str) -> str:
-    """Run ``overrides`` into ``out_dir``: a ConfigError whose message holds every ``expected`` text, and an
-    empty run folder. Returns the message."""
-    with pytest.raises(ConfigError) as err:
-        run(compose_cfg(overrides), out_dir)
+    """Run ``overrides`` into ``out_dir`` as the command line does (its checks, then the run): a refusal whose
+    message holds every ``expected`` text, and an empty run folder. A value of the wrong type is refused by the
+    command line's check (Hydra would refuse to compose it); a value out of range by the run's validation.
+    Returns the message."""
+    with pytest.raises((ConfigError, CliError)) as err:
+        try:
+            cfg = compose_cfg(overrides)
+        except ConfigCompositionException:
+            check_overrides(overrides)  # names the field and its range, where Hydra's type error does not
+            raise
+        run(cfg, out_dir)
     message = str(err.value)
     for text in expected:
         assert text in message, f"{text!r} not in {message!r}"
@@ -172,14 +181,14 @@ def test_unreadable_file_is_refused_naming_field_and_file(make, field, tmp_path,
 
 
 def test_error_summary_of_a_job_with_an_invalid_seed(tmp_path):
-    """In a sweep the job's error is recorded (seed -1), also when the seed itself cannot be read."""
-    for overrides in (["seed=abc"], ["seed=${oops}"]):
-        cfg = compose_cfg(overrides)
-        try:
-            run(cfg, tmp_path / "run")
-        except Exception as exc:  # what __main__ does in a multirun
-            summary = record_job_error(tmp_path / "run", {"scenario": "flat"}, cfg, exc)
-        assert summary["seed"] == -1 and summary["status"] == "error" and "seed" in summary["message"]
+    """In a sweep the job's error is recorded (seed -1), also when the seed itself cannot be read (a seed of the
+    wrong type, seed=abc, is refused before: Hydra cannot compose it into the schema's int)."""
+    cfg = compose_cfg(["seed=${oops}"])
+    try:
+        run(cfg, tmp_path / "run")
+    except Exception as exc:  # what __main__ does in a multirun
+        summary = record_job_error(tmp_path / "run", {"scenario": "flat"}, cfg, exc)
+    assert summary["seed"] == -1 and summary["status"] == "error" and "seed" in summary["message"]
 
 
 def test_single_run_with_a_bad_seed_exits_naming_the_field(tmp_path):
@@ -187,5 +196,5 @@ def test_single_run_with_a_bad_seed_exits_naming_the_field(tmp_path):
     cmd = [sys.executable, "-m", "taslel_bench", "seed=abc", f"hydra.run.dir={tmp_path}"]
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
     assert out.returncode != 0
-    assert "ConfigError: seed='abc': must be an integer in [0, " in out.stderr
+    assert out.returncode == 2 and "seed='abc': must be an integer in [0, " in out.stderr
     assert not (tmp_path / "summary.json").exists() and not (tmp_path / "steps.parquet").exists()

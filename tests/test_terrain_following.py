@@ -75,14 +75,13 @@ def test_a_swing_toward_a_step_rises_to_its_top_by_mid_swing_and_lands_on_it():
 
 def test_terrain_following_is_a_config_switch_refused_unless_boolean():
     from taslel_bench.api import build_controller
-    from taslel_bench.config.validate import validate
-    from taslel_bench.util.fields import ConfigError
+    from taslel_bench.cli_checks import CliError, check_overrides
 
     cfg = compose_cfg(["controller.terrain_following=true"])
     assert isinstance(build_controller(cfg, Terrain((Plane(),))), TerrainFollowingController)
     assert type(build_controller(compose_cfg([]))) is NominalController
-    with pytest.raises(ConfigError, match="controller.terrain_following"):
-        validate(compose_cfg(["controller.terrain_following=maybe"]))
+    with pytest.raises(CliError, match="controller.terrain_following='maybe': must be true or false"):
+        check_overrides(["controller.terrain_following=maybe"])
 
 
 def test_touchdown_aim_ends_the_swing_above_the_ground_and_descends_early_in_the_stance():

@@ -46,7 +46,7 @@ def build_backend(cfg: DictConfig) -> QPBackend:
     equality rows of ``full``, without them for ``condensed``): settings that make the backend fail there
     (``solver.settings.eps_abs=-1``: OSQP rejects it at every setup) fail every tick of a run."""
     backend = build_axis(cfg, "solver")
-    with_equalities = _get(cfg, "filter.formulation", "full") == "full"
+    with_equalities = cfg.filter.formulation == "full"
     solution = backend.solve(probe_problem(with_equalities))
     backend.reset()
     if not solution.ok:

@@ -15,6 +15,7 @@ from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import FilterSettings
 from taslel_bench.metrics.health import HealthLimits
+from taslel_bench.metrics.verdict import SafetyLimits
 from taslel_bench.plant.adapter import PlantNames, PlantOverrides
 from taslel_bench.plant.build import PlantOptions
 from taslel_bench.robot.description import RobotDescription, complete_robot_node, describe_robot
@@ -25,10 +26,6 @@ from taslel_bench.sim.terminations import FallRule
 from taslel_bench.terrain.profile import ClearanceProfile
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.fields import fail, plain_dict
-
-
-def _get(cfg: DictConfig, path: str, default: Any = None) -> Any:
-    return OmegaConf.select(cfg, path, default=default, throw_on_missing=True)
 
 
 def robot_description(cfg: DictConfig) -> RobotDescription:
@@ -51,38 +48,34 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
     return FilterSettings(
         enabled=bool(f.enabled),
         regularization=float(f.regularization),
-        regularization_target=str(f.get("regularization_target", "nominal")),
+        regularization_target=str(f.regularization_target),
         lambda_min_n=float(f.lambda_min_n),
-        contact_velocity_gain=float(f.get("contact_velocity_gain", 0.0)),
+        contact_velocity_gain=float(f.contact_velocity_gain),
         torque_limit_nm=robot.torque_limit_nm,
         ecbf_enabled=bool(f.ecbf.enabled),
         ecbf_alpha1=float(f.ecbf.alpha1),
         ecbf_alpha2=float(f.ecbf.alpha2),
         fallback=str(f.fallback),
         stance_source=str(f.stance_source),
-        formulation=str(f.get("formulation", "condensed")),
-        robust=robust_settings(f.get("robust")),
+        formulation=str(f.formulation),
+        robust=robust_settings(f.robust),
         control_dt_s=1.0 / float(cfg.control_rate_hz),
-        friction_cone=str(f.get("friction_cone", "pyramid")),
-        cone_edge_downhill=bool(f.get("cone_edge_downhill", False)),
-        relaxation=str(f.get("relaxation", "none")),
+        friction_cone=str(f.friction_cone),
+        cone_edge_downhill=bool(f.cone_edge_downhill),
+        relaxation=str(f.relaxation),
     )
 
 
 def contact_estimate(cfg: DictConfig) -> ContactEstimate:
-    """The contact estimate of ``filter.stance_source: estimate`` from ``filter.contact_estimate`` (absent:
-    the defaults of :class:`ContactEstimateSettings`)."""
-    node = _get(cfg, "filter.contact_estimate") or {}
-    return ContactEstimate(ContactEstimateSettings(**{k: float(v) for k, v in node.items()},
+    """The contact estimate of ``filter.stance_source: estimate`` from ``filter.contact_estimate``."""
+    node = cfg.filter.contact_estimate
+    return ContactEstimate(ContactEstimateSettings(**{str(k): float(v) for k, v in node.items()},
                                                    control_dt_s=1.0 / float(cfg.control_rate_hz)))
 
 
-def robust_settings(node) -> RobustSettings:
-    """``filter.robust`` (absent: off)."""
-    if not node:
-        return RobustSettings()
-    return RobustSettings(enabled=bool(node.get("enabled", False)),
-                          **{k: float(v) for k, v in node.items() if k != "enabled"})
+def robust_settings(node: DictConfig) -> RobustSettings:
+    """``filter.robust`` as :class:`RobustSettings`."""
+    return RobustSettings(enabled=bool(node.enabled), **{str(k): float(v) for k, v in node.items() if k != "enabled"})
 
 
 def episode_settings(cfg: DictConfig, robot: RobotDescription) -> EpisodeSettings:
@@ -93,13 +86,19 @@ def episode_settings(cfg: DictConfig, robot: RobotDescription) -> EpisodeSetting
         fall=FallRule(height_m=robot.fall_height_m, tilt_deg=robot.fall_tilt_deg),
         init_joint_noise_rad=robot.init_joint_noise_rad,
         init_base_vel_noise_mps=robot.init_base_vel_noise_mps,
-        filter_start_s=float(cfg.filter.get("start_time", 0.0)),
+        filter_start_s=float(cfg.filter.start_time),
     )
 
 
 def health_limits(cfg: DictConfig) -> HealthLimits:
-    h = cfg.get("health") or {}
-    return HealthLimits(**{k: float(v) for k, v in h.items()})
+    return HealthLimits(**{str(k): float(v) for k, v in cfg.health.items()})
+
+
+def safety_limits(cfg: DictConfig) -> SafetyLimits:
+    """The ``safety`` block (the verdict's limits) as :class:`SafetyLimits`."""
+    block = cfg.safety
+    return SafetyLimits(trips_max=int(block.trips_max), **{str(k): float(v) for k, v in block.items()
+                                                           if k != "trips_max"})
 
 
 def _plain(value: Any) -> Any:
@@ -110,11 +109,8 @@ def _plain(value: Any) -> Any:
 
 
 def model_options(cfg: DictConfig) -> ModelOptions:
-    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`; absent = defaults."""
-    group = _get(cfg, "model")
-    if group is None:
-        return ModelOptions()
-    return ModelOptions(**{k: _plain(v) for k, v in group.items()})
+    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`."""
+    return ModelOptions(**{str(k): _plain(v) for k, v in cfg.model.items()})
 
 
 def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:
@@ -133,14 +129,11 @@ def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:
 
 def plant_options(cfg: DictConfig, robot: RobotDescription) -> PlantOptions:
     """The plant builder's options from the validated config (time step, torque limit, names, overrides)."""
-    names = _get(cfg, "robot.plant_names")
-    overrides = _get(cfg, "robot.plant_overrides")
     return PlantOptions(
         timestep_s=1.0 / float(cfg.physics_rate_hz),
         torque_limit_nm=robot.torque_limit_nm,
-        names=PlantNames(**{k: _plain(v) for k, v in names.items()}) if names is not None else PlantNames(),
-        overrides=(PlantOverrides(**{k: _plain(v) for k, v in overrides.items()}) if overrides is not None
-                   else PlantOverrides()),
+        names=PlantNames(**{str(k): _plain(v) for k, v in cfg.robot.plant_names.items()}),
+        overrides=PlantOverrides(**{str(k): _plain(v) for k, v in cfg.robot.plant_overrides.items()}),
     )
 
 
@@ -149,11 +142,11 @@ def build_barriers(cfg: DictConfig, robot: RobotDescription, terrain: Terrain, p
                    ) -> list[Barrier]:
     """The barrier families of ``filter.barriers`` (name -> ``{_target_: <Barrier subclass>, ...options}``,
     null to drop one) that apply to this world, in config order; none when ``filter.ecbf.enabled`` is off."""
-    if not bool(_get(cfg, "filter.ecbf.enabled", True)):
+    if not bool(cfg.filter.ecbf.enabled):
         return []
     world = BarrierWorld(terrain, profile, float(cfg.filter.ecbf.alpha1), float(cfg.filter.ecbf.alpha2), robot)
     barriers = []
-    for name, node in (_get(cfg, "filter.barriers") or {}).items():
+    for name, node in cfg.filter.barriers.items():
         if node is None:
             continue
         path = f"filter.barriers.{name}"

@@ -29,16 +29,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from taslel_bench.util.params import param
+
 
 @dataclass(frozen=True)
 class RobustSettings:
-    enabled: bool = False
-    ecbf_margin_mps2: float = 0.0  # [m/s²] fixed margin on the ECBF condition
-    adaptive_gain: float = 0.0  # [-] x running RMS of the condition's shortfall
-    adaptive_time_constant_s: float = 0.5  # [s] of that running RMS
-    max_margin_mps2: float = 50.0  # [m/s²] cap on the total ECBF margin
-    friction_margin: float = 0.0  # [-] the filter uses mu (1 - friction_margin)
-    observer_time_constant_s: float = 0.0  # [s] disturbance observer on the dynamics; 0 = off
+    """``filter.robust``: margins for a wrong model (module doc); off = the paper's rows."""
+
+    enabled: bool = param(False, "switches the ECBF margins below (the friction margin applies either way)")
+    ecbf_margin_mps2: float = param(0.0, "fixed margin on the ECBF condition psi = hdot_e + a2 h_e", unit="m/s²",
+                                    lo=0.0, hi=100.0)
+    adaptive_gain: float = param(0.0, "x running RMS of the shortfall of the realised psi behind the planned one",
+                                 lo=0.0, hi=100.0)
+    adaptive_time_constant_s: float = param(0.5, "time constant of that running RMS", unit="s", lo=0.0,
+                                            lo_open=True, hi=60.0)
+    max_margin_mps2: float = param(50.0, "cap on the total ECBF margin", unit="m/s²", lo=0.0, hi=1000.0)
+    friction_margin: float = param(0.0, "the pyramids use mu (1 - friction_margin)", lo=0.0, hi=1.0, hi_open=True)
+    observer_time_constant_s: float = param(0.0, "disturbance observer on the equations of motion (low-pass of the "
+                                                 "residual); 0: off", unit="s", lo=0.0, hi=10.0)
 
 
 class RobustMargin:

@@ -11,16 +11,27 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from taslel_bench.util.params import param
+
 
 @dataclass(frozen=True)
 class HealthLimits:
-    qp_failed_rate_max: float = 0.05  # [-] share of filtered ticks whose QP failed (fallback torque applied)
-    barrier_negative_rate_max: float = 0.05  # [-] share of swing ticks with the filter's h < 0 while solved
-    barrier_psi_realized_negative_rate_max: float = 0.05  # [-] swing ticks whose realised ECBF condition < 0
-    demand_beyond_cone_rate_max: float = 0.01  # [-] filter-loaded feet planned beyond the true cone, worst 0.5 s
-    residual_alarm_rate_max: float = 0.05  # [-] walking ticks with a model residual beyond the bounds below
-    residual_trunk_force_n_max: float = 5.0  # [N] per-tick bound on |trunk-force residual|
-    residual_joint_nm_max: float = 2.0  # [N·m] per-tick bound on the largest joint residual
+    """The ``health`` block of the run config: a run that crosses one of these ends ``degraded``, not ``ok``."""
+
+    qp_failed_rate_max: float = param(0.05, "share of filtered ticks whose QP failed (fallback torques applied)",
+                                      lo=0.0, hi=1.0)
+    barrier_negative_rate_max: float = param(0.05, "share of swing ticks with the filter's own barrier h < 0 "
+                                                   "while solved", lo=0.0, hi=1.0)
+    barrier_psi_realized_negative_rate_max: float = param(0.05, "share of swing ticks whose realised ECBF "
+                                                                "condition was < -2 m/s²", lo=0.0, hi=1.0)
+    demand_beyond_cone_rate_max: float = param(0.01, "share of filter-loaded feet whose planned force leaves the "
+                                                     "true friction cone (worst 0.5 s window)", lo=0.0, hi=1.0)
+    residual_alarm_rate_max: float = param(0.05, "share of walking ticks whose model residual exceeds one of the "
+                                                 "two bounds below", lo=0.0, hi=1.0)
+    residual_trunk_force_n_max: float = param(5.0, "bound on |M vdot + h - S u - J'f| over the trunk-force rows",
+                                              unit="N", lo=0.0, lo_open=True)
+    residual_joint_nm_max: float = param(2.0, "bound on the largest joint row of the same residual", unit="N·m",
+                                         lo=0.0, lo_open=True)
 
 
 # summary key -> (limit attribute, what crossing it means)

@@ -4,7 +4,7 @@
 says whether the robot came through safely. It is computed by the same rules with the filter on or off, from
 plant measurements (a metric the run does not have, e.g. the filter's planned forces with the filter off, is
 not a reason). A run is unsafe when it fell, or crossed one of the ``safety`` limits of the config
-(:class:`SafetyLimits`, defaults below and in ``conf/config.yaml``). A run that ended in an error is not
+(:class:`SafetyLimits`, with their defaults and ranges). A run that ended in an error is not
 judged: ``safe`` is False with the reason ``not_judged``.
 
 Each reason is a :class:`Reason` value (tag, summary key, measured, limit); ``summary.json`` keeps them as text
@@ -18,18 +18,28 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from taslel_bench.util.params import param
+
 
 @dataclass(frozen=True)
 class SafetyLimits:
-    trips_max: int = 0  # [-] trips per run (a swing foot's or a leg link's new contact with an obstacle)
-    # [s] > 0: a swing foot landing on an obstacle's top at most this long before its scheduled touchdown is an
-    # early touchdown, not a trip (as on the floor): the check reads ``trips_beyond_touchdown_tolerance``
-    # instead of ``trips``; 0: every trip counts
-    trip_touchdown_tolerance_s: float = 0.0
-    cone_edge_rate_worst_window_max: float = 0.25  # [-] loaded contacts at the cone edge, worst 0.5 s window
-    clearance_violation_rate_worst_window_max: float = 0.10  # [-] swing ticks > 1 mm below z(s), worst window
-    clearance_violation_depth_max_m: float = 0.01  # [m] deepest swing-foot violation of the profile z(s)
-    demand_beyond_cone_rate_worst_window_max: float = 0.01  # [-] filter-loaded feet planned beyond the true cone
+    """The ``safety`` block of the run config: the limits of the verdict (rates over the worst 0.5 s window of the
+    walk, so a local event counts; a fall is always unsafe)."""
+
+    trips_max: int = param(0, "trips allowed per run (new contact of a swing foot or leg link with an obstacle)",
+                           lo=0, hi=10_000)
+    trip_touchdown_tolerance_s: float = param(
+        0.0, "> 0: a swing foot landing on an obstacle's top at most this long before its scheduled touchdown is an "
+             "early touchdown, not a trip (the check then reads trips_beyond_touchdown_tolerance); 0: every trip "
+             "counts", unit="s", lo=0.0, hi=0.1, why="half of the default swing")
+    cone_edge_rate_worst_window_max: float = param(
+        0.25, "share of loaded contacts at |f_t| >= 0.98 mu f_n (sliding) in any 0.5 s", lo=0.0, hi=1.0)
+    clearance_violation_rate_worst_window_max: float = param(
+        0.10, "share of swing ticks > 1 mm below the clearance profile in any 0.5 s", lo=0.0, hi=1.0)
+    clearance_violation_depth_max_m: float = param(
+        0.01, "deepest swing-foot violation of the clearance profile", unit="m", lo=0.0, hi=0.5)
+    demand_beyond_cone_rate_worst_window_max: float = param(
+        0.01, "share of filter-loaded feet planned outside the true cone in any 0.5 s", lo=0.0, hi=1.0)
 
 
 # tag -> (summary key, limit attribute, what crossing it means); ``fell`` and ``not_judged`` have no limit

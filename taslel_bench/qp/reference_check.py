@@ -32,8 +32,6 @@ from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.interfaces import QPBackend, QPProblem
 
 ONE_MS_US = 1000.0  # [µs]
-DEFAULT_EVERY = 10  # conf/config.yaml's: a 10 s run (10 500 filtered ticks at 1 kHz) gets 1050 checks
-DEFAULT_TOL_NM = 1e-3  # [N·m] conf/config.yaml's
 DEFAULT_BATCH = 100  # checks kept before the episode solves them (bounded memory: ~3.3 MB for the full QP)
 
 
@@ -123,10 +121,10 @@ def reference_check(cfg: DictConfig) -> ReferenceCheck | None:
     reference is built from ``conf/solver/reference.yaml`` (the core never imports the solver package)."""
     from hydra.utils import instantiate
 
-    every = int(OmegaConf.select(cfg, "record.reference_every", default=DEFAULT_EVERY))
+    every = int(cfg.record.reference_every)
     if every == 0:
         return None
-    tol = float(OmegaConf.select(cfg, "record.reference_tol_nm", default=DEFAULT_TOL_NM))
+    tol = float(cfg.record.reference_tol_nm)
     return ReferenceCheck(instantiate(OmegaConf.load(CONF_DIR / "solver" / "reference.yaml")), every, tol)
 
 

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import OmegaConf
 
 from taslel_bench.plant.contacts import foot_radius_m
 from taslel_bench.record import run_files
@@ -243,13 +243,11 @@ def _fit(draw, text: str, font, width_px: int) -> str:
 def plant_of_run(run_dir: Path):
     """The run's MuJoCo plant, rebuilt from its config.yaml (the scenario's terrain and edits)."""
     from taslel_bench.config.axes import build_axis
+    from taslel_bench.config.schema import load_run_config
     from taslel_bench.config.settings import robot_description
     from taslel_bench.sim.build import build_plant_model
 
-    path = Path(run_dir) / "config.yaml"
-    cfg = OmegaConf.load(path)
-    if not isinstance(cfg, DictConfig):
-        raise ValueError(f"{path}: not a run config (a mapping)")
+    cfg = load_run_config(Path(run_dir) / "config.yaml")
     return build_plant_model(cfg, robot_description(cfg), build_axis(cfg, "scenario"),
                              np.random.default_rng(int(cfg.seed)))
 

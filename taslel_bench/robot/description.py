@@ -106,6 +106,18 @@ def robot_config_path(name: str) -> Path:
     return path
 
 
+# the keys a robot file may leave out, with the values they then take (most quadrupeds' names and noise levels)
+ROBOT_DEFAULTS: dict[str, Any] = {
+    "joint_roles": list(quad.JOINT_ROLES),  # hip, thigh, calf
+    "knee_forward": [False] * quad.N_LEGS,  # every knee bends backwards
+    "foot_radius_m": None,  # [m] the foot link's collision sphere in the URDF
+    "torque_limit_nm": None,  # [N·m] the URDF's effort limits
+    "velocity_limit_radps": None,  # [rad/s] the URDF's velocity limits
+    "shin_axis_fraction": 0.7,  # [-] guarded shin: knee -> this fraction of the way to the foot centre
+    "fall_tilt_deg": 57.0,  # [deg]
+    "init_joint_noise_rad": 0.02,  # [rad]
+    "init_base_vel_noise_mps": 0.05,  # [m/s]
+}
 DEFAULT_ROBOT = "a1"  # conf/config.yaml's default robot, for objects built without a config (tests, studies)
 
 
@@ -139,7 +151,7 @@ def describe_robot(node: Mapping[str, Any], where: str = "robot") -> RobotDescri
     """The :class:`RobotDescription` of a ``robot`` config node (a mapping; see ``conf/robot/a1.yaml``).
 
     Raises :class:`ConfigError` naming the field, the value and what is valid."""
-    node = dict(node)
+    node = {**ROBOT_DEFAULTS, **node}
     return _describe(_hashable(node), where)
 
 
@@ -159,7 +171,7 @@ def _describe(frozen: tuple, where: str) -> RobotDescription:
         raise ConfigError(f"{where}.name: missing; the robot's short name (e.g. a1)")
     urdf = resolve_urdf(node.get("urdf"), f"{where}.urdf")
     legs = _names(node.get("legs"), 4, f"{where}.legs", "the robot's 4 leg prefixes, core order (FL, FR, RL, RR)")
-    roles = _names(node.get("joint_roles", list(quad.JOINT_ROLES)), 3, f"{where}.joint_roles",
+    roles = _names(node["joint_roles"], 3, f"{where}.joint_roles",
                    "the robot's words for the hip (abduction), thigh (hip flexion) and calf (knee) joints")
     joints = tuple(_pattern(node.get("joints"), f"{where}.joints", leg=leg, joint=role)
                    for leg in legs for role in roles)
@@ -167,7 +179,7 @@ def _describe(frozen: tuple, where: str) -> RobotDescription:
     model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
     _check_names(model, joints, feet, str(node.get("trunk_link")), urdf, where)
     foot_radius, centres, from_urdf = _feet(urdf, feet, node.get("foot_radius_m"), where)
-    knees = node.get("knee_forward", [False] * quad.N_LEGS)
+    knees = node["knee_forward"]
     if not isinstance(knees, list) or len(knees) != quad.N_LEGS or not all(isinstance(k, bool) for k in knees):
         raise ConfigError(f"{where}.knee_forward={knees!r}: 4 booleans, core leg order (true: the knee points "
                           "forwards, as ANYmal's hind legs)")
@@ -193,8 +205,8 @@ def _describe(frozen: tuple, where: str) -> RobotDescription:
         stand_height_m=_positive(node, "stand_height_m", where),
         fall_height_m=_positive(node, "fall_height_m", where),
         fall_tilt_deg=_positive(node, "fall_tilt_deg", where),
-        init_joint_noise_rad=float(node.get("init_joint_noise_rad", 0.0)),
-        init_base_vel_noise_mps=float(node.get("init_base_vel_noise_mps", 0.0)),
+        init_joint_noise_rad=float(node["init_joint_noise_rad"]),
+        init_base_vel_noise_mps=float(node["init_base_vel_noise_mps"]),
         mass_kg=float(pin.computeTotalMass(model)),
         legs=geometry,
     )

@@ -45,7 +45,7 @@ def build_plant_model(cfg: DictConfig, robot: RobotDescription, scenario: Scenar
                       ) -> mujoco.MjModel:
     """The MuJoCo plant of a run: the robot's URDF (or ``robot.plant_mjcf``), the scenario's terrain, then its
     other edits (:func:`build_plant`)."""
-    mjcf = cfg.robot.get("plant_mjcf")
+    mjcf = cfg.robot.plant_mjcf
     return build_plant(scenario, plant_options(cfg, robot), int(cfg.seed), rng, Path(mjcf) if mjcf else None, robot)
 
 

@@ -19,8 +19,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from taslel_bench.config.compose import CONF_DIR
-from taslel_bench.config.safety import safety_limits
-from taslel_bench.config.settings import health_limits, robot_description
+from taslel_bench.config.settings import health_limits, robot_description, safety_limits
 from taslel_bench.config.validate import memory_estimate_gb, validate
 from taslel_bench.metrics.sections import RunSummary
 from taslel_bench.metrics.summary import SummaryStream, summary_sections
@@ -51,7 +50,7 @@ def plant_identity(cfg: DictConfig, built: Built) -> dict[str, object]:
     """What was simulated and what the controller believed: the plant source (the URDF of
     example-robot-data or ``robot.plant_mjcf``) and the controller model's URDF, with their content hashes
     (masses, inertias, joint losses: :func:`taslel_bench.plant.comparison.plant_vs_model`)."""
-    mjcf = cfg.robot.get("plant_mjcf")
+    mjcf = cfg.robot.plant_mjcf
     plant_src = Path(mjcf) if mjcf else built.robot.urdf_path
     model_src = Path(built.episode.model.urdf_path)
     return {
@@ -103,12 +102,12 @@ def identity_of(cfg: DictConfig, input_files: Iterable[Path] = (),
     checkpoints), the project code the run imports and its ``_target_`` modules, the composed config files
     (``choices``: the option of each config group) and the result-deciding package versions."""
     plain = hashed_config(cfg)
-    mjcf = cfg.robot.get("plant_mjcf")
+    mjcf = cfg.robot.plant_mjcf
     robot_urdf = robot_description(cfg).urdf_path
     return run_identity(
         OmegaConf.to_yaml(OmegaConf.create(plain)),
         plant=mjcf_files(Path(mjcf)) if mjcf else [robot_urdf, *urdf_mesh_files(robot_urdf)],
-        model=[Path(cfg.get("model", {}).get("urdf") or robot_urdf)],
+        model=[Path(cfg.model.urdf or robot_urdf)],
         checkpoints=sorted(Path(p).resolve() for p in input_files),
         targets=target_modules(plain),
         config=config_files(CONF_DIR, choices or {}),
@@ -162,7 +161,7 @@ def prepare_folder(cfg: DictConfig, out_dir: Path, config_hash: str) -> tuple[di
     if not problem and previous is not None and previous.get("status") == INTERRUPTED:
         problem = INTERRUPTED  # a partial episode: never reused as complete
     same = previous is not None and previous.get("config_sha256") == config_hash
-    if not problem and same and previous is not None and not cfg.get("force", False):
+    if not problem and same and previous is not None and not cfg.force:
         return {**previous, "skipped": True}, {}
     notes: dict[str, object] = {}
     stale = run_files.remove_stale(out_dir)
@@ -370,7 +369,7 @@ def _write_results(out_dir: Path, res: EpisodeResult, summary: dict, events: lis
 
 def _video(cfg: DictConfig, built: Built, out_dir: Path):
     """record.video: a callable rendering video.mp4 from the run folder (taslel_bench.record.video), or None."""
-    if not cfg.record.get("video", False):
+    if not cfg.record.video:
         return None
     from taslel_bench.record.video import render_at_end_of_run
 

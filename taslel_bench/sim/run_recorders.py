@@ -12,8 +12,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench.config.safety import safety_limits
-from taslel_bench.config.settings import health_limits
+from taslel_bench.config.settings import health_limits, safety_limits
 from taslel_bench.metrics.summary import SummaryStream
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
@@ -21,7 +20,6 @@ from taslel_bench.record.steps_writer import StepsWriter
 from taslel_bench.sim.observers import FilterQPs, MetricsFeed, StepsTable, StreamedChunks
 from taslel_bench.util.fields import plain_dict
 
-DEFAULT_CHUNK_TICKS = 5000  # record.chunk_ticks when the config has none
 SWEEP_LEVEL_KEYS = ("tracker",)  # settings of the sweep, not of a run: not in a run's config.yaml or hash
 
 
@@ -34,8 +32,8 @@ def run_config_yaml(cfg: DictConfig) -> str:
 
 
 def chunk_ticks(cfg: DictConfig) -> int | None:
-    """``record.chunk_ticks`` (absent: :data:`DEFAULT_CHUNK_TICKS`; null: the whole episode in memory)."""
-    chunk = cfg.record.get("chunk_ticks", DEFAULT_CHUNK_TICKS)
+    """``record.chunk_ticks`` (null: the whole episode in memory)."""
+    chunk = cfg.record.chunk_ticks
     return int(chunk) if chunk is not None else None
 
 
@@ -113,11 +111,11 @@ def _mcap(cfg: DictConfig, built, out_dir: Path) -> StreamedChunks | None:
 
 def _qp_recorder(cfg: DictConfig, built, choices: dict[str, str]) -> qpset.QPRecorder | None:
     """A :class:`taslel_bench.record.qpset.QPRecorder` when ``record.qps`` is on (and a filter runs)."""
-    if not cfg.record.get("qps", False) or built.filter is None:
+    if not cfg.record.qps or built.filter is None:
         return None
     info = {
         "scenario": choices.get("scenario", built.scenario.name), "solver": choices.get("solver", ""),
         "estimator": choices.get("estimator", getattr(built.estimator, "name", "")), "seed": int(cfg.seed),
         "control_rate_hz": float(cfg.control_rate_hz), "backend": str(built.backend.describe()),
     }  # fmt: skip
-    return qpset.QPRecorder(info, every=int(cfg.record.get("qps_every", 1)))
+    return qpset.QPRecorder(info, every=int(cfg.record.qps_every))
