@@ -3,8 +3,8 @@
 Run by the mkdocs hook (docs/hooks.py) before every build, or by hand: ``python docs/gen_pages.py``.
 Writes (each git-ignored, rebuilt every time):
 
-* ``docs/reference/config.md``: every config group, option and key with its value and its one-line comment,
-  from ``conf/`` as it is;
+* ``docs/reference/config.md``: every key of the run config's schema with its default, unit, range and meaning,
+  then every config group and option with the keys it sets and their one-line comments, from ``conf/`` as it is;
 * ``docs/reference/summary-keys.md``: every ``summary.json`` key with its unit (from the key's name: the
   project puts units in key names) and its definition (the comment where the code sets it, else the metrics
   guide's text that names it), and the file that sets it;
@@ -104,13 +104,18 @@ def header_comment(path: Path) -> str:
 def config_page() -> str:
     from taslel_bench.cli_checks import group_options
     from taslel_bench.cli_help import GROUP_LINES
+    from taslel_bench.config.schema import RunConfig, TrotConfig
 
     out = [GENERATED_NOTE, "# Config groups and keys\n",
-           ("Generated from `conf/` as it is. Pick an option with `group=option`, set a key with `key=value`; "
-           "`python -m taslel_bench --cfg job` prints the composed config. The defaults of a run are "
-           "`conf/config.yaml`'s defaults list. Units are in brackets in the comments, or in the key's name "
-           "(`_s`, `_m`, `_hz`, `_nm`, `_n`, `_deg`).\n"),
-           "## Top level: `conf/config.yaml`\n", _key_table(CONF / "config.yaml", skip=("defaults", "hydra"))]
+           ("Generated from the run config's schema (`taslel_bench/config/schema.py`) and `conf/` as they are. "
+            "Pick an option with `group=option`, set a key with `key=value`; `python -m taslel_bench --cfg job` "
+            "prints the composed config. The defaults of a run are `conf/config.yaml`'s defaults list; a group "
+            "option sets only what differs from the schema. A value of the wrong type or out of its range is "
+            "refused before anything runs, naming the key.\n"),
+           "## The schema: every key's default, unit and range\n",
+           "### Top level, `record`, `health`, `safety`, `robot`, `model`, `filter`\n",
+           schema_table(RunConfig),
+           "### `controller=trot`\n", schema_table(TrotConfig, "controller.")]
     for group, options in group_options(include_renamed=False).items():
         if group.startswith("hydra/help"):
             continue
@@ -131,10 +136,58 @@ def config_page() -> str:
     return "\n".join(out)
 
 
+def _valid(spec) -> str:
+    """The valid values of a schema field as text: a range with its unit, or the choices."""
+    from taslel_bench.util.fields import interval
+
+    if spec is None:
+        return ""
+    if spec.choices:
+        return " \\| ".join(f"`{c}`" for c in spec.choices)
+    if spec.lo is None and spec.hi is None and spec.hi_key is None:
+        return ""
+    hi_text = spec.hi_key if spec.hi_key is not None else None
+    text = interval(spec.lo, spec.hi, spec.lo_open, spec.hi_open)
+    if hi_text:
+        text = text.replace("inf)", f"{hi_text}]").replace("inf]", f"{hi_text}]")
+    return text
+
+
+def schema_table(cls: type, prefix: str = "") -> str:
+    """key | default | unit | valid | meaning of every field of a schema dataclass, nested ones flattened."""
+    lines = ["| key | default | unit | valid | meaning |", "|---|---|---|---|---|"]
+    lines += _schema_rows(cls, prefix)
+    return "\n".join(lines) + "\n"
+
+
+def _schema_rows(cls: type, prefix: str) -> list[str]:
+    import dataclasses
+
+    from omegaconf import OmegaConf
+
+    from taslel_bench.util.params import schema_fields, spec_of
+
+    rows = []
+    defaults = OmegaConf.structured(cls)
+    for field, tp, _optional in schema_fields(cls):
+        spec = spec_of(field)
+        if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+            rows.append(f"| `{prefix}{field.name}` | | | | {_cell(spec.doc if spec else '')} |")
+            rows += _schema_rows(tp, f"{prefix}{field.name}.")
+            continue
+        missing = OmegaConf.is_missing(defaults, field.name)
+        plain = None if missing else OmegaConf.to_container(defaults, resolve=False)[field.name]  # type: ignore[index]
+        value = "(the option's)" if missing else f"`{_cell(json.dumps(plain))}`"
+        unit = spec.unit if spec else ""
+        rows.append(f"| `{prefix}{field.name}` | {value} | {_cell(unit)} | {_valid(spec)} | "
+                    f"{_cell(spec.doc if spec else '')} |")
+    return rows
+
+
 def _key_table(path: Path, skip: tuple[str, ...] = ()) -> str:
     rows = [r for r in yaml_keys(path) if r[0].split(".")[0] not in skip and r[0] != "defaults"]
     if not rows:
-        return "(no keys)\n"
+        return "(every key at the schema's default)\n"
     lines = ["| key | value | meaning |", "|---|---|---|"]
     for key, value, comment in rows:
         lines.append(f"| `{key}` | {('`' + _cell(value) + '`') if value else ''} | {_cell(comment)} |")

@@ -33,7 +33,7 @@ GROUP_LINES: dict[str, str] = {
     "tracker": "where a sweep is logged besides its folder (mlflow or none)",
     "hydra/launcher": "how -m runs its jobs: local (one per core), ray, slurm",
 }
-SKIP_GROUPS = ("hydra/help", "robot_plant")  # robot_plant: included by every robot file, not chosen
+SKIP_GROUPS = ("hydra/help",)
 
 
 def first_comment_line(path: Path) -> str:

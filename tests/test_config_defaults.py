@@ -1,5 +1,6 @@
-"""YAML is the one source of defaults: the settings dataclasses the core builds from the config, and each axis
-class's defaults, agree with the config files (a default written twice that differs is a bug)."""
+"""Each default lives once: the run config's schema (taslel_bench/config/schema.py) holds the core groups' defaults,
+which the settings the core builds from the default config reproduce; no option YAML restates one; each axis class's
+defaults agree with its config file (a default written twice that differs is a bug)."""
 
 from __future__ import annotations
 
@@ -45,6 +46,43 @@ def test_core_settings_defaults_are_the_configs():
     }
     wrong = {name: diff for name, (built, default) in pairs.items() if (diff := _differences(built, default))}
     assert not wrong
+
+
+SCHEMA_GROUPS = ("filter", "model", "robot", "controller")  # the groups whose options build on the schema
+
+
+def _leaves(node, prefix=""):
+    """(dotted key, value) of every leaf of a plain YAML mapping (``defaults`` and ``_target_`` left out)."""
+    for key, value in node.items():
+        if key in ("defaults", "_target_"):
+            continue
+        if isinstance(value, dict) and value:
+            yield from _leaves(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+def _schema_default(root, path: str):
+    """The schema's default at ``path`` (``"?"`` where the schema has no fixed default: a required key, an entry
+    of a free-form node such as ``filter.barriers``)."""
+    parent, _, leaf = path.rpartition(".")
+    node = OmegaConf.select(root, parent) if parent else root
+    if node is None or OmegaConf.get_type(node) is dict or leaf not in node or OmegaConf.is_missing(node, leaf):
+        return "?"
+    return OmegaConf.to_container(node, resolve=False)[leaf]
+
+
+@pytest.mark.parametrize("group", SCHEMA_GROUPS)
+def test_no_option_restates_a_schema_default(group):
+    from taslel_bench.config import schema
+
+    node_type = {"filter": schema.FilterConfig, "model": schema.ModelConfig, "robot": schema.RobotConfig,
+                 "controller": schema.TrotConfig}[group]
+    base = OmegaConf.structured(node_type)
+    restated = [f"{path.name}: {key}={value!r}" for path in sorted((CONF_DIR / group).glob("*.yaml"))
+                for key, value in _leaves(OmegaConf.to_container(OmegaConf.load(path)) or {})
+                if (default := _schema_default(base, key)) != "?" and _same(value, default)]
+    assert not restated
 
 
 def _same(yaml_value, default) -> bool:

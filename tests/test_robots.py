@@ -122,7 +122,7 @@ def _yaml(name: str) -> dict:
 
 
 def test_the_trot_scaled_to_the_a1_is_the_tuned_trot():
-    """The trot's values from the robot (conf/controller/trot.yaml's scaling) are the A1's tuned values exactly, and
+    """The trot's values from the robot (controller.scaling's defaults) are the A1's tuned values exactly, and
     follow each robot's mass and leg length."""
     from taslel_bench.api import build_controller
     from tests.conftest import compose_cfg

@@ -15,7 +15,7 @@ from __future__ import annotations
 import inspect
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
@@ -61,10 +61,15 @@ def _as_list(value: Any) -> Any:
     return list(value) if isinstance(value, tuple) else value
 
 
-# the frozen core values as config nodes (same fields, defaults and specs)
-HealthConfig = config_copy(HealthLimits, "HealthConfig")
-SafetyConfig = config_copy(SafetyLimits, "SafetyConfig")
-RobustConfig = config_copy(RobustSettings, "RobustConfig")
+# the frozen core values as config nodes (same fields, defaults and specs; for a type checker, the values)
+if TYPE_CHECKING:
+    HealthConfig = HealthLimits
+    SafetyConfig = SafetyLimits
+    RobustConfig = RobustSettings
+else:
+    HealthConfig = config_copy(HealthLimits, "HealthConfig")
+    SafetyConfig = config_copy(SafetyLimits, "SafetyConfig")
+    RobustConfig = config_copy(RobustSettings, "RobustConfig")
 
 
 # ------------------------------------------------------------------------------------------------- record

@@ -32,7 +32,8 @@ class GaitParams:
 class TrotScaling:
     """How the trot's values follow a robot of mass m [kg] and leg length L [m] (thigh + calf): the speed with sqrt(L)
     (equal Froude number), the swing height with L, the PD gains with m L (the torques that hold the robot up) and
-    its square root. The coefficients are ``controller.scaling`` in ``conf/controller/trot.yaml``."""
+    its square root. The coefficients are ``controller.scaling``
+    (:class:`taslel_bench.config.schema.TrotScalingConfig`)."""
 
     speed_per_sqrt_leg: float  # [m^0.5/s] speed = this x sqrt(L)
     swing_per_leg: float  # [-] swing height = this x L

@@ -1,6 +1,7 @@
-"""``controller=trot``: the paper's trot for any robot, built from the ``controller`` group (``_target_`` of
-``conf/controller/trot.yaml``). Values left null come from the robot (:class:`taslel_bench.control.gait.TrotScaling`);
-``terrain_following`` gives the terrain-following variant (beyond the paper)."""
+"""``controller=trot``: the paper's trot for any robot, built from the ``controller`` group (its keys, defaults and
+units: :class:`taslel_bench.config.schema.TrotConfig`). Values left null come from the robot
+(:class:`taslel_bench.control.gait.TrotScaling`); ``terrain_following`` gives the terrain-following variant (beyond the
+paper)."""
 
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ def trot_controller(
     swing_from_measured_hips: bool = False,
     touchdown_height: float = 0.0,
 ) -> NominalController:
-    """The trot of ``robot`` at the control period ``control_dt_s`` [s]; the keys are ``conf/controller/trot.yaml``'s
+    """The trot of ``robot`` at the control period ``control_dt_s`` [s]; the keys are ``controller=trot``'s
     (meanings and units there). ``terrain_following`` needs the world's ``terrain``."""
     v = trot_values(
         robot, TrotScaling(**scaling), speed=speed, swing_height=swing_height, stand_height=stand_height, kp=kp, kd=kd

@@ -53,7 +53,7 @@ DEFAULT_FALL_RULE = FallRule(height_m=0.12, tilt_deg=57.0)  # conf/robot/a1.yaml
 @dataclass(frozen=True)
 class EpisodeSettings:
     """Built from the run config by :func:`taslel_bench.config.settings.episode_settings`; the defaults are the
-    config's (``conf/config.yaml``, ``conf/robot/a1.yaml``; a test checks they agree)."""
+    config's (the schema's and ``conf/robot/a1.yaml``; a test checks they agree)."""
 
     duration_s: float = 10.0  # [s] walking time after the stand
     physics_dt_s: float = 0.001  # [s]
