@@ -83,7 +83,7 @@ TERRAIN_CASES: dict[str, list[str]] = {
     **{f"terrain_{w}_flat_nominal": ["+experiment=terrain", f"scenario={w}", "filter=terrain", "duration=5",
                                      *FLAT_GROUND_NOMINAL] for w in ("steps", "rough", "logs", "slope")},
     **{f"terrain_{w}_landing": ["+experiment=terrain", f"scenario={w}", "filter=terrain", "duration=5",
-                                "+filter.barriers.landing._target_=taslel_bench.filter.barriers.landing.LandingVelocity"]
+                                "filter.barriers.landing={_target_:taslel_bench.filter.barriers.landing.LandingVelocity}"]
        for w in ("rough", "logs")},
     **{f"paper_{w}": ["+experiment=terrain", f"scenario={w}", "filter=id_cbf_qp", "duration=5"]
        for w in ("rough", "logs")},
