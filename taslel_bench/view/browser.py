@@ -10,6 +10,7 @@ refuses SwiftShader for WebGL).
 from __future__ import annotations
 
 import base64
+import contextlib
 import io
 import itertools
 import json
@@ -59,6 +60,7 @@ class HeadlessChromium:
                f"--window-size={width},{height}", "about:blank"]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         self.log: list[str] = []
+        self._stack = contextlib.ExitStack()  # the DevTools WebSocket
         try:
             self.ws = self._connect(start_timeout_s)
             self._ids = itertools.count(1)
@@ -90,7 +92,7 @@ class HeadlessChromium:
         if not seen.wait(timeout_s):
             raise BrowserError(f"Chromium did not open its DevTools socket within {timeout_s:g} s: "
                                + " | ".join(self.log[-5:]))  # fmt: skip
-        return connect(found[0], max_size=None, open_timeout=timeout_s)
+        return self._stack.enter_context(connect(found[0], max_size=None, open_timeout=timeout_s))
 
     def call(self, method: str, params: dict[str, Any] | None = None, page: bool = False) -> dict[str, Any]:
         """One DevTools command (``page``: to the page's session), its result; events in between are dropped."""
@@ -129,9 +131,7 @@ class HeadlessChromium:
             time.sleep(0.2)
 
     def close(self) -> None:
-        ws = getattr(self, "ws", None)
-        if ws is not None:
-            ws.close()
+        self._stack.close()
         if self.proc.poll() is None:
             self.proc.terminate()
             try:

@@ -41,19 +41,21 @@ EVENT_RGBA = {"fall": (0.95, 0.2, 0.2, 1.0), "trip": (1.0, 0.6, 0.1, 1.0), "qp_f
 OTHER_RGBA = (0.8, 0.8, 0.8, 1.0)
 TIMELINE_H_PX = 26.0
 MAX_EVENT_BUTTONS = 40  # the list shows the first ones; the timeline marks them all
-RUN_WINDOW_PX = (520, 210)  # [px] the Run window's first size (bottom right of the page)
+RUN_WINDOW_PX = (520, 200)  # [px] the Run window's size when it first appears: top right, left of Studio's axes
+RUN_WINDOW_TOP_PX, RUN_WINDOW_RIGHT_MARGIN_PX = 30.0, 110.0  # [px] (the scene's middle, the robot, stays clear)
 READY_FRAMES = 30  # frames built for a browser before the page counts as drawn (about 0.5 s at 60 Hz)
 VIEW_CAMERA = {"distance": 2.0, "azimuth": 130.0, "elevation": -18.0}  # [m], [deg], [deg] tracking the trunk
 
 
 def force_arrows(rec: Recording, row: int, radius_m: float, plant: bool = True, planned: bool = True) -> list:
-    """``mujoco.MjvGeom`` arrows of row ``row``: from the bottom of each foot sphere (``radius_m`` [m] below its
-    centre) along the force, :data:`FORCE_SCALE_M_PER_N` [m/N]; forces under :data:`MIN_ARROW_N` or nan skipped."""
+    """``mujoco.MjvGeom`` arrows of row ``row``: the forces of its tick, from the bottom of each foot sphere of its
+    state (``radius_m`` [m] below the centre) along the force, :data:`FORCE_SCALE_M_PER_N` [m/N], world axes;
+    forces under :data:`MIN_ARROW_N` or nan skipped."""
     sets = [(rec.grf_plant_w[row], PLANT_RGBA)] if plant else []
     sets += [(rec.grf_planned_w[row], PLANNED_RGBA)] if planned else []
     out = []
     for forces, rgba in sets:
-        for foot, force in zip(rec.feet_w[row], forces, strict=True):
+        for foot, force in zip(rec.feet_shown_w(row), forces, strict=True):
             norm = float(np.linalg.norm(force))
             if not np.isfinite(norm) or norm < MIN_ARROW_N:
                 continue
@@ -91,7 +93,6 @@ class RunPanel(plugin.ViewerPlugin):
         self._app = None
         self._radius_m = 0.02
         self._sought = -1
-        self.view_rect_px: tuple[float, ...] = ()  # (x, y, w, h) [px] of the 3D view once a browser drew the page
 
     @messages.handler(priority=messages.Priority.INTERNAL)
     def _on_app_init(self, event: InitEvent) -> None:
@@ -124,9 +125,10 @@ class RunPanel(plugin.ViewerPlugin):
     def _on_build_gui(self, _: messages.BuildGuiEvent) -> None:
         self.gui_frames += 1
         if self.gui_frames == READY_FRAMES:
-            self._report_ready()
-        size = imgui.GetIO().DisplaySize
-        imgui.SetNextWindowPos(imgui.Vec2(size.x - 8, size.y - 40), imgui.Cond.FirstUseEver, imgui.Vec2(1, 1))
+            size = imgui.GetIO().DisplaySize
+            print(f"view: a browser shows the page ({size.x:.0f}x{size.y:.0f} px)", file=sys.stderr, flush=True)
+        right = imgui.GetIO().DisplaySize.x - RUN_WINDOW_RIGHT_MARGIN_PX
+        imgui.SetNextWindowPos(imgui.Vec2(right, RUN_WINDOW_TOP_PX), imgui.Cond.FirstUseEver, imgui.Vec2(1, 0))
         imgui.SetNextWindowSize(imgui.Vec2(*RUN_WINDOW_PX), imgui.Cond.FirstUseEver)
         expanded, _open = imgui.Begin("Run", None, int(imgui.WindowFlags.NoSavedSettings))
         if expanded:
@@ -135,18 +137,6 @@ class RunPanel(plugin.ViewerPlugin):
             self._toggles()
             self._event_buttons()
         imgui.End()
-
-    def _report_ready(self) -> None:
-        """Say on stderr that a browser draws the page, with where the 3D view is on it: Studio's layout call
-        (``ux.configure_docking_layout``, made here once more after Studio's own in this frame, with Studio's
-        settings) returns the central area the scene is drawn in, (x, y, w, h) [px] of the canvas."""
-        display = imgui.GetIO().DisplaySize
-        app = self._app
-        rect = ux.configure_docking_layout(show_toolbar=bool(app and app.config.show_toolbar),
-                                           show_status_bar=bool(app is None or app.config.show_status_bar))  # fmt: skip
-        self.view_rect_px = tuple(float(v) for v in rect)
-        print(f"view: a browser draws the page ({display.x:.0f}x{display.y:.0f} px canvas; 3D view at x={rect[0]:.0f} "
-              f"y={rect[1]:.0f} w={rect[2]:.0f} h={rect[3]:.0f} px)", file=sys.stderr, flush=True)  # fmt: skip
 
     def _header(self) -> None:
         rec, row = self.rec, self.row()

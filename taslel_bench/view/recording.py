@@ -57,7 +57,7 @@ class Recording:
     state: np.ndarray  # (n, 19) trunk position [m] and quaternion wxyz (world), then the 12 joints [rad]
     velocity: np.ndarray  # (n, 18) trunk linear velocity [m/s] (world), angular [rad/s] (trunk), joints [rad/s]
     torque_nm: np.ndarray  # (n, 12) [N·m] the torques applied in the tick, in quad.JOINT_NAMES order
-    feet_w: np.ndarray  # (n, 4, 3) [m] foot centres, legs in quad.LEGS order
+    feet_w: np.ndarray  # (n, 4, 3) [m] foot centres at the start of the tick (its physics step's sensors)
     grf_plant_w: np.ndarray  # (n, 4, 3) [N] MuJoCo's contact force on each foot
     grf_planned_w: np.ndarray  # (n, 4, 3) [N] the filter's planned contact force (nan: no filter or swing)
     stand_s: float  # [s] the stand before walking
@@ -75,6 +75,11 @@ class Recording:
     def row_at(self, t_state_s: float) -> int:
         """The row whose state time is nearest ``t_state_s`` [s], clipped to the recording."""
         return int(np.clip(np.rint((t_state_s - float(self.t_s[0])) / self.dt_s) - 1, 0, self.n - 1))
+
+    def feet_shown_w(self, row: int) -> np.ndarray:
+        """(4, 3) [m] foot centres of row ``row``'s state: the next row's sensors (read at the start of its tick,
+        i.e. at this state), this row's own on the last row (one tick earlier)."""
+        return self.feet_w[min(row + 1, self.n - 1)]
 
     def row_of_tick(self, t_tick_s: float) -> int:
         """The row of the tick that starts at ``t_tick_s`` [s] (an event's time), clipped to the recording."""
