@@ -32,6 +32,12 @@ from taslel_bench.view.recording import Recording
 IDLE_SLEEP_S = 0.01  # [s] wall time yielded per sync loop iteration (Studio's own stepping yields 1 ms)
 
 
+def has_the_robot(model) -> bool:
+    """``model`` has a free joint and every joint of ``quad.JOINT_NAMES`` (the recorded state fits it)."""
+    joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name) for name in quad.JOINT_NAMES]
+    return min(joints) >= 0 and bool((model.jnt_type == mujoco.mjtJoint.mjJNT_FREE).any())
+
+
 def qvel_addresses(model) -> np.ndarray:
     """qvel indices of :data:`taslel_bench.view.recording.VELOCITY_COLUMNS`: the free joint's 6, then the 12 joints."""
     free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
@@ -61,17 +67,21 @@ class RecordingPlayback(plugin.SimPlugin):
         self._wall = time.monotonic()
         self._posed: tuple[int, int] | None = None  # (id of the MjData, row) last written
         self._announced = (-1, -1.0)  # (row, speed) last sent to the viewer
+        self._active = False  # the current model is the run's plant (set on each model)
 
     # ------------------------------------------------------------------ model and state
     @messages.handler(priority=messages.Priority.INTERNAL)
     def _on_post_model(self, event: messages.PostModelEvent) -> None:
-        self._qadr, self._vadr = qpos_addresses(event.model), qvel_addresses(event.model)
-        self._ctrl = ctrl_columns(event.model)
+        """A model arrives (the run's plant; or a file dropped on the page: not posed, Studio shows it as it is)."""
+        self._active = has_the_robot(event.model)
+        if self._active:
+            self._qadr, self._vadr = qpos_addresses(event.model), qvel_addresses(event.model)
+            self._ctrl = ctrl_columns(event.model)
         self._posed, self._announced = None, (-1, -1.0)
 
     def pose(self, model, data) -> None:
         """Write row :attr:`row` into ``data`` (positions, velocities, torques, time) and run ``mj_forward``."""
-        if self._posed == (id(data), self.row):
+        if not self._active or self._posed == (id(data), self.row):
             return
         r = self.row
         data.qpos[self._qadr] = self.rec.state[r]
