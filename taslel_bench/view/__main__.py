@@ -3,7 +3,8 @@
 Prints the viewer's URL (``http://127.0.0.1:<port>/``) on stdout, progress and Studio's own messages on stderr, and
 serves until Ctrl-C (or SIGTERM), which stops it cleanly (exit 0). ``--screenshot out.png`` instead opens the page in
 headless Chromium, saves what it shows, and exits. Exit codes: 0 served and stopped / screenshot written, 1 the
-viewer or the browser failed, 2 bad input (not a run folder, a run whose plant cannot be rebuilt, a port in use).
+viewer or the browser failed, 2 bad input (not a run folder, a run whose plant cannot be rebuilt, a port in use), 130
+Ctrl-C before the viewer served.
 """
 
 from __future__ import annotations
@@ -64,11 +65,15 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     url_out: TextIO = sys.stdout
     sys.stdout = sys.stderr  # Studio prints its banner and notices with print(): stdout carries the URL alone
-    if args.screenshot is None:
-        sys.exit(run(args, url_out))
-    with tempfile.TemporaryDirectory(prefix="taslel_view_home_") as home:
-        os.environ["HOME"] = home  # Studio reads and saves its layout in $HOME/.mujoco.ini: its default layout
-        sys.exit(run(args, url_out))
+    try:
+        if args.screenshot is None:
+            sys.exit(run(args, url_out))
+        with tempfile.TemporaryDirectory(prefix="taslel_view_home_") as home:
+            os.environ["HOME"] = home  # Studio reads and saves its layout in $HOME/.mujoco.ini: its default layout
+            sys.exit(run(args, url_out))
+    except KeyboardInterrupt:  # before the viewer served (reading the run, building the plant)
+        progress("interrupted")
+        sys.exit(130)
 
 
 def run(args: argparse.Namespace, url_out: TextIO) -> int:
