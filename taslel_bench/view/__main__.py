@@ -122,7 +122,7 @@ def _serve(args: argparse.Namespace, rec, model, url_out: TextIO) -> int:
             return 0
     except KeyboardInterrupt:
         progress("stopped")
-        return 0
+        return 130 if args.screenshot is not None else 0  # a screenshot cut short is not written
     except RuntimeError as exc:  # Studio: the port is in use
         print(f"error: {exc}", file=sys.stderr)
         return 2 if "in use" in str(exc) else 1
@@ -142,25 +142,31 @@ def _screenshot(args: argparse.Namespace, served) -> int:
     """Open the page in headless Chromium while the replay runs here; save the settled page. Studio's layout is its
     default one (``main`` points Studio's settings file at a temporary folder in this mode)."""
     from taslel_bench.view.browser import BrowserError, HeadlessChromium, save_png, settled_screenshot
+    from taslel_bench.view.panel import READY_FRAMES
     from taslel_bench.view.server import pump
 
     done, result = threading.Event(), {}
 
-    def shoot() -> None:
+    def shoot(browser: HeadlessChromium) -> None:
         try:
-            with HeadlessChromium(args.width, args.height) as browser:
-                browser.open(served.url)
-                browser.wait_for_canvas(args.timeout)
-                ready = lambda: served.panel.gui_frames >= 30  # noqa: E731 - the page's UI is up and drawing
-                result["path"] = save_png(settled_screenshot(browser, ready, args.timeout), args.screenshot)
-        except (BrowserError, OSError) as exc:
+            browser.open(served.url)
+            browser.wait_for_canvas(args.timeout)
+            ready = lambda: served.panel.gui_frames >= READY_FRAMES  # noqa: E731 - the page's UI is up and drawing
+            result["path"] = save_png(settled_screenshot(browser, ready, args.timeout), args.screenshot)
+        except Exception as exc:  # BrowserError, OSError, a closed DevTools socket: reported, Chromium closed below
             result["error"] = f"{type(exc).__name__}: {exc}"
         finally:
             done.set()
 
     progress(f"taking a screenshot of {served.url} with headless Chromium")
-    threading.Thread(target=shoot, daemon=True).start()
-    pump(served, until=done)
+    try:
+        browser = HeadlessChromium(args.width, args.height)
+    except BrowserError as exc:
+        print(f"error: screenshot: {exc}", file=sys.stderr)
+        return 1
+    with browser:  # closed here, on this thread, whatever stops the replay (Ctrl-C included)
+        threading.Thread(target=shoot, args=(browser,), daemon=True).start()
+        pump(served, until=done)
     if "error" in result:
         print(f"error: screenshot: {result['error']}", file=sys.stderr)
         return 1
