@@ -318,6 +318,8 @@ def cli_page() -> str:
             "and report |\n"
             "| `python -m taslel_bench.render <run folder>` | `taslel-bench-render` | render a run's MP4 from its "
             "`steps.parquet` |\n"
+            "| `python -m taslel_bench.view <run folder>` | `taslel-bench-view` | replay a run in MuJoCo Studio's web "
+            "viewer on 127.0.0.1 (`--screenshot out.png`: a screenshot through headless Chromium) |\n"
             "| `python -m taslel_bench.replay <qps.npz>` | `taslel-bench-replay` | replay a QP test set on every "
             "backend |\n"
             "| `python -m taslel_bench.qpset info\\|merge` | `taslel-bench-qpset` | inspect or merge QP test sets |\n"

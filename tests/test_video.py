@@ -131,6 +131,7 @@ def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(
     os.environ.setdefault("MUJOCO_GL", "egl")
     lines = still_strips(tmp_path / "sweep", pd.DataFrame([row]))
     assert len(lines) == 2 and "fall at 0.600 s (test)" in lines[1] and "no still" not in lines[1]
+    assert "replay: `python -m taslel_bench.view r0 --time 0.000`" in lines[1]  # from the sweep folder
     png = tmp_path / "sweep" / "stills" / "r0.png"
     assert Image.open(png).size == (STILL_SIZE[0] * len(STRIP_OFFSETS_S), STILL_SIZE[1])
     clip = tmp_path / "sweep" / "stills" / "r0.mp4"

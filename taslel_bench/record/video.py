@@ -105,7 +105,7 @@ class RunFrames:
         self.camera.trackbodyid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, quad.TRUNK_BODY)
         self.camera.distance, self.camera.azimuth, self.camera.elevation = (
             CAMERA["distance"], CAMERA["azimuth"], CAMERA["elevation"])  # fmt: skip
-        self._qadr = _qpos_addresses(model)
+        self._qadr = qpos_addresses(model)
         self._state = steps[STATE_COLUMNS].to_numpy(float)
         self._feet = steps[FOOT_COLUMNS].to_numpy(float).reshape(-1, quad.N_LEGS, 3)
         self._forces = steps[FORCE_COLUMNS].to_numpy(float).reshape(-1, quad.N_LEGS, 3)
@@ -173,7 +173,7 @@ def verdict_text(summary: dict) -> str:
     return "verdict: n/a" + (f"; {', '.join(parts)}" if parts else "")
 
 
-def _qpos_addresses(model) -> np.ndarray:
+def qpos_addresses(model) -> np.ndarray:
     """qpos indices of STATE_COLUMNS: the free joint's position and quaternion, then the 12 joints."""
     import mujoco
 

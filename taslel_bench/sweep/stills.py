@@ -3,6 +3,8 @@ as a row of frames (PNG) rendered from the run's steps.parquet (:mod:`taslel_ben
 the run's ``video.mp4`` or, when the run has none (``record.video=false``), to a clip of the event
 rendered beside the strip (from 2 s before to 0.5 s after it).
 
+Beside each strip, the command replaying the run in MuJoCo Studio's web viewer (:func:`view_command`).
+
 The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the first trip
 (``first_trip_s``: the first of the onsets ``trips`` counts, :mod:`taslel_bench.metrics.clearance`).
 Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``). With ``keep=True`` (``python -m taslel_bench.report
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import re
+import shlex
 import traceback
 from pathlib import Path
 
@@ -32,6 +35,7 @@ STILL_SIZE = (256, 192)  # [px] width, height of one frame
 CLIP_WINDOW_S = (-2.0, 0.5)  # [s] the event clip, relative to the event
 FPS = 30.0
 PROGRESS_EVERY = 20  # runs between progress lines while the stills render
+VIEW_LEAD_S = 1.0  # [s] the viewer command opens the run this long before the event
 
 
 def event_of_run(run_dir: Path, row: pd.Series) -> tuple[str, float] | None:
@@ -84,6 +88,12 @@ def still_strip(run_dir: Path, t_event_s: float, out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     run_files.atomic_write(out, lambda p: Image.fromarray(strip).save(p, format="PNG"))
     return out
+
+
+def view_command(run_dir: str, t_event_s: float) -> str:
+    """The command replaying the run in MuJoCo Studio's web viewer (:mod:`taslel_bench.view`), run from the sweep
+    folder, opened :data:`VIEW_LEAD_S` before the event (simulated time [s])."""
+    return f"python -m taslel_bench.view {shlex.quote(run_dir)} --time {max(t_event_s - VIEW_LEAD_S, 0.0):.3f}"
 
 
 def _video_link(sweep_dir: Path, run_dir: str, t_event_s: float, name: str, keep: bool = False) -> str:
@@ -142,12 +152,15 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> li
             link = _video_link(sweep_dir, run_dir, t, name, keep)
             reason = f" ({row.get('fall_reason')})" if kind == "fall" else ""
             lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
-                         f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link})\n\n"
+                         f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link}); "
+                         f"replay: `{view_command(run_dir, t)}`\n\n"
                          f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
         except Exception:  # a still that cannot be drawn is reported, the report is still written
             lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
     if not lines:
         return []
     head = ("## The second before each fall or trip\n\nRendered from each run's steps.parquet (MuJoCo's offscreen "
-            "renderer; blue arrows: MuJoCo contact forces); a still links to the run's video.\n")  # fmt: skip
+            "renderer; blue arrows: MuJoCo contact forces); a still links to the run's video. The `replay:` command, "
+            "run in the sweep folder, replays the run in MuJoCo Studio's web viewer (a browser page on 127.0.0.1; "
+            "time scrubber, force arrows, the events on a timeline) from a second before the event.\n")  # fmt: skip
     return [head, *lines]
