@@ -91,7 +91,8 @@ def episode_settings(cfg: DictConfig, robot: RobotDescription) -> EpisodeSetting
 
 
 def health_limits(cfg: DictConfig) -> HealthLimits:
-    return HealthLimits(**{str(k): float(v) for k, v in cfg.health.items()})
+    return HealthLimits(model_error_degrades=bool(cfg.health.model_error_degrades),
+                        **{str(k): float(v) for k, v in cfg.health.items() if k != "model_error_degrades"})
 
 
 def safety_limits(cfg: DictConfig) -> SafetyLimits:

@@ -172,3 +172,19 @@ def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray
     beyond = filter_loaded & (lam_t > tr.mu_foot[ticks] * lam_n * (1 + CONE_RTOL))
     acc.mean(f"filter_demand_beyond_cone_rate{suffix}", beyond[filter_loaded])
     acc.window(f"filter_demand_beyond_cone_rate_worst_window{suffix}", beyond, filter_loaded, window_ticks(dt))
+    _promises(acc, tr, ticks, filter_loaded & ~beyond, filter_loaded, dt, suffix)
+
+
+def _promises(acc: Reducer, tr: EpisodeTrace, ticks: slice, planned_inside: np.ndarray, filter_loaded: np.ndarray,
+              dt: float, suffix: str) -> None:
+    """What the filter promised against what the plant did, per filter-loaded foot (the run's health,
+    :mod:`taslel_bench.metrics.health`): ``filter_promise_cone_edge_rate`` -- the filter planned the foot's force
+    inside the true cone and the plant's net force on the foot sits at the cone's edge (the foot slides although
+    the plan said it sticks: a wrong model, contact or friction); ``filter_promise_stance_in_air_rate`` -- the
+    filter loaded the foot and the plant foot carries no load (a planned stance foot in the air)."""
+    foot_edge, foot_loaded = _foot_cone_edge(tr, ticks, tr.contact_mu[ticks])
+    slid = planned_inside & foot_loaded & foot_edge
+    in_air = filter_loaded & ~(tr.contact_fn_n[ticks] >= MIN_NORMAL_FORCE_N).any(axis=2)
+    for name, broken in (("cone_edge", slid), ("stance_in_air", in_air)):
+        acc.mean(f"filter_promise_{name}_rate{suffix}", broken[filter_loaded])
+        acc.window(f"filter_promise_{name}_rate_worst_window{suffix}", broken, filter_loaded, window_ticks(dt))

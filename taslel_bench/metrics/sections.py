@@ -25,8 +25,9 @@ class Verdict:
     """The run's health (``status``: ok, degraded or error, and why) and safety (``safe``, why not)."""
 
     status: str
-    degraded_reasons: str  # "; "-joined, the health limits crossed
+    degraded_reasons: str  # "; "-joined, the guarantee limits crossed
     reasons: list[Reason]  # why the run is unsafe (empty: safe)
+    model_error_reasons: str = ""  # "; "-joined, the model-error limits crossed (residual alarms)
 
     @property
     def safe(self) -> bool:
@@ -34,8 +35,9 @@ class Verdict:
 
     def keys(self) -> dict[str, object]:
         """``safe``, ``unsafe_reasons`` (the reasons' text), ``unsafe_reason_tags`` (what reports count) and
-        ``degraded_reasons``; ``status`` is the outcome's."""
-        return {"degraded_reasons": self.degraded_reasons, "safe": self.safe,
+        ``degraded_reasons``, ``model_error_reasons``; ``status`` is the outcome's."""
+        return {"degraded_reasons": self.degraded_reasons, "model_error_reasons": self.model_error_reasons,
+                "safe": self.safe,
                 "unsafe_reasons": "; ".join(r.text for r in self.reasons),
                 "unsafe_reason_tags": ",".join(r.tag for r in self.reasons)}
 

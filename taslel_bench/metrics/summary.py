@@ -13,7 +13,7 @@ import numpy as np
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, overestimates
 from taslel_bench.metrics.clearance import ClearanceStream
 from taslel_bench.metrics.contacts import ContactStream, stand_part
-from taslel_bench.metrics.health import HealthLimits, assess
+from taslel_bench.metrics.health import HealthLimits, assess, model_errors
 from taslel_bench.metrics.residuals import ResidualStream
 from taslel_bench.metrics.sections import RunSummary, Verdict
 from taslel_bench.metrics.stream import Reducer
@@ -80,7 +80,8 @@ def summary_sections(res: EpisodeResult, control_dt_s: float, stand_duration_s: 
     flat = summary.flat()
     status, degraded = assess(flat, limits)
     summary.outcome["status"] = status
-    summary.verdict = Verdict(status, degraded, reasons({**flat, "status": status}, safety))
+    summary.verdict = Verdict(status, degraded, reasons({**flat, "status": status}, safety),
+                              model_errors(flat, limits))
     return summary
 
 
