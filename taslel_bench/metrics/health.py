@@ -33,10 +33,10 @@ class HealthLimits:
     demand_beyond_cone_rate_max: float = param(0.01, "share of filter-loaded feet whose planned force leaves the "
                                                      "true friction cone (worst 0.5 s window)", lo=0.0, hi=1.0)
     promise_cone_edge_rate_max: float = param(
-        0.05, "share of filter-loaded feet planned inside the true cone whose plant force sits at the cone's edge "
+        0.37, "share of filter-loaded feet planned inside the true cone whose plant force sits at the cone's edge "
               "(worst 0.5 s window)", lo=0.0, hi=1.0)
     promise_stance_in_air_rate_max: float = param(
-        0.2, "share of filter-loaded feet that carry no load in the plant (worst 0.5 s window)", lo=0.0, hi=1.0)
+        0.21, "share of filter-loaded feet that carry no load in the plant (worst 0.5 s window)", lo=0.0, hi=1.0)
     residual_alarm_rate_max: float = param(0.05, "model error: share of walking ticks whose model residual exceeds "
                                                  "one of the two bounds below", lo=0.0, hi=1.0)
     residual_trunk_force_n_max: float = param(5.0, "bound on |M vdot + h - S u - J'f| over the trunk-force rows",
