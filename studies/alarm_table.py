@@ -156,9 +156,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.md").write_text(text)
+    written = [args.out / "table.md"]
     if not all(s.suffix == ".parquet" for s in args.sweeps):  # the runs themselves, beside their table
         df.drop(columns=["plant", "filter", "world"]).to_parquet(args.out / "summary.parquet")
-    print(f"wrote {args.out / 'table.md'} and {args.out / 'summary.parquet'}")
+        written.append(args.out / "summary.parquet")
+    print("wrote " + ", ".join(map(str, written)))
     return 0
 
 
