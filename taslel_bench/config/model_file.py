@@ -87,7 +87,7 @@ def model_values(cfg: DictConfig) -> dict[str, Any]:
 def _same(a: Any, b: Any) -> bool:
     """Equal values, a joint field's one number equal to 12 equal numbers."""
     try:
-        x, y = np.asarray(a, float), np.asarray(b, float)
-        return bool(np.array_equal(*np.broadcast_arrays(x, y)))
+        x, y = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+        return bool(np.array_equal(x, y))
     except (TypeError, ValueError):
         return a == b

@@ -15,7 +15,7 @@ EXIT_BAD_INPUT = 2
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog="python -m taslel_bench.identify", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m taslel_bench.identify", description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("runs", type=Path, nargs="+", metavar="RUN_FOLDER", help="run folders (config.yaml, "
                     "steps.parquet); their walking parts, in this order, are the data")
     ap.add_argument("--out", type=Path, required=True, help="the model override file to write (YAML); the fit "

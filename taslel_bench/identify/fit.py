@@ -167,11 +167,15 @@ def scales(params: sysid.ParameterDict) -> np.ndarray:
 
 def perturbation(params: sysid.ParameterDict) -> PlantPerturbation:
     """The plant perturbation with the parameters' current values (joint fields: one value -> all 12)."""
-    joint = {n: as_joint_values(params[n].value.tolist() if params[n].size > 1 else float(params[n].value[0]))
-             for n in JOINT_FIELDS}
+    def joint(name: str) -> tuple[float, ...]:
+        value = params[name].value
+        return as_joint_values(value.tolist() if value.size > 1 else float(value[0]))
+
     shift = params["trunk_com_shift_m"].value
     return PlantPerturbation(trunk_mass_scale=float(params["trunk_mass_scale"].value[0]),
-                             trunk_com_shift_m=(float(shift[0]), float(shift[1]), float(shift[2])), **joint)
+                             trunk_com_shift_m=(float(shift[0]), float(shift[1]), float(shift[2])),
+                             joint_damping=joint("joint_damping"), armature=joint("armature"),
+                             joint_frictionloss=joint("joint_frictionloss"))
 
 
 def build_model(params: sysid.ParameterDict, spec: mujoco.MjSpec) -> mujoco.MjModel:
