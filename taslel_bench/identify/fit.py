@@ -128,7 +128,8 @@ def identify(runs: Sequence[RunData], settings: FitSettings = FitSettings(), out
     nominal = initial.as_nominal_vector()
     return FitResult(
         runs=[str(r.path) for r in runs], window_s=settings.window_s, windows=sum(len(g.starts) for g in groups),
-        walking_s=sum(len(g.starts) for g in groups) * settings.window_s, physics_dt_s=runs[0].physics_dt_s,
+        walking_s=sum(g.measured_qvel.shape[0] * g.measured_qvel.shape[1] * g.run.physics_dt_s * g.run.steps_per_tick
+                      for g in groups), physics_dt_s=runs[0].physics_dt_s,
         urdf=by_field(params, nominal), start=by_field(params, initial.as_vector()), value=by_field(params, x_star),
         interval=by_field(params, np.asarray(intervals)), plant=shared_plant(runs, settings.per_joint),
         rms_before=rms(replay_errors(nominal, initial, groups, settings.threads)),
