@@ -12,6 +12,7 @@ enums: an enum value would change the text of every run's ``config.yaml`` and so
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass
 from pathlib import Path
@@ -183,7 +184,8 @@ class RobotConfig:
 
 
 # -------------------------------------------------------------------------------------------------- model
-@dataclass
+# generated __init__, __repr__ and __eq__ would spell the keyword ``from`` as an attribute: __init__ below
+@dataclass(init=False, repr=False, eq=False)
 class ModelConfig:
     """``model``: the controller's model of the robot (Pinocchio), what the filter's M vdot + h = S u + J' lambda
     believes; the defaults are the URDF as is. Joint fields: one number for all 12 leg joints, or 12 in the core
@@ -191,6 +193,10 @@ class ModelConfig:
 
     urdf: str | None = param(default_of(ModelOptions, "urdf"), "another URDF of the robot (same joint and foot "
                                                                "names); null: the robot's")
+    # ``from`` is a Python keyword: the field is declared through the class namespace (a key ``model.from``)
+    __annotations__["from"] = "str | None"
+    vars()["from"] = param(None, "a model file (YAML, a `model:` mapping of these keys, e.g. written by python -m "
+                                 "taslel_bench.identify) whose values set them; null: none", unit="path")
     joint_damping: Any = param(default_of(ModelOptions, "joint_damping"), "viscous joint loss added to the URDF's: "
                                                                           "h += d qdot", unit="N·m·s/rad")
     armature: Any = param(default_of(ModelOptions, "armature"), "rotor inertia added to the joint's diagonal "
@@ -210,6 +216,14 @@ class ModelConfig:
     implicit_damping_dt_s: float = param(default_of(ModelOptions, "implicit_damping_dt_s"),
                                          "dt x damping on the joint diagonal of M, as MuJoCo's implicit integrators "
                                          "(the physics step); 0: continuous model", unit="s", lo=0.0, hi=0.1)
+
+    def __init__(self, **values: Any) -> None:
+        """Every field at its default, ``values`` (by key, ``from`` included) instead where given."""
+        for f in dataclasses.fields(self):
+            default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+            setattr(self, f.name, values.pop(f.name, default))
+        if values:
+            raise TypeError(f"ModelConfig: unknown keys {sorted(values)}")
 
 
 # ------------------------------------------------------------------------------------------------- filter

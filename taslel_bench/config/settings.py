@@ -9,6 +9,7 @@ from typing import Any
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from taslel_bench.config.model_file import model_values
 from taslel_bench.control.contact_estimate import ContactEstimate, ContactEstimateSettings
 from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.barriers.base import Barrier, BarrierWorld
@@ -110,8 +111,9 @@ def _plain(value: Any) -> Any:
 
 
 def model_options(cfg: DictConfig) -> ModelOptions:
-    """The ``model`` group (validated by :func:`validate`) as :class:`ModelOptions`."""
-    return ModelOptions(**{str(k): _plain(v) for k, v in cfg.model.items()})
+    """The ``model`` group (validated by :func:`validate`), with ``model.from``'s file applied, as
+    :class:`ModelOptions`."""
+    return ModelOptions(**{key: _plain(value) for key, value in model_values(cfg).items()})
 
 
 def build_model(cfg: DictConfig, robot: RobotDescription) -> RobotModel:

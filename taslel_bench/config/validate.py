@@ -26,6 +26,7 @@ from typing import Any
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
+from taslel_bench.config.model_file import model_values
 from taslel_bench.config.schema import CONTROLLER_SCHEMAS, TROT_TARGET, RunConfig
 from taslel_bench.control.gait import TrotScaling
 from taslel_bench.interfaces import MAX_FRICTION
@@ -357,8 +358,8 @@ def _model(cfg: DictConfig) -> None:
                                       "URDF")
     shared = ("trunk_mass_scale", "trunk_com_shift_m", "payload_mass_kg", "payload_pos_m", "joint_damping",
               "armature", "joint_frictionloss")  # the plant perturbation's fields, checked by the same rules
-    given = {key: _get(cfg, f"{m}.{key}") for key in shared}
-    check_trunk_and_joints(m, {key: value for key, value in given.items() if value is not None})
+    given = model_values(cfg)  # with model.from's file applied (its values checked, naming the file)
+    check_trunk_and_joints(m, {key: given[key] for key in shared if given[key] is not None})
 
 
 def _divisors(n: int) -> str:

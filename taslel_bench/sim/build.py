@@ -55,11 +55,18 @@ def build_plant(scenario: Scenario, options: PlantOptions | None = None, seed: i
     """The robot's URDF plant (default: the A1), or the MJCF ``mjcf`` of it, with the scenario's terrain (drawn
     from its own stream of ``seed``: a random terrain does not shift the draws of ``rng``) and the scenario's
     other edits."""
+    return compile_plant(build_plant_spec(scenario, options, seed, rng, mjcf, robot), mjcf)
+
+
+def build_plant_spec(scenario: Scenario, options: PlantOptions | None = None, seed: int = 0,
+                     rng: np.random.Generator | None = None, mjcf: Path | None = None,
+                     robot: RobotDescription | None = None) -> mujoco.MjSpec:
+    """The spec :func:`build_plant` compiles (the same arguments)."""
     options = options if options is not None else PlantOptions()
     spec = mjcf_spec(mjcf, options) if mjcf is not None else robot_spec(robot, options)
     scenario.terrain.build(spec, terrain_rng(seed))
     scenario.build(spec, rng if rng is not None else np.random.default_rng(seed))
-    return compile_plant(spec, mjcf)
+    return spec
 
 
 def terrain_rng(seed: int) -> np.random.Generator:

@@ -5,7 +5,7 @@
   example-robot-data's URDF), every ``<include>``d file (MuJoCo looks in the main file's folder first, also for
   an include inside an included file) and every mesh, heightfield, texture and skin they name
   (:func:`taslel_bench.plant.mjcf_files.mjcf_files`);
-* ``model``: the controller model's URDF (``model.urdf`` or the default);
+* ``model``: the controller model's URDF (``model.urdf`` or the default) and its ``model.from`` file;
 * ``checkpoint``: every file the estimator loads (its optional ``input_files()``: model and drop detector);
 * ``code``: the source of every module of the project's packages (:data:`PROJECT_PACKAGES`) that the run
   imports, found statically from :data:`ENTRY_MODULES` and every ``_target_`` of the config (imports inside

@@ -98,8 +98,8 @@ def hashed_config(cfg: DictConfig) -> dict:
 def identity_of(cfg: DictConfig, input_files: Iterable[Path] = (),
                 choices: dict[str, str] | None = None) -> RunIdentity:  # fmt: skip
     """Everything that decides a run's results (:mod:`taslel_bench.sim.identity`): the resolved config, the
-    plant files as MuJoCo reads them, the controller model's URDF, ``input_files`` (the estimator's
-    checkpoints), the project code the run imports and its ``_target_`` modules, the composed config files
+    plant files as MuJoCo reads them, the controller model's URDF and ``model.from`` file, ``input_files`` (the
+    estimator's checkpoints), the project code the run imports and its ``_target_`` modules, the composed config files
     (``choices``: the option of each config group) and the result-deciding package versions."""
     plain = hashed_config(cfg)
     mjcf = cfg.robot.plant_mjcf
@@ -107,7 +107,7 @@ def identity_of(cfg: DictConfig, input_files: Iterable[Path] = (),
     return run_identity(
         OmegaConf.to_yaml(OmegaConf.create(plain)),
         plant=mjcf_files(Path(mjcf)) if mjcf else [robot_urdf, *urdf_mesh_files(robot_urdf)],
-        model=[Path(cfg.model.urdf or robot_urdf)],
+        model=[Path(cfg.model.urdf or robot_urdf), *([Path(cfg.model["from"])] if cfg.model["from"] else [])],
         checkpoints=sorted(Path(p).resolve() for p in input_files),
         targets=target_modules(plain),
         config=config_files(CONF_DIR, choices or {}),
