@@ -28,10 +28,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
-import mujoco.batch
 import numpy as np
+from mujoco import batch as mj_batch
 
 from taslel_bench.control.nominal import NominalController, pd_rows
+from taslel_bench.control.plan import NominalControl
 from taslel_bench.interfaces import Scenario
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.contacts import FootContactReader
@@ -47,7 +48,7 @@ class BatchEnv:
 
     scenario: Scenario  # its world: the terrain sets the initial height and the friction under the trunk
     mj_model: mujoco.MjModel  # its plant; every environment of a batch has one layout (one builder)
-    controller: NominalController  # its open-loop trot; one object may serve several environments
+    controller: NominalControl  # its open-loop trot (a NominalController); one object may serve several envs
     rng: np.random.Generator  # draws its initial state, as the episode's rng does
 
 
@@ -114,7 +115,7 @@ class BatchRollout:
                  sample_every_ticks: int = 0, record: bool = False) -> None:
         t0 = time.perf_counter()
         self.s, self.envs = settings, tuple(envs)
-        _check_envs(self.envs)
+        self.controllers = _checked_controllers(self.envs)
         if sample_every_ticks < 0:
             raise ValueError(f"sample_every_ticks must be >= 0 (0: no samples), got {sample_every_ticks!r}")
         self.sample_every, self.record = int(sample_every_ticks), bool(record)
@@ -123,19 +124,19 @@ class BatchRollout:
         self.contacts = FootContactReader(m0)  # one layout: the same sensor rows and geom classes in every env
         self.terminations = Terminations(settings.fall, self.bridge.free_qadr, self.contacts, settings.physics_dt_s)
         self.physics_per_tick = round(settings.control_dt_s / settings.physics_dt_s)
-        self.end_tick = np.array([round((e.controller.stand_duration_s + settings.duration_s) / settings.control_dt_s)
-                                  for e in self.envs])
+        self.end_tick = np.array([round((c.stand_duration_s + settings.duration_s) / settings.control_dt_s)
+                                  for c in self.controllers])
         self.initial_qpos, self.initial_qvel = self._initial_states()
         self._timelines()
-        self.batch = mujoco.batch.Batch(m0, len(self.envs), nthread)
+        self.batch = mj_batch.Batch(m0, len(self.envs), nthread)
         self.batch.set_models([e.mj_model for e in self.envs])
         self.setup_time_s = time.perf_counter() - t0
 
     def _initial_states(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, nq), (N, nv): each environment's initial MuJoCo state, drawn as its episode draws it."""
         scratch = mujoco.MjData(self.envs[0].mj_model)
-        states = [draw_initial_state(e.mj_model, scratch, self.bridge, e.controller, e.controller.robot.foot_radius_m,
-                                     e.scenario.terrain, self.s, e.rng) for e in self.envs]
+        states = [draw_initial_state(e.mj_model, scratch, self.bridge, c, c.robot.foot_radius_m, e.scenario.terrain,
+                                     self.s, e.rng) for e, c in zip(self.envs, self.controllers, strict=True)]
         return np.array([q for q, _ in states]), np.array([v for _, v in states])
 
     def _timelines(self) -> None:
@@ -143,18 +144,18 @@ class BatchRollout:
         ``_index`` (T, N) the row of tick k of env i; the PD gains and limits per environment."""
         n_ticks = int(self.end_tick.max())
         rows, offsets, index = [], {}, np.zeros((n_ticks, len(self.envs)), np.int32)
-        for i, env in enumerate(self.envs):
-            key = id(env.controller)
+        for i, controller in enumerate(self.controllers):
+            key = id(controller)
             if key not in offsets:
-                r, idx = env.controller.reference_timeline(n_ticks, self.s.control_dt_s)
+                r, idx = controller.reference_timeline(n_ticks, self.s.control_dt_s)
                 offsets[key] = (sum(len(x) for x in rows), idx)
                 rows.append(r)
             offset, idx = offsets[key]
             index[:, i] = offset + idx
         self._rows, self._index = np.concatenate(rows), index
-        self._kp = np.array([float(e.controller.gains.kp) for e in self.envs])  # [N·m/rad], as the controller's
-        self._kd = np.array([float(e.controller.gains.kd) for e in self.envs])  # [N·m·s/rad]
-        self._limit = np.array([e.controller.torque_limit_nm for e in self.envs], float)  # [N·m] (N, 12)
+        self._kp = np.array([float(c.gains.kp) for c in self.controllers])  # [N·m/rad], as the controller's
+        self._kd = np.array([float(c.gains.kd) for c in self.controllers])  # [N·m·s/rad]
+        self._limit = np.array([c.torque_limit_nm for c in self.controllers], float)  # [N·m] (N, 12)
 
     # -------------------------------------------------------------------------------------------------- run
     def run(self) -> BatchResult:
@@ -204,8 +205,8 @@ class _Loop:
         if sample:
             self._sample_before(k // r.sample_every, ids)
         falls, unstable = self._physics(ids)
-        if sample:
-            self.samples.sensordata[k // r.sample_every, ids] = self.sensordata[ids]  # type: ignore[union-attr]
+        if sample and self.samples is not None:
+            self.samples.sensordata[k // r.sample_every, ids] = self.sensordata[ids]
         self.tau_prev[ids] = self.u[ids]
         if self.trace is not None:
             self._record(k)
@@ -243,7 +244,7 @@ class _Loop:
             unstable.add(i)
             return
         data = self._contacts_at_step_start(i) if code == READS_CONTACTS else None
-        fall = self.r.terminations.fall_of(code, self.qpos[i], data, float(self.time[i]))  # type: ignore[arg-type]
+        fall = self.r.terminations.fall_of(code, self.qpos[i], data, float(self.time[i]))
         if fall is not None:
             falls[i] = fall
 
@@ -252,9 +253,7 @@ class _Loop:
         list after ``mj_step``): collision recomputed at that qpos."""
         self.contact_checks += 1
         m = self.r.envs[i].mj_model
-        if self._scratch is None:
-            self._scratch = mujoco.MjData(m)
-        d = self._scratch
+        d = self._scratch = self._scratch if self._scratch is not None else mujoco.MjData(m)  # one layout: one scratch
         mujoco.mj_resetData(m, d)
         d.qpos[:] = self.qpos_before[i]
         mujoco.mj_fwdPosition(m, d)
@@ -285,7 +284,7 @@ class _Loop:
         """Sample row ``s``: the joint state at the tick's start, the previous tick's torque, the friction under
         the trunk (sensors are added after the tick's physics)."""
         smp = self.samples
-        assert smp is not None
+        assert smp is not None  # sampling is on
         smp.q_joints[s, ids], smp.qd_joints[s, ids] = self.q[ids], self.qd[ids]
         smp.tau_prev[s, ids] = self.tau_prev[ids]
         mu = self._uniform_mu[ids]
@@ -313,23 +312,30 @@ def _new_trace(r: BatchRollout, n: int) -> BatchTrace:
     return BatchTrace(np.zeros((t, n, m.nq)), np.zeros((t, n, m.nv)), np.zeros((t, n, quad.N_JOINTS)))
 
 
-def _check_envs(envs: tuple[BatchEnv, ...]) -> None:
-    """ValueError naming the field of the first environment a batched rollout cannot run as its episode would."""
+def _checked_controllers(envs: tuple[BatchEnv, ...]) -> list[NominalController]:
+    """The environments' controllers, after a ValueError naming the field of the first environment a batched
+    rollout cannot run as its episode would."""
     if not envs:
         raise ValueError("BatchRollout: envs is empty; give at least one BatchEnv")
-    m0 = envs[0].mj_model
+    m0, out = envs[0].mj_model, []
     for i, e in enumerate(envs):
-        kind = type(e.controller)
-        if not isinstance(e.controller, NominalController) or kind.compute is not NominalController.compute or \
-                kind.update_references is not NominalController.update_references:
+        c = e.controller
+        if not (isinstance(c, NominalController) and _open_loop(type(c))):
             raise ValueError(f"envs[{i}].controller: a batched rollout runs the open-loop trot (NominalController); "
-                             f"got {kind.__name__}")
+                             f"got {type(c).__name__}")
         if not does_nothing(e.scenario.on_tick):
             raise ValueError(f"envs[{i}].scenario: {type(e.scenario).__name__}.on_tick acts on every physics step; "
                              "a batched rollout runs scenarios whose on_tick does nothing")
         if _layout(e.mj_model) != _layout(m0):
             raise ValueError(f"envs[{i}].mj_model: its layout {_layout(e.mj_model)} differs from envs[0]'s "
                              f"{_layout(m0)}; batch environments of one plant builder and terrain kind together")
+        out.append(c)
+    return out
+
+
+def _open_loop(kind: type[NominalController]) -> bool:
+    """The trot's references of ``kind`` are NominalController's (open loop: not overridden by a subclass)."""
+    return kind.compute is NominalController.compute and kind.update_references is NominalController.update_references
 
 
 def _layout(m: mujoco.MjModel) -> tuple[int, ...]:

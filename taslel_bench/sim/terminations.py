@@ -65,10 +65,10 @@ class Terminations:
             return None
         return self.fall_of(term, qpos, data, t_s)
 
-    def fall_of(self, term: int, qpos: np.ndarray, data: mujoco.MjData, t_s: float) -> Fall | None:
+    def fall_of(self, term: int, qpos: np.ndarray, data: mujoco.MjData | None, t_s: float) -> Fall | None:
         """The fall that :func:`_step_term`'s code ``term`` (not _NONE) means for the state ``qpos`` a physics
-        step produced at episode time ``t_s`` [s]; ``data`` holds the contacts of the step's starting state
-        (MuJoCo's after ``mj_step``), read only for the body-contact term (None: only shins touch)."""
+        step produced at episode time ``t_s`` [s] (None: only shins touch); ``data`` holds the contacts of the step's
+        starting state (MuJoCo's after ``mj_step``), read only for :data:`READS_CONTACTS` (None for the others)."""
         contacts = self.contacts
         if term == _HEIGHT:
             z = qpos[self.a + 2]
@@ -76,6 +76,8 @@ class Terminations:
         if term == _TILT:
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, _cos_tilt(qpos, self.a)))))
             return Fall("trunk_tilt", f"trunk tilt {tilt:.0f} deg", t_s)
+        if data is None:
+            raise ValueError("Terminations.fall_of: the contacts term needs data with the step's starting contacts")
         contacts.classify_other_contacts(data)  # term == _OTHER_CONTACTS: of the step's starting state
         if contacts.body_contact:
             name = contacts.non_foot_contact_name
