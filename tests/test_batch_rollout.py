@@ -65,7 +65,7 @@ def test_batched_rollout_is_the_episode_loop_bit_for_bit(paper_parts, loop_runs,
     cfg, settings, worlds, plants = paper_parts
     envs = [api.BatchEnv(w, p, api.build_controller(cfg), np.random.default_rng(s))
             for w, p, s in zip(worlds, plants, SEEDS, strict=True)]
-    batch = api.BatchRollout(settings, envs, nthread=nthread, record=True).run()
+    batch = api.BatchRollout(settings, envs, nthread=nthread, record="states").run()
     assert batch.nthread == nthread and batch.trace is not None
     assert [r.fell for r, _ in loop_runs] == [True, False, False, False]
     for i, (res, rec) in enumerate(loop_runs):
@@ -84,7 +84,7 @@ def test_one_controller_shared_by_every_environment_gives_the_same_bits(paper_pa
     cfg, settings, worlds, plants = paper_parts
     shared = api.build_controller(cfg)
     envs = [api.BatchEnv(w, p, shared, np.random.default_rng(s)) for w, p, s in zip(worlds, plants, SEEDS, strict=True)]
-    batch = api.BatchRollout(settings, envs, nthread=2, record=True).run()
+    batch = api.BatchRollout(settings, envs, nthread=2, record="states").run()
     assert batch.trace is not None
     for i, (res, rec) in enumerate(loop_runs):
         assert np.array_equal(batch.trace.u[: res.n_ticks, i], np.array(rec.u))
@@ -156,5 +156,7 @@ def test_what_a_batch_cannot_run_is_refused_by_name(paper_parts) -> None:
         api.BatchRollout(settings, [dataclasses.replace(env, controller=follower)])
     with pytest.raises(ValueError, match="sample_every_ticks must be >= 0"):
         api.BatchRollout(settings, [env], sample_every_ticks=-1)
+    with pytest.raises(ValueError, match="record must be one of none, torques, states, got 'qpos'"):
+        api.BatchRollout(settings, [env], record="qpos")
     with pytest.raises(ValueError, match="batch must be >= 0"):
         collect(Path("/nonexistent"), {"train": 1}, batch=-1)

@@ -41,6 +41,8 @@ from taslel_bench.sim.episode import EpisodeSettings, does_nothing, draw_initial
 from taslel_bench.sim.terminations import READS_CONTACTS, Fall, Terminations
 from taslel_bench.util.jit import kernel
 
+RECORD = ("none", "torques", "states")  # what BatchRollout(record=...) keeps of every tick
+
 
 @dataclass(frozen=True)
 class BatchEnv:
@@ -81,12 +83,13 @@ class BatchSamples:
 
 @dataclass
 class BatchTrace:
-    """Every tick of every environment (``record=True``): the plant state after the tick's physics and the torque
-    held over it; rows after an environment's last tick repeat its final state (zero after the batch's last)."""
+    """Every tick of every environment (``record``): the torque held over the tick and, with ``record="states"``, the
+    plant state after the tick's physics (else empty arrays); rows after an environment's last tick repeat its final
+    values (zero after the batch's last)."""
 
+    u: np.ndarray  # (T, N, 12) [N·m] core order
     qpos: np.ndarray  # (T, N, nq) MuJoCo qpos
     qvel: np.ndarray  # (T, N, nv) MuJoCo qvel (free joint: linear velocity in world axes)
-    u: np.ndarray  # (T, N, 12) [N·m] core order
 
 
 @dataclass
@@ -109,16 +112,19 @@ class BatchResult:
 class BatchRollout:
     """The episodes of ``envs`` (see the module doc) with the episode ``settings`` (duration, rates, fall rule,
     initial noise) on ``nthread`` threads (0: every CPU). ``sample_every_ticks`` > 0 keeps a :class:`BatchSamples`;
-    ``record`` keeps a :class:`BatchTrace` (memory: ticks x envs x 49 floats)."""
+    ``record`` keeps a :class:`BatchTrace`: one of :data:`RECORD` ("torques": ticks x envs x 12 floats, "states":
+    x 49 for the A1)."""
 
     def __init__(self, settings: EpisodeSettings, envs: Sequence[BatchEnv], *, nthread: int = 0,
-                 sample_every_ticks: int = 0, record: bool = False) -> None:
+                 sample_every_ticks: int = 0, record: str = "none") -> None:
         t0 = time.perf_counter()
         self.s, self.envs = settings, tuple(envs)
         self.controllers = _checked_controllers(self.envs)
         if sample_every_ticks < 0:
             raise ValueError(f"sample_every_ticks must be >= 0 (0: no samples), got {sample_every_ticks!r}")
-        self.sample_every, self.record = int(sample_every_ticks), bool(record)
+        if record not in RECORD:
+            raise ValueError(f"record must be one of {', '.join(RECORD)}, got {record!r}")
+        self.sample_every, self.record = int(sample_every_ticks), record
         m0 = self.envs[0].mj_model
         self.bridge = StateBridge(m0)
         self.contacts = FootContactReader(m0)  # one layout: the same sensor rows and geom classes in every env
@@ -158,6 +164,15 @@ class BatchRollout:
         self._limit = np.array([c.torque_limit_nm for c in self.controllers], float)  # [N·m] (N, 12)
 
     # -------------------------------------------------------------------------------------------------- run
+    def reset(self) -> None:
+        """Every simulation of the batch at its environment's initial state, as the episode's ``initial_state()``:
+        MuJoCo's reset, the initial qpos and qvel, ``mj_forward``."""
+        b = self.batch
+        b.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+        b.bind("qpos")[:] = self.initial_qpos
+        b.bind("qvel")[:] = self.initial_qvel
+        b.forward()
+
     def run(self) -> BatchResult:
         """Every environment from its initial state until its end, a fall or an error (the same ones each run)."""
         loop = _Loop(self)
@@ -175,12 +190,9 @@ class _Loop:
 
     def __init__(self, r: BatchRollout) -> None:
         self.r, b, n = r, r.batch, len(r.envs)
-        b.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+        r.reset()
         self.qpos, self.qvel, self.ctrl, self.time = b.bind("qpos"), b.bind("qvel"), b.bind("ctrl"), b.bind("time")
         self.sensordata, self.ncon = b.bind("sensordata"), b.bind("ncon")
-        self.qpos[:] = r.initial_qpos
-        self.qvel[:] = r.initial_qvel
-        b.forward()  # as the episode's initial_state(): mj_forward on the initial state
         self.alive = np.ones(n, bool)
         self.ids = np.arange(n)
         self.outcomes = [EnvOutcome() for _ in range(n)]
@@ -191,7 +203,7 @@ class _Loop:
         self.physics_steps = self.contact_checks = 0
         self._scratch: mujoco.MjData | None = None
         self.samples = _new_samples(r, n) if r.sample_every else None
-        self.trace = _new_trace(r, n) if r.record else None
+        self.trace = _new_trace(r, n) if r.record != "none" else None
         mus = [e.scenario.terrain.uniform_friction for e in r.envs]  # [-] None: several frictions
         self._uniform_mu = np.array([math.nan if mu is None else mu for mu in mus])
 
@@ -296,8 +308,10 @@ class _Loop:
 
     def _record(self, k: int) -> None:
         tr = self.trace
-        assert tr is not None
-        tr.qpos[k], tr.qvel[k], tr.u[k] = self.qpos, self.qvel, self.u
+        assert tr is not None  # recording is on
+        tr.u[k] = self.u
+        if self.r.record == "states":
+            tr.qpos[k], tr.qvel[k] = self.qpos, self.qvel
 
 
 def _new_samples(r: BatchRollout, n: int) -> BatchSamples:
@@ -309,7 +323,8 @@ def _new_samples(r: BatchRollout, n: int) -> BatchSamples:
 
 def _new_trace(r: BatchRollout, n: int) -> BatchTrace:
     t, m = int(r.end_tick.max()), r.envs[0].mj_model
-    return BatchTrace(np.zeros((t, n, m.nq)), np.zeros((t, n, m.nv)), np.zeros((t, n, quad.N_JOINTS)))
+    rows = t if r.record == "states" else 0
+    return BatchTrace(np.zeros((t, n, quad.N_JOINTS)), np.zeros((rows, n, m.nq)), np.zeros((rows, n, m.nv)))
 
 
 def _checked_controllers(envs: tuple[BatchEnv, ...]) -> list[NominalController]:
