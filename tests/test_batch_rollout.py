@@ -5,6 +5,7 @@ collection writes the loop's arrays; what it cannot run is refused by name."""
 from __future__ import annotations
 
 import dataclasses
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +106,7 @@ def test_reference_timeline_is_the_references_of_every_tick(period_s: float) -> 
         rows, index = timed.reference_timeline(ticks, 1e-3)
         assert rows[index].tobytes() == np.array(expected).tobytes()
         assert len(rows) == round(period_s * 1000) + 2  # the stand, walking's first tick, one period
+        timed = pickle.loads(pickle.dumps(timed))  # a copy (another process's) writes the same references
 
 
 def _collection_draws() -> list[tuple]:

@@ -68,6 +68,11 @@ class NominalController:
         self._stand_state: ContactPlan | None = None  # gait state while standing (all feet in stance)
         self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickling: q_des and qd_des are views of the references again (pickle copies them apart)."""
+        self.__dict__.update(state)
+        self.q_des, self.qd_des = self._references
+
     @property
     def stand_height_m(self) -> float:
         """[m] hip joint -> foot centre in the stand and in stance."""
