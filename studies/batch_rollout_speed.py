@@ -8,7 +8,8 @@ plant perturbation, gait and PD gains as ``estimators.collect`` draws them; 1 kH
   environments in one compiled call per tick, fall terms after every step, window sampling): physics steps per
   second of its ticks' loop, and with the environments' setup (plants, reference timelines, initial states);
 * **physics only**: the same batch (same models, initial states, and environments ending on the same ticks)
-  replaying the recorded torques with no controller: the batched loop's limit, and the ratio of the two;
+  replaying the recorded torques with no controller: the batched loop's limit, and the ratio of the two (the two
+  measured ``--repeat`` times in turns; the best and the median of each are printed);
 * **loop today**: ``estimators.collect`` on the first ``--loop-episodes`` draws (the episode loop, ``--threads``
   worker processes);
 * **filtered**: episodes with the safety filter (``filter=id_cbf_qp``, the project's solver) in the episode loop,
@@ -54,16 +55,15 @@ def _draws(n: int) -> list[EpisodeParams]:
     return [p for _, p, _, _, _ in jobs]
 
 
-def batched(draws: list[EpisodeParams], cfg: EpisodeConfig, threads: int) -> tuple[api.BatchRollout, api.BatchResult,
-                                                                                     float]:
-    """(the rollout, its result with the torques recorded, the plants' build time [s])."""
+def batched(draws: list[EpisodeParams], cfg: EpisodeConfig, threads: int) -> tuple[api.BatchRollout, float]:
+    """(the rollout of ``draws`` with window sampling and the torques recorded, the plants' build time [s])."""
     t0 = time.perf_counter()
     parts = [episode_parts(p, cfg) for p in draws]
     build_s = time.perf_counter() - t0
     envs = [api.BatchEnv(x.world, x.plant, x.controller, x.rng) for x in parts]
     rollout = api.BatchRollout(parts[0].settings, envs, nthread=threads, record="torques",
                                sample_every_ticks=round(WINDOW_DT_S / cfg.timestep_s))
-    return rollout, rollout.run(), build_s
+    return rollout, build_s
 
 
 def physics_only(rollout: api.BatchRollout, res: api.BatchResult) -> tuple[float, bool]:
@@ -85,6 +85,19 @@ def physics_only(rollout: api.BatchRollout, res: api.BatchResult) -> tuple[float
     return steps / wall, bool(np.array_equal(b.bind("qpos"), final))
 
 
+def interleaved(rollout: api.BatchRollout, repeat: int) -> tuple[api.BatchResult, list[float], list[float], bool]:
+    """(the last batched result, ``repeat`` batched and physics-only rates [env-steps/s] measured in turns, every
+    replay reached the rollout's final states)."""
+    batched_rates, physics_rates, same = [], [], True
+    for _ in range(repeat):
+        res = rollout.run()
+        batched_rates.append(res.env_steps_per_s)
+        rate, ok = physics_only(rollout, res)
+        physics_rates.append(rate)
+        same &= ok
+    return res, batched_rates, physics_rates, same
+
+
 def loop_today(n: int, cfg: EpisodeConfig, workers: int) -> float:
     """env-steps/s of ``estimators.collect`` (the episode loop, ``workers`` processes) on ``n`` training episodes."""
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
@@ -104,6 +117,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--threads", type=int, default=2, help="batch threads (and the loop's worker processes)")
     ap.add_argument("--duration", type=float, default=EpisodeConfig.duration_s,
                     help="episode length with the stand [s]")
+    ap.add_argument("--repeat", type=int, default=3, help="batched and physics-only runs, in turns")
     ap.add_argument("--loop-episodes", type=int, default=40, help="episodes of the loop's figure (0: skip)")
     ap.add_argument("--filtered-episodes", type=int, default=2, help="episodes of the filtered figure (0: skip)")
     a = ap.parse_args(argv)
@@ -111,16 +125,19 @@ def main(argv: list[str] | None = None) -> None:
     info = api.machine_info()
     print(f"machine {info['cpu']} ({info['cores']} cores), {info['code']}; load before {_load()}", flush=True)
     draws = _draws(a.envs)
-    rollout, res, build_s = batched(draws, cfg, a.threads)
-    rate, setup_s = res.env_steps_per_s, build_s + res.setup_time_s
-    with_setup = res.physics_steps / (setup_s + res.wall_time_s)
-    print(f"batched nominal: {rate:,.0f} env-steps/s ({a.envs} envs x {a.duration:g} s, {res.nthread} threads, "
-          f"{res.physics_steps:,} steps in {res.wall_time_s:.1f} s, {sum(o.fell for o in res.outcomes)} falls); with "
-          f"setup ({build_s:.1f} s plants + {res.setup_time_s:.1f} s timelines and initial states): "
-          f"{with_setup:,.0f} env-steps/s; load {_load()}", flush=True)
-    limit, same = physics_only(rollout, res)
-    print(f"physics only (same batch, recorded torques, no controller): {limit:,.0f} env-steps/s; batched / physics "
-          f"only = {rate / limit:.2f} (replay reached the same final states: {same}); load {_load()}", flush=True)
+    rollout, build_s = batched(draws, cfg, a.threads)
+    res, rates, limits, same = interleaved(rollout, a.repeat)
+    rate, limit = max(rates), max(limits)
+    setup_s = build_s + res.setup_time_s
+    print(f"batched nominal: {rate:,.0f} env-steps/s, best of {a.repeat} (median {np.median(rates):,.0f}; {a.envs} "
+          f"envs x {a.duration:g} s, {res.nthread} threads, {res.physics_steps:,} steps, "
+          f"{sum(o.fell for o in res.outcomes)} falls); with the setup ({build_s:.1f} s plants + "
+          f"{res.setup_time_s:.1f} s timelines and initial states, once): "
+          f"{res.physics_steps / (setup_s + res.physics_steps / rate):,.0f} env-steps/s", flush=True)
+    print(f"physics only (same batch, recorded torques replayed, no controller): {limit:,.0f} env-steps/s, best of "
+          f"{a.repeat} (median {np.median(limits):,.0f}); batched / physics only = {rate / limit:.2f} (medians "
+          f"{np.median(rates) / np.median(limits):.2f}); replays reached the same final states: {same}; "
+          f"load {_load()}", flush=True)
     if a.loop_episodes:
         print(f"loop today (estimators.collect, {a.threads} workers, {a.loop_episodes} episodes): "
               f"{loop_today(a.loop_episodes, cfg, a.threads):,.0f} env-steps/s; load {_load()}", flush=True)

@@ -139,7 +139,7 @@ class NominalController:
         if not self.use_tables:
             self._compute_references(t)
             return
-        if self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0:  # standing: constant references
+        if self._standing(t):  # constant references
             if self._stand_q is None:
                 self._compute_references(t)
                 self._stand_q = self.q_des.copy()
@@ -156,6 +156,10 @@ class NominalController:
             self._table_filled[row] = True
             return
         self._compute_references(t)
+
+    def _standing(self, t: float) -> bool:
+        """Episode time ``t`` [s] gets the stand's references (half a tick before walking starts, or earlier)."""
+        return self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0
 
     def _table_row(self, t: float) -> int:
         """The row of the per-period table that walking episode time ``t`` [s] reads or fills: gait time on the
@@ -198,6 +202,9 @@ class NominalController:
                 # tick k - period and every later tick read the full table: the references repeat every period
                 index[k:] = index[k - period + np.arange(n_ticks - k) % period]
                 break
+            if k and self.use_tables and self._stand_q is not None and self._standing(k * control_dt_s):
+                index[k] = index[k - 1]  # the stand's references again (update_references would copy them)
+                continue
             self.update_references(k * control_dt_s)
             if not rows or rows[-1].tobytes() != self._references.tobytes():  # bitwise (0.0 and -0.0 differ)
                 rows.append(self._references.copy())
