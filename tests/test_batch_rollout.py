@@ -162,3 +162,26 @@ def test_what_a_batch_cannot_run_is_refused_by_name(paper_parts) -> None:
         api.BatchRollout(settings, [env], record="qpos")
     with pytest.raises(ValueError, match="batch must be >= 0"):
         collect(Path("/nonexistent"), {"train": 1}, batch=-1)
+
+
+def test_a_diverging_environment_ends_in_error_as_in_the_loop_and_the_others_run_on(paper_parts, loop_runs) -> None:
+    """Negative joint damping (kd < 0) makes the legs' motion grow until the episode's state guard ends it."""
+    cfg, settings, worlds, plants = paper_parts
+
+    def unstable() -> NominalController:
+        return NominalController(GaitParams(), PDGains(kp=100.0, kd=-5.0))
+
+    controllers = [api.build_controller(cfg), unstable(), api.build_controller(cfg), api.build_controller(cfg)]
+    envs = [api.BatchEnv(w, p, c, np.random.default_rng(s))
+            for w, p, c, s in zip(worlds, plants, controllers, SEEDS, strict=True)]
+    batch = api.BatchRollout(settings, envs, nthread=2, record="states").run()
+    rec = _PlantRecorder()
+    res = api.Episode(settings, worlds[1], plants[1], unstable(), None, FixedEstimator(1.0),
+                      np.random.default_rng(SEEDS[1]), observers=[rec], trace=False).run()
+    got = batch.outcomes[1]
+    assert (got.status, got.message, got.n_ticks) == (res.status, res.message, res.n_ticks)
+    assert res.status == "error" and res.message.startswith("non-finite or exploding plant state") and res.n_ticks < 50
+    assert batch.trace is not None
+    assert np.array_equal(batch.trace.qpos[: res.n_ticks, 1], np.array(rec.qpos))
+    n = loop_runs[2][0].n_ticks
+    assert np.array_equal(batch.trace.qpos[:n, 2], np.array(loop_runs[2][1].qpos))  # the others run on untouched

@@ -202,6 +202,7 @@ class _Loop:
         self.codes, self.ok = np.zeros(n, np.int64), np.zeros(n, np.bool_)
         self.physics_steps = self.contact_checks = 0
         self._scratch: mujoco.MjData | None = None
+        self.mujoco_errors: dict[int, str] = {}  # env -> the error MuJoCo raised in its step
         self.samples = _new_samples(r, n) if r.sample_every else None
         self.trace = _new_trace(r, n) if r.record != "none" else None
         mus = [e.scenario.terrain.uniform_friction for e in r.envs]  # [-] None: several frictions
@@ -235,7 +236,10 @@ class _Loop:
         for _ in range(r.physics_per_tick):
             np.copyto(self.qpos_before, self.qpos)
             t_before = self.time[step_ids]
-            b.step(None if step_ids.size == len(r.envs) else step_ids)
+            try:
+                b.step(None if step_ids.size == len(r.envs) else step_ids)
+            except mj_batch.SimulationError as exc:  # those kept their state (no time step: ended below), the rest ran
+                self.mujoco_errors.update({int(i): b.error(int(i)) for i in exc.ids})
             self.physics_steps += step_ids.size
             t_after = self.time[step_ids]
             r.terminations.after_steps(self.qpos, step_ids, self.sensordata, self.ncon, self.codes)
@@ -277,9 +281,11 @@ class _Loop:
         r = self.r
         r.terminations.states_ok(self.qpos, self.qvel, ids, self.ok)
         bad = set(ids[~self.ok[: ids.size]].tolist()) | unstable
-        for i in bad:  # the episode's message
+        for i in bad:  # the episode's message, or MuJoCo's error (the episode's would name its exception)
             out = self.outcomes[i]
             out.status, out.message = "error", f"non-finite or exploding plant state at t={k * r.s.control_dt_s:.3f}s"
+            if i in self.mujoco_errors:
+                out.message = f"MuJoCo error at t={k * r.s.control_dt_s:.3f}s: {self.mujoco_errors[i]}"
         for i in falls.keys() - bad:
             out, fall = self.outcomes[i], falls[i]
             out.fell, out.time_to_fall_s = True, r.terminations.on_grid(fall.t_s)
