@@ -112,7 +112,7 @@ def filtered(draws: list[EpisodeParams], cfg: EpisodeConfig) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--envs", type=int, default=256, help="environments stepped together")
     ap.add_argument("--threads", type=int, default=2, help="batch threads (and the loop's worker processes)")
     ap.add_argument("--duration", type=float, default=EpisodeConfig.duration_s,
