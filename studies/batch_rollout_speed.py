@@ -85,17 +85,24 @@ def physics_only(rollout: api.BatchRollout, res: api.BatchResult) -> tuple[float
     return steps / wall, bool(np.array_equal(b.bind("qpos"), final))
 
 
-def interleaved(rollout: api.BatchRollout, repeat: int) -> tuple[api.BatchResult, list[float], list[float], bool]:
-    """(the last batched result, ``repeat`` batched and physics-only rates [env-steps/s] measured in turns, every
-    replay reached the rollout's final states)."""
-    batched_rates, physics_rates, same = [], [], True
+def interleaved(rollout: api.BatchRollout, repeat: int) -> tuple[api.BatchResult, dict[str, list[float]], bool]:
+    """(the last batched result; per kind, "batched" and "physics", ``repeat`` rates [env-steps/s] measured in
+    turns and the process's CPU time per env-step [µs] (all threads: how busy the cores were, not the wall);
+    every replay reached the rollout's final states)."""
+    out: dict[str, list[float]] = {"batched": [], "physics": [], "batched_cpu_us": [], "physics_cpu_us": []}
+    same = True
     for _ in range(repeat):
+        cpu0 = time.process_time()
         res = rollout.run()
-        batched_rates.append(res.env_steps_per_s)
+        cpu1 = time.process_time()
         rate, ok = physics_only(rollout, res)
-        physics_rates.append(rate)
+        cpu2 = time.process_time()
+        out["batched"].append(res.env_steps_per_s)
+        out["physics"].append(rate)
+        out["batched_cpu_us"].append((cpu1 - cpu0) / res.physics_steps * 1e6)  # the replay steps as many
+        out["physics_cpu_us"].append((cpu2 - cpu1) / res.physics_steps * 1e6)
         same &= ok
-    return res, batched_rates, physics_rates, same
+    return res, out, same
 
 
 def loop_today(n: int, cfg: EpisodeConfig, workers: int) -> float:
@@ -126,18 +133,19 @@ def main(argv: list[str] | None = None) -> None:
     print(f"machine {info['cpu']} ({info['cores']} cores), {info['code']}; load before {_load()}", flush=True)
     draws = _draws(a.envs)
     rollout, build_s = batched(draws, cfg, a.threads)
-    res, rates, limits, same = interleaved(rollout, a.repeat)
+    res, m, same = interleaved(rollout, a.repeat)
+    rates, limits = m["batched"], m["physics"]
     rate, limit = max(rates), max(limits)
     setup_s = build_s + res.setup_time_s
     print(f"batched nominal: {rate:,.0f} env-steps/s, best of {a.repeat} (median {np.median(rates):,.0f}; {a.envs} "
           f"envs x {a.duration:g} s, {res.nthread} threads, {res.physics_steps:,} steps, "
-          f"{sum(o.fell for o in res.outcomes)} falls); with the setup ({build_s:.1f} s plants + "
-          f"{res.setup_time_s:.1f} s timelines and initial states, once): "
+          f"{sum(o.fell for o in res.outcomes)} falls; CPU {min(m['batched_cpu_us']):.1f} µs per env-step); with the "
+          f"setup ({build_s:.1f} s plants + {res.setup_time_s:.1f} s timelines and initial states, once): "
           f"{res.physics_steps / (setup_s + res.physics_steps / rate):,.0f} env-steps/s", flush=True)
     print(f"physics only (same batch, recorded torques replayed, no controller): {limit:,.0f} env-steps/s, best of "
-          f"{a.repeat} (median {np.median(limits):,.0f}); batched / physics only = {rate / limit:.2f} (medians "
-          f"{np.median(rates) / np.median(limits):.2f}); replays reached the same final states: {same}; "
-          f"load {_load()}", flush=True)
+          f"{a.repeat} (median {np.median(limits):,.0f}; CPU {min(m['physics_cpu_us']):.1f} µs per env-step); "
+          f"batched / physics only = {rate / limit:.2f} (medians {np.median(rates) / np.median(limits):.2f}); "
+          f"replays reached the same final states: {same}; load {_load()}", flush=True)
     if a.loop_episodes:
         print(f"loop today (estimators.collect, {a.threads} workers, {a.loop_episodes} episodes): "
               f"{loop_today(a.loop_episodes, cfg, a.threads):,.0f} env-steps/s; load {_load()}", flush=True)
