@@ -8,8 +8,9 @@ sampled; windows of ``WINDOW_STEPS`` samples, starting every ``stride`` samples 
 are labelled with the floor friction. Splits are by episode (train / val / test from the training ranges,
 ``shifted`` from :data:`SHIFTED_RANGES`). Episodes run in the core episode loop (:mod:`taslel_bench.api`), so
 a fall is the benchmark's (:mod:`taslel_bench.sim.terminations`) and ends the episode; windows ending later
-than ``fall_margin_s`` before the fall are dropped. Episodes run in parallel processes; the throughput is
-printed in env-steps/s (physics steps).
+than ``fall_margin_s`` before the fall are dropped. Episodes run in parallel processes, or with ``--batch N``
+N nominal episodes at a time through the core's batched rollout (:mod:`estimators.collect_batch`; the same
+windows and labels); the throughput is printed in env-steps/s (physics steps).
 
 With ``--filter-fraction f`` a fraction f of the episodes (drawn per episode from a stream separate from
 the plant draws, so the plant parameters of a seed do not change) runs with the ID-CBF-QP safety filter
@@ -34,8 +35,10 @@ import multiprocessing as mp
 import os
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -57,6 +60,9 @@ from estimators.randomisation import (
 from estimators.simple import FixedEstimator
 from taslel_bench import api
 from taslel_bench.interfaces import FrictionStrips, Plane, Proprioception, Terrain, quad
+
+if TYPE_CHECKING:
+    from mujoco import MjModel
 
 PAPER_STEPS_PER_S = 100_000  # Isaac Gym, 4096 A1s, RTX 3080 (paper, "Data Collection")
 
@@ -145,13 +151,21 @@ def episode_terrain(p: EpisodeParams, patch: SurfacePatch | None = None) -> Terr
     return Terrain((FrictionStrips(edges, mus, 50.0, 0.1),))
 
 
-def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False,
-                  patch: SurfacePatch | None = None, observers=(), trace: bool = True):
-    """The core episode of one draw: the flat floor (:func:`episode_terrain`, with ``patch``) with the
-    draw's friction and plant perturbation, the
-    draw's gait and gains, the benchmark's loop and fall rule (``api.episode_settings`` of the project config),
-    no initial-state noise, ``estimator`` in the estimator slot, the project's safety filter if ``filtered``,
-    ``observers`` watching it; ``trace``: record the benchmark's per-tick trace too."""
+@dataclass(frozen=True)
+class EpisodeParts:
+    """What the core episode of one draw is built from (:func:`episode_parts`)."""
+
+    settings: api.EpisodeSettings
+    world: api.StaticWorld
+    plant: MjModel
+    controller: api.NominalController
+    rng: np.random.Generator
+
+
+def episode_parts(p: EpisodeParams, cfg: EpisodeConfig, patch: SurfacePatch | None = None) -> EpisodeParts:
+    """The parts of the core episode of one draw: the flat floor (:func:`episode_terrain`, with ``patch``) with the
+    draw's friction and plant perturbation, the draw's gait and gains, the benchmark's loop and fall rule
+    (``api.episode_settings`` of the project config), no initial-state noise, the draw's seed."""
     project = _worker_config(cfg.filter_overrides)
     world = api.StaticWorld(episode_terrain(p, patch), perturbation=p.perturbation())
     plant = api.build_plant(world, api.PlantOptions(timestep_s=cfg.timestep_s), seed=p.seed)
@@ -161,9 +175,17 @@ def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: boo
     settings = replace(api.episode_settings(project), duration_s=cfg.duration_s - cfg.stand_duration_s,
                        physics_dt_s=cfg.timestep_s, control_dt_s=cfg.timestep_s, init_joint_noise_rad=0.0,
                        init_base_vel_noise_mps=0.0, filter_start_s=0.0, analyse=False)
-    safety_filter = api.build_safety_filter(project) if filtered else None
-    return api.Episode(settings, world, plant, controller, safety_filter, estimator, np.random.default_rng(p.seed),
-                       observers=observers, trace=trace)
+    return EpisodeParts(settings, world, plant, controller, np.random.default_rng(p.seed))
+
+
+def build_episode(p: EpisodeParams, cfg: EpisodeConfig, estimator, filtered: bool = False,
+                  patch: SurfacePatch | None = None, observers=(), trace: bool = True):
+    """The core episode of one draw (:func:`episode_parts`), ``estimator`` in the estimator slot, the project's
+    safety filter if ``filtered``, ``observers`` watching it; ``trace``: record the benchmark's per-tick trace too."""
+    parts = episode_parts(p, cfg, patch)
+    safety_filter = api.build_safety_filter(_worker_config(cfg.filter_overrides)) if filtered else None
+    return api.Episode(parts.settings, parts.world, parts.plant, parts.controller, safety_filter, estimator,
+                       parts.rng, observers=observers, trace=trace)
 
 
 def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered: bool = False,
@@ -185,14 +207,35 @@ def run_episode(p: EpisodeParams, cfg: EpisodeConfig = EpisodeConfig(), filtered
     if res.status == "error":
         raise RuntimeError(f"collection episode (seed {p.seed}) failed: {res.message}")
     fall_t = res.time_to_fall_s if res.fell else float("nan")
-    samples, mu_trunk = np.stack(sampler.samples), np.array(sampler.trunk_friction)
-    starts = _window_starts(len(samples), fall_t, cfg)
+    samples = _Samples(np.stack(sampler.samples), np.array(sampler.trunk_friction), np.asarray(sampler.sensors))
+    return _episode_result(samples, fall_t, res.n_ticks * episode.physics_per_tick, p, cfg, episode.contacts,
+                           episode.terrain, patch, filtered=filtered, filter_failures=sampler.filter_fallbacks,
+                           filter_mu=filter_mu, wall_s=time.perf_counter() - wall0)
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """One episode's samples, one row per sampled tick: features (n, N_FEATURES) float32, the friction under the
+    trunk [-] (n,) and MuJoCo's sensordata after the tick (n, nsensordata)."""
+
+    features: np.ndarray
+    trunk_friction: np.ndarray
+    sensors: np.ndarray
+
+
+def _episode_result(samples: _Samples, fall_t: float, steps: int, p: EpisodeParams, cfg: EpisodeConfig, contacts,
+                    terrain: Terrain, patch: SurfacePatch | None, *, filtered: bool = False, filter_failures: int = 0,
+                    filter_mu: float = float("nan"), wall_s: float = 0.0) -> EpisodeResult:
+    """The windows of one episode's ``samples`` (see the module docstring) and their labels: the friction under the
+    trunk and under each foot (the feet's positions from the sensors, through ``contacts``, a
+    ``FootContactReader`` of the plant, on ``terrain``) and the feet's contact flags at each window's last
+    sample; ``fall_t`` [s] (nan: no fall), ``steps`` the physics steps simulated."""
+    starts = _window_starts(len(samples.features), fall_t, cfg)
     ends = starts + WINDOW_STEPS - 1
-    feet = episode.contacts.from_sensor_log(np.asarray(sampler.sensors)[ends])
-    return EpisodeResult(_cut_windows(samples, starts), res.fell, fall_t, res.n_ticks * episode.physics_per_tick, p,
-                         filtered, sampler.filter_fallbacks, filter_mu, time.perf_counter() - wall0,
-                         y=mu_trunk[ends].astype(np.float32),
-                         y_foot=episode.terrain.friction_under(feet["foot_pos_in_world"][..., :2]).astype(np.float32),
+    feet = contacts.from_sensor_log(samples.sensors[ends])
+    return EpisodeResult(_cut_windows(samples.features, starts), not math.isnan(fall_t), fall_t, steps, p, filtered,
+                         filter_failures, filter_mu, wall_s, y=samples.trunk_friction[ends].astype(np.float32),
+                         y_foot=terrain.friction_under(feet["foot_pos_in_world"][..., :2]).astype(np.float32),
                          foot_loaded=feet["in_contact"], patch=patch)
 
 
@@ -357,31 +400,51 @@ def _draw_jobs(seed: int, counts: dict[str, int], train_r: Ranges, shifted_r: Ra
     return jobs
 
 
-def _run_jobs(jobs: list[Job], cfg: EpisodeConfig,
-              workers: int) -> tuple[list[EpisodeResult], float]:
-    """Run every job (in ``workers`` forked processes if > 1), printing the progress about every 5 % of the
+def _run_jobs(jobs: list[Job], cfg: EpisodeConfig, workers: int,
+              batch: int = 0) -> tuple[list[EpisodeResult], float]:
+    """Run every job (in ``workers`` forked processes if > 1; with ``batch`` > 0 the nominal ones ``batch`` at a
+    time on ``workers`` threads, :mod:`estimators.collect_batch`), printing the progress about every 5 % of the
     episodes; returns the results in job order and the wall time [s]."""
     t0 = time.perf_counter()
+    every = max(1, len(jobs) // 20)
+    shown = [0]
+
+    def progress(n_done: int) -> None:
+        if n_done // every > shown[0] // every or n_done == len(jobs):
+            el = time.perf_counter() - t0
+            print(f"  {n_done}/{len(jobs)} episodes, {el:.0f} s, "
+                  f"eta {el / max(n_done, 1) * (len(jobs) - n_done):.0f} s", flush=True)
+        shown[0] = n_done
+
+    if batch:
+        from estimators.collect_batch import run_jobs_batched  # it imports this module
+
+        def loop(rest: list[Job]) -> list[EpisodeResult]:
+            return _run_loop(rest, cfg, workers, lambda n: progress(len(jobs) - len(rest) + n))
+
+        results = run_jobs_batched(jobs, cfg, batch, workers, loop, progress)
+    else:
+        results = _run_loop(jobs, cfg, workers, progress)
+    return results, time.perf_counter() - t0
+
+
+def _run_loop(jobs: list[Job], cfg: EpisodeConfig, workers: int,
+              progress: Callable[[int], None]) -> list[EpisodeResult]:
+    """The jobs in the episode loop (in ``workers`` forked processes if > 1), in job order; ``progress(n)`` after
+    each with the number done."""
     args = [(p, cfg, f, s, patch) for _, p, f, s, patch in jobs]
     results: list[EpisodeResult] = []
-    every = max(1, len(args) // 20)
-
-    def progress(r: EpisodeResult) -> None:
-        results.append(r)
-        if len(results) % every == 0 or len(results) == len(args):
-            el = time.perf_counter() - t0
-            print(f"  {len(results)}/{len(args)} episodes, {el:.0f} s, "
-                  f"eta {el / len(results) * (len(args) - len(results)):.0f} s", flush=True)
-
     if workers <= 1:
         for a in args:
-            progress(_run(a))
-    else:
-        ctx = mp.get_context("fork")
-        with ctx.Pool(workers) as pool:
-            for r in pool.imap(_run, args, chunksize=2):  # imap keeps the job order
-                progress(r)
-    return results, time.perf_counter() - t0
+            results.append(_run(a))
+            progress(len(results))
+        return results
+    ctx = mp.get_context("fork")
+    with ctx.Pool(workers) as pool:
+        for r in pool.imap(_run, args, chunksize=2):  # imap keeps the job order
+            results.append(r)
+            progress(len(results))
+    return results
 
 
 def _cost_by_kind(results: list[EpisodeResult]) -> dict[str, object]:
@@ -507,6 +570,7 @@ def collect(
     friction_range: tuple[float, float] | None = None,
     patch_fraction: float = 0.0,
     patch_ranges: PatchRanges = PATCH_RANGES,
+    batch: int = 0,
 ) -> dict[str, object]:
     """Run all splits, write ``<split>.npz`` (X, y, episode, params, filtered, window_filtered) and
     ``manifest.json`` into ``out_dir``. ``filter_fraction`` [-]: probability that an episode runs with the
@@ -521,17 +585,23 @@ def collect(
     of every split from U(lo, hi) instead of the training range (e.g. low-friction evaluation sets; the same
     random stream, so only the friction values change); ``patch_fraction`` [-]: probability that an episode's
     floor has a strip of other friction across the path (drawn from ``patch_ranges``, a stream of its own:
-    drops and rises; labels per window under the trunk and under each foot)."""
+    drops and rises; labels per window under the trunk and under each foot); ``batch`` > 0: the nominal episodes
+    run ``batch`` at a time through the core's batched rollout on ``workers`` threads
+    (:mod:`estimators.collect_batch`; the same arrays as the episode loop's), the filtered ones in the loop."""
+    if batch < 0:
+        raise ValueError(f"batch must be >= 0 (0: the episode loop; N: N nominal episodes stepped together), "
+                         f"got {batch!r}")
     filters = _FilterDraws.checked(filter_fraction, filter_mu_scale, filter_mu_range)
     patches = _PatchDraws.checked(patch_fraction, patch_ranges)
     _check_splits(counts)
     train_r, shifted_r, friction_range = _split_ranges(shift_factors, friction_range)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = _draw_jobs(seed, counts, train_r, shifted_r, plant_beta, filters, patches)
-    results, wall = _run_jobs(jobs, cfg, workers)
+    results, wall = _run_jobs(jobs, cfg, workers, batch)
     manifest = _build_manifest(seed, workers, cfg, (train_r, shifted_r), shift_factors, results, wall,
                                filters, friction_range, plant_beta)
     manifest.update(patches.manifest_fields())
+    manifest["batch"] = batch  # nominal episodes stepped together (0: the episode loop in worker processes)
     for split in _SPLITS:
         rs = [r for job, r in zip(jobs, results, strict=True) if job[0] == split]
         if not rs:
@@ -576,6 +646,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="patch length log-uniform in [LO, HI] [m]")
     ap.add_argument("--patch-friction", type=float, nargs=2, default=list(PATCH_RANGES.friction),
                     metavar=("LO", "HI"), help="patch friction ~ U(LO, HI), at least 0.15 away from the floor's")
+    ap.add_argument("--batch", type=int, default=0, metavar="N",
+                    help="step N nominal episodes together (mujoco.batch on --workers threads; filtered episodes "
+                         "still run one by one); 0: every episode in the episode loop")
     ap.add_argument("--filter-overrides", nargs="*", default=[],
                     help="Hydra overrides of the project config for the filter, e.g. solver=daqp")
     return ap
@@ -584,7 +657,8 @@ def _parser() -> argparse.ArgumentParser:
 def _print_summary(man: dict[str, object], out: Path, workers: int) -> None:
     """Print the throughput (env-steps/s, against the paper's), the per-kind cost and the split counts."""
     rate = man["env_steps_per_s"]
-    print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {workers} workers")
+    how = f"{workers} workers" if not man.get("batch") else f"batches of {man['batch']} on {workers} threads"
+    print(f"collected {man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s with {how}")
     print(f"throughput {rate:,.0f} env-steps/s  vs paper {PAPER_STEPS_PER_S:,} (RTX 3080, 4096 robots): "
           f"{rate / PAPER_STEPS_PER_S:.2f}x")
     per = man["env_steps_per_s_per_worker"]  # type: ignore[index]
@@ -610,7 +684,8 @@ def main(argv: list[str] | None = None) -> None:
                   shift_factors=tuple(a.shift_factors),
                   friction_range=None if a.friction_range is None else tuple(a.friction_range),
                   patch_fraction=a.patch_fraction,
-                  patch_ranges=PatchRanges(tuple(a.patch_start), tuple(a.patch_length), tuple(a.patch_friction)))
+                  patch_ranges=PatchRanges(tuple(a.patch_start), tuple(a.patch_length), tuple(a.patch_friction)),
+                  batch=a.batch)
     _print_summary(man, a.out, a.workers)
 
 

@@ -1,5 +1,5 @@
 """Collection throughput of nominal episodes (``python -m studies.estimator_collect_speed [--episodes N]
-[--workers W] [--windows FILE] [--compare FILE]``).
+[--workers W] [--batch B] [--windows FILE] [--compare FILE]``).
 
 Prints env-steps/s (physics steps per wall second, all workers, and per worker) of ``estimators.collect`` on
 N nominal training episodes (seed 0, no filter, 5 s each) and the machine's load before and after; a printed
@@ -26,16 +26,18 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--episodes", type=int, default=200)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--patch-fraction", type=float, default=0.0)
+    ap.add_argument("--batch", type=int, default=0, help="episodes stepped together (0: the episode loop)")
     ap.add_argument("--windows", type=Path, help="keep the collected train.npz here")
     ap.add_argument("--compare", type=Path, help="a train.npz of the same command from another checkout")
     a = ap.parse_args(argv)
     print(f"cpus {os.cpu_count()}, load before {os.getloadavg()[0]:.2f}")
     with tempfile.TemporaryDirectory() as tmp:
         man = collect(Path(tmp), {"train": a.episodes}, seed=0, workers=a.workers, cfg=EpisodeConfig(),
-                      patch_fraction=a.patch_fraction)
+                      patch_fraction=a.patch_fraction, batch=a.batch)
         print(f"{man['env_steps']:,} env steps in {man['wall_time_s']:.1f} s -> {man['env_steps_per_s']:,.0f} "
-              f"env-steps/s with {a.workers} workers ({man['env_steps_per_s_per_worker']['nominal']:,.0f} per "
-              f"worker); load after {os.getloadavg()[0]:.2f}", flush=True)
+              f"env-steps/s with {a.workers} {'threads, batches of ' + str(a.batch) if a.batch else 'workers'} "
+              f"({man['env_steps_per_s_per_worker']['nominal']:,.0f} per worker); load after {os.getloadavg()[0]:.2f}",
+              flush=True)
         if a.windows is not None:
             shutil.copy(Path(tmp) / "train.npz", a.windows)
         if a.compare is not None:

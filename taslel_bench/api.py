@@ -14,6 +14,8 @@ run as in a benchmark run.
     plant = api.build_plant(world)                        # compiled MuJoCo model
     episode = api.Episode(api.episode_settings(cfg), world, plant, controller, None, estimator, rng)
     result = episode.run()                                # result.trace, result.fell, result.time_to_fall_s
+    batch = api.BatchRollout(settings, [api.BatchEnv(world, plant, controller, rng), ...], nthread=2)
+    batch.run()                                           # the same nominal episodes (no filter), stepped together
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from taslel_bench.robot import leg_chain
 from taslel_bench.robot.description import RobotDescription, load_robot
 from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.robot.model import RobotModel
+from taslel_bench.sim.batch import BatchEnv, BatchResult, BatchRollout
 from taslel_bench.sim.build import build_plant
 from taslel_bench.sim.episode import Episode, EpisodeSettings
 from taslel_bench.sim.observers import FilterQPs
@@ -48,6 +51,9 @@ from taslel_bench.sim.world import StaticWorld
 from taslel_bench.util.machine import machine_info
 
 __all__ = [
+    "BatchEnv",
+    "BatchResult",
+    "BatchRollout",
     "Episode",
     "EpisodeResult",
     "EpisodeSettings",

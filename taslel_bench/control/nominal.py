@@ -68,6 +68,11 @@ class NominalController:
         self._stand_state: ContactPlan | None = None  # gait state while standing (all feet in stance)
         self.use_tables = True  # False: compute every tick's references afresh (tests compare the two)
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickling: q_des and qd_des are views of the references again (pickle copies them apart)."""
+        self.__dict__.update(state)
+        self.q_des, self.qd_des = self._references
+
     @property
     def stand_height_m(self) -> float:
         """[m] hip joint -> foot centre in the stand and in stance."""
@@ -134,26 +139,36 @@ class NominalController:
         if not self.use_tables:
             self._compute_references(t)
             return
-        if self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0:  # standing: constant references
+        if self._standing(t):  # constant references
             if self._stand_q is None:
                 self._compute_references(t)
                 self._stand_q = self.q_des.copy()
             self.q_des[:] = self._stand_q
             self.qd_des[:] = 0.0
             return
-        if self._period_ticks:
-            x = self.gait_time(t) / self.fd_dt_s
-            j = round(x)
-            if j >= 1 and abs(x - j) < 1e-6:
-                row = j % self._period_ticks
-                if self._table_filled[row]:
-                    self._references[:] = self._table[row]  # (q_des, qd_des)
-                    return
-                self._compute_references(t)
-                self._table[row] = self._references
-                self._table_filled[row] = True
+        row = self._table_row(t)
+        if row >= 0:
+            if self._table_filled[row]:
+                self._references[:] = self._table[row]  # (q_des, qd_des)
                 return
+            self._compute_references(t)
+            self._table[row] = self._references
+            self._table_filled[row] = True
+            return
         self._compute_references(t)
+
+    def _standing(self, t: float) -> bool:
+        """Episode time ``t`` [s] gets the stand's references (half a tick before walking starts, or earlier)."""
+        return self.gait_time(t + 0.5 * self.fd_dt_s) < 0.0
+
+    def _table_row(self, t: float) -> int:
+        """The row of the per-period table that walking episode time ``t`` [s] reads or fills: gait time on the
+        ``fd_dt_s`` grid, at least one tick after walking starts; -1 for any other time (computed afresh)."""
+        if not self._period_ticks:
+            return -1
+        x = self.gait_time(t) / self.fd_dt_s
+        j = round(x)
+        return j % self._period_ticks if j >= 1 and abs(x - j) < 1e-6 else -1
 
     def _compute_references(self, t: float) -> None:
         h = 0.5 * self.fd_dt_s
@@ -166,6 +181,35 @@ class NominalController:
         self.qd_des[:] = after
         self.qd_des -= before
         self.qd_des *= 1.0 / self.fd_dt_s
+
+    def reference_timeline(self, n_ticks: int, control_dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The references (q_des [rad], qd_des [rad/s], core order) :meth:`compute` uses on the ticks k = 0 ..
+        ``n_ticks`` - 1 of one episode (episode time k x ``control_dt_s`` [s]), as (rows (n_rows, 2, 12), index
+        (n_ticks,) int32): tick k uses ``rows[index[k]]``. Made by the same :meth:`update_references` calls, from
+        this controller's state, as an episode's loop makes (so the controller is left as that loop leaves it).
+        Once the per-period table is full, every later tick (when ticks are ``fd_dt_s`` apart) only looks a row up:
+        the references then repeat every period and are indexed, not recomputed; a tick whose references equal
+        the previous tick's (the stand) reuses its row."""
+        if n_ticks < 0 or not control_dt_s > 0.0:
+            raise ValueError(f"reference_timeline: n_ticks must be >= 0 and control_dt_s > 0 [s], got {n_ticks!r}, "
+                             f"{control_dt_s!r}")
+        period = self._period_ticks if self.use_tables and control_dt_s == self.fd_dt_s else 0
+        rows: list[np.ndarray] = []
+        index = np.empty(n_ticks, np.int32)
+        for k in range(n_ticks):
+            past_fill = period and k >= period and self._table_filled.all()
+            if past_fill and self._table_row((k - period) * control_dt_s) >= 0:
+                # tick k - period and every later tick read the full table: the references repeat every period
+                index[k:] = index[k - period + np.arange(n_ticks - k) % period]
+                break
+            if k and self.use_tables and self._stand_q is not None and self._standing(k * control_dt_s):
+                index[k] = index[k - 1]  # the stand's references again (update_references would copy them)
+                continue
+            self.update_references(k * control_dt_s)
+            if not rows or rows[-1].tobytes() != self._references.tobytes():  # bitwise (0.0 and -0.0 differ)
+                rows.append(self._references.copy())
+            index[k] = len(rows) - 1
+        return np.array(rows).reshape(-1, 2, quad.N_JOINTS), index
 
     def reset(self) -> None:
         """A new episode (the references are periodic tables: nothing to forget)."""
@@ -181,3 +225,12 @@ def _pd(references, q, qd, kp, kd, limit, u):
     ``limit`` (12,) per joint."""
     for j in range(u.shape[0]):
         u[j] = min(max(kp * (references[0, j] - q[j]) + kd * (references[1, j] - qd[j]), -limit[j]), limit[j])
+
+
+@kernel
+def pd_rows(references, index, q, qd, kp, kd, limit, ids, u):
+    """:func:`_pd` for each environment i of ``ids`` in a batch (the same compiled law, so the same torques as its
+    own controller): u[i] [N·m] from the references ``references[index[i]]`` (2, 12), the joint state q[i], qd[i]
+    [rad, rad/s], the gains kp[i], kd[i] and the limits limit[i] (12,) [N·m]."""
+    for i in ids:
+        _pd(references[index[i]], q[i], qd[i], kp[i], kd[i], limit[i], u[i])

@@ -37,9 +37,15 @@ class NominalControl(Protocol):
 
     robot: RobotDescription
     stand_duration_s: float  # [s] the initial stand before walking
-    stand_height_m: float  # [m] hip joint -> foot centre in the stand configuration
-    commanded_speed_mps: float  # [m/s] the forward speed it is asked for (0: standing)
-    stance_swing_s: tuple[float, float]  # [s] the stance and swing durations it plans (or expects)
+
+    @property
+    def stand_height_m(self) -> float: ...  # [m] hip joint -> foot centre in the stand configuration
+
+    @property
+    def commanded_speed_mps(self) -> float: ...  # [m/s] the forward speed it is asked for (0: standing)
+
+    @property
+    def stance_swing_s(self) -> tuple[float, float]: ...  # [s] the stance and swing durations it plans (or expects)
 
     def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
                 base_pose: np.ndarray | None = None) -> np.ndarray: ...

@@ -30,7 +30,15 @@ import numpy as np
 from taslel_bench.control.plan import NominalControl
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
-from taslel_bench.interfaces import Estimator, FrictionEstimate, GroundTruth, ImuSample, Proprioception, Scenario
+from taslel_bench.interfaces import (
+    Estimator,
+    FrictionEstimate,
+    GroundTruth,
+    ImuSample,
+    Proprioception,
+    Scenario,
+    Terrain,
+)
 from taslel_bench.metrics import residuals
 from taslel_bench.metrics.residuals import ResidualSetup
 from taslel_bench.plant.bridge import StateBridge
@@ -137,27 +145,9 @@ class Episode:
 
     # ------------------------------------------------------------------------------------ initial state
     def _draw_initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """MuJoCo (qpos, qvel) of the stand pose perturbed by the seeded rng (drawn once per episode): joint
-        angles + N(0, init_joint_noise_rad), trunk linear velocity + N(0, init_base_vel_noise_mps) [world
-        axes], trunk height set so the lowest foot-sphere bottom is INITIAL_PENETRATION_M below the terrain
-        under it."""
-        s, m, d = self.s, self.m, self.d
-        q = np.zeros(quad.NQ)
-        q[6] = 1.0
-        q[2] = self.controller.stand_height_m + self.model.robot.foot_radius_m
-        q[7:] = self.controller.stand_configuration() + self.rng.normal(0.0, s.init_joint_noise_rad, 12)
-        v = np.zeros(quad.NV)
-        v[:3] = self.rng.normal(0.0, s.init_base_vel_noise_mps, 3)
-        mujoco.mj_resetData(m, d)
-        self.bridge.qpos_mj(q, d.qpos)
-        mujoco.mj_kinematics(m, d)
-        feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
-        ground = np.array([self.terrain.height_at(x, y) for x, y in d.geom_xpos[feet, :2]])
-        lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0] - ground))
-        q[2] -= lowest_bottom + INITIAL_PENETRATION_M
-        self.bridge.qpos_mj(q, d.qpos)
-        self.bridge.qvel_mj(q, v, d.qvel)
-        return d.qpos.copy(), d.qvel.copy()
+        """MuJoCo (qpos, qvel) of the episode's initial state (:func:`draw_initial_state`, drawn once per episode)."""
+        return draw_initial_state(self.m, self.d, self.bridge, self.controller, self.model.robot.foot_radius_m,
+                                  self.terrain, self.s, self.rng)
 
     def initial_state(self) -> None:
         """Reset the plant to the episode's initial state (the same one every time)."""
@@ -444,6 +434,31 @@ class Episode:
         except Exception:  # a metric must not lose the run: note it
             self._residuals_error = traceback.format_exc().strip().splitlines()[-1]
         self._clock["residuals_s"] += time.perf_counter() - t0
+
+
+def draw_initial_state(m: mujoco.MjModel, d: mujoco.MjData, bridge: StateBridge, controller: NominalControl,
+                       foot_radius_m: float, terrain: Terrain, settings: EpisodeSettings,
+                       rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo (qpos, qvel) of the controller's stand pose perturbed by ``rng``: joint angles +
+    N(0, ``settings.init_joint_noise_rad``) [rad], trunk linear velocity + N(0, ``init_base_vel_noise_mps``) [m/s,
+    world axes], trunk height set so that the lowest foot-sphere bottom (spheres of ``foot_radius_m`` [m]) is
+    :data:`INITIAL_PENETRATION_M` below the ``terrain`` under it. ``d`` (an MjData of ``m``'s layout) is scratch."""
+    q = np.zeros(quad.NQ)
+    q[6] = 1.0
+    q[2] = controller.stand_height_m + foot_radius_m
+    q[7:] = controller.stand_configuration() + rng.normal(0.0, settings.init_joint_noise_rad, 12)
+    v = np.zeros(quad.NV)
+    v[:3] = rng.normal(0.0, settings.init_base_vel_noise_mps, 3)
+    mujoco.mj_resetData(m, d)
+    bridge.qpos_mj(q, d.qpos)
+    mujoco.mj_kinematics(m, d)
+    feet = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f) for f in quad.FOOT_FRAMES]
+    ground = np.array([terrain.height_at(x, y) for x, y in d.geom_xpos[feet, :2]])
+    lowest_bottom = float(np.min(d.geom_xpos[feet, 2] - m.geom_size[feet, 0] - ground))
+    q[2] -= lowest_bottom + INITIAL_PENETRATION_M
+    bridge.qpos_mj(q, d.qpos)
+    bridge.qvel_mj(q, v, d.qvel)
+    return d.qpos.copy(), d.qvel.copy()
 
 
 _NOOP_OPS = ("RESUME", "NOP", "LOAD_CONST", "RETURN_VALUE", "RETURN_CONST")

@@ -59,21 +59,40 @@ class Terminations:
         Also updates the contact reader's non-foot contact flags (unless the trunk term ended the episode)."""
         contacts = self.contacts
         term = _step_term(qpos, self.a, self._height_m, self._cos_tilt_min, contacts.sensordata_of(data),
-                          self._found_rows, data.ncon)  # one compiled call  # fmt: skip
+                         self._found_rows, data.ncon)  # one compiled call  # fmt: skip
         if term == _NONE:
             contacts.clear_non_foot_contacts()
             return None
+        return self.fall_of(term, qpos, data, t_s)
+
+    def fall_of(self, term: int, qpos: np.ndarray, data: mujoco.MjData | None, t_s: float) -> Fall | None:
+        """The fall that :func:`_step_term`'s code ``term`` (not _NONE) means for the state ``qpos`` a physics
+        step produced at episode time ``t_s`` [s] (None: only shins touch); ``data`` holds the contacts of the step's
+        starting state (MuJoCo's after ``mj_step``), read only for :data:`READS_CONTACTS` (None for the others)."""
+        contacts = self.contacts
         if term == _HEIGHT:
             z = qpos[self.a + 2]
             return Fall("trunk_height", f"trunk height {z:.3f} m < {self.rule.height_m} m", t_s)
         if term == _TILT:
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, _cos_tilt(qpos, self.a)))))
             return Fall("trunk_tilt", f"trunk tilt {tilt:.0f} deg", t_s)
+        if data is None:
+            raise ValueError("Terminations.fall_of: the contacts term needs data with the step's starting contacts")
         contacts.classify_other_contacts(data)  # term == _OTHER_CONTACTS: of the step's starting state
         if contacts.body_contact:
             name = contacts.non_foot_contact_name
             return Fall("body_contact", f"{name} (above the knee) touched the terrain", t_s - self.dt)
         return None
+
+    def after_steps(self, qpos: np.ndarray, ids: np.ndarray, sensordata: np.ndarray, ncon: np.ndarray,
+                    out: np.ndarray) -> None:
+        """:meth:`after_step`'s compiled test for the simulations ``ids`` of a batch (rows of ``qpos``, ``sensordata``,
+        ``ncon``): ``out[j]`` = the term code of ``ids[j]``, 0 for none; a non-zero code goes to :meth:`fall_of`."""
+        step_terms(qpos, ids, self.a, self._height_m, self._cos_tilt_min, sensordata, self._found_rows, ncon, out)
+
+    def states_ok(self, qpos: np.ndarray, qvel: np.ndarray, ids: np.ndarray, out: np.ndarray) -> None:
+        """``out[j]`` = not :meth:`state_is_bad` for the simulation ``ids[j]`` of a batch (rows of qpos and qvel)."""
+        states_ok(qpos, qvel, ids, self._vmax_sq, out)
 
     def state_is_bad(self, qpos: np.ndarray, qvel: np.ndarray) -> bool:
         """NaN/inf anywhere in the state or a speed beyond the bound (one dot product each)."""
@@ -85,6 +104,7 @@ class Terminations:
 
 
 _NONE, _HEIGHT, _TILT, _OTHER_CONTACTS = 0, 1, 2, 3  # what _trunk_term / _step_term found
+READS_CONTACTS = _OTHER_CONTACTS  # the term code whose fall (:meth:`Terminations.fall_of`) reads the contact list
 
 
 @kernel
@@ -124,3 +144,19 @@ def _state_ok(qpos, qvel, vmax_sq):  # pragma: no cover - compiled
     for x in qpos:
         acc += x * 0.0
     return v2 < vmax_sq and acc == 0.0
+
+
+@kernel
+def step_terms(qpos, ids, a, height_m, cos_tilt_min, sensordata, found_rows, ncon, out):  # pragma: no cover - compiled
+    """:func:`_step_term` of each simulation ``ids[i]`` of a batch (rows of ``qpos``, ``sensordata``, ``ncon``) into
+    ``out[i]``: the same compiled test as one episode's."""
+    for i in range(ids.shape[0]):
+        s = ids[i]
+        out[i] = _step_term(qpos[s], a, height_m, cos_tilt_min, sensordata[s], found_rows, ncon[s])
+
+
+@kernel
+def states_ok(qpos, qvel, ids, vmax_sq, out):  # pragma: no cover - compiled
+    """:func:`_state_ok` of each simulation ``ids[i]`` of a batch (rows of ``qpos`` and ``qvel``) into ``out[i]``."""
+    for i in range(ids.shape[0]):
+        out[i] = _state_ok(qpos[ids[i]], qvel[ids[i]], vmax_sq)
