@@ -53,8 +53,8 @@ def test_a_run_records_its_cpu_share_and_each_solves_thread_cpu_time(tmp_path):
     solved = steps[steps["qp_status"] >= 0]
     assert len(solved) > 100 and np.isfinite(solved["qp_solve_cpu_us"]).all() and (solved["qp_solve_cpu_us"] > 0).all()
     # the thread's CPU time covers the backend call, its wall timer the solve inside it: the CPU time stays within
-    # the wall time + 5 µs but for rare solves where work between the two clocks' readings (a garbage collection)
-    # lands on the CPU side: measured on a quiet machine, 1 of 9,600 solves (12 runs) was 64 µs above
+    # the wall time + 5 µs but for rare solves (cause not identified; work between the two clocks' readings is one
+    # candidate): measured on a quiet machine, 1 of 9,600 solves (12 runs) was 64 µs above
     above = solved["qp_solve_cpu_us"] > solved["qp_solve_us"] + 5.0
     assert above.mean() <= 0.01, solved[above]
     assert solved["qp_setup"].iloc[0] and 1 <= solved["qp_setup"].sum() <= 3  # the persistent solver's builds
