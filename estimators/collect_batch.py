@@ -5,20 +5,24 @@ of each, bit for bit (``tests/test_batch_rollout.py``). Filtered episodes are no
 update and QP run per episode and per tick): they run in the episode loop as before.
 
 Episodes with a surface patch have another plant layout (floor strips instead of one plane) than those without,
-so the two kinds are batched apart. An episode's ``wall_s`` is its share of its batch's CPU time (batch wall time x
-threads / episodes), so the manifest's per-worker rate is per thread.
+so the two kinds are batched apart. A batch's parts (plants, controllers and their references: the serial part of its
+cost) are built in worker processes, one per thread, then stepped together. An episode's ``wall_s`` is its share
+of its batch's CPU time (batch wall time x threads / episodes), so the manifest's per-worker rate is per thread.
 """
 
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 import time
 from collections.abc import Callable
+from multiprocessing.pool import Pool
 
 import numpy as np
 
 from estimators.collect import (
     EpisodeConfig,
+    EpisodeParts,
     EpisodeResult,
     Job,
     _episode_result,
@@ -30,16 +34,27 @@ from estimators.randomisation import EpisodeParams, SurfacePatch
 from taslel_bench import api
 
 
-def run_batch(jobs: list[tuple[EpisodeParams, SurfacePatch | None]], cfg: EpisodeConfig,
-              nthread: int) -> list[EpisodeResult]:
+def ready_parts(args: tuple[EpisodeParams, EpisodeConfig, SurfacePatch | None]) -> EpisodeParts:
+    """One episode's parts (draw, config, patch) with its controller's references made for the whole episode (its
+    per-period table filled: the batch then only looks them up); run in a worker process, the parts pickled back."""
+    p, cfg, patch = args
+    parts = episode_parts(p, cfg, patch)
+    parts.controller.reference_timeline(round(cfg.duration_s / cfg.timestep_s), cfg.timestep_s)
+    return parts
+
+
+def run_batch(jobs: list[tuple[EpisodeParams, SurfacePatch | None]], cfg: EpisodeConfig, nthread: int,
+              pool: Pool | None = None) -> list[EpisodeResult]:
     """The nominal episodes of ``jobs`` (draw, patch or None; all with a patch or all without) stepped together on
-    ``nthread`` threads; their results in job order, equal to :func:`estimators.collect.run_episode`'s."""
+    ``nthread`` threads, their parts built in ``pool``'s processes (None: here); their results in job order, equal
+    to :func:`estimators.collect.run_episode`'s."""
     if not jobs:
         return []
     if len({patch is None for _, patch in jobs}) > 1:
         raise ValueError("run_batch: jobs mix episodes with and without a patch (two plant layouts); batch them apart")
     wall0 = time.perf_counter()
-    parts = [episode_parts(p, cfg, patch) for p, patch in jobs]
+    args = [(p, cfg, patch) for p, patch in jobs]
+    parts = [ready_parts(a) for a in args] if pool is None else pool.map(ready_parts, args)
     envs = [api.BatchEnv(x.world, x.plant, x.controller, x.rng) for x in parts]
     rollout = api.BatchRollout(parts[0].settings, envs, nthread=nthread,
                                sample_every_ticks=round(WINDOW_DT_S / cfg.timestep_s))
@@ -64,20 +79,20 @@ def run_jobs_batched(jobs: list[Job], cfg: EpisodeConfig, batch: int, nthread: i
                      run_loop: Callable[[list[Job]], list[EpisodeResult]],
                      progress: Callable[[int], None]) -> list[EpisodeResult]:
     """Every job, in job order: the nominal ones ``batch`` at a time on ``nthread`` threads (with and without a
-    patch apart), the filtered ones through ``run_loop`` (the episode loop); ``progress(n)`` after each batch
-    with the episodes done so far."""
+    patch apart; each batch's parts built in ``nthread`` worker processes first), the filtered ones through
+    ``run_loop`` (the episode loop); ``progress(n)`` after each batch with the episodes done so far."""
     if batch < 1:
         raise ValueError(f"batch must be >= 1 (episodes stepped together), got {batch!r}")
     results: dict[int, EpisodeResult] = {}
     nominal = [i for i, job in enumerate(jobs) if not job[2]]
-    for with_patch in (False, True):
-        kind = [i for i in nominal if (jobs[i][4] is not None) == with_patch]
-        for start in range(0, len(kind), batch):
-            chunk = kind[start : start + batch]
-            for i, r in zip(chunk, run_batch([(jobs[i][1], jobs[i][4]) for i in chunk], cfg, nthread), strict=True):
-                results[i] = r
-            progress(len(results))
+    with mp.get_context("fork").Pool(max(1, nthread)) as pool:
+        for with_patch in (False, True):
+            kind = [i for i in nominal if (jobs[i][4] is not None) == with_patch]
+            for start in range(0, len(kind), batch):
+                chunk = kind[start : start + batch]
+                done = run_batch([(jobs[i][1], jobs[i][4]) for i in chunk], cfg, nthread, pool)
+                results.update(zip(chunk, done, strict=True))
+                progress(len(results))
     filtered = [i for i, job in enumerate(jobs) if job[2]]
-    for i, r in zip(filtered, run_loop([jobs[i] for i in filtered]), strict=True):
-        results[i] = r
+    results.update(zip(filtered, run_loop([jobs[i] for i in filtered]), strict=True))
     return [results[i] for i in range(len(jobs))]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import tempfile
 from pathlib import Path
@@ -31,6 +32,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--compare", type=Path, help="a train.npz of the same command from another checkout")
     a = ap.parse_args(argv)
     print(f"cpus {os.cpu_count()}, load before {os.getloadavg()[0]:.2f}")
+    cpu0 = _cpu_s()
     with tempfile.TemporaryDirectory() as tmp:
         man = collect(Path(tmp), {"train": a.episodes}, seed=0, workers=a.workers, cfg=EpisodeConfig(),
                       patch_fraction=a.patch_fraction, batch=a.batch)
@@ -38,12 +40,20 @@ def main(argv: list[str] | None = None) -> None:
               f"env-steps/s with {a.workers} {'threads, batches of ' + str(a.batch) if a.batch else 'workers'} "
               f"({man['env_steps_per_s_per_worker']['nominal']:,.0f} per worker); load after {os.getloadavg()[0]:.2f}",
               flush=True)
+        print(f"CPU {(_cpu_s() - cpu0) / man['env_steps'] * 1e6:.1f} µs per env step (every process and thread: "  # type: ignore[operator]
+              f"what the cores spent, whatever else ran)", flush=True)
         if a.windows is not None:
             shutil.copy(Path(tmp) / "train.npz", a.windows)
         if a.compare is not None:
             mine, other = np.load(Path(tmp) / "train.npz"), np.load(a.compare)
             same = set(mine.files) == set(other.files) and all(_same(mine[k], other[k]) for k in other.files)
             print(f"windows and labels identical to {a.compare}: {same}")
+
+
+def _cpu_s() -> float:
+    """[s] user + system CPU time of this process and its ended children."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
