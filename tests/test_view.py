@@ -272,8 +272,9 @@ def _logs_in_view_px(model, data, eye, page: tuple[int, int]) -> list[tuple[int,
 
 
 @pytest.mark.skipif(find_chromium() is None, reason="no Chromium on PATH (Debian: apt-get install -y chromium)")
-def test_in_headless_chromium_the_robot_is_drawn_where_the_camera_puts_it(run_dir, tmp_path):
-    servers = {name: _Server(run_dir, tmp_path / name, "--time", str(SHOW_S), *extra)
+def _screenshots(run_dir, folder) -> dict[str, np.ndarray]:
+    """The page of the run with the robot and with it hidden, each a settled screenshot (saved for a look)."""
+    servers = {name: _Server(run_dir, folder / name, "--time", str(SHOW_S), *extra)
                for name, extra in (("robot", ()), ("hidden", ("--hide-robot",)))}  # fmt: skip
     shots = {}
     try:
@@ -286,18 +287,32 @@ def test_in_headless_chromium_the_robot_is_drawn_where_the_camera_puts_it(run_di
     finally:
         codes = [server.stop() for server in servers.values()]
     for name, image in shots.items():  # kept for a look when the test fails
-        save_png(image, tmp_path / f"{name}.png")
+        save_png(image, folder / f"{name}.png")
     assert codes == [0, 0]
-    model, data, eye = _posed(run_dir)
-    x0, y0, x1, y1 = _robot_box_px(model, data, eye, PAGE)
-    assert 0 < x0 < x1 < PAGE[0] and 0 < y0 < y1 < PAGE[1] - STATUS_BAR_PX  # on the page, not cut off
+    return shots
+
+
+def _difference(shots, box) -> tuple[float, float]:
+    """Shares of pixels that differ between the two pages inside the robot's box and away from it."""
+    x0, y0, x1, y1 = box
     differs = np.abs(shots["robot"].astype(int) - shots["hidden"].astype(int)).max(axis=2) > PIXEL_DIFFERS
     differs = differs[:-STATUS_BAR_PX]
-    inside = differs[y0:y1, x0:x1].mean()
     mx, my = (x1 - x0) // 5, (y1 - y0) // 5  # a margin: shadows, anti-aliasing
     near = np.zeros_like(differs)
     near[max(y0 - my, 0):y1 + my, max(x0 - mx, 0):x1 + mx] = True
-    outside = differs[~near].mean()
+    return float(differs[y0:y1, x0:x1].mean()), float(differs[~near].mean())
+
+
+def test_in_headless_chromium_the_robot_is_drawn_where_the_camera_puts_it(run_dir, tmp_path):
+    model, data, eye = _posed(run_dir)
+    x0, y0, x1, y1 = _robot_box_px(model, data, eye, PAGE)
+    assert 0 < x0 < x1 < PAGE[0] and 0 < y0 < y1 < PAGE[1] - STATUS_BAR_PX  # on the page, not cut off
+    # a page caught before it settled differs everywhere: up to 3 pairs of screenshots, the last one judged
+    for attempt in range(3):
+        shots = _screenshots(run_dir, tmp_path / f"attempt{attempt}")
+        inside, outside = _difference(shots, (x0, y0, x1, y1))
+        if inside > 0.2 and outside < 0.002:
+            break
     assert inside > 0.2, f"the robot's box {x0, y0, x1, y1} differs from the empty scene on only {inside:.1%}"
     assert outside < 0.002, f"{outside:.2%} of the page outside the robot's box differs from the empty scene"
     logs = _logs_in_view_px(model, data, eye, PAGE)  # the run's terrain, seen from the recorded state
