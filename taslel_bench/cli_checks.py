@@ -154,27 +154,25 @@ def _values(override) -> list:
 def _check_typed_value(cfg, key: str, value) -> None:
     """Refuse ``key=value`` where the schema's field type refuses the value, with the field's range and unit (the
     text of :func:`taslel_bench.util.params.check_value`), else OmegaConf's own reason."""
+    import copy
     import dataclasses
 
-    from omegaconf import OmegaConf
+    from omegaconf import DictConfig, OmegaConf
     from omegaconf.errors import ValidationError
 
     from taslel_bench.util.fields import ConfigError
     from taslel_bench.util.params import check_value, schema_fields, spec_of
 
-    trial = OmegaConf.create(OmegaConf.to_container(cfg, resolve=False))
     parent_key, _, leaf = key.rpartition(".")
     parent = OmegaConf.select(cfg, parent_key) if parent_key else cfg
     schema = OmegaConf.get_type(parent) if parent is not None else None
+    if not (isinstance(parent, DictConfig) and isinstance(schema, type) and dataclasses.is_dataclass(schema)):
+        return  # a node without a schema (an axis, a free-form mapping): its own checks judge the value
     try:
-        typed = OmegaConf.merge(OmegaConf.structured(schema), OmegaConf.select(trial, parent_key) or {}) \
-            if dataclasses.is_dataclass(schema) else None
-        if typed is not None:
-            OmegaConf.update(typed, leaf, value, merge=True)
+        OmegaConf.update(copy.deepcopy(parent), leaf, value, merge=True)  # a copy of the typed node, on trial
         return
     except ValidationError as exc:
         reason = str(exc).splitlines()[0]
-    assert isinstance(schema, type)
     for field, tp, _optional in schema_fields(schema):
         if field.name == leaf:
             try:

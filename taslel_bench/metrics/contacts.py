@@ -24,7 +24,7 @@ terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mo
 from __future__ import annotations
 
 import math
-from typing import cast
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -130,7 +130,16 @@ class ContactStream:
         acc.mean(f"touchdown_slip_mps_mean{suffix}", slip_main[self.touchdowns(plant_loaded)])
         if tr.filter_on:
             assert normals is not None  # set above when the filter is on
-            _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix)
+            feet = PlantFeet(sliding=foot_edge & foot_loaded, loaded=plant_loaded)
+            _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix, feet)
+
+
+class PlantFeet(NamedTuple):
+    """(n, 4) per foot, from the plant: ``sliding``, its net force loaded and at the cone's edge
+    (:func:`_foot_cone_edge`); ``loaded``, at least one loaded contact."""
+
+    sliding: np.ndarray
+    loaded: np.ndarray
 
 
 FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank
@@ -155,7 +164,7 @@ def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[n
 
 def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray,
                    normals: np.ndarray, loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
-                   suffix: str) -> None:
+                   suffix: str, feet: PlantFeet) -> None:
     """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
     filter's planned force against the true cone about the terrain normal under the foot."""
     f = tr.grf_plant_w[ticks]  # [N] net force on each foot (foot sensor), world axes
@@ -172,19 +181,18 @@ def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray
     beyond = filter_loaded & (lam_t > tr.mu_foot[ticks] * lam_n * (1 + CONE_RTOL))
     acc.mean(f"filter_demand_beyond_cone_rate{suffix}", beyond[filter_loaded])
     acc.window(f"filter_demand_beyond_cone_rate_worst_window{suffix}", beyond, filter_loaded, window_ticks(dt))
-    _promises(acc, tr, ticks, filter_loaded & ~beyond, filter_loaded, dt, suffix)
+    _promises(acc, feet, filter_loaded & ~beyond, filter_loaded, dt, suffix)
 
 
-def _promises(acc: Reducer, tr: EpisodeTrace, ticks: slice, planned_inside: np.ndarray, filter_loaded: np.ndarray,
-              dt: float, suffix: str) -> None:
+def _promises(acc: Reducer, feet: PlantFeet, planned_inside: np.ndarray, filter_loaded: np.ndarray, dt: float,
+              suffix: str) -> None:
     """What the filter promised against what the plant did, per filter-loaded foot (the run's health,
     :mod:`taslel_bench.metrics.health`): ``filter_promise_cone_edge_rate`` -- the filter planned the foot's force
     inside the true cone and the plant's net force on the foot sits at the cone's edge (the foot slides although
     the plan said it sticks: a wrong model, contact or friction); ``filter_promise_stance_in_air_rate`` -- the
     filter loaded the foot and the plant foot carries no load (a planned stance foot in the air)."""
-    foot_edge, foot_loaded = _foot_cone_edge(tr, ticks, tr.contact_mu[ticks])
-    slid = planned_inside & foot_loaded & foot_edge
-    in_air = filter_loaded & ~(tr.contact_fn_n[ticks] >= MIN_NORMAL_FORCE_N).any(axis=2)
+    slid = planned_inside & feet.sliding
+    in_air = filter_loaded & ~feet.loaded
     for name, broken in (("cone_edge", slid), ("stance_in_air", in_air)):
         acc.mean(f"filter_promise_{name}_rate{suffix}", broken[filter_loaded])
         acc.window(f"filter_promise_{name}_rate_worst_window{suffix}", broken, filter_loaded, window_ticks(dt))
