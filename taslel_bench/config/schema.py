@@ -23,6 +23,8 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
 from taslel_bench.control.contact_estimate import ContactEstimateSettings
+from taslel_bench.control.contact_plan_estimate import PlanEstimateSettings
+from taslel_bench.control.policy import policy_controller
 from taslel_bench.control.trot import trot_controller
 from taslel_bench.filter.robust import RobustSettings
 from taslel_bench.filter.safety_filter import (
@@ -348,7 +350,38 @@ class TrotConfig:
                                     "ground, then descends over the stance's first 30 ms", unit="m", lo=0.0, hi=0.03)
 
 
-CONTROLLER_SCHEMAS: dict[str, type] = {TROT_TARGET: TrotConfig}  # a controller's _target_ -> its schema
+POLICY_TARGET = f"{policy_controller.__module__}.{policy_controller.__name__}"
+_PLAN = PlanEstimateSettings()
+
+
+@dataclass
+class PlanEstimateConfig:
+    """``controller.plan``: the contact plan estimated from joint torques, kinematics and the IMU (a policy has no
+    gait clock; :mod:`taslel_bench.control.contact_plan_estimate`)."""
+
+    touchdown_force_n: float = param(_PLAN.touchdown_force_n, "estimated vertical ground force above which a swing "
+                                     "foot has landed", unit="N", lo=0.0, lo_open=True, hi=1e4)
+    liftoff_force_n: float = param(_PLAN.liftoff_force_n, "below which a stance foot has lifted off (below "
+                                   "touchdown_force_n)", unit="N", lo=0.0, hi=1e4)
+    min_stance_s: float = param(_PLAN.min_stance_s, "shortest stance (debounce)", unit="s", lo=0.0, hi=1.0)
+    min_swing_s: float = param(_PLAN.min_swing_s, "shortest swing (debounce)", unit="s", lo=0.0, hi=1.0)
+
+
+@dataclass
+class PolicyControllerConfig:
+    """``controller=policy``: a learned policy (ONNX, run with onnxruntime) under its contract, the ``policy`` group
+    (``policy=<name>``, ``conf/policy/<name>.yaml``)."""
+
+    _target_: str = param(POLICY_TARGET, "the builder")
+    contract: Any = param("${policy}", "the policy's contract (the policy group's node)")
+    command: list[float] = param(factory=lambda: [0.5, 0.0, 0.0], doc="velocity command after the stand: forward "
+                                 "[m/s], lateral [m/s], yaw rate [rad/s]")
+    stand_duration: float = param(0.5, "initial stand (the policy runs with a zero command)", unit="s", lo=0.0,
+                                  hi=60.0)
+    plan: PlanEstimateConfig = param(factory=PlanEstimateConfig, doc="the estimated contact plan")
+
+
+CONTROLLER_SCHEMAS: dict[str, type] = {TROT_TARGET: TrotConfig, POLICY_TARGET: PolicyControllerConfig}
 
 
 # --------------------------------------------------------------------------------------------------- root
@@ -359,6 +392,7 @@ class RunConfig:
     robot: RobotConfig = param(MISSING, "the robot (conf/robot/<name>.yaml)")
     model: ModelConfig = param(factory=ModelConfig, doc="the controller's model of the robot")
     controller: Any = param(MISSING, "the nominal controller (conf/controller/)")
+    policy: Any = param(None, "a learned policy's contract (conf/policy/<name>.yaml), read by controller=policy")
     filter: FilterConfig = param(factory=FilterConfig, doc="the safety filter")
     scenario: Any = param(MISSING, "the world (conf/scenario/)")
     solver: Any = param(MISSING, "the QP backend (conf/solver/)")
@@ -408,6 +442,7 @@ def register() -> None:
     store = ConfigStore.instance()
     store.store(name=SCHEMA_NAME, node=RunConfig)
     store.store(group="schema/controller", name="trot", node=TrotConfig)
+    store.store(group="schema/controller", name="policy", node=PolicyControllerConfig)
 
 
 register()

@@ -23,16 +23,21 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 
+from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.config.model_file import model_values
-from taslel_bench.config.schema import CONTROLLER_SCHEMAS, TROT_TARGET, RunConfig
+from taslel_bench.config.schema import CONTROLLER_SCHEMAS, POLICY_TARGET, TROT_TARGET, RunConfig
+from taslel_bench.control.policy import OnnxPolicy
+from taslel_bench.control.policy_contract import contract_from_mapping
 from taslel_bench.control.gait import TrotScaling
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import RobotDescription, describe_robot
+from taslel_bench.robot.kinematics import LegKinematics
 from taslel_bench.util.fields import ConfigError, choice, fail, number, numbers, plain_dict
 from taslel_bench.util.params import check_fields
 
@@ -184,9 +189,43 @@ def _meaningful(cfg: DictConfig) -> None:
         raise fail("record.qps", True, "there is no QP to record with filter.enabled=false (set one of them)")
 
 
+def shipped_policies() -> list[str]:
+    """The policies of ``conf/policy/`` (their names)."""
+    return sorted(p.stem for p in (CONF_DIR / "policy").glob("*.yaml"))
+
+
+def _policy(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) -> float:
+    """``controller=policy``: the contract of the ``policy`` group (its keys, the robot, the rate, the ONNX file
+    and its sizes), the command and the plan's hysteresis; returns the stand height [m] of its default pose."""
+    if not isinstance(_get(cfg, "policy"), DictConfig):
+        raise fail("policy", _get(cfg, "policy"), "controller=policy needs a policy: policy=<name> of conf/policy/ "
+                   f"(shipped: {', '.join(shipped_policies()) or 'none'}); a policy of your own: "
+                   "docs/guides/policies.md")
+    where = f"policy={cfg.policy.get('name', '?')}"
+    contract = contract_from_mapping(plain_dict(cfg.policy, "policy"), where)
+    if contract.robot != robot.name:
+        raise fail("robot.name", robot.name, f"the policy {contract.name!r} was trained for robot "
+                   f"{contract.robot!r}: set robot={contract.robot}")
+    ticks = control_rate_hz / contract.rate_hz
+    if abs(ticks - round(ticks)) > 1e-9:
+        raise fail("control_rate_hz", control_rate_hz, f"must be a whole multiple of the policy's rate_hz="
+                   f"{contract.rate_hz:g} ({where})")
+    OnnxPolicy(contract, where)  # the file, its hash and its input and output sizes
+    numbers("controller.command", cfg.controller.command, -5.0, 5.0, length=3, unit="m/s, m/s, rad/s")
+    plan = cfg.controller.plan
+    if not float(plan.liftoff_force_n) < float(plan.touchdown_force_n):
+        raise fail("controller.plan.liftoff_force_n", plan.liftoff_force_n,
+                   f"must be below controller.plan.touchdown_force_n={plan.touchdown_force_n} [N] (the hysteresis)")
+    kin = LegKinematics(robot)
+    pose = np.asarray(contract.default_pose)[contract.core_from_policy]
+    return float(-np.mean([kin.leg_fk(i, pose[3 * i: 3 * i + 3])[2] for i in range(quad.N_LEGS)]))
+
+
 def _controller(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) -> float:
     """Trot parameters (null: the robot's, :class:`taslel_bench.control.gait.TrotScaling`); returns the stand
     height [m]."""
+    if _get(cfg, "controller._target_") == POLICY_TARGET:
+        return _policy(cfg, control_rate_hz, robot)
     if _get(cfg, "controller._target_") != TROT_TARGET:  # another controller checks its own arguments when built
         return robot.stand_height_m
     value = _trot_values(cfg, robot)

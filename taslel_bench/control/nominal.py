@@ -124,10 +124,10 @@ class NominalController:
     def _desired_list(self, t: float) -> list[float]:
         return self._legs_ik_list(self.gait.foot_targets_list(self.gait_time(t)))
 
-    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
-                base_pose: np.ndarray | None = None) -> np.ndarray:
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray, base_pose: np.ndarray | None = None,
+                base_velocity: np.ndarray | None = None, tau_applied: np.ndarray | None = None) -> np.ndarray:
         """Nominal torques [N·m] (12, core order) at episode time ``t`` [s] from joint state [rad, rad/s]
-        (``base_pose``, the trunk's, is not used: the paper's references are open loop)."""
+        (``base_pose``, ``base_velocity`` and ``tau_applied`` are not used: the paper's references are open loop)."""
         self.update_references(t)
         u = np.empty(quad.N_JOINTS)
         _pd(self._references, q_joints, qd_joints, self._kp, self._kd, self.torque_limit_nm, u)

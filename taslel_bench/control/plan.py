@@ -2,7 +2,8 @@
 
 The safety filter, the contact estimate, the metrics and the recordings read the plan the controller produced at
 each tick (recorded in the trace), never the controller's configuration. A controller with a gait clock (the trot)
-plans stance and swing from it; one without a clock (a learned policy) would plan them from a contact estimate.
+plans stance and swing from it; one without a clock (a learned policy) plans them from a contact estimate
+(:mod:`taslel_bench.control.contact_plan_estimate`).
 
 Arrays are in the core's leg order (:data:`taslel_bench.robot.quadruped.LEGS`).
 """
@@ -32,8 +33,10 @@ class ContactPlan:
 class NominalControl(Protocol):
     """A nominal controller as the episode uses it (the trot: :class:`taslel_bench.control.nominal.NominalController`).
 
-    ``compute`` gets the episode time [s], the joint angles [rad] and velocities [rad/s] in core order and the
-    trunk pose (position [m], quaternion xyzw; Pinocchio's), and returns the nominal torques [N·m] (12,)."""
+    ``compute`` gets the episode time [s], the joint angles [rad] and velocities [rad/s] in core order, the
+    trunk pose (position [m], quaternion xyzw; Pinocchio's), the trunk velocity (Pinocchio's: linear [m/s] and
+    angular [rad/s], trunk axes) and the torques applied on the previous tick [N·m], and returns the nominal torques
+    [N·m] (12,). It is called before :meth:`contact_plan` of the same tick."""
 
     robot: RobotDescription
     stand_duration_s: float  # [s] the initial stand before walking
@@ -47,8 +50,8 @@ class NominalControl(Protocol):
     @property
     def stance_swing_s(self) -> tuple[float, float]: ...  # [s] the stance and swing durations it plans (or expects)
 
-    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
-                base_pose: np.ndarray | None = None) -> np.ndarray: ...
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray, base_pose: np.ndarray | None = None,
+                base_velocity: np.ndarray | None = None, tau_applied: np.ndarray | None = None) -> np.ndarray: ...
 
     def contact_plan(self, t: float) -> ContactPlan: ...
 

@@ -105,10 +105,10 @@ class TerrainFollowingController(NominalController):
         self._replanned[:] = False
         self.sag_m = 0.0
 
-    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray,
-                base_pose: np.ndarray | None = None) -> np.ndarray:
+    def compute(self, t: float, q_joints: np.ndarray, qd_joints: np.ndarray, base_pose: np.ndarray | None = None,
+                base_velocity: np.ndarray | None = None, tau_applied: np.ndarray | None = None) -> np.ndarray:
         """Nominal torques [N·m] at episode time ``t`` [s]; ``base_pose`` = Pinocchio's first 7 coordinates
-        (trunk position [m, world], quaternion x, y, z, w)."""
+        (trunk position [m, world], quaternion x, y, z, w); the trunk velocity and applied torques are not used."""
         if base_pose is None:
             raise ValueError(_NEEDS_POSE)
         self._base_pose = base_pose

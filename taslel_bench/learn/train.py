@@ -26,6 +26,7 @@ import yaml
 from taslel_bench.control.policy_contract import contract_to_mapping, file_sha256
 from taslel_bench.learn.config import TrainingConfig
 from taslel_bench.learn.env import WalkingEnv
+from taslel_bench.learn.export import export_onnx
 from taslel_bench.util.machine import machine_info
 
 REPO = Path(__file__).resolve().parents[2]
@@ -114,19 +115,10 @@ def train(cfg: TrainingConfig, out: Path, conf_dir: Path) -> dict:
     train_s = time.perf_counter() - t_start
     out.mkdir(parents=True, exist_ok=True)
     policy = runner.get_inference_policy()
-    export_onnx(runner, out / "policy.onnx")
+    export_onnx(policy, out / "policy.onnx")
     torch.save(policy.state_dict(), out / "policy_torch.pt")
     gait = measure_gait(env, policy)
     return {"rows": rows, "train_s": train_s, "gait": gait, "env": env}
-
-
-def export_onnx(runner, path: Path) -> None:
-    """The deterministic actor (its observation normaliser included) as one self-contained ONNX file: input
-    ``obs`` (batch, obs_size) float32, output ``actions`` (batch, 12)."""
-    model = runner.alg.get_policy().as_onnx(verbose=False).to("cpu").eval()
-    torch.onnx.export(model, model.get_dummy_inputs(), str(path), export_params=True, opset_version=18,
-                      input_names=model.input_names, output_names=model.output_names,
-                      dynamic_axes={"obs": {0: "batch"}, "actions": {0: "batch"}}, external_data=False, dynamo=False)
 
 
 @torch.inference_mode()

@@ -172,7 +172,7 @@ class Episode:
             # contact flags (filter.stance_source=contact) writable: warm both
             for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
                 gs = self.controller.contact_plan(t)
-                u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose)
+                u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose, self._base_velocity, self._tau_prev)
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
                 results.append(self.filter.filter(inputs, u_nom))
@@ -276,6 +276,7 @@ class Episode:
         self._q = np.zeros(quad.NQ)  # Pinocchio configuration, read from the plant every tick
         self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
         self._v = np.zeros(quad.NV)  # Pinocchio velocity (trunk linear velocity in trunk axes)
+        self._base_velocity = self._v[:6]  # its trunk velocity (a view): the controller's base_velocity
         self._q_joints, self._qd_joints = self._q[7:], self._v[6:]  # [rad], [rad/s] core order (views, made once)
         self._plant_rows = (self._qpos, self._qvel, self._sensordata)  # what the trace copies after each tick
         a = self.bridge.free_qadr
@@ -320,7 +321,7 @@ class Episode:
         self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, filter_mu=self._mu_filter_prev,
                                               imu=self._imu_sample())  # what the robot measures
         est = self.estimator.step(sensed) if self._truth_step is None else self._truth_step(sensed, truth)
-        u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose)
+        u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose, self._base_velocity, self._tau_prev)
         gs = self.controller.contact_plan(t)
         in_stance = self.stance.stance(gs, self.contacts)
         tick1 = time.perf_counter()
