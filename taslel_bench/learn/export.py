@@ -16,9 +16,9 @@ def export_onnx(actor, path: Path) -> None:
     """The deterministic ``actor`` (rsl_rl's MLPModel, its observation normaliser included) as one ONNX file:
     input ``obs`` (batch, obs_size) float32, output ``actions`` (batch, 12)."""
     model = actor.as_onnx(verbose=False).to("cpu").eval()
-    torch.onnx.export(model, model.get_dummy_inputs(), str(path), export_params=True, opset_version=18,
-                      input_names=model.input_names, output_names=model.output_names,
-                      dynamic_axes={"obs": {0: "batch"}, "actions": {0: "batch"}}, external_data=False, dynamo=False)
+    torch.onnx.export(model, model.get_dummy_inputs(), str(path), opset_version=18, input_names=model.input_names,
+                      output_names=model.output_names, dynamic_shapes=({0: torch.export.Dim("batch")},),
+                      external_data=False, verbose=False)
 
 
 def actor_model(ppo: PPOSettings, obs_size: int, n_actions: int = 12):
