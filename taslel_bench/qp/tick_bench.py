@@ -1,7 +1,7 @@
 """Per-tick cost and real-time factor of an episode, with a breakdown of the tick's parts.
 
     python -m taslel_bench.bench [--duration 5] [--solvers daqp,osqp,qpsolvers:osqp] [--scenario obstacle]
-                                 [--main osqp,clarabel]
+                                 [--main osqp,clarabel] [--controllers trot,policy]
 
 Prints, for the nominal-only loop and for the filter with each solver and formulation: median tick time,
 real-time factor, the median cost of each part of the tick measured inside the loop, the same parts
@@ -9,7 +9,8 @@ measured in isolation on the episode's final state, and the *sum-of-parts limit*
 loop would reach if a tick cost only the sum of its parts timed alone (mj_step x physics steps per tick,
 controller, Pinocchio update, contact check, QP build, QP solve), with the loop's factor as a share of it.
 Runs share one process and are reported side by side. A solver ``qpsolvers:<name>`` is the per-call route
-(``solver=qpsolvers solver.name=<name>``).
+(``solver=qpsolvers solver.name=<name>``). ``--controllers trot,policy`` runs every loop once per nominal
+controller (``policy``: the robot's shipped learned policy, ``controller=policy policy=<robot>_walk``).
 
 ``--main osqp,clarabel`` also runs the main command, ``python -m taslel_bench -m solver=osqp,clarabel`` (its
 default config: two 10 s runs as two parallel jobs sharing the cores), in a temporary sweep folder and reports
@@ -130,9 +131,11 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
     q, v = br.q_pin(d.qpos), br.v_pin(d.qpos, d.qvel)
     t = [e.controller.stand_duration_s + 1.0]
 
+    tau = np.zeros(12)
+
     def ctrl():
         t[0] += 1e-3
-        e.controller.compute(t[0], qj, qdj)
+        e.controller.compute(t[0], qj, qdj, q[:7], v[:6], tau)
 
     if trace is None:
         trace = e.run().traced()
@@ -144,7 +147,7 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
     if (safety_filter := built.filter) is not None:
         costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
         gs = e.controller.contact_plan(t[0])
-        u = e.controller.compute(t[0], qj, qdj)
+        u = e.controller.compute(t[0], qj, qdj, q[:7], v[:6], tau)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: safety_filter.build(inputs, u), 1000)
         costs["qp_solve"] = replayed_solve_us(built)
@@ -288,7 +291,7 @@ def main(argv: list[str] | None = None) -> None:
     args = _parse_args(argv)
     load_before = os.getloadavg()[0]
     rows, busy = [], []
-    for label, extra in _loop_configs(args.solvers, args.formulations):
+    for label, extra in _loop_configs(args.solvers, args.formulations, args.controllers, args.robot):
         with CpuWatch() as watch:
             rows.append(_run_loop(label, extra, args))
         assert watch.result is not None  # set when the with block ends
@@ -346,6 +349,9 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--formulations", default="full,condensed",
                     help="filter.formulation values to run for each solver (full, condensed)")
     ap.add_argument("--scenario", default="flat")
+    ap.add_argument("--controllers", default="trot",
+                    help="comma-separated nominal controllers: trot, policy (the robot's shipped policy)")
+    ap.add_argument("--robot", default="a1", help="conf/robot/<robot>.yaml")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
     ap.add_argument("--cold", action="store_true",
                     help="also time idempotent parts twice in a row in one more run (cost of interleaving)")
@@ -355,14 +361,23 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def _loop_configs(solvers: str, formulations: str) -> list[tuple[str, list[str]]]:
-    """(label, config overrides) of each loop: the nominal-only loop, then the filter with each solver
-    (comma-separated ``solvers``) in each formulation (comma-separated ``formulations``)."""
-    return [("nominal only", ["filter.enabled=false"])] + [
-        (f"filter ({form}) + {s}", [*_solver_overrides(s), f"filter.formulation={form}"])
-        for s in solvers.split(",") if s
-        for form in formulations.split(",") if form
-    ]
+def _loop_configs(solvers: str, formulations: str, controllers: str = "trot", robot: str = "a1"
+                  ) -> list[tuple[str, list[str]]]:
+    """(label, config overrides) of each loop, per nominal controller (comma-separated ``controllers``): the
+    nominal-only loop, then the filter with each solver (comma-separated ``solvers``) in each formulation
+    (comma-separated ``formulations``). A label names the controller when there is more than one."""
+    loops = []
+    names = [c for c in controllers.split(",") if c]
+    for controller in names:
+        pick = ["controller=policy", f"policy={robot}_walk"] if controller == "policy" else [
+            f"controller={controller}"]
+        prefix = f"{controller}: " if len(names) > 1 else ""
+        loops += [(f"{prefix}nominal only", [*pick, "filter.enabled=false"])] + [
+            (f"{prefix}filter ({form}) + {s}", [*pick, *_solver_overrides(s), f"filter.formulation={form}"])
+            for s in solvers.split(",") if s
+            for form in formulations.split(",") if form
+        ]
+    return loops
 
 
 def _solver_overrides(name: str) -> list[str]:
@@ -376,7 +391,8 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     """Run one episode with the overrides ``extra``. Returns the row (label, median tick [µs], real-time
     factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
     :func:`wall_accounting`, :func:`cold_vs_warm` and :func:`back_to_back`, both {} without ``--cold``)."""
-    cfg = compose([f"duration={args.duration}", f"scenario={args.scenario}", "progress=false", *extra])
+    cfg = compose([f"robot={args.robot}", f"duration={args.duration}", f"scenario={args.scenario}", "progress=false",
+                   *extra])
     built = Built(cfg)
     res = built.episode.run()
     tr = res.traced()

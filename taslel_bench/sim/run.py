@@ -120,9 +120,12 @@ def config_sha256(cfg: DictConfig, input_files: Iterable[Path] = (), choices: di
 
 
 def estimator_files(built: Built) -> list[Path]:
-    """The files the run's estimator loaded (its optional ``input_files()``: checkpoints), [] if none."""
+    """The files the run's estimator and controller loaded (an estimator's optional ``input_files()``: checkpoints;
+    a learned policy's ONNX file), [] if none."""
     files: Callable[[], Iterable[str | Path]] | None = getattr(built.estimator, "input_files", None)
-    return [Path(p) for p in files()] if callable(files) else []
+    policy = getattr(getattr(built.controller, "policy", None), "path", None)  # controller=policy's ONNX file
+    loaded = [Path(p) for p in files()] if callable(files) else []
+    return loaded + ([Path(policy)] if policy is not None else [])
 
 
 SUPERSEDE_WHY = {
