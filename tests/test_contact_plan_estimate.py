@@ -88,3 +88,19 @@ def test_hysteresis_must_be_ordered():
     with pytest.raises(ValueError, match="liftoff_force_n"):
         ContactPlanEstimate(robot_description(api.compose([])), 0.2, 0.001,
                             PlanEstimateSettings(touchdown_force_n=10.0, liftoff_force_n=20.0))
+
+
+def test_compiled_update_equals_the_numpy_estimate():
+    cfg = api.compose([])
+    robot = robot_description(cfg)
+    estimate = ContactPlanEstimate(robot, 0.2, 0.001)
+    rng = np.random.default_rng(3)
+    stand = api.build_controller(cfg).stand_configuration()
+    for _ in range(50):
+        q = stand + rng.normal(0.0, 0.2, 12)
+        tau = rng.normal(0.0, 8.0, 12)
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        expected = estimate.foot_forces_in_world(q, tau, quat)[:, 2]
+        estimate.update(q, tau, quat)
+        np.testing.assert_allclose(estimate.force_z, expected, rtol=1e-9, atol=1e-9)

@@ -33,6 +33,7 @@ from taslel_bench.control.plan import ContactPlan
 from taslel_bench.robot import leg_chain
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import RobotDescription
+from taslel_bench.util.jit import kernel
 
 
 @dataclass(frozen=True)
@@ -93,17 +94,9 @@ class ContactPlanEstimate:
     def update(self, q_joints: np.ndarray, tau_joints: np.ndarray, quat_xyzw: np.ndarray) -> ContactPlan:
         """This tick's plan from the encoders ``q_joints`` [rad] (12,), the torques applied on the previous tick
         ``tau_joints`` [N·m] (12,) and the trunk's attitude ``quat_xyzw`` (world <- trunk)."""
-        fz = self.foot_forces_in_world(q_joints, tau_joints, quat_xyzw)[:, 2]
-        self.force_z[:] = fz
-        self.ticks_in_state += 1
-        for i in range(quad.N_LEGS):
-            if self.in_stance[i]:
-                if fz[i] < self.s.liftoff_force_n and self.ticks_in_state[i] >= self._min_stance:
-                    self.in_stance[i] = False
-                    self.ticks_in_state[i] = 0
-            elif fz[i] > self.s.touchdown_force_n and self.ticks_in_state[i] >= self._min_swing:
-                self.in_stance[i] = True
-                self.ticks_in_state[i] = 0
+        _update(self._table, np.asarray(q_joints, float), np.asarray(tau_joints, float), np.asarray(quat_xyzw, float),
+                self.s.touchdown_force_n, self.s.liftoff_force_n, self._min_stance, self._min_swing, self.force_z,
+                self.in_stance, self.ticks_in_state)
         self.plan = self._plan()
         return self.plan
 
@@ -111,3 +104,41 @@ class ContactPlanEstimate:
         phase = np.where(self.in_stance, 0.0, np.minimum(self.ticks_in_state * self.dt / self.swing_s, 1.0))
         return ContactPlan(phi=math.nan, phi_dot=0.0, in_stance=self.in_stance.copy(), swing_phase=phase,
                            swing_phase_rate=1.0 / self.swing_s)
+
+
+@kernel
+def _update(table, q, tau, quat, touchdown, liftoff, min_stance, min_swing, force_z, in_stance, ticks):
+    """:meth:`ContactPlanEstimate.update` compiled, in place: per leg the vertical ground force in world axes
+    ``-(J^-T tau)`` rotated by the attitude (0 for a singular leg), then the hysteresis."""
+    x, y, z, w = quat[0], quat[1], quat[2], quat[3]
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)  # world z row of R
+    for i in range(4):
+        row = table[i]
+        pose = leg_chain.leg_pose(row, q[3 * i], q[3 * i + 1], q[3 * i + 2], np.sin, np.cos)
+        jx, jy, jz = leg_chain.foot_jacobian(row, pose)  # rows of J (d p / d q_leg), trunk axes
+        # f solves J^T f = -tau: column c of J^T is row c of J; Cramer's rule on the 3x3 system
+        a = np.empty((3, 3))
+        for c in range(3):
+            a[0, c], a[1, c], a[2, c] = jx[c], jy[c], jz[c]
+        det = (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]) - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+               + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
+        fz_world = 0.0
+        if abs(det) > 1e-12:
+            b0, b1, b2 = -tau[3 * i], -tau[3 * i + 1], -tau[3 * i + 2]
+            # J^T = a^T: solve a^T f = b
+            m00, m01, m02 = a[0, 0], a[1, 0], a[2, 0]
+            m10, m11, m12 = a[0, 1], a[1, 1], a[2, 1]
+            m20, m21, m22 = a[0, 2], a[1, 2], a[2, 2]
+            f0 = (b0 * (m11 * m22 - m12 * m21) - m01 * (b1 * m22 - m12 * b2) + m02 * (b1 * m21 - m11 * b2)) / det
+            f1 = (m00 * (b1 * m22 - m12 * b2) - b0 * (m10 * m22 - m12 * m20) + m02 * (m10 * b2 - b1 * m20)) / det
+            f2 = (m00 * (m11 * b2 - b1 * m21) - m01 * (m10 * b2 - b1 * m20) + b0 * (m10 * m21 - m11 * m20)) / det
+            fz_world = r20 * f0 + r21 * f1 + r22 * f2
+        force_z[i] = fz_world
+        ticks[i] += 1
+        if in_stance[i]:
+            if fz_world < liftoff and ticks[i] >= min_stance:
+                in_stance[i] = False
+                ticks[i] = 0
+        elif fz_world > touchdown and ticks[i] >= min_swing:
+            in_stance[i] = True
+            ticks[i] = 0
