@@ -27,7 +27,7 @@ def test_environment_steps_observes_and_resets():
     assert obs.shape == (8, env.contract.obs_size) and obs.dtype == torch.float32
     assert env.decimation == 4 and env.dt == pytest.approx(0.02)
     friction = env.geom_friction[:, env._floor, 0]
-    assert ((0.6 <= friction) & (friction <= 1.25)).all() and np.unique(friction).size == 8
+    assert ((friction >= 0.6) & (friction <= 1.25)).all() and np.unique(friction).size == 8
     for _ in range(5):
         obs, reward, done, extras = env.step(torch.zeros(8, 12))
     assert torch.isfinite(reward).all() and not done.any()

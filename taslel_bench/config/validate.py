@@ -30,9 +30,9 @@ from omegaconf.errors import InterpolationResolutionError, MissingMandatoryValue
 from taslel_bench.config.compose import CONF_DIR
 from taslel_bench.config.model_file import model_values
 from taslel_bench.config.schema import CONTROLLER_SCHEMAS, POLICY_TARGET, TROT_TARGET, RunConfig
+from taslel_bench.control.gait import TrotScaling
 from taslel_bench.control.policy import OnnxPolicy
 from taslel_bench.control.policy_contract import contract_from_mapping
-from taslel_bench.control.gait import TrotScaling
 from taslel_bench.interfaces import MAX_FRICTION
 from taslel_bench.plant.perturbation import check_trunk_and_joints
 from taslel_bench.robot import quadruped as quad

@@ -78,7 +78,8 @@ class OnnxPolicy:
         self._contract, self._where = contract, where
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.session.run([self._output], {self._input: obs.reshape(1, -1).astype(np.float32)})[0][0]
+        out = self.session.run([self._output], {self._input: obs.reshape(1, -1).astype(np.float32)})[0]
+        return np.asarray(out)[0]
 
     def __getstate__(self) -> dict:  # an onnxruntime session does not pickle: rebuilt from the contract on load
         return {"contract": self._contract, "where": self._where}

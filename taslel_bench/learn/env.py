@@ -39,8 +39,8 @@ from taslel_bench.control.policy_contract import (
 )
 from taslel_bench.learn.config import TrainingConfig
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.robot import quadruped as quad
 from taslel_bench.plant.build import compile_plant
+from taslel_bench.robot import quadruped as quad
 from taslel_bench.sim.build import build_plant_spec
 
 # the observation terms of the policies trained here, in order: (term, scale) (legged_gym's scales)

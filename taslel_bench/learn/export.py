@@ -33,8 +33,9 @@ def actor_model(ppo: PPOSettings, obs_size: int, n_actions: int = 12):
 
 def load_torch_actor(folder: Path, obs_size: int):
     """The actor saved in ``folder`` (``policy_torch.pt``, architecture from ``training.yaml``), in eval mode."""
-    settings = yaml.safe_load((folder / "training.yaml").read_text())["ppo"]
-    ppo = PPOSettings(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()})
+    settings: dict = yaml.safe_load((folder / "training.yaml").read_text())["ppo"]
+    ppo = PPOSettings(**settings)
+    ppo.hidden_dims = tuple(ppo.hidden_dims)
     actor = actor_model(ppo, obs_size)
     actor.load_state_dict(torch.load(folder / "policy_torch.pt", weights_only=True))
     return actor.eval()

@@ -193,7 +193,8 @@ def ship(cfg: TrainingConfig, out: Path, conf_dir: Path, result: dict, argv: lis
             f"- machine: {info}",
             f"- versions: {_versions()}", "",
             "Files: `policy.onnx` (the deterministic actor, observation normaliser included), `policy_torch.pt` (its "
-            f"torch weights), `training.yaml`, `learning_curve.csv`/`.png`; the contract: `conf/policy/{cfg.name}.yaml`."]
+            "torch weights), `training.yaml`, `learning_curve.csv`/`.png`; the contract: "
+            f"`conf/policy/{cfg.name}.yaml`."]
     (out / "README.md").write_text("\n".join(text) + "\n")
 
 
@@ -252,7 +253,8 @@ def _set(cfg: TrainingConfig, assignment: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    ap = argparse.ArgumentParser(prog="python -m taslel_bench.learn.train", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m taslel_bench.learn.train",
+                                 description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--robot", default="a1", help="conf/robot/<robot>.yaml")
     ap.add_argument("--name", default=None, help="policy name (default: <robot>_walk)")
     ap.add_argument("--seed", type=int, default=0)

@@ -72,12 +72,13 @@ class TickRecorder:
     def _on(self) -> bool:
         return self.k0 <= self.tick < self.k0 + self.n
 
-    def _compute(self, t, q_joints, qd_joints, base_pose=None):
+    def _compute(self, t, q_joints, qd_joints, base_pose=None, base_velocity=None, tau_applied=None):
         self.tick = round(t / self.e.s.control_dt_s)  # the controller runs first in every tick
         if self._on():
             self.rows["controller"].append((t, q_joints.copy(), qd_joints.copy(),
-                                            None if base_pose is None else base_pose.copy()))  # fmt: skip
-        return self._orig["compute"](t, q_joints, qd_joints, base_pose)
+                                            *(None if x is None else x.copy()
+                                              for x in (base_pose, base_velocity, tau_applied))))  # fmt: skip
+        return self._orig["compute"](t, q_joints, qd_joints, base_pose, base_velocity, tau_applied)
 
     def _update(self, q, v):
         if self._on():
