@@ -23,6 +23,7 @@ from taslel_bench.record import run_files
 from taslel_bench.sweep import table_set
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect, override_keys, run_folders
 from taslel_bench.sweep.claims import _unsafe, paper_claims
+from taslel_bench.sweep.policy_table import policy_section
 from taslel_bench.sweep.solver_verdict import _overall, machine_busy_line, solve_time_figure, solver_verdict
 from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
 from taslel_bench.sweep.stills import still_strips
@@ -504,7 +505,7 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
         markdown_table(cost) if len(table) else "",
         solver_text,
         HOW_MEASURED.format(shift=SHGEOM_SHIFT_US),
-        terrain_section(frame) if not frame.empty else "",
+        (policy_section(frame) or terrain_section(frame)) if not frame.empty else "",
         paper_claims(_finished(urdf_plant_runs(frame))) if not frame.empty else "",
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")

@@ -1,0 +1,52 @@
+"""The policy study's report section on a synthetic sweep frame: the side-by-side table and the target sentences."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from taslel_bench.sweep.policy_table import is_policy_study, policy_section, target_sentences, world_of
+
+
+def _run(world, controller, variant, *, fell=False, safe=True, distance=4.0, speed=0.5, torque=0.5, trips=0,
+         friction=""):  # fmt: skip
+    return {"robot": "a1", "scenario": world, "scenario.friction": friction, "controller": controller,
+            "filter_variant": variant, "status": "ok", "fell": fell, "safe": safe and not fell,
+            "unsafe_reasons": "fell: at 3 s" if fell else "", "distance_m": distance, "mean_speed_mps": speed,
+            "intervention_nm_mean": torque, "trips": trips, "tick_us_median": 50.0}
+
+
+def _frame() -> pd.DataFrame:
+    rows = []
+    for controller in ("trot", "policy"):
+        for variant in ("nominal", "paper", "terrain"):
+            rows += [_run("flat", controller, variant, torque=0.0 if variant == "nominal" else 0.6) for _ in range(2)]
+            # steps: the terrain filter adds a fall to the trot, nothing to the policy
+            fell = controller == "trot" and variant == "terrain"
+            rows += [_run("steps", controller, variant, fell=fell), _run("steps", controller, variant)]
+            rows += [_run("low_friction", controller, variant, friction="0.3", safe=variant != "nominal")
+                     for _ in range(2)]
+    return pd.DataFrame(rows)
+
+
+def test_world_names_carry_the_swept_friction():
+    assert list(world_of(_frame()).unique()) == ["flat", "steps", "low_friction 0.3"]
+
+
+def test_targets_say_met_or_missed_with_the_numbers():
+    frame = _frame()
+    assert is_policy_study(frame)
+    text = "\n".join(target_sentences(frame, "a1"))
+    assert "**met**: the policy alone on flat ground: 0 falls in 2 runs, mean forward speed 0.500 m/s" in text
+    assert "**met**: minimally invasive, policy + terrain filter on flat ground: mean intervention 0.60 N·m" in text
+    assert ("**missed**: do no harm, trot + terrain filter vs trot alone over 3 worlds: worse on steps "
+            "(falls 1 vs 0") in text
+    assert "**met**: do no harm, policy + terrain filter vs policy alone over 3 worlds: no world worse" in text
+    assert ("**met**: helps on slippery ground, policy: unsafe runs with the terrain filter vs alone: "
+            "low_friction 0.3: 0 vs 2") in text
+    assert "**missed**: helps on rough ground, policy: fewer falls or trips than alone on 0 of 1 worlds" in text
+
+
+def test_section_has_one_table_per_robot():
+    section = policy_section(_frame())
+    assert section.count("### a1") == 1 and "| low_friction 0.3 | policy | terrain | 2/2 |" in section
+    assert policy_section(_frame().assign(controller="trot")) == ""
