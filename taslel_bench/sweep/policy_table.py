@@ -20,7 +20,7 @@ CONTROLLERS = ("trot", "policy")
 WORLD_ORDER = ("flat", "low_friction", "friction_patch", "logs", "steps", "rough", "slope", "push", "payload")
 SLIPPERY = ("low_friction", "friction_patch")  # the help target: strictly fewer unsafe runs than alone
 ROUGH = ("logs", "steps", "rough", "slope")  # the help target: fewer falls or trips on at least two
-COMMAND_MPS = 0.5  # [m/s] the policies' forward command (controller.command)
+COMMAND_MPS = 0.5  # [m/s] the policies' forward command when a run's summary does not say (commanded_speed_mps)
 SPEED_TOLERANCE_MPS = 0.1
 MAX_FLAT_INTERVENTION_NM = 1.0
 MAX_DISTANCE_LOSS = 0.10  # do no harm: mean distance not lower by more than this share
@@ -83,9 +83,11 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
     flat = _finished(cell(frame, robot, "flat", "policy", "nominal"))
     if len(flat):
         speed = _mean(flat, "mean_speed_mps")
-        ok = _count(flat, "fell") == 0 and abs(speed - COMMAND_MPS) <= SPEED_TOLERANCE_MPS
+        command = _mean(flat, "commanded_speed_mps")
+        command = COMMAND_MPS if math.isnan(command) else command
+        ok = _count(flat, "fell") == 0 and abs(speed - command) <= SPEED_TOLERANCE_MPS
         out.append(f"**{'met' if ok else 'missed'}**: the policy alone on flat ground: {_count(flat, 'fell')} falls "
-                   f"in {len(flat)} runs, mean forward speed {speed:.3f} m/s at a {COMMAND_MPS} m/s command "
+                   f"in {len(flat)} runs, mean forward speed {speed:.3f} m/s at a {command:.3g} m/s command "
                    f"(target: 0 falls, within {SPEED_TOLERANCE_MPS} m/s).")
     for controller in CONTROLLERS:
         alone = _finished(cell(frame, robot, "flat", controller, "nominal"))
