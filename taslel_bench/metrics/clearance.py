@@ -37,7 +37,7 @@ beyond. In stance, ``stance_flank_strikes`` counts the onsets of flank contacts 
 foot) and ``stance_obstacle_contacts`` every new obstacle contact. ``foot_contacts_dropped`` and
 ``contacts_not_logged`` count the contacts of the walk the trace could not keep (beyond
 :data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_PER_FOOT` per foot or
-:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few.
+:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few; ``foot_contacts_max`` is the most contacts one foot had on one tick.
 """
 
 from __future__ import annotations
@@ -80,6 +80,28 @@ def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
     acc.max(f"{prefix}_max_m", x)
 
 
+class TripRule:
+    """The module doc's rule over consecutive chunks of ticks (the onsets carried across them): the summary's
+    counts and the viewer's trip marks (:mod:`taslel_bench.view.recording`) are this one rule."""
+
+    def __init__(self, dt: float) -> None:
+        rearm = max(1, round(TRIP_REARM_S / dt))
+        self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
+
+    def __call__(self, touching: np.ndarray, flank: np.ndarray, air: np.ndarray, phase: np.ndarray,
+                 link: np.ndarray) -> dict[str, np.ndarray]:  # fmt: skip
+        """Masks (ticks, 4) from per-foot ``touching`` (a contact with any terrain at distance <= 0), ``flank``
+        (one of them with its normal more than 45 deg from vertical), ``air`` (in the air by the plan and the
+        filter's stance set), ``phase`` (the plan's swing phase) and per-leg ``link`` (a leg link touching an
+        obstacle): ``strike`` (a), ``lift`` (b), ``landing`` (c, a touchdown), ``link`` (a leg link's trip),
+        ``new_flank`` (every flank onset, in the air or not) and ``new`` (every new contact of a foot)."""
+        new_flank, new = self.flank(flank), self.foot(touching)
+        walkable = new & ~flank & air  # a new contact whose contacts of that tick are all within 45 deg of vertical
+        return {"strike": new_flank & air, "lift": walkable & (phase < LATE_SWING_PHASE),
+                "landing": walkable & (phase >= LATE_SWING_PHASE), "link": self.link(link), "new_flank": new_flank,
+                "new": new}
+
+
 def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str, float]:
     """Virtual-profile clearance, trips, touchdowns and strikes, and the filter's barrier values over the walking
     ticks ``k0:n`` (``dt`` [s] control period; see the module doc). Keys are nan when the run has no profile /
@@ -97,9 +119,8 @@ class ClearanceStream:
         self.dt, self.acc = dt, Reducer()
         self.report_ticks = round(REPORT_TOUCHDOWN_TOLERANCE_S / dt)
         rearm = max(1, round(TRIP_REARM_S / dt))
-        self.flank, self.foot, self.link, self.link_off_foot = Onsets(rearm), Onsets(rearm), Onsets(rearm), \
-            Onsets(rearm)  # fmt: skip
-        self.link_floor, self.obstacle = Onsets(rearm), Onsets(rearm)
+        self.rule = TripRule(dt)
+        self.link_off_foot, self.link_floor, self.obstacle = Onsets(rearm), Onsets(rearm), Onsets(rearm)
         self.phase_step = math.nan  # the plan's swing phase per tick (median over the swing ticks seen last)
 
     def result(self) -> dict[str, float]:
@@ -142,18 +163,12 @@ class ClearanceStream:
         (ticks, 4): the feet in the air by the plan and the filter's stance set."""
         acc = self.acc
         touching = tr.contact_touching[w]  # (n, 4, K)
-        flank_c = touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-        flank = cast(np.ndarray, flank_c.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
-        on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))
-        new_flank = self.flank(flank)
-        new = self.foot(cast(np.ndarray, touching.any(axis=2)))  # a foot's new contact, any surface
+        flank = cast(np.ndarray, (touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)).any(axis=2))  # (n, 4)
+        on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))  # (numpy's stub: bool | array)
         phase = tr.swing_phase[w]
-        walkable = new & ~flank & air  # its contacts of that tick all within 45 deg of vertical
-        strike = new_flank & air  # (a) at any phase (a new contact with a flank among its contacts included)
-        lift = walkable & (phase < LATE_SWING_PHASE)  # (b)
-        landing = walkable & (phase >= LATE_SWING_PHASE)  # (c) a touchdown
+        r = self.rule(cast(np.ndarray, touching.any(axis=2)), flank, air, phase, tr.leg_link_obstacle_contact[w])
+        strike, lift, landing, link_obstacle, new = r["strike"], r["lift"], r["landing"], r["link"], r["new"]
         floor = ~on_obstacle
-        link_obstacle = self.link(tr.leg_link_obstacle_contact[w])
         link_floor = self.link_floor(tr.leg_link_floor_contact[w])
         n_foot, n_link = int(strike.sum() + lift.sum()), int(link_obstacle.sum())
         acc.count("trips", n_foot + n_link)
@@ -169,10 +184,11 @@ class ClearanceStream:
         acc.count("touchdowns_early_floor", (landing & floor).sum())
         early = ticks_before_touchdown(phase[landing], self._step(phase, air))
         acc.count("touchdowns_early_beyond_20ms", (early > self.report_ticks).sum())
-        acc.count("stance_flank_strikes", (new_flank & ~air).sum())
+        acc.count("stance_flank_strikes", (r["new_flank"] & ~air).sum())
         # contacts the trace could not keep (0 expected: plant.contact_frames' slots are sized with a margin)
         acc.count("foot_contacts_dropped", tr.foot_contacts_dropped[w].sum())
         acc.count("contacts_not_logged", tr.contacts_not_logged[w].sum())
+        acc.max("foot_contacts_max", tr.foot_contacts[w])  # the most terrain contacts of one foot on one tick
         acc.count("stance_obstacle_contacts", (self.obstacle(on_obstacle) & ~air).sum())
         trip_ticks = np.flatnonzero((strike | lift).any(axis=1) | link_obstacle.any(axis=1))
         # [s] episode time of the first trip (the report's still strips start there); nan without one

@@ -25,6 +25,8 @@ After ``mj_step`` the contact list, the constraint forces and the body velocitie
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -37,6 +39,7 @@ from taslel_bench.util.jit import kernel
 # (``foot_contacts_dropped``)
 MAX_CONTACTS_PER_FOOT = 8
 FOOT_NEIGHBOURHOOD_M = 0.04  # [m] a leg-link contact point nearer than this to its foot's centre is beside the foot
+FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank (riser, log side)
 MAX_CONTACTS_LOGGED = 24  # contacts kept per tick (flat ground: 2-4; beyond, counted: ``contacts_not_logged``)
 
 
@@ -126,7 +129,7 @@ class ContactFrameReader:
     def frames(self, log: ContactLog, k0: int, k1: int, foot_pos_w: np.ndarray) -> dict[str, np.ndarray]:
         """Per-foot arrays of ticks ``k0:k1`` (shape (n, 4, K), K = MAX_CONTACTS_PER_FOOT, zero / False in
         unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept; the
-        count of the others in ``foot_contacts_dropped`` (n, 4), and the tick's contacts beyond
+        count of the others in ``foot_contacts_dropped`` (n, 4), of all in ``foot_contacts`` (n, 4), and the tick's contacts beyond
         :data:`MAX_CONTACTS_LOGGED` in ``contacts_not_logged`` (n,)):
         ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
         (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;
@@ -178,8 +181,9 @@ class ContactFrameReader:
         key = tick[order] * quad.N_LEGS + leg[order]
         slot = np.arange(order.size) - np.searchsorted(key, key, side="left")
         keep = slot < kk
-        out["foot_contacts_dropped"] = np.zeros((n, quad.N_LEGS), np.int32)
-        np.add.at(out["foot_contacts_dropped"], (tick[order][~keep], leg[order][~keep]), 1)
+        out["foot_contacts"] = np.zeros((n, quad.N_LEGS), np.int32)
+        np.add.at(out["foot_contacts"], (tick, leg), 1)
+        out["foot_contacts_dropped"] = np.maximum(out["foot_contacts"] - kk, 0)
         o, s = order[keep], slot[keep]
         ti, li = tick[o], leg[o]
         arrays = {"contact_fn_n": np.zeros((n, quad.N_LEGS, kk)), "contact_ft_n": np.zeros((n, quad.N_LEGS, kk)),
