@@ -37,7 +37,8 @@ beyond. In stance, ``stance_flank_strikes`` counts the onsets of flank contacts 
 foot) and ``stance_obstacle_contacts`` every new obstacle contact. ``foot_contacts_dropped`` and
 ``contacts_not_logged`` count the contacts of the walk the trace could not keep (beyond
 :data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_PER_FOOT` per foot or
-:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few; ``foot_contacts_max`` is the most contacts one foot had on one tick.
+:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few;
+``foot_contacts_max`` is the most contacts one foot had on one tick.
 """
 
 from __future__ import annotations

@@ -15,7 +15,8 @@ steps, heightfields), vectorised over ticks:
   to ``contact.pos``, as ``mj_objectVelocity`` reads it; the normal component removed) — the slip at the
   contact, not at the sphere's lowest point. Terrain geoms are static (world or mocap bodies: no velocity);
 * per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0, the same
-  for any other terrain geom (the floor), and for an obstacle at contact points farther than :data:`FOOT_NEIGHBOURHOOD_M` from that leg's foot-sphere centre (the
+  for any other terrain geom (the floor), and for an obstacle at contact points farther than
+  :data:`FOOT_NEIGHBOURHOOD_M` from that leg's foot-sphere centre (the
   A1 URDF's calf box runs to the foot centre and leaves the 2 cm sphere 1.65 cm from it: where the foot stands on
   a log's curve the box grazes the log beside the foot, as it grazes the floor on flat ground).
 
@@ -129,7 +130,8 @@ class ContactFrameReader:
     def frames(self, log: ContactLog, k0: int, k1: int, foot_pos_w: np.ndarray) -> dict[str, np.ndarray]:
         """Per-foot arrays of ticks ``k0:k1`` (shape (n, 4, K), K = MAX_CONTACTS_PER_FOOT, zero / False in
         unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept; the
-        count of the others in ``foot_contacts_dropped`` (n, 4), of all in ``foot_contacts`` (n, 4), and the tick's contacts beyond
+        count of the others in ``foot_contacts_dropped`` (n, 4), of all in ``foot_contacts`` (n, 4), and the
+        tick's contacts beyond
         :data:`MAX_CONTACTS_LOGGED` in ``contacts_not_logged`` (n,)):
         ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
         (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;

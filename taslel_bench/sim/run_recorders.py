@@ -12,7 +12,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench.config.settings import health_limits, safety_limits
+from taslel_bench.config.settings import health_limits
 from taslel_bench.metrics.summary import SummaryStream
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
