@@ -16,7 +16,9 @@ filter's stance set (a foot the plan has put down but the filter still holds as 
 landing where the plan means it to):
 
 * (a) the onset of a foot contact whose normal is more than 45 deg from vertical (a riser, a log's flank), at any
-  swing phase, is a trip (``foot_trips_flank``, a strike);
+  swing phase, is a trip (``foot_trips_flank``, a strike), also when the foot already touches something else
+  (``foot_trips_flank_in_contact``: e.g. a foot that landed on the rough heightfield and whose contact normal
+  then tilts past 45 deg while its plan still says swing);
 * (b) the onset of a foot contact on a walkable surface (normal within 45 deg of vertical) in the first half of
   the swing (swing phase < 0.5) is a trip (``foot_trips_top``: a scuff or a strike while lifting);
 * (c) the onset of a foot contact on a walkable surface at swing phase >= 0.5 is a **touchdown**, never a trip
@@ -54,7 +56,7 @@ from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.trace import EpisodeTrace
 
 CLEARANCE_TOLERANCE_M = 0.001  # [m] below the profile by more than this = a violation
-TRIP_REARM_S = 0.01  # [s] an obstacle contact starting within this of the foot's last one continues it
+TRIP_REARM_S = 0.01  # [s] a contact starting within this of the foot's (or link's) last one continues it
 REPORT_TOUCHDOWN_TOLERANCE_S = 0.02  # [s] touchdowns_early_beyond_20ms: 10 % of the default 0.2 s swing
 LATE_SWING_PHASE = 0.5  # [-] a walkable landing from this swing phase on is a touchdown, earlier a trip
 
