@@ -82,7 +82,7 @@ def main() -> None:
                 falls.setdefault((world, spec), []).append(int(bool(s["fell"])))
                 print(f"{world:8s} seed {seed} {spec:32s} status {s['status']:8s} fell {s['fell']!s:5s} "
                       f"t_fall {s['time_to_fall_s']:5.2f} s  walked {s['distance_m']:.2f} m  trips {s.get('trips')} "
-                      f"strikes {s.get('trips_strikes')}  {s['fall_reason']}", flush=True)
+                      f"early touchdowns {s.get('touchdowns_early')}  {s['fall_reason']}", flush=True)
     print("\nfalls / runs (10 s trot)\n| world | " + " | ".join(specs) + " |")
     print("|---" * (len(specs) + 1) + "|")
     for world in a.worlds.split(","):

@@ -119,49 +119,47 @@ def test_virtual_clearance_counts_every_swing_tick_and_reports_loaded_ones_besid
     assert m["clearance_loaded_swing_rate"] == pytest.approx(0.2)
 
 
-def test_trips_are_new_obstacle_contacts_in_swing_and_leg_link_contacts():
+def test_trips_are_strikes_and_lift_scuffs_in_the_air_and_leg_link_contacts_not_late_landings():
     tr = synthetic_trace(n=40)
     tr.obstacle_clearance_m[:] = 0.05
     tr.in_stance[:, 1] = False
+    tr.swing_phase[:, 1] = 0.3
+    tr.swing_phase[20:, 1] = 0.8
     clear_contact(tr, slice(None), 1)
     set_contact(tr, [2, 3], 1, 5.0, obstacle=True, normal=(-1.0, 0.0, 0.5))  # foot 1 hits a log's flank in swing ...
-    set_contact(tr, [30], 1, 5.0, obstacle=True)  # ... and lands early on its top later: two trips
-    set_contact(tr, slice(None), 3, 50.0, obstacle=True)  # foot 3 stands on a log: not a trip
+    set_contact(tr, [30], 1, 5.0, obstacle=True)  # ... and lands early on its top later: a touchdown
+    set_contact(tr, slice(None), 3, 50.0, obstacle=True)  # foot 3 stands on a log: nothing
     tr.obstacle_clearance_m[[2, 3, 30], 1] = -0.001
-    tr.leg_link_obstacle_contact[[4, 5], 0] = True  # one knock of leg 0's calf
+    tr.leg_link_obstacle_contact[[4, 5], 0] = True  # one knock of leg 0's calf, beside its foot
     m = clearance_metrics(tr, 0)
-    assert (m["foot_trips"], m["shin_trips"], m["trips"]) == (2, 1, 3)
-    assert (m["foot_trips_flank"], m["foot_trips_top"]) == (1, 1)
+    assert (m["foot_trips"], m["shin_trips"], m["trips"]) == (1, 1, 2)
+    assert (m["foot_trips_flank"], m["foot_trips_top"], m["touchdowns_early"]) == (1, 0, 1)
+    assert (m["shin_trips_off_foot"], m["foot_trips_floor"], m["touchdowns_early_floor"]) == (0, 0, 0)
     assert m["obstacle_touch_swing_rate"] == pytest.approx(3 / 40)
-    # the top landing was early in the swing, the calf knock beside its foot: both are strikes then, none is
+    # the top contact in the first half of the swing: a scuff, a trip
     tr.swing_phase[30, 1] = 0.3
-    tr.leg_link_obstacle_contact_off_foot[[4, 5], 0] = False
+    tr.leg_link_obstacle_contact_off_foot[[4, 5], 0] = True  # the calf knock 4 cm or more from its foot
     m = clearance_metrics(tr, 0)
-    assert (m["foot_trips_top_late_swing"], m["shin_trips_off_foot"], m["trips_strikes"]) == (0, 0, 2)
-    tr.swing_phase[30, 1] = 0.8  # a late-swing landing on the top: an early touchdown, not a strike
-    tr.leg_link_obstacle_contact_off_foot[[4, 5], 0] = True  # the calf knock 4 cm or more from its foot: a strike
-    m = clearance_metrics(tr, 0)
-    assert (m["foot_trips_top_late_swing"], m["shin_trips_off_foot"], m["trips_strikes"]) == (1, 1, 2)
-    assert m["trips"] == 3
+    assert (m["foot_trips_top"], m["touchdowns_early"], m["shin_trips_off_foot"], m["trips"]) == (1, 0, 1, 3)
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 
 
 def test_a_late_touchdown_on_an_obstacle_top_is_a_landing_not_a_trip():
-    """The contact estimate holds a foot whose scheduled stance has begun as swing until it is loaded (a late
-    touchdown): its contact onset is where the gait means it to land, a stance contact; the same onset in the
-    scheduled swing is a trip (an early touchdown)."""
+    """The contact estimate holds a foot whose planned stance has begun as swing until it is loaded (a late
+    touchdown): its contact onset is where the plan means it to land, a stance contact; the same onset in the
+    planned swing's second half is an early touchdown, no trip either."""
     tr = synthetic_trace(n=40)
     tr.obstacle_clearance_m[:] = 0.05
     tr.in_stance[:, 1] = False  # outside the filter's stance set throughout
     tr.swing_phase[:, 1] = 0.9
     clear_contact(tr, slice(None), 1)
     set_contact(tr, [30, 31], 1, 40.0, obstacle=True)
-    tr.scheduled_stance[28:, 1] = True  # the schedule's stance began two ticks before the onset
+    tr.scheduled_stance[28:, 1] = True  # the plan's stance began two ticks before the onset
     m = clearance_metrics(tr, 0)
-    assert (m["trips"], m["foot_trips"], m["stance_obstacle_contacts"]) == (0, 0, 1)
-    tr.scheduled_stance[:, 1] = False  # the same onset in the scheduled swing
+    assert (m["trips"], m["touchdowns_early"], m["stance_obstacle_contacts"]) == (0, 0, 1)
+    tr.scheduled_stance[:, 1] = False  # the same onset in the planned swing
     m = clearance_metrics(tr, 0)
-    assert (m["trips"], m["foot_trips_top_late_swing"], m["stance_obstacle_contacts"]) == (1, 1, 0)
+    assert (m["trips"], m["touchdowns_early"], m["stance_obstacle_contacts"]) == (0, 1, 0)
 
 
 def test_negative_barrier_while_solved_degrades_the_run():

@@ -129,24 +129,23 @@ def test_target_sentences_say_missed_when_a_number_misses():
     assert "2.50x" in sentences[6]
 
 
-def test_trip_target_sentences_read_the_trips_three_ways_with_the_worst_run():
-    """Every trip, beyond 20 ms of the touchdown and strikes, each with its mean, its largest run and met or
-    missed; a sweep without the 20 ms key (older summaries) shows the two it has."""
-    frame = _sweep(trips=20, trips_beyond_touchdown_20ms=0.5, trips_strikes=0.5)
-    extra = _row("logs", "terrain", trips=22, trips_beyond_touchdown_20ms=3, trips_strikes=1)
+def test_trip_target_sentences_read_the_trips_with_the_worst_run_and_the_early_touchdowns_beside():
+    """The verdict's trips with their mean, largest run and met or missed; the early touchdowns (no trips) beside
+    them where the sweep has the key."""
+    frame = _sweep(trips=20, touchdowns_early=12, touchdowns_early_beyond_20ms=0.5)
+    extra = _row("logs", "terrain", trips=22, touchdowns_early=10, touchdowns_early_beyond_20ms=1.5)
     sentence = terrain_table.target_sentences(pd.concat([frame, pd.DataFrame([extra])]))[0]
     assert sentence.startswith("**logs**") and ": missed: falls 0/2, 3 m;" in sentence, sentence
-    assert "every trip 21 (at most 22): missed" in sentence, sentence
-    assert "beyond 20 ms of the touchdown 1.75 (at most 3): missed" in sentence, sentence
-    assert "strikes 0.75 (at most 1): met" in sentence, sentence
-    extra = _row("logs", "terrain", trips=22, trips_beyond_touchdown_20ms=2, trips_strikes=1)
-    frame = _sweep(trips=20, trips_beyond_touchdown_20ms=0, trips_strikes=0.5)
+    assert "trips 21 (at most 22): missed" in sentence, sentence
+    assert "early touchdowns (walkable landings in the second half of the swing, no trips) 11 per run, 1 more" \
+        in sentence, sentence
+    extra = _row("logs", "terrain", trips=2)
+    frame = _sweep(trips=0)
     sentence = terrain_table.target_sentences(pd.concat([frame, pd.DataFrame([extra])]))[0]
-    assert "beyond 20 ms of the touchdown 1 (at most 2): met on average, not in every run (1 of 2 over)" in sentence
-    old = terrain_table.target_sentences(_sweep(trips=20, trips_strikes=1.5))[0]
-    assert "beyond 20 ms" not in old and "strikes 1.5 (at most 1.5): missed" in old, old
-    ok = terrain_table.target_sentences(_sweep(trips=1, trips_beyond_touchdown_20ms=0, trips_strikes=0))[0]
-    assert ": met: falls 0/1" in ok and "every trip 1 (at most 1): met" in ok, ok
+    assert "trips 1 (at most 2): met on average, not in every run (1 of 2 over)" in sentence, sentence
+    assert "early touchdowns" not in sentence
+    ok = terrain_table.target_sentences(_sweep(trips=1))[0]
+    assert ": met: falls 0/1" in ok and "trips 1 (at most 1): met" in ok, ok
 
 
 def test_urdf_plant_runs_keep_the_paper_claims_on_one_plant():

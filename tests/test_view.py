@@ -78,24 +78,31 @@ def test_the_command_exits_2_on_a_folder_that_is_not_a_run(tmp_path):
 
 
 def test_trips_are_the_onsets_the_summary_counts():
-    """Ticks of 1 ms, stand until 0.5 s: FL's foot touches a log in swing at 0.6 s (a trip), again 5 ms after it
-    let go (the same contact: re-armed only after 10 ms), and in stance at 0.8 s (a landing); RR's calf touches one
-    at 0.7 s (a trip); a touch during the stand is not counted."""
+    """Ticks of 1 ms, stand until 0.5 s: FL swings 0.55-0.75 s, scuffs the ground at 0.6 s (phase 0.25: a trip),
+    again 5 ms after it let go (the same contact: re-armed only after 10 ms), lands at 0.72 s (phase 0.85: a
+    touchdown, no trip) and meets a flank at 0.74 s (a trip); RR's calf touches an obstacle at 0.7 s (a trip); FR
+    meets a flank in stance (no trip); a touch during the stand is not counted."""
     n = 1000
     t = np.arange(n) * 1e-3
     cols: dict[str, np.ndarray] = {"t_s": t}
     for leg in quad.LEGS:
         cols[f"{leg}_stance"] = np.ones(n, bool)
         cols[f"{leg}_scheduled_stance"] = np.ones(n, bool)
-        cols[f"{leg}_obstacle_contact"] = np.zeros(n, bool)
+        cols[f"{leg}_swing_phase"] = np.zeros(n)
+        cols[f"{leg}_foot_touching"] = np.ones(n, bool)
+        cols[f"{leg}_foot_flank_contact"] = np.zeros(n, bool)
         cols[f"{leg}_leg_link_obstacle_contact"] = np.zeros(n, bool)
-        cols[f"{leg}_obstacle_clearance_m"] = np.full(n, 0.05)
     cols["FL_stance"][550:750] = cols["FL_scheduled_stance"][550:750] = False  # FL swings 0.55-0.75 s
-    cols["FL_obstacle_contact"][[*range(600, 605), *range(610, 612), *range(800, 810), *range(100, 110)]] = True
+    cols["FL_swing_phase"][550:750] = np.arange(200) / 200
+    cols["FL_foot_touching"][[*range(100, 110), *range(550, 750)]] = False
+    cols["FL_foot_touching"][[*range(600, 605), *range(610, 612), *range(720, 750)]] = True
+    cols["FL_foot_flank_contact"][740:745] = True
+    cols["FR_foot_flank_contact"][800:810] = True
     cols["RR_leg_link_obstacle_contact"][700:720] = True
     events = trip_events(pd.DataFrame(cols), stand_s=0.5, dt_s=1e-3)
-    assert [(round(e.t_s, 6), e.text) for e in events] == [(0.6, "FL foot hit an obstacle"),
-                                                           (0.7, "RR leg link hit an obstacle")]
+    assert [(round(e.t_s, 6), e.text) for e in events] == [(0.6, "FL foot scuffed the ground lifting"),
+                                                           (0.7, "RR leg link hit an obstacle"),
+                                                           (0.74, "FL foot struck a flank")]
 
 
 def test_a_recorded_run_loads_with_its_rows_times_and_summary(run_dir):

@@ -1,5 +1,5 @@
-"""Swing-foot clearance metrics: the virtual phase profile z(s), physical obstacles (trips and stance strikes),
-and the filter's own barrier values.
+"""Swing-foot clearance metrics: the virtual phase profile z(s), trips and touchdowns from the plant's contacts and
+the controller's contact plan, and the filter's own barrier values.
 
 Swing ticks are the walking ticks of a foot outside the filter's stance set. The clearance headline
 (``clearance_*``) is judged on **every** swing tick; beside it, the swing ticks whose foot still carries load in
@@ -7,36 +7,40 @@ the plant (a contact with normal force >= 1 N) are reported as lift-off lag (fir
 touchdown (second half), ``clearance_*_lift_off_lag`` / ``clearance_*_early_touchdown`` and ``_unloaded``
 for the rest: they are in the headline, not removed from it.
 
-Physical obstacles are judged from contact onsets (MuJoCo contacts at distance <= 0,
-:mod:`taslel_bench.plant.contact_frames`):
+**Trips** are judged from contact onsets (MuJoCo contacts at distance <= 0,
+:mod:`taslel_bench.plant.contact_frames`) and the contact plan the controller produced, as the trace recorded it
+(the plan's stance set ``scheduled_stance`` and swing phase ``swing_phase``; a controller without a gait clock
+records an estimated phase there): never the gait's configuration. One rule for every controller and every
+surface (the floor, a heightfield, a step, a log, a slope), while a foot is in the air by the plan and by the
+filter's stance set (a foot the plan has put down but the filter still holds as swing, a late touchdown, is
+landing where the plan means it to):
 
-* a **foot trip** is the onset of a foot's contact with an obstacle while the foot is in the air by both the
-  gait schedule and the filter's stance set, unless the foot was touching an obstacle within the last
-  :data:`TRIP_REARM_S` (a contact continuing from stance through lift-off, or the same contact flickering, is
-  not new). A foot whose scheduled stance has begun but that the contact estimate still holds as swing (a
-  late touchdown, ``filter.contact_estimate.late_touchdown_max_s``) is landing where the gait means it to:
-  its onset is a stance contact (``stance_obstacle_contacts``), not a trip. With the schedule or the contact
-  estimate without late touchdowns the filter's stance set contains the schedule's, and this is the onset of
-  a foot outside the filter's set (``filter.stance_source=contact``, the plant's contact flags, is the one
-  source whose set can miss a scheduled stance foot: its onsets there are landings too);
-* a **leg-link trip** is the onset of a non-foot link of a leg (calf, thigh, hip) touching an obstacle;
-* a **stance strike** is the onset (after the same re-arm gap), during the foot's stance, of a foot contact
-  whose normal is more than 45 deg from vertical (a log's flank); ``stance_obstacle_contacts`` counts every
-  new obstacle contact in stance.
+* (a) the onset of a foot contact whose normal is more than 45 deg from vertical (a riser, a log's flank), at any
+  swing phase, is a trip (``foot_trips_flank``, a strike), also when the foot already touches something else
+  (``foot_trips_flank_in_contact``: e.g. a foot that landed on the rough heightfield and whose contact normal
+  then tilts past 45 deg while its plan still says swing);
+* (b) the onset of a foot contact on a walkable surface (normal within 45 deg of vertical) in the first half of
+  the swing (swing phase < 0.5) is a trip (``foot_trips_top``: a scuff or a strike while lifting);
+* (c) the onset of a foot contact on a walkable surface at swing phase >= 0.5 is a **touchdown**, never a trip
+  (``touchdowns_early``: a landing before the plan's touchdown, on a top as on the floor);
+* the onset of a leg link's contact (calf, thigh, hip; beside its foot or not) with an obstacle is a trip
+  (``shin_trips``; ``shin_trips_off_foot`` those farther than
+  :data:`taslel_bench.plant.contact_frames.FOOT_NEIGHBOURHOOD_M` from the leg's foot centre).
 
-``trips`` (the verdict's count) is ``foot_trips + shin_trips``. Two of its parts are events that on the floor
-are not trips at all, and are counted apart so a report can show them (``trips`` itself is unchanged):
-``foot_trips_top_late_swing`` (a swing foot landing on an obstacle's top in the second half of its swing: an
-early touchdown, as the floor's are) and the leg-link onsets within
-:data:`taslel_bench.plant.contact_frames.FOOT_NEIGHBOURHOOD_M` of the leg's own foot centre (the URDF calf
-box grazing the log the foot stands on). ``trips_strikes`` is what is left: flank hits, top hits in the first
-half of the swing and leg-link contacts away from the foot (``shin_trips_off_foot``).
-``foot_trips_top_near_touchdown`` are the late-swing top landings at most ``touchdown_tolerance_s`` before the
-scheduled touchdown ((1 - swing phase) x the swing's duration), and ``trips_beyond_touchdown_tolerance`` is
-``trips`` without them (equal to ``trips`` when the tolerance is 0): the count the verdict reads when
-``safety.trip_touchdown_tolerance_s`` > 0. ``trips_beyond_touchdown_20ms`` is the same count at a fixed
-:data:`REPORT_TOUCHDOWN_TOLERANCE_S`, whatever the verdict's tolerance: the reports' third reading of the trips,
-between ``trips`` and ``trips_strikes``.
+An onset is the start of a foot's contact (any surface; for (a), a contact with a flank) after at least
+:data:`TRIP_REARM_S` without one: a contact continuing from stance through lift-off, or the same contact
+flickering, is not new. A foot's new contact is classified by its contacts of that tick: a flank among them
+makes it (a). ``trips`` (the verdict's count) is ``foot_trips + shin_trips``, ``foot_trips`` is
+``foot_trips_flank + foot_trips_top``; ``foot_trips_floor`` / ``touchdowns_early_floor`` are the part of them
+on the ground that is not an obstacle geom (the flat floor). ``touchdowns_early_beyond_20ms`` are the early
+touchdowns more than :data:`REPORT_TOUCHDOWN_TOLERANCE_S` before the plan's touchdown, read from the trace in
+whole ticks ((1 - swing phase) / the phase's per-tick step, rounded), so a landing exactly 20 ms early is not
+beyond. In stance, ``stance_flank_strikes`` counts the onsets of flank contacts (a log's flank against a stance
+foot) and ``stance_obstacle_contacts`` every new obstacle contact. ``foot_contacts_dropped`` and
+``contacts_not_logged`` count the contacts of the walk the trace could not keep (beyond
+:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_PER_FOOT` per foot or
+:data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few;
+``foot_contacts_max`` is the most contacts one foot had on one tick.
 """
 
 from __future__ import annotations
@@ -52,8 +56,9 @@ from taslel_bench.metrics.windows import window_ticks
 from taslel_bench.record.trace import EpisodeTrace
 
 CLEARANCE_TOLERANCE_M = 0.001  # [m] below the profile by more than this = a violation
-TRIP_REARM_S = 0.01  # [s] an obstacle contact starting within this of the foot's last one continues it
-REPORT_TOUCHDOWN_TOLERANCE_S = 0.02  # [s] trips_beyond_touchdown_20ms: 10 % of the default 0.2 s swing
+TRIP_REARM_S = 0.01  # [s] a contact starting within this of the foot's (or link's) last one continues it
+REPORT_TOUCHDOWN_TOLERANCE_S = 0.02  # [s] touchdowns_early_beyond_20ms: 10 % of the default 0.2 s swing
+LATE_SWING_PHASE = 0.5  # [-] a walkable landing from this swing phase on is a touchdown, earlier a trip
 
 
 def onsets(mask: np.ndarray, rearm_ticks: int = 1) -> np.ndarray:
@@ -62,10 +67,13 @@ def onsets(mask: np.ndarray, rearm_ticks: int = 1) -> np.ndarray:
     return Onsets(rearm_ticks)(mask)
 
 
-def _near_touchdown_phase(tolerance_s: float, swing_s: float) -> float:
-    """Swing phase from which a late-swing top landing is at most ``tolerance_s`` [s] before the scheduled
-    touchdown (> 1, none is, when the tolerance is 0)."""
-    return 1.0 - tolerance_s / swing_s if tolerance_s > 0.0 else 2.0
+def ticks_before_touchdown(phase: np.ndarray, step: float) -> np.ndarray:
+    """Whole ticks from swing phase ``phase`` to the plan's touchdown (phase 1) when the phase grows by ``step``
+    per tick: (1 - phase) / step rounded to the nearest tick, so a boundary in time is compared in integers (nan
+    where the step is unknown)."""
+    if not step > 0.0:
+        return np.full(np.shape(phase), np.nan)
+    return np.rint((1.0 - np.asarray(phase, float)) / step)
 
 
 def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
@@ -75,28 +83,48 @@ def _depths(acc: Reducer, x: np.ndarray, prefix: str) -> None:
     acc.max(f"{prefix}_max_m", x)
 
 
-def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001, swing_s: float = 0.2,
-                      touchdown_tolerance_s: float = 0.0) -> dict[str, float]:  # fmt: skip
-    """Virtual-profile clearance, physical-obstacle trips and strikes, and the filter's barrier values over the
-    walking ticks ``k0:n`` (``dt`` [s] control period, ``swing_s`` [s] the scheduled swing's duration,
-    ``touchdown_tolerance_s`` [s] see the module doc). Keys are nan when the run has no profile / no obstacles
-    / no filter."""
-    stream = ClearanceStream(dt, swing_s, touchdown_tolerance_s)
+class TripRule:
+    """The module doc's rule over consecutive chunks of ticks (the onsets carried across them): the summary's
+    counts and the viewer's trip marks (:mod:`taslel_bench.view.recording`) are this one rule."""
+
+    def __init__(self, dt: float) -> None:
+        rearm = max(1, round(TRIP_REARM_S / dt))
+        self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
+
+    def __call__(self, touching: np.ndarray, flank: np.ndarray, air: np.ndarray, phase: np.ndarray,
+                 link: np.ndarray) -> dict[str, np.ndarray]:  # fmt: skip
+        """Masks (ticks, 4) from per-foot ``touching`` (a contact with any terrain at distance <= 0), ``flank``
+        (one of them with its normal more than 45 deg from vertical), ``air`` (in the air by the plan and the
+        filter's stance set), ``phase`` (the plan's swing phase) and per-leg ``link`` (a leg link touching an
+        obstacle): ``strike`` (a), ``lift`` (b), ``landing`` (c, a touchdown), ``link`` (a leg link's trip),
+        ``new_flank`` (every flank onset, in the air or not) and ``new`` (every new contact of a foot)."""
+        new_flank, new = self.flank(flank), self.foot(touching)
+        walkable = new & ~flank & air  # a new contact whose contacts of that tick are all within 45 deg of vertical
+        return {"strike": new_flank & air, "lift": walkable & (phase < LATE_SWING_PHASE),
+                "landing": walkable & (phase >= LATE_SWING_PHASE), "link": self.link(link), "new_flank": new_flank,
+                "new": new}
+
+
+def clearance_metrics(tr: EpisodeTrace, k0: int, dt: float = 0.001) -> dict[str, float]:
+    """Virtual-profile clearance, trips, touchdowns and strikes, and the filter's barrier values over the walking
+    ticks ``k0:n`` (``dt`` [s] control period; see the module doc). Keys are nan when the run has no profile /
+    no obstacles / no filter."""
+    stream = ClearanceStream(dt)
     stream.feed(tr, slice(k0, tr.n))
     return stream.result()
 
 
 class ClearanceStream:
-    """:func:`clearance_metrics` fed chunk by chunk (rows of the trace's current chunk); contact onsets
-    carried across chunks."""
+    """:func:`clearance_metrics` fed chunk by chunk (rows of the trace's current chunk); contact onsets and the
+    swing phase's per-tick step carried across chunks."""
 
-    def __init__(self, dt: float, swing_s: float = 0.2, touchdown_tolerance_s: float = 0.0) -> None:
+    def __init__(self, dt: float) -> None:
         self.dt, self.acc = dt, Reducer()
-        self.near_touchdown_phase = _near_touchdown_phase(touchdown_tolerance_s, swing_s)
-        self.near_touchdown_phase_report = _near_touchdown_phase(REPORT_TOUCHDOWN_TOLERANCE_S, swing_s)
+        self.report_ticks = round(REPORT_TOUCHDOWN_TOLERANCE_S / dt)
         rearm = max(1, round(TRIP_REARM_S / dt))
-        self.flank, self.foot, self.link = Onsets(rearm), Onsets(rearm), Onsets(rearm)
-        self.link_off_foot = Onsets(rearm)
+        self.rule = TripRule(dt)
+        self.link_off_foot, self.link_floor, self.obstacle = Onsets(rearm), Onsets(rearm), Onsets(rearm)
+        self.phase_step = math.nan  # the plan's swing phase per tick (median over the swing ticks seen last)
 
     def result(self) -> dict[str, float]:
         return self.acc.result()
@@ -119,52 +147,68 @@ class ClearanceStream:
         acc.mean("clearance_loaded_swing_rate", loaded[judged])
         acc.window("clearance_violation_rate_worst_window", violated, judged, window_ticks(dt))
         _depths(acc, -c[violated], "clearance_violation_depth")
-        self._obstacles(tr, w, swing & ~tr.scheduled_stance[w])  # in the air by the filter and by the schedule
+        air = swing & ~tr.scheduled_stance[w]  # in the air by the filter and by the controller's plan
+        self._trips(tr, w, air)
+        self._obstacles(tr, w, air)
         _barrier_metrics(acc, tr, w, swing, dt)
 
-    def _obstacles(self, tr: EpisodeTrace, w: slice, swing: np.ndarray) -> None:
-        """Trips and stance strikes from contact onsets (see the module doc), the geometric clearance of swing
-        feet, lower legs on the floor (``shin_floor_contact_rate``, not a fall); ``swing`` (ticks, 4): the feet
-        in the air by the schedule and the filter's stance set."""
+    def _step(self, phase: np.ndarray, air: np.ndarray) -> float:
+        """The plan's swing phase per tick, from this chunk's consecutive in-the-air ticks (the median of the
+        positive steps; the last chunk's where this one has none)."""
+        d = np.diff(phase, axis=0)
+        d = d[air[1:] & air[:-1] & (d > 0.0)]
+        if d.size:
+            self.phase_step = float(np.median(d))
+        return self.phase_step
+
+    def _trips(self, tr: EpisodeTrace, w: slice, air: np.ndarray) -> None:
+        """Trips, early touchdowns and stance strikes from contact onsets (the module doc's rule); ``air``
+        (ticks, 4): the feet in the air by the plan and the filter's stance set."""
+        acc = self.acc
+        touching = tr.contact_touching[w]  # (n, 4, K)
+        flank = cast(np.ndarray, (touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)).any(axis=2))  # (n, 4)
+        on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))  # (numpy's stub: bool | array)
+        phase = tr.swing_phase[w]
+        r = self.rule(cast(np.ndarray, touching.any(axis=2)), flank, air, phase, tr.leg_link_obstacle_contact[w])
+        strike, lift, landing, link_obstacle, new = r["strike"], r["lift"], r["landing"], r["link"], r["new"]
+        floor = ~on_obstacle
+        link_floor = self.link_floor(tr.leg_link_floor_contact[w])
+        n_foot, n_link = int(strike.sum() + lift.sum()), int(link_obstacle.sum())
+        acc.count("trips", n_foot + n_link)
+        acc.count("foot_trips", n_foot)
+        acc.count("foot_trips_flank", strike.sum())
+        acc.count("foot_trips_top", lift.sum())
+        acc.count("foot_trips_floor", ((strike | lift) & floor).sum())
+        acc.count("foot_trips_flank_in_contact", (strike & ~new).sum())  # a flank met by a foot already touching
+        acc.count("shin_trips", n_link)  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
+        acc.count("shin_trips_off_foot", self.link_off_foot(tr.leg_link_obstacle_contact_off_foot[w]).sum())
+        acc.count("leg_link_floor_contacts", link_floor.sum())  # new leg-link contacts with the floor
+        acc.count("touchdowns_early", landing.sum())
+        acc.count("touchdowns_early_floor", (landing & floor).sum())
+        early = ticks_before_touchdown(phase[landing], self._step(phase, air))
+        acc.count("touchdowns_early_beyond_20ms", (early > self.report_ticks).sum())
+        acc.count("stance_flank_strikes", (r["new_flank"] & ~air).sum())
+        # contacts the trace could not keep (0 expected: plant.contact_frames' slots are sized with a margin)
+        acc.count("foot_contacts_dropped", tr.foot_contacts_dropped[w].sum())
+        acc.count("contacts_not_logged", tr.contacts_not_logged[w].sum())
+        acc.max("foot_contacts_max", tr.foot_contacts[w])  # the most terrain contacts of one foot on one tick
+        acc.count("stance_obstacle_contacts", (self.obstacle(on_obstacle) & ~air).sum())
+        trip_ticks = np.flatnonzero((strike | lift).any(axis=1) | link_obstacle.any(axis=1))
+        # [s] episode time of the first trip (the report's still strips start there); nan without one
+        acc.first("first_trip_s", float(tr.t_s[w][trip_ticks[0]]) if trip_ticks.size else math.nan)
+
+    def _obstacles(self, tr: EpisodeTrace, w: slice, air: np.ndarray) -> None:
+        """The geometric clearance of the feet in the air above obstacles, lower legs on the floor
+        (``shin_floor_contact_rate``, not a fall); ``air`` (ticks, 4): the feet in the air by the plan and the
+        filter's stance set."""
         acc = self.acc
         acc.mean("shin_floor_contact_rate", tr.shin_floor_contact[w])
-        flank = tr.contact_touching[w] & (tr.contact_normal_w[w][..., 2] < FLANK_COS)
-        flank_feet = cast(np.ndarray, flank.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
-        acc.count("stance_flank_strikes", (self.flank(flank_feet) & ~swing).sum())
         d = tr.obstacle_clearance_m[w]
         if not np.isfinite(d).any():  # no obstacles in the terrain (nan distances): no obstacle keys
             return
-        on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))  # (n, 4) foot touches an obstacle
-        new = self.foot(on_obstacle)
-        link_new = self.link(tr.leg_link_obstacle_contact[w])
-        foot_trips = new & swing
-        trip_ticks = np.flatnonzero(foot_trips.any(axis=1) | link_new.any(axis=1))
-        touch = on_obstacle & swing
-        n_foot, n_link = foot_trips.sum(), link_new.sum()
-        acc.count("trips", n_foot + n_link)
-        acc.count("foot_trips", n_foot)
-        # the same split by where the foot met the obstacle: on a flank (normal > 45 deg from vertical: a riser,
-        # a log's side) or on a top (a swing foot landing early on a step's top); they add up to foot_trips
-        on_flank = flank.any(axis=2)
-        acc.count("foot_trips_flank", (foot_trips & on_flank).sum())
-        acc.count("foot_trips_top", (foot_trips & ~on_flank).sum())
-        acc.count("shin_trips", n_link)  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
-        phase = tr.swing_phase[w]
-        late_top = foot_trips & ~on_flank & (phase >= 0.5)
-        off_foot = self.link_off_foot(tr.leg_link_obstacle_contact_off_foot[w]).sum()
-        acc.count("foot_trips_top_late_swing", late_top.sum())
-        acc.count("shin_trips_off_foot", off_foot)
-        acc.count("trips_strikes", n_foot - late_top.sum() + off_foot)
-        near = (late_top & (phase >= self.near_touchdown_phase)).sum()
-        acc.count("foot_trips_top_near_touchdown", near)
-        acc.count("trips_beyond_touchdown_tolerance", n_foot + n_link - near)
-        near_report = (late_top & (phase >= self.near_touchdown_phase_report)).sum()
-        acc.count("trips_beyond_touchdown_20ms", n_foot + n_link - near_report)
-        acc.count("stance_obstacle_contacts", (new & ~swing).sum())
-        # [s] episode time of the first trip (the report's still strips start there); nan without one
-        acc.first("first_trip_s", float(tr.t_s[w][trip_ticks[0]]) if trip_ticks.size else math.nan)
-        acc.mean("obstacle_touch_swing_rate", touch[swing])
-        acc.min("obstacle_clearance_min_m", d[swing])
+        touch = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2)) & air
+        acc.mean("obstacle_touch_swing_rate", touch[air])
+        acc.min("obstacle_clearance_min_m", d[air])
         _depths(acc, -d[touch & (d < 0)], "obstacle_penetration")
 
 

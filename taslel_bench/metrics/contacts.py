@@ -23,13 +23,13 @@ terrain's friction there). ``*_worst_window`` rates: the worst 0.5 s window (:mo
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple, cast
 
 import numpy as np
 
 from taslel_bench.metrics.stream import Reducer, Touchdowns
 from taslel_bench.metrics.windows import window_ticks
+from taslel_bench.plant.contact_frames import FLANK_COS
 from taslel_bench.record.trace import EpisodeTrace
 
 MIN_NORMAL_FORCE_N = 1.0  # [N] a contact carries load from this normal force on
@@ -142,7 +142,6 @@ class PlantFeet(NamedTuple):
     loaded: np.ndarray
 
 
-FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank
 
 
 def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

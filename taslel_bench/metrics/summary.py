@@ -38,24 +38,23 @@ DEFAULT_SAFETY = SafetyLimits()
 
 def summarize(res: EpisodeResult, control_dt_s: float, stand_duration_s: float, stance_duration_s: float = 0.2,
               limits: HealthLimits = DEFAULT_LIMITS, safety: SafetyLimits = DEFAULT_SAFETY,
-              swing_duration_s: float = 0.2, stream: SummaryStream | None = None) -> dict[str, object]:  # fmt: skip
+              stream: SummaryStream | None = None) -> dict[str, object]:  # fmt: skip
     """The episode's summary keys (:func:`summary_sections`, flattened)."""
-    return summary_sections(res, control_dt_s, stand_duration_s, stance_duration_s, limits, safety, swing_duration_s,
+    return summary_sections(res, control_dt_s, stand_duration_s, stance_duration_s, limits, safety,
                             stream).flat()  # fmt: skip
 
 
 def summary_sections(res: EpisodeResult, control_dt_s: float, stand_duration_s: float,
                      stance_duration_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS,
-                     safety: SafetyLimits = DEFAULT_SAFETY, swing_duration_s: float = 0.2,
+                     safety: SafetyLimits = DEFAULT_SAFETY,
                      stream: SummaryStream | None = None) -> RunSummary:  # fmt: skip
     """The episode's summary in sections (:class:`taslel_bench.metrics.sections.RunSummary`; the run adds its
-    identity, plant and machine). ``stance_duration_s`` / ``swing_duration_s`` [s]: the scheduled stance
-    length (touchdown-slip window) and swing length (how early a landing is); ``limits``: when the run is
+    identity, plant and machine). ``stance_duration_s`` [s]: the scheduled stance length (touchdown-slip
+    window; trips and touchdowns read the plan recorded in the trace); ``limits``: when the run is
     ``degraded`` instead of ``ok``; ``safety``: when it is not ``safe``. The numbers come from ``stream``
     (the episode's metrics, fed chunk by chunk during the episode) when it was made with these settings,
     else from the whole trace (which must then hold every tick)."""
-    settings = (control_dt_s, stand_duration_s, stance_duration_s, limits, swing_duration_s,
-                safety.trip_touchdown_tolerance_s)  # fmt: skip
+    settings = (control_dt_s, stand_duration_s, stance_duration_s, limits)
     trace = res.traced()
     if not isinstance(stream, SummaryStream) or stream.settings != settings:
         if trace.offset:
@@ -104,14 +103,14 @@ class SummaryStream:
     key; a percentile key keeps at most :data:`taslel_bench.metrics.stream.EXACT_QUANTILE_VALUES` values,
     then a fixed-size histogram; the reference-checked ticks' u errors are kept whole (8 bytes per check)."""
 
-    def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2, limits: HealthLimits = DEFAULT_LIMITS,
-                 swing_s: float = 0.2, trip_touchdown_tolerance_s: float = 0.0) -> None:  # fmt: skip
-        self.settings = (dt, stand_s, stance_s, limits, swing_s, trip_touchdown_tolerance_s)
+    def __init__(self, dt: float, stand_s: float, stance_s: float = 0.2,
+                 limits: HealthLimits = DEFAULT_LIMITS) -> None:
+        self.settings = (dt, stand_s, stance_s, limits)
         self.dt, self.k_walk = dt, round(stand_s / dt)  # first walking tick
         self.acc, self.n, self.filter_on = Reducer(), 0, False
         self.walk_contacts = ContactStream(dt, stance_s, "")
         self.stand_contacts = ContactStream(dt, stance_s, "_stand")
-        self.clearance = ClearanceStream(dt, swing_s, trip_touchdown_tolerance_s)
+        self.clearance = ClearanceStream(dt)
         self.residuals = ResidualStream(limits)
         self.estimator = EstimatorStream()
         self.ends: dict[str, np.ndarray] = {}  # trunk position and yaw of the first walking and the last tick

@@ -26,12 +26,9 @@ class SafetyLimits:
     """The ``safety`` block of the run config: the limits of the verdict (rates over the worst 0.5 s window of the
     walk, so a local event counts; a fall is always unsafe)."""
 
-    trips_max: int = param(0, "trips allowed per run (new contact of a swing foot or leg link with an obstacle)",
-                           lo=0, hi=10_000)
-    trip_touchdown_tolerance_s: float = param(
-        0.0, "> 0: a swing foot landing on an obstacle's top at most this long before its scheduled touchdown is an "
-             "early touchdown, not a trip (the check then reads trips_beyond_touchdown_tolerance); 0: every trip "
-             "counts", unit="s", lo=0.0, hi=0.1, why="half of the default swing")
+    trips_max: int = param(0, "trips allowed per run (a foot in the air striking a flank, or scuffing a walkable "
+                                  "surface in the first half of its swing; a leg link touching an obstacle; a landing "
+                                  "on a walkable surface later in the swing is a touchdown)", lo=0, hi=10_000)
     cone_edge_rate_worst_window_max: float = param(
         0.25, "share of loaded contacts at |f_t| >= 0.98 mu f_n (sliding) in any 0.5 s", lo=0.0, hi=1.0)
     clearance_violation_rate_worst_window_max: float = param(
@@ -44,7 +41,7 @@ class SafetyLimits:
 
 # tag -> (summary key, limit attribute, what crossing it means); ``fell`` and ``not_judged`` have no limit
 CHECKS = {
-    "tripped": ("trips", "trips_max", "new contacts of a swing foot or a leg link with an obstacle"),
+    "tripped": ("trips", "trips_max", "strikes and scuffs of a foot in the air, leg links touching an obstacle"),
     "cone_edge": ("friction_cone_edge_rate_worst_window", "cone_edge_rate_worst_window_max",
                   "loaded contacts at the friction-cone edge (sliding), worst 0.5 s"),
     "clearance": ("clearance_violation_rate_worst_window", "clearance_violation_rate_worst_window_max",
@@ -93,10 +90,6 @@ def reasons(summary: dict[str, Any], limits: SafetyLimits) -> list[Reason]:
         found.append(Reason("fell", "time_to_fall_s", float(summary.get("time_to_fall_s", math.nan)), math.nan,
                             str(summary.get("fall_reason", ""))))
     for tag, (key, attr, meaning) in CHECKS.items():
-        if tag == "tripped" and limits.trip_touchdown_tolerance_s > 0.0:
-            key = "trips_beyond_touchdown_tolerance"
-            meaning += (f", top landings within {1e3 * limits.trip_touchdown_tolerance_s:g} ms of the scheduled "
-                        f"touchdown not counted")
         value = summary.get(key)
         limit = getattr(limits, attr)
         if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > limit:

@@ -14,8 +14,9 @@ steps, heightfields), vectorised over ticks:
 * the tangential speed [m/s] of the foot's material point at the contact position (the body's ``cvel`` moved
   to ``contact.pos``, as ``mj_objectVelocity`` reads it; the normal component removed) — the slip at the
   contact, not at the sphere's lowest point. Terrain geoms are static (world or mocap bodies: no velocity);
-* per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0, and the
-  same for contact points farther than :data:`FOOT_NEIGHBOURHOOD_M` from that leg's foot-sphere centre (the
+* per leg, a non-foot link of that leg (calf, thigh, hip) touching an obstacle geom at distance <= 0, the same
+  for any other terrain geom (the floor), and for an obstacle at contact points farther than
+  :data:`FOOT_NEIGHBOURHOOD_M` from that leg's foot-sphere centre (the
   A1 URDF's calf box runs to the foot centre and leaves the 2 cm sphere 1.65 cm from it: where the foot stands on
   a log's curve the box grazes the log beside the foot, as it grazes the floor on flat ground).
 
@@ -25,6 +26,8 @@ After ``mj_step`` the contact list, the constraint forces and the body velocitie
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -32,9 +35,13 @@ from taslel_bench.plant.contacts import foot_geom_ids, obstacle_geom_mask
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.util.jit import kernel
 
-MAX_CONTACTS_PER_FOOT = 3  # a sphere meets a plane and a log's flank at once at most twice in practice
+# contacts kept per foot and tick: a sphere on the floor or a log has 1-2, on the rough heightfield (a union of
+# triangular prisms) up to 6 measured; beyond this, the foot's least loaded ones are dropped and counted
+# (``foot_contacts_dropped``)
+MAX_CONTACTS_PER_FOOT = 8
 FOOT_NEIGHBOURHOOD_M = 0.04  # [m] a leg-link contact point nearer than this to its foot's centre is beside the foot
-MAX_CONTACTS_LOGGED = 24  # contacts kept per tick (the robot on flat ground has 2-4; overflow is counted)
+FLANK_COS = math.cos(math.radians(45.0))  # a contact normal more than 45 deg from world z: a flank (riser, log side)
+MAX_CONTACTS_LOGGED = 24  # contacts kept per tick (flat ground: 2-4; beyond, counted: ``contacts_not_logged``)
 
 
 class ContactLog:
@@ -122,10 +129,14 @@ class ContactFrameReader:
     # -------------------------------------------------------------------------------------- after the loop
     def frames(self, log: ContactLog, k0: int, k1: int, foot_pos_w: np.ndarray) -> dict[str, np.ndarray]:
         """Per-foot arrays of ticks ``k0:k1`` (shape (n, 4, K), K = MAX_CONTACTS_PER_FOOT, zero / False in
-        unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept):
+        unused slots; each foot's contacts sorted by normal force, the largest first, the K largest kept; the
+        count of the others in ``foot_contacts_dropped`` (n, 4), of all in ``foot_contacts`` (n, 4), and the
+        tick's contacts beyond
+        :data:`MAX_CONTACTS_LOGGED` in ``contacts_not_logged`` (n,)):
         ``contact_fn_n`` f_n [N]; ``contact_ft_n`` |f_t| [N]; ``contact_mu`` [-]; ``contact_normal_w``
         (n, 4, K, 3) out of the terrain; ``contact_slip_mps`` [m/s]; ``contact_touching`` distance <= 0;
-        ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4), and
+        ``contact_on_obstacle`` touching an obstacle geom; ``leg_link_obstacle_contact`` (n, 4),
+        ``leg_link_floor_contact`` (n, 4) the same with a terrain geom that is not an obstacle, and
         ``leg_link_obstacle_contact_off_foot`` (n, 4) for contact points beyond :data:`FOOT_NEIGHBOURHOOD_M` of
         the leg's foot centre (``foot_pos_w`` (n, 4, 3) [m], the foot-sphere centres of those ticks: the foot
         sensors', read once per tick already)."""
@@ -137,9 +148,14 @@ class ContactFrameReader:
         terrain_pair = used & (robot[..., 0] != robot[..., 1])
         touching = log.dist[t] <= 0.0
         out: dict[str, np.ndarray] = {"leg_link_obstacle_contact": np.zeros((n, quad.N_LEGS), bool),
-               "leg_link_obstacle_contact_off_foot": np.zeros((n, quad.N_LEGS), bool)}
+               "leg_link_obstacle_contact_off_foot": np.zeros((n, quad.N_LEGS), bool),
+               "leg_link_floor_contact": np.zeros((n, quad.N_LEGS), bool),
+               "contacts_not_logged": np.maximum(log.count[t] - MAX_CONTACTS_LOGGED, 0)}
         link = self._link_leg[geom]
         for side in (0, 1):
+            floor = terrain_pair & touching & (link[..., side] >= 0) & ~self._is_obstacle[geom[..., 1 - side]]
+            tick, j = np.nonzero(floor)
+            out["leg_link_floor_contact"][tick, link[tick, j, side]] = True
             hit = terrain_pair & touching & (link[..., side] >= 0) & self._is_obstacle[geom[..., 1 - side]]
             tick, j = np.nonzero(hit)
             leg = link[tick, j, side]
@@ -167,6 +183,9 @@ class ContactFrameReader:
         key = tick[order] * quad.N_LEGS + leg[order]
         slot = np.arange(order.size) - np.searchsorted(key, key, side="left")
         keep = slot < kk
+        out["foot_contacts"] = np.zeros((n, quad.N_LEGS), np.int32)
+        np.add.at(out["foot_contacts"], (tick, leg), 1)
+        out["foot_contacts_dropped"] = np.maximum(out["foot_contacts"] - kk, 0)
         o, s = order[keep], slot[keep]
         ti, li = tick[o], leg[o]
         arrays = {"contact_fn_n": np.zeros((n, quad.N_LEGS, kk)), "contact_ft_n": np.zeros((n, quad.N_LEGS, kk)),

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from taslel_bench.plant.bridge import StateBridge
-from taslel_bench.plant.contact_frames import MAX_CONTACTS_PER_FOOT, ContactLog
+from taslel_bench.plant.contact_frames import FLANK_COS, MAX_CONTACTS_PER_FOOT, ContactLog
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
@@ -139,7 +139,9 @@ class EpisodeTrace:
         # foot-terrain contact in MuJoCo's contact frame, per tick, leg and slot (K slots, zero / False unused):
         # f_n [N], |f_t| [N], the contact's mu [-], the normal out of the terrain (world axes), the contact
         # point's tangential speed [m/s], touching (distance <= 0), on an obstacle geom; per leg: a non-foot
-        # link of the leg touching an obstacle, and the same farther than FOOT_NEIGHBOURHOOD_M from its foot
+        # link of the leg touching an obstacle, the same farther than FOOT_NEIGHBOURHOOD_M from its foot, a
+        # non-foot link touching other terrain (the floor), and the foot's contacts beyond the K slots (dropped);
+        # per tick, the contacts beyond the log's MAX_CONTACTS_LOGGED. K = 8: 1.9 kB per tick (10 s: 20 MB)
         k = MAX_CONTACTS_PER_FOOT
         self.contact_fn_n = np.zeros((c, nl, k))
         self.contact_ft_n = np.zeros((c, nl, k))
@@ -151,6 +153,10 @@ class EpisodeTrace:
         self.foot_contact_normal_w = np.zeros((c, nl, 3))  # [N] sum of f_n x normal over each foot's contacts
         self.leg_link_obstacle_contact = np.zeros((c, nl), bool)
         self.leg_link_obstacle_contact_off_foot = np.zeros((c, nl), bool)
+        self.leg_link_floor_contact = np.zeros((c, nl), bool)
+        self.foot_contacts = np.zeros((c, nl), np.int32)
+        self.foot_contacts_dropped = np.zeros((c, nl), np.int32)
+        self.contacts_not_logged = np.zeros(c, np.int32)
 
     def _allocate_tick_timing(self, c: int) -> None:
         """The event list (the friction estimate and the tick's wall times are loop rows: ``tick_parts_s`` [s] =
@@ -380,7 +386,9 @@ class EpisodeTrace:
 
     def _contact_frame_columns(self, cols: dict, d: dict, t: slice, i: int, leg: str) -> None:
         """Leg ``i``'s contacts in MuJoCo's contact frame: the summed normal force, and the tangential force,
-        friction, normal and contact-point slip of its most loaded contact (slot 0: sorted by normal force)."""
+        friction, normal and contact-point slip of its most loaded contact (slot 0: sorted by normal force); its
+        leg links on an obstacle; the foot touching any terrain, and touching a flank (normal more than 45 deg
+        from vertical)."""
         def get(name: str) -> np.ndarray:
             return d[name][:, i] if name in d else getattr(self, name)[t, i]
 
@@ -391,6 +399,10 @@ class EpisodeTrace:
         cols[f"{leg}_contact_frame_slip_mps"] = get("contact_slip_mps")[:, 0]
         cols[f"{leg}_leg_link_obstacle_contact"] = get("leg_link_obstacle_contact")
         cols[f"{leg}_leg_link_obstacle_contact_off_foot"] = get("leg_link_obstacle_contact_off_foot")
+        # what the trip rule reads of the foot's contacts (taslel_bench.metrics.clearance): any touching, a flank
+        touching = get("contact_touching")
+        cols[f"{leg}_foot_touching"] = touching.any(axis=1)
+        cols[f"{leg}_foot_flank_contact"] = (touching & (get("contact_normal_w")[..., 2] < FLANK_COS)).any(axis=1)
 
     def _model_columns(self, cols: dict, k0: int, k1: int) -> None:
         """The controller model's residuals and barrier conditions (nan until computed after the episode)."""

@@ -304,9 +304,9 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics:
     time spent off the loop's clock, the reference check, the estimator's own diagnostics (optional
     ``diagnostics()``), the filter's relaxations and the contact estimate's counts."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = built.controller.stance_swing_s
+    stance_s, _ = built.controller.stance_swing_s
     out = summary_sections(res, dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg),
-                           safety_limits(cfg), swing_s, metrics)  # fmt: skip
+                           safety_limits(cfg), metrics)  # fmt: skip
     out.timing["recording_s"] = float(res.extras.get("recording_s", 0.0))
     out.timing["reference_s"] = float(res.extras.get("reference_s", 0.0))
     out.filter.update(_reference_summary(built, metrics, dt))  # record.reference_every: u error against the reference

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from taslel_bench.config.settings import health_limits, safety_limits
+from taslel_bench.config.settings import health_limits
 from taslel_bench.metrics.summary import SummaryStream
 from taslel_bench.record import qpset, run_files
 from taslel_bench.record.result import EpisodeResult
@@ -83,9 +83,8 @@ def run_recorders(cfg: DictConfig, built, out_dir: Path, choices: dict[str, str]
     """The recorders of a run of ``built`` (:class:`taslel_bench.sim.build.Built`) into ``out_dir``;
     ``choices``: the option of each config group, as the run's summary names them."""
     dt = 1.0 / float(cfg.control_rate_hz)
-    stance_s, swing_s = built.controller.stance_swing_s
-    metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg), swing_s,
-                            safety_limits(cfg).trip_touchdown_tolerance_s)  # fmt: skip
+    stance_s, _ = built.controller.stance_swing_s
+    metrics = SummaryStream(dt, float(cfg.controller.stand_duration), stance_s, health_limits(cfg))
     return RunRecorders(metrics, StepsWriter(out_dir / run_files.STEPS), _mcap(cfg, built, out_dir),
                         _qp_recorder(cfg, built, choices))
 

@@ -355,18 +355,16 @@ crossed a health limit and are listed below):
 - `clearance_violation_rate`: every swing tick (loaded ones included: lift-off lag, early touchdown) with
   the foot-sphere bottom more than 1 mm below the virtual profile z(s); `clearance_depth_p95_m`: 95th
   percentile of how far below.
-- `trips`: new contacts (after >= 10 ms without one) of a swing foot with an obstacle, plus new contacts of
-  a leg link (calf, thigh, hip) with one (MuJoCo contacts, distance <= 0); a contact continuing from stance
-  through lift-off is not a trip. `stance_strikes`: new foot contacts in stance whose normal is more than
-  45 deg from vertical (a log's flank).
-- `trips_strikes`: `trips` less the swing feet landing on an obstacle's top in the second half of the swing
-  (`foot_trips_top_late_swing`: early touchdowns, which on the floor are not counted) and less the leg-link
-  contacts within 4 cm of the leg's own foot centre (the URDF calf box grazing the log the foot stands on);
-  `shin_trips_off_foot` the leg-link onsets beyond 4 cm. `trips` stays the verdict's count unless
-  `safety.trip_touchdown_tolerance_s` > 0: then `trips_beyond_touchdown_tolerance`, `trips` less the top
-  landings at most that long before the scheduled touchdown (`foot_trips_top_near_touchdown`).
-  `trips_beyond_touchdown_20ms` is the same count at 20 ms whatever the verdict reads (the terrain table's
-  third reading).
+- `trips`: the verdict's count, one rule for every controller and surface, read from the plant's contacts
+  (MuJoCo, distance <= 0) and the contact plan the controller recorded, for a foot in the air by the plan and
+  the filter's stance set: a new foot contact (after >= 10 ms without one) whose normal is more than 45 deg
+  from vertical (a riser, a log's flank), at any swing phase (`foot_trips_flank`); a new contact on a walkable
+  surface (normal within 45 deg) in the first half of the swing (`foot_trips_top`); plus every new contact
+  of a leg link (calf, thigh, hip) with an obstacle (`shin_trips`; `shin_trips_off_foot` those beyond 4 cm of
+  the leg's own foot centre). `foot_trips_floor`: the foot trips on the floor (not an obstacle geom).
+- `touchdowns_early`: new contacts on a walkable surface in the second half of the swing, on a top as on the
+  floor: landings before the plan's touchdown, not trips (`touchdowns_early_beyond_20ms`: more than 20 ms
+  before it, in whole ticks). `stance_flank_strikes`: new flank contacts of a foot in stance.
 - `barrier_negative_rate`: share of swing ticks whose QP was solved while the filter's own barrier h < 0.
 - `residual_*`: RMS over walking ticks of the controller model's residual against what the plant did,
   |M vdot + h - S u - J'f| (the plant's acceleration and foot forces, the model's M, h, J): joint rows

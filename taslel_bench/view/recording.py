@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taslel_bench.metrics.clearance import TRIP_REARM_S, onsets
+from taslel_bench.metrics.clearance import TripRule
 from taslel_bench.record import run_files
 from taslel_bench.record.video import FOOT_COLUMNS, FORCE_COLUMNS, STATE_COLUMNS
 from taslel_bench.robot import quadruped as quad
@@ -29,8 +29,8 @@ VELOCITY_COLUMNS = [*(f"base_v{ax}_w_mps" for ax in "xyz"), *(f"base_w{ax}_b_rad
 TORQUE_COLUMNS = [f"u_{j}_nm" for j in JOINTS]
 PLANNED_FORCE_COLUMNS = [f"{leg}_grf_filter_{ax}_w_n" for leg in quad.LEGS for ax in "xyz"]
 TRIP_COLUMNS = [f"{leg}_{name}" for leg in quad.LEGS
-                for name in ("obstacle_contact", "leg_link_obstacle_contact", "stance", "scheduled_stance",
-                             "obstacle_clearance_m")]  # fmt: skip
+                for name in ("foot_touching", "foot_flank_contact", "leg_link_obstacle_contact", "stance",
+                             "scheduled_stance", "swing_phase")]  # fmt: skip
 
 
 class NotARunFolder(ValueError):
@@ -164,25 +164,24 @@ def _saved_events(run_dir: Path) -> list[RunEvent]:
 
 
 def trip_events(steps: pd.DataFrame, stand_s: float, dt_s: float) -> list[RunEvent]:
-    """The trips the summary's ``trips`` counts (:mod:`taslel_bench.metrics.clearance`), one event per onset:
-    over the walking ticks, a foot's new obstacle contact while it is in the air by the schedule and the
-    filter's stance set, or a leg link's new obstacle contact (re-armed after ``TRIP_REARM_S``). ``[]`` when
-    the terrain has no obstacles or the columns are missing."""
-    if any(c not in steps for c in TRIP_COLUMNS) or not np.isfinite(
-            steps[[f"{leg}_obstacle_clearance_m" for leg in quad.LEGS]].to_numpy(float)).any():  # fmt: skip
+    """The trips the summary's ``trips`` counts, one event per onset over the walking ticks, by the same rule
+    (:class:`taslel_bench.metrics.clearance.TripRule`): a foot in the air by the plan and the filter's stance set
+    striking a flank, or touching a walkable surface in the first half of its swing; a leg link's new obstacle
+    contact. ``[]`` when the columns are missing (a run recorded before the rule)."""
+    if any(c not in steps for c in TRIP_COLUMNS):
         return []
     t_s = steps["t_s"].to_numpy(float)
     walk = slice(int(np.searchsorted(t_s, stand_s - dt_s / 2)), len(t_s))
-    rearm = max(1, round(TRIP_REARM_S / dt_s))
 
-    def legs(name: str) -> np.ndarray:
-        return steps[[f"{leg}_{name}" for leg in quad.LEGS]].to_numpy(bool)[walk]
+    def legs(name: str, dtype: type = bool) -> np.ndarray:
+        return steps[[f"{leg}_{name}" for leg in quad.LEGS]].to_numpy(dtype)[walk]
 
-    swing = ~legs("stance") & ~legs("scheduled_stance")
-    foot = onsets(legs("obstacle_contact"), rearm) & swing
-    link = onsets(legs("leg_link_obstacle_contact"), rearm)
+    air = ~legs("stance") & ~legs("scheduled_stance")
+    r = TripRule(dt_s)(legs("foot_touching"), legs("foot_flank_contact"), air, legs("swing_phase", float),
+                       legs("leg_link_obstacle_contact"))  # fmt: skip
     out = []
-    for mask, part in ((foot, "foot"), (link, "leg link")):
+    for mask, what in ((r["strike"], "foot struck a flank"), (r["lift"], "foot scuffed the ground lifting"),
+                       (r["link"], "leg link hit an obstacle")):  # fmt: skip
         for k, i in zip(*np.nonzero(mask), strict=True):
-            out.append(RunEvent(float(t_s[walk][k]), "trip", f"{quad.LEGS[i]} {part} hit an obstacle"))
-    return out
+            out.append(RunEvent(float(t_s[walk][k]), "trip", f"{quad.LEGS[i]} {what}"))
+    return sorted(out, key=lambda e: e.t_s)
