@@ -10,6 +10,8 @@ Arrays are in the core's leg order (:data:`taslel_bench.robot.quadruped.LEGS`).
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -58,3 +60,15 @@ class NominalControl(Protocol):
     def stand_configuration(self) -> np.ndarray: ...
 
     def reset(self) -> None: ...
+
+
+def compute_of(controller: NominalControl) -> Callable[..., np.ndarray]:
+    """``controller.compute`` called with the six arguments of :class:`NominalControl` (time, joint angles and
+    rates, trunk pose, trunk velocity, torques applied on the previous tick). A controller written for the first
+    four only (``compute(t, q_joints, qd_joints, base_pose=None)``) is called with those: it keeps working."""
+    compute = controller.compute
+    params = inspect.signature(compute).parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_POSITIONAL for p in params) or len(params) >= 6:
+        return compute
+    return lambda t, q_joints, qd_joints, base_pose=None, base_velocity=None, tau_applied=None: compute(
+        t, q_joints, qd_joints, base_pose)

@@ -37,6 +37,7 @@ from rich.console import Console
 from rich.table import Table
 
 from taslel_bench.api import compose
+from taslel_bench.control.plan import compute_of
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.qp.tick_replay import AFTER_STAND_TICKS, record_ticks, replay
 from taslel_bench.record.run_files import atomic_write
@@ -132,10 +133,11 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
     t = [e.controller.stand_duration_s + 1.0]
 
     tau = np.zeros(12)
+    compute = compute_of(e.controller)
 
     def ctrl():
         t[0] += 1e-3
-        e.controller.compute(t[0], qj, qdj, q[:7], v[:6], tau)
+        compute(t[0], qj, qdj, q[:7], v[:6], tau)
 
     if trace is None:
         trace = e.run().traced()
@@ -147,7 +149,7 @@ def part_costs(built: Built, trace: EpisodeTrace | None = None) -> dict[str, flo
     if (safety_filter := built.filter) is not None:
         costs["pinocchio_update"] = _median_us(lambda: e.model.update(q, v))
         gs = e.controller.contact_plan(t[0])
-        u = e.controller.compute(t[0], qj, qdj, q[:7], v[:6], tau)
+        u = compute(t[0], qj, qdj, q[:7], v[:6], tau)
         inputs = TickInputs(e.model, v, gs.in_stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
         costs["qp_build"] = _median_us(lambda: safety_filter.build(inputs, u), 1000)
         costs["qp_solve"] = replayed_solve_us(built)

@@ -27,7 +27,7 @@ from types import SimpleNamespace
 import mujoco
 import numpy as np
 
-from taslel_bench.control.plan import NominalControl
+from taslel_bench.control.plan import NominalControl, compute_of
 from taslel_bench.filter.layout import TickInputs
 from taslel_bench.filter.safety_filter import FilterResult, SafetyFilter
 from taslel_bench.interfaces import (
@@ -172,7 +172,7 @@ class Episode:
             # contact flags (filter.stance_source=contact) writable: warm both
             for t, writable in ((0.0, True), (self.controller.stand_duration_s, False)):
                 gs = self.controller.contact_plan(t)
-                u_nom = self.controller.compute(t, q[7:], v[6:], self._base_pose, self._base_velocity, self._tau_prev)
+                u_nom = self._compute(t, q[7:], v[6:], self._base_pose, self._base_velocity, self._tau_prev)
                 stance = gs.in_stance.copy() if writable else gs.in_stance
                 inputs = TickInputs(self.model, v, stance, 1.0, gs.swing_phase, gs.swing_phase_rate)
                 results.append(self.filter.filter(inputs, u_nom))
@@ -271,7 +271,8 @@ class Episode:
 
     def _views(self) -> None:
         """Views of the plant's arrays and the tick's buffers, made once per run (MjData makes a new numpy
-        wrapper on every attribute read)."""
+        wrapper on every attribute read), and the controller's compute as the tick calls it."""
+        self._compute = compute_of(self.controller)  # per run: a tool may wrap the controller's compute
         self._qpos, self._qvel, self._sensordata, self._ctrl = self.d.qpos, self.d.qvel, self.d.sensordata, self.d.ctrl
         self._q = np.zeros(quad.NQ)  # Pinocchio configuration, read from the plant every tick
         self._base_pose = self._q[:7]  # its trunk pose (a view, made once): the controller's base_pose
@@ -321,7 +322,7 @@ class Episode:
         self.sensed = sensed = Proprioception(t, q_joints, qd_joints, self._tau_prev, filter_mu=self._mu_filter_prev,
                                               imu=self._imu_sample())  # what the robot measures
         est = self.estimator.step(sensed) if self._truth_step is None else self._truth_step(sensed, truth)
-        u_nom = self.controller.compute(t, q_joints, qd_joints, self._base_pose, self._base_velocity, self._tau_prev)
+        u_nom = self._compute(t, q_joints, qd_joints, self._base_pose, self._base_velocity, self._tau_prev)
         gs = self.controller.contact_plan(t)
         in_stance = self.stance.stance(gs, self.contacts)
         tick1 = time.perf_counter()
