@@ -357,3 +357,61 @@ def test_the_public_api_builds_the_terrain_filter_with_its_terrain():
     terrain = Terrain((Plane(0.4),))
     built = api.build_safety_filter(compose_cfg(["filter=terrain"]), terrain=terrain)
     assert isinstance(built.friction, TerrainFrictionCone) and built.friction.terrain is terrain
+
+
+def test_correction_limits_bound_u_minus_u_nom_per_leg_and_default_to_the_papers_bounds(states):
+    """``correction_limit_stance_nm`` / ``_swing_nm`` bound |u - u_nom| on each joint of a stance / swing leg (the
+    torque limits still hold); unset, the bounds are the torque limits only (the paper's QP)."""
+    st, pm = states
+    terrain = Terrain((Plane(1.0), Log(0.25, 0.0, 0.06)))  # a log under the front legs: barrier rows bind
+    w = world(terrain=terrain)
+    make = lambda s: [TerrainClearance(w, lift_m=0.05), LegClearance(w, "shin")]  # noqa: E731
+    paper = SafetyFilter(FilterSettings(), TightReference(), make(None))
+    assert np.array_equal(paper.condensed.lb, -paper.torque_limit_nm)
+    limited = SafetyFilter(FilterSettings(correction_limit_stance_nm=0.5, correction_limit_swing_nm=2.0),
+                           TightReference(), make(None))  # fmt: skip
+    moved = 0.0
+    for state in st:
+        x = inputs_for(pm, state, 1.0)
+        free = paper.filter(x, state[3])
+        res = limited.filter(x, state[3])
+        moved = max(moved, float(np.abs(free.u - state[3]).max()))
+        if res.used_fallback:
+            assert np.array_equal(res.u, state[3])
+            continue
+        legs = np.repeat(np.asarray(x.in_stance, bool), 3)
+        du = np.abs(res.u - state[3])
+        assert np.all(du[legs] <= 0.5 + 1e-6) and np.all(du[~legs] <= 2.0 + 1e-6)
+        assert np.all(np.abs(res.u) <= limited.torque_limit_nm + 1e-9)
+    assert moved > 2.0  # without the limits the filter moved some joint further
+    with pytest.raises(ValueError, match="correction_limit"):
+        SafetyFilter(FilterSettings(correction_limit_swing_nm=-1.0), TightReference())
+
+
+def test_support_min_normal_z_takes_a_stance_toe_on_a_riser_face_out_of_the_contact_rows(states):
+    """A stance foot against a steep face (normal n_z below ``support_min_normal_z``) gets no contact rows or cone
+    (lambda = 0); on flat ground the option changes nothing (the same QP)."""
+    st, pm = states
+    state = next(s for s in st if np.asarray(s[2].in_stance).any())
+    x = inputs_for(pm, state, 1.0)
+    flat = Terrain((Plane(1.0),))
+    plain = SafetyFilter(FilterSettings(friction_cone="terrain"), TightReference(), terrain=flat)
+    checked = SafetyFilter(FilterSettings(friction_cone="terrain", support_min_normal_z=0.7), TightReference(),
+                           terrain=flat)  # fmt: skip
+    a, b = plain.build(x, state[3]), checked.build(x, state[3])
+    assert np.array_equal(a.A, b.A) and np.array_equal(a.G, b.G) and checked.unsupported_ticks == 0
+    leg = int(np.flatnonzero(x.in_stance)[0])
+    foot = pm.foot_pos_in_world[leg]
+    r = pm.robot.foot_radius_m
+    # a riser face 12 mm into the toe (closer than the floor under it by more than the corner tolerance)
+    riser = Box(centre_m=(foot[0] + r - 0.012 + 0.2, foot[1], 0.0), half_size_m=(0.2, 0.3, 0.1), role=OBSTACLE)
+    steps = Terrain((Plane(1.0), riser))
+    f = SafetyFilter(FilterSettings(friction_cone="terrain", support_min_normal_z=0.7), TightReference(),
+                     terrain=steps)  # fmt: skip
+    res = f.filter(x, state[3])
+    assert f.unsupported_ticks == 1 and not res.used_fallback
+    assert np.allclose(res.lam.reshape(4, 3)[leg], 0.0, atol=1e-6)
+    others = [i for i in np.flatnonzero(x.in_stance) if i != leg]
+    assert all(res.lam.reshape(4, 3)[i, 2] > 0.5 for i in others)
+    with pytest.raises(ValueError, match="support_min_normal_z"):
+        SafetyFilter(FilterSettings(support_min_normal_z=0.7), TightReference())

@@ -295,6 +295,13 @@ class FilterConfig:
     relaxation: str = param(default_of(FilterSettings, "relaxation"),
                             "none (infeasible QP -> fallback) | priority (drop barrier families, last first)",
                             choices=RELAXATIONS)
+    correction_limit_stance_nm: float | None = param(None, "|u - u_nom| at most this per joint of a stance leg "
+                                                           "(null: no limit, the paper's)", unit="N·m", lo=0.0)
+    correction_limit_swing_nm: float | None = param(None, "|u - u_nom| at most this per joint of a swing leg "
+                                                          "(null: no limit, the paper's)", unit="N·m", lo=0.0)
+    support_min_normal_z: float | None = param(None, "a stance foot whose terrain normal has n_z below this gets no "
+                                                     "contact rows or cone (a toe on a riser face; null: off)",
+                                               lo=-1.0, hi=1.0)
     robust: RobustConfig = param(factory=RobustConfig, doc="margins for a wrong model (off: the paper's rows)")
     contact_estimate: ContactEstimateConfig = param(factory=ContactEstimateConfig,
                                                     doc="the stance estimate of stance_source: estimate")

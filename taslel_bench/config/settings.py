@@ -4,6 +4,8 @@ the episode's, the plant's and the controller's model's options, the nominal con
 
 from __future__ import annotations
 
+import math
+
 from typing import Any
 
 from hydra.utils import get_class, instantiate
@@ -64,7 +66,15 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
         friction_cone=str(f.friction_cone),
         cone_edge_downhill=bool(f.cone_edge_downhill),
         relaxation=str(f.relaxation),
+        correction_limit_stance_nm=_limit(f.correction_limit_stance_nm),
+        correction_limit_swing_nm=_limit(f.correction_limit_swing_nm),
+        support_min_normal_z=None if f.support_min_normal_z is None else float(f.support_min_normal_z),
     )
+
+
+def _limit(value: float | None) -> float:
+    """A config limit: null (no limit) -> inf."""
+    return math.inf if value is None else float(value)
 
 
 def contact_estimate(cfg: DictConfig) -> ContactEstimate:

@@ -30,6 +30,7 @@ kernels (:mod:`taslel_bench.util.jit`) at the end of this module and in :mod:`ta
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -41,7 +42,7 @@ from taslel_bench.filter.constraints import ContactOrSwing, EqualityFamily, Equa
 from taslel_bench.filter.equality_solve import FreeBlockSolver, solve_free
 from taslel_bench.filter.layout import INACTIVE_RHS, LAM, N_VARS, NL, NU, NV, VDOT, TickInputs, U
 from taslel_bench.filter.robust import DisturbanceObserver, RobustMargin, RobustSettings
-from taslel_bench.filter.terrain_cone import TerrainFrictionCone
+from taslel_bench.filter.terrain_cone import TerrainFrictionCone, contact_normals
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import default_robot
@@ -76,6 +77,13 @@ class FilterSettings:
     friction_cone: str = "pyramid"  # "pyramid" (paper: world z, one mu) | "terrain" (per foot, terrain normal)
     cone_edge_downhill: bool = False  # terrain cone: a pyramid edge down the slope (full mu there), not world x
     relaxation: str = "none"  # "none" (failure -> fallback) | "priority" (drop barrier families, last first)
+    # [N·m] per joint: |u - u_nom| at most this on a stance leg's / a swing leg's joints (inf: the paper's, only
+    # the torque limits bound u)
+    correction_limit_stance_nm: float = math.inf
+    correction_limit_swing_nm: float = math.inf
+    # [-] a stance foot whose terrain normal has n_z below this is no support to the filter: no contact rows and
+    # no cone for it (lambda = 0, the leg's motion free), its barrier rows those of a stance foot (none); None: off
+    support_min_normal_z: float | None = None
 
 
 @dataclass
@@ -131,6 +139,16 @@ class SafetyFilter:
                                                               edge_downhill=settings.cone_edge_downhill)
         else:
             self.friction = FrictionCone(settings.lambda_min_n)
+        if settings.correction_limit_stance_nm < 0.0 or settings.correction_limit_swing_nm < 0.0:
+            raise ValueError("filter.correction_limit_stance_nm and filter.correction_limit_swing_nm must be >= 0")
+        # bounds |u - u_nom| <= limit per leg (stance / swing) on top of the torque limits: only when one is finite
+        self._limit_correction = math.isfinite(settings.correction_limit_stance_nm) or math.isfinite(
+            settings.correction_limit_swing_nm)
+        self.terrain = terrain
+        self._support_check = settings.support_min_normal_z is not None
+        if self._support_check and terrain is None:
+            raise ValueError("filter.support_min_normal_z needs the world's terrain")
+        self.unsupported_ticks = 0  # ticks with a scheduled stance foot the filter took as no support
         self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families
         self.relaxed_by_family: dict[str, int] = {}  # family name -> ticks it was dropped
         self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
@@ -222,16 +240,33 @@ class SafetyFilter:
                          self.settings.regularization_target == "nominal", sv.rows, sv.workspace, self._rhs,
                          c.P, c.q, c.G, c.h)  # fmt: skip
 
+    def supported(self, inputs: TickInputs) -> TickInputs:
+        """``inputs`` with the stance feet whose terrain normal has n_z below ``support_min_normal_z`` (a toe
+        against a riser face or a log's side) taken out of the stance set (the inputs themselves if none is)."""
+        stance = np.asarray(inputs.in_stance, bool)
+        if not stance.any():
+            return inputs
+        m = inputs.model
+        normals = contact_normals(self.terrain, m.foot_pos_in_world, m.robot.foot_radius_m)
+        keep = stance & (normals[:, 2] >= self.settings.support_min_normal_z)
+        if np.array_equal(keep, stance):
+            return inputs
+        self.unsupported_ticks += 1
+        return TickInputs(m, inputs.v, keep, inputs.mu, inputs.swing_phase, inputs.swing_phase_rate,
+                          inputs.mu_per_foot)
+
     def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
         """Write this tick's QP (in place) and return it."""
         qp = self.problem
         qp.q[U] = -u_nom
+        contact = self.supported(inputs) if self._support_check else inputs  # the stance set of the contact rows
         for fam in self.eq_families:
-            fam.write(qp, inputs)
+            fam.write(qp, contact)
         if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
             eom = self.eq_families[0]
             qp.b[eom.start : eom.start + NV] += self.observer.d_hat
-        for fam in self.ineq_families:
+        self.friction.write(qp, contact)
+        for fam in self.barriers:
             fam.write(qp, inputs)
         if self.condensed is not None:
             self._condensed_ok = self._condense(qp, u_nom)
@@ -244,6 +279,20 @@ class SafetyFilter:
         this tick if the contact Jacobian makes the (vdot, lambda) block singular)."""
         sv, eps = self._equalities, self.settings.regularization
         _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
+
+    def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray) -> None:
+        """The backend problem's bounds on u: the torque limits intersected with u_nom +- the correction limit
+        of each joint's leg (``correction_limit_stance_nm`` for the filter's stance legs, ``..._swing_nm`` for the
+        others); a u_nom beyond a torque limit gets the limit itself."""
+        s, lim = self.settings, self.torque_limit_nm
+        per_leg = np.where(np.asarray(in_stance, bool), s.correction_limit_stance_nm, s.correction_limit_swing_nm)
+        delta = np.repeat(per_leg, quad.N_JOINTS // quad.N_LEGS)
+        lb = np.minimum(np.maximum(-lim, u_nom - delta), lim)
+        ub = np.maximum(np.minimum(lim, u_nom + delta), -lim)
+        if self.condensed is not None:
+            self.condensed.lb[:], self.condensed.ub[:] = lb, ub
+        else:
+            self.problem.lb[U], self.problem.ub[U] = lb, ub
 
     def _solve(self, qp: QPProblem) -> QPSolution:
         """The backend's answer to this tick's QP (the condensed one with ``formulation: condensed``)."""
@@ -286,6 +335,7 @@ class SafetyFilter:
         self._last_u = None
         self.relaxed_ticks = 0
         self.relaxed_by_family = {}
+        self.unsupported_ticks = 0
         self.robust.reset()
         if self.observer is not None:
             self.observer.reset()
@@ -303,6 +353,8 @@ class SafetyFilter:
         if self._friction_margin > 0.0:  # with or without the ECBF margins (robust.enabled)
             inputs = inputs.with_mu_scaled(1.0 - self._friction_margin)  # per-foot values too
         qp = self.build(inputs, u_nom)
+        if self._limit_correction:
+            self._correction_bounds(u_nom, inputs.in_stance)
         if robust:
             self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
