@@ -41,9 +41,10 @@ def test_targets_say_met_or_missed_with_the_numbers():
     assert ("**missed**: do no harm, trot + terrain filter vs trot alone over 3 worlds: worse on steps "
             "(falls 1 vs 0") in text
     assert "**met**: do no harm, policy + terrain filter vs policy alone over 3 worlds: no world worse" in text
-    assert ("**met**: helps on slippery ground, policy: unsafe runs with the terrain filter vs alone: "
+    assert ("**met**: helps on slippery ground, policy + terrain filter: unsafe runs vs alone: "
             "low_friction 0.3: 0 vs 2") in text
-    assert "**missed**: helps on rough ground, policy: fewer falls or trips than alone on 0 of 1 worlds" in text
+    assert ("**missed**: helps on rough ground, policy + terrain filter: fewer falls or trips than alone on 0 of 1 "
+            "worlds") in text
 
 
 def test_section_has_one_table_per_robot():

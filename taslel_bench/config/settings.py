@@ -5,7 +5,6 @@ the episode's, the plant's and the controller's model's options, the nominal con
 from __future__ import annotations
 
 import math
-
 from typing import Any
 
 from hydra.utils import get_class, instantiate

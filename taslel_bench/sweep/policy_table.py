@@ -12,11 +12,13 @@ import math
 
 import pandas as pd
 
-from taslel_bench.sweep.terrain_table import VARIANT_COLUMN, VARIANTS, _falls, _finished, _fmt, _mean, _unsafe
+from taslel_bench.sweep.terrain_table import VARIANT_COLUMN, _falls, _finished, _fmt, _mean, _unsafe
 from taslel_bench.util.tables import markdown_table
 
 CONTROLLER_COLUMN = "controller"
 CONTROLLERS = ("trot", "policy")
+VARIANTS = ("nominal", "paper", "terrain", "bounded")  # filter off, filter=id_cbf_qp, filter=terrain, terrain_bounded
+FILTERS = ("paper", "terrain", "bounded")
 WORLD_ORDER = ("flat", "low_friction", "friction_patch", "logs", "steps", "rough", "slope", "push", "payload")
 SLIPPERY = ("low_friction", "friction_patch")  # the help target: strictly fewer unsafe runs than alone
 ROUGH = ("logs", "steps", "rough", "slope")  # the help target: fewer falls or trips on at least two
@@ -91,7 +93,7 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
                    f"(target: 0 falls, within {SPEED_TOLERANCE_MPS} m/s).")
     for controller in CONTROLLERS:
         alone = _finished(cell(frame, robot, "flat", controller, "nominal"))
-        for variant in ("paper", "terrain"):
+        for variant in FILTERS:
             filtered = _finished(cell(frame, robot, "flat", controller, variant))
             if not len(filtered) or not len(alone):
                 continue
@@ -102,17 +104,18 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
                        f"ground: mean intervention {torque:.2f} N·m (target <= {MAX_FLAT_INTERVENTION_NM}), falls "
                        f"{_count(filtered, 'fell')} vs {_count(alone, 'fell')} alone.")
     for controller in CONTROLLERS:
-        out += _no_harm(frame, robot, controller)
-        out += _helps(frame, robot, controller)
+        for variant in ("terrain", "bounded"):
+            out += _no_harm(frame, robot, controller, variant)
+            out += _helps(frame, robot, controller, variant)
     return out
 
 
-def _no_harm(frame: pd.DataFrame, robot: str, controller: str) -> list[str]:
+def _no_harm(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> list[str]:
     worse = []
     judged = 0
     for world in _worlds(frame):
         alone = _finished(cell(frame, robot, world, controller, "nominal"))
-        terrain = _finished(cell(frame, robot, world, controller, "terrain"))
+        terrain = _finished(cell(frame, robot, world, controller, variant))
         if not len(alone) or not len(terrain):
             continue
         judged += 1
@@ -129,17 +132,17 @@ def _no_harm(frame: pd.DataFrame, robot: str, controller: str) -> list[str]:
         return []
     verdict = "met" if not worse else "missed"
     detail = "no world worse" if not worse else "worse on " + "; ".join(worse)
-    return [f"**{verdict}**: do no harm, {controller} + terrain filter vs {controller} alone over {judged} worlds: "
+    return [f"**{verdict}**: do no harm, {controller} + {variant} filter vs {controller} alone over {judged} worlds: "
             f"{detail} (falls and unsafe runs no more, distance at most {MAX_DISTANCE_LOSS:.0%} lower)."]
 
 
-def _helps(frame: pd.DataFrame, robot: str, controller: str) -> list[str]:
+def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> list[str]:
     out = []
     slippery, rough_better, rough_judged = [], [], 0
     for world in _worlds(frame):
         base = world.split()[0]
         alone = _finished(cell(frame, robot, world, controller, "nominal"))
-        terrain = _finished(cell(frame, robot, world, controller, "terrain"))
+        terrain = _finished(cell(frame, robot, world, controller, variant))
         if not len(alone) or not len(terrain):
             continue
         if base in SLIPPERY:
@@ -153,13 +156,14 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str) -> list[str]:
     if slippery:
         ok = all(t < a for _, t, a in slippery)
         cells = ", ".join(f"{w}: {t} vs {a}" for w, t, a in slippery)
-        out.append(f"**{'met' if ok else 'missed'}**: helps on slippery ground, {controller}: unsafe runs with the "
-                   f"terrain filter vs alone: {cells} (target: strictly fewer on each).")
+        out.append(f"**{'met' if ok else 'missed'}**: helps on slippery ground, {controller} + {variant} filter: "
+                   f"unsafe runs vs alone: {cells} (target: strictly fewer on each).")
     if rough_judged:
         ok = len(rough_better) >= 2
-        out.append(f"**{'met' if ok else 'missed'}**: helps on rough ground, {controller}: fewer falls or trips "
-                   f"than alone on {len(rough_better)} of {rough_judged} worlds ({', '.join(rough_better) or 'none'}; "
-                   "target: at least 2).")
+        better = ", ".join(rough_better) or "none"
+        out.append(f"**{'met' if ok else 'missed'}**: helps on rough ground, {controller} + {variant} filter: fewer "
+                   f"falls or trips than alone on {len(rough_better)} of {rough_judged} worlds ({better}; target: at "
+                   "least 2).")
     return out
 
 
@@ -169,9 +173,9 @@ def policy_section(frame: pd.DataFrame) -> str:
         return ""
     parts = ["## Filters on the deployed controllers: blind trot and learned policy\n",
              ("Per robot and world: each nominal controller (`trot`: the paper's blind trot; `policy`: the robot's "
-              "shipped learned policy) alone (`nominal`), with the paper's filter (`paper`) and with the terrain "
-              "filter (`terrain`). Means over finished runs (`runs` = finished/all); `unsafe` = runs whose verdict "
-              "is `safe: false`, with the reasons' counts.\n")]
+              "shipped learned policy) alone (`nominal`), with the paper's filter (`paper`), the terrain filter "
+              "(`terrain`) and the terrain filter with bounded corrections (`bounded`). Means over finished runs "
+              "(`runs` = finished/all); `unsafe` = runs whose verdict is `safe: false`, with the reasons' counts.\n")]
     robots = sorted(set(frame["robot"].astype(str))) if "robot" in frame else ["a1"]
     for robot in robots:
         table = comparison_table(frame, robot)
