@@ -149,9 +149,10 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
             slippery.append((world, _count(terrain, "unsafe"), _count(alone, "unsafe")))
         if base in ROUGH:
             rough_judged += 1
-            fewer_falls = _count(terrain, "fell") < _count(alone, "fell")
-            fewer_trips = _mean(terrain, "trips") < _mean(alone, "trips")
-            if fewer_falls or fewer_trips:
+            # fewer trips counts only without more falls: a run that falls early has less time to trip
+            falls, falls_alone = _count(terrain, "fell"), _count(alone, "fell")
+            fewer_trips = falls <= falls_alone and _mean(terrain, "trips") < _mean(alone, "trips")
+            if falls < falls_alone or fewer_trips:
                 rough_better.append(world)
     if slippery:
         ok = all(t < a for _, t, a in slippery)
@@ -162,8 +163,8 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
         ok = len(rough_better) >= 2
         better = ", ".join(rough_better) or "none"
         out.append(f"**{'met' if ok else 'missed'}**: helps on rough ground, {controller} + {variant} filter: fewer "
-                   f"falls or trips than alone on {len(rough_better)} of {rough_judged} worlds ({better}; target: at "
-                   "least 2).")
+                   f"falls, or fewer trips and no more falls, than alone on {len(rough_better)} of {rough_judged} "
+                   f"worlds ({better}; target: at least 2).")
     return out
 
 
