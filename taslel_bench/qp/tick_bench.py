@@ -354,6 +354,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--controllers", default="trot",
                     help="comma-separated nominal controllers: trot, policy (the robot's shipped policy)")
     ap.add_argument("--robot", default="a1", help="conf/robot/<robot>.yaml")
+    ap.add_argument("--override", action="append", default=[],
+                    help="a config override added to every loop (repeatable), e.g. --override estimator=fixed")
     ap.add_argument("--out", type=Path, default=None, help="also write the table as markdown to this file")
     ap.add_argument("--cold", action="store_true",
                     help="also time idempotent parts twice in a row in one more run (cost of interleaving)")
@@ -394,7 +396,7 @@ def _run_loop(label: str, extra: list[str], args: argparse.Namespace) -> tuple:
     factor, sum-of-parts limit, status, fell, {part: median µs in the loop}, {part: median µs in isolation},
     :func:`wall_accounting`, :func:`cold_vs_warm` and :func:`back_to_back`, both {} without ``--cold``)."""
     cfg = compose([f"robot={args.robot}", f"duration={args.duration}", f"scenario={args.scenario}", "progress=false",
-                   *extra])
+                   *args.override, *extra])
     built = Built(cfg)
     res = built.episode.run()
     tr = res.traced()
