@@ -246,8 +246,9 @@ class SafetyFilter:
         stance = np.asarray(inputs.in_stance, bool)
         if not stance.any():
             return inputs
-        m = inputs.model
-        normals = contact_normals(self.terrain, m.foot_pos_in_world, m.robot.foot_radius_m)
+        m, terrain = inputs.model, self.terrain
+        assert terrain is not None  # checked when support_min_normal_z is set (__init__)
+        normals = contact_normals(terrain, m.foot_pos_in_world, m.robot.foot_radius_m)
         keep = stance & (normals[:, 2] >= self.settings.support_min_normal_z)
         if np.array_equal(keep, stance):
             return inputs

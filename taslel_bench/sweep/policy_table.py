@@ -31,8 +31,8 @@ METRICS = {"trips/run": "trips", "distance [m]": "distance_m", "speed [m/s]": "m
 
 
 def is_policy_study(frame: pd.DataFrame) -> bool:
-    return (CONTROLLER_COLUMN in frame and VARIANT_COLUMN in frame and "scenario" in frame
-            and (frame[CONTROLLER_COLUMN].astype(str) == "policy").any())
+    return bool(CONTROLLER_COLUMN in frame and VARIANT_COLUMN in frame and "scenario" in frame
+                and (frame[CONTROLLER_COLUMN].astype(str) == "policy").any())
 
 
 def world_of(frame: pd.DataFrame) -> pd.Series:
