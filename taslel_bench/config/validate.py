@@ -200,7 +200,7 @@ def _policy(cfg: DictConfig, control_rate_hz: int, robot: RobotDescription) -> f
     if not isinstance(_get(cfg, "policy"), DictConfig):
         raise fail("policy", _get(cfg, "policy"), "controller=policy needs a policy: policy=<name> of conf/policy/ "
                    f"(shipped: {', '.join(shipped_policies()) or 'none'}); a policy of your own: "
-                   "docs/guides/policies.md")
+                   "docs/guides/learned-policy.md")
     where = f"policy={cfg.policy.get('name', '?')}"
     contract = contract_from_mapping(plain_dict(cfg.policy, "policy"), where)
     if contract.robot != robot.name:

@@ -4,7 +4,7 @@ One contract serves the policy's training (:mod:`taslel_bench.learn.env`, many e
 deployment in a run (:class:`taslel_bench.control.policy.PolicyController`, one robot): both build observations
 with :class:`ObservationBuilder` from a :class:`PolicyState`, so a policy sees in the harness exactly what it saw
 in training. A contract is written in a policy's YAML (``conf/policy/<name>.yaml``, keys in
-``docs/guides/policies.md``) and read by :func:`contract_from_mapping`.
+``docs/guides/learned-policy.md``) and read by :func:`contract_from_mapping`.
 
 **Observation vocabulary** (:data:`TERMS`), each term a row block of the observation vector, in the contract's
 order; each has a scale (a number or one per component), a clip (applied after the scale) and a history length

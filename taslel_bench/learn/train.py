@@ -170,7 +170,8 @@ def ship(cfg: TrainingConfig, out: Path, conf_dir: Path, result: dict, argv: lis
                                    stance_s=round(gait["stance_s"], 3), swing_s=round(gait["swing_s"], 3))
     conf_dir.mkdir(parents=True, exist_ok=True)
     header = (f"# Policy contract of {cfg.name}: PPO on {cfg.robot}, flat ground, friction {cfg.friction[0]}-"
-              f"{cfg.friction[1]}; written by python -m taslel_bench.learn.train (keys: docs/guides/policies.md)\n")
+              f"{cfg.friction[1]}; written by python -m taslel_bench.learn.train "
+              "(keys: docs/guides/learned-policy.md)\n")
     (conf_dir / f"{cfg.name}.yaml").write_text(header + yaml.safe_dump(contract_to_mapping(contract),
                                                                        sort_keys=False))
     (out / "training.yaml").write_text(yaml.safe_dump(_plain(cfg.as_dict()), sort_keys=False))
