@@ -110,6 +110,8 @@ def _serve(args: argparse.Namespace, rec, model, url_out: TextIO) -> int:
     from taslel_bench.view.server import pump, serve, start_row_of
 
     signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops it as Ctrl-C does
+    # Ctrl-C (SIGINT) stops it even when started from a background job, whose SIGINT the shell set to ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with serve(model, rec, port=args.port, host=args.host, start_row=start_row_of(rec, args.time),
                    play=args.play, title=title_of(args.run_dir, rec.summary)) as served:  # fmt: skip
