@@ -28,6 +28,7 @@ from tensordict import TensorDict
 from taslel_bench.config.compose import compose
 from taslel_bench.config.settings import build_controller, plant_options, robot_description
 from taslel_bench.control.policy_contract import (
+    TERMS,
     ActionSpec,
     ObservationBuilder,
     ObservationTerm,
@@ -51,7 +52,7 @@ TRAINED_TERMS: tuple[tuple[str, float | tuple[float, ...]], ...] = (
 
 def training_contract(cfg: TrainingConfig, default_pose_core: np.ndarray, onnx: str = "") -> PolicyContract:
     """The contract of a policy trained with ``cfg`` (joint order: the core's)."""
-    terms = tuple(ObservationTerm(name, scale if isinstance(scale, tuple) else (float(scale),) * _size(name),
+    terms = tuple(ObservationTerm(name, scale if isinstance(scale, tuple) else (float(scale),) * TERMS[name].size,
                                   100.0, 1) for name, scale in TRAINED_TERMS)  # fmt: skip
     return PolicyContract(name=cfg.name, robot=cfg.robot, onnx=onnx, onnx_sha256="", rate_hz=cfg.policy_rate_hz,
                           observations=terms, action=ActionSpec("joint_position", cfg.action_scale, 100.0, cfg.kp,
@@ -76,11 +77,6 @@ def _training_plant(hcfg, robot, cfg: TrainingConfig) -> mujoco.MjModel:
     m = compile_plant(spec)
     m.opt.timestep = cfg.physics_dt_s
     return m
-
-
-def _size(term: str) -> int:
-    from taslel_bench.control.policy_contract import TERMS
-    return TERMS[term].size
 
 
 class WalkingEnv:
