@@ -130,13 +130,14 @@ def test_a_part_of_another_kind_keeps_the_python_query(states):
         assert np.array_equal(old.problem.G, new.problem.G) and np.array_equal(old.problem.h, new.problem.h)
 
 
-def families(terrain: Terrain, downhill: bool) -> SafetyFilter:
+def families(terrain: Terrain, downhill: bool, along_nominal: bool = False) -> SafetyFilter:
     w = world(terrain=terrain)
     barriers = [TerrainClearance(w), TerrainClearance(w, "tc_all", role=None), LegClearance(w, "shin"),
                 LegClearance(w, "shin_all", role=None, swing_only=True),
                 LegClearance(w, "knee", part="knee", radius_m=0.02)]  # fmt: skip
-    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill), TightReference(),
-                        barriers, terrain=terrain)  # fmt: skip
+    return SafetyFilter(FilterSettings(friction_cone="terrain", cone_edge_downhill=downhill,
+                                       cone_edge_along_nominal=along_nominal), TightReference(), barriers,
+                        terrain=terrain)  # fmt: skip
 
 
 def stance_variants(x: TickInputs) -> list[TickInputs]:
@@ -145,16 +146,22 @@ def stance_variants(x: TickInputs) -> list[TickInputs]:
     return [x, replace(x, in_stance=np.zeros(4, bool)), replace(x, in_stance=np.ones(4, bool), mu_per_foot=mu)]
 
 
-@pytest.mark.parametrize("downhill", [False, True])
-def test_compiled_family_writes_give_the_python_writes_bits(states, downhill):
+@pytest.mark.parametrize(("downhill", "along_nominal"), [(False, False), (True, False), (True, True)])
+def test_compiled_family_writes_give_the_python_writes_bits(states, downhill, along_nominal):
     st, pm = states
     pm.update(*st[0][:2])
     foot_x = float(pm.foot_pos_in_world[0, 0])
+    rng = np.random.default_rng(3)
     for terrain in terrains(foot_x):
-        old, new = families(terrain, downhill), families(terrain, downhill)
+        old, new = families(terrain, downhill, along_nominal), families(terrain, downhill, along_nominal)
         active = 0
         for state in st:
             for x in stance_variants(inputs_for(pm, state, 0.8)):
+                # nominal forces with a tangential part above and (last foot) below the turning threshold
+                force = rng.normal(0.0, 15.0, (4, 3)) + np.array([0.0, 0.0, 40.0])
+                force[3, :2] = 0.1
+                old.friction.nominal_force[:] = force
+                new.friction.nominal_force[:] = force
                 for f_old, f_new in zip(old.ineq_families, new.ineq_families, strict=True):
                     f_old.write_python(old.problem, x)
                     f_new.write(new.problem, x)

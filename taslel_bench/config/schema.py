@@ -292,6 +292,12 @@ class FilterConfig:
                                choices=FRICTION_CONES)
     cone_edge_downhill: bool = param(default_of(FilterSettings, "cone_edge_downhill"),
                                      "terrain cone: a pyramid edge down the slope (full mu there), not world x")
+    cone_edge_along_nominal: bool = param(default_of(FilterSettings, "cone_edge_along_nominal"),
+                                          "terrain cone: each stance pyramid turned per tick so an edge lies along "
+                                          "the nominal's tangential force on that foot (full mu where it pushes)")
+    release_lifted_feet: bool = param(default_of(FilterSettings, "release_lifted_feet"),
+                                      "a stance foot the nominal torques pull off the ground (normal force under "
+                                      "the stance model below lambda_min) is swing for that tick")
     relaxation: str = param(default_of(FilterSettings, "relaxation"),
                             "none (infeasible QP -> fallback) | priority (drop barrier families, last first)",
                             choices=RELAXATIONS)

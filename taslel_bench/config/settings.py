@@ -64,6 +64,8 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
         control_dt_s=1.0 / float(cfg.control_rate_hz),
         friction_cone=str(f.friction_cone),
         cone_edge_downhill=bool(f.cone_edge_downhill),
+        cone_edge_along_nominal=bool(f.cone_edge_along_nominal),
+        release_lifted_feet=bool(f.release_lifted_feet),
         relaxation=str(f.relaxation),
         correction_limit_stance_nm=_limit(f.correction_limit_stance_nm),
         correction_limit_swing_nm=_limit(f.correction_limit_swing_nm),

@@ -187,6 +187,10 @@ def _meaningful(cfg: DictConfig) -> None:
                    f"{walk_end_s:g} s, or filter.enabled=false")
     if cfg.record.qps and not filter_on:
         raise fail("record.qps", True, "there is no QP to record with filter.enabled=false (set one of them)")
+    if cfg.filter.cone_edge_along_nominal and cfg.filter.friction_cone != "terrain":
+        raise fail("filter.cone_edge_along_nominal", True,
+                   f"turns the terrain cone's pyramids; filter.friction_cone={cfg.filter.friction_cone} keeps the "
+                   f"paper's (world x). Use filter.friction_cone=terrain, or filter=terrain_release")
 
 
 def shipped_policies() -> list[str]:

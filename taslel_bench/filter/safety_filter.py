@@ -46,12 +46,14 @@ from taslel_bench.filter.terrain_cone import TerrainFrictionCone, contact_normal
 from taslel_bench.interfaces import QPBackend, QPProblem, QPSolution
 from taslel_bench.robot import quadruped as quad
 from taslel_bench.robot.description import default_robot
+from taslel_bench.robot.model import RobotModel
 from taslel_bench.terrain.terrain import Terrain
 from taslel_bench.util.jit import kernel
 
 FALLBACKS = ("nominal", "hold_last")
 REGULARIZATION_TARGETS = ("nominal", "zero")
 FORMULATIONS = ("full", "condensed")
+_WORLD_Z = np.tile([0.0, 0.0, 1.0], (quad.N_LEGS, 1))  # the paper's pyramid's normal at every foot
 FRICTION_CONES = ("pyramid", "terrain")  # the paper's (world z, one mu) | per foot about the terrain normal
 RELAXATIONS = ("none", "priority")  # on an infeasible QP: fall back at once | drop barrier families, last first
 STANCE_SOURCES = ("schedule", "contact", "estimate")  # gait | plant contact flags | contact estimate
@@ -76,6 +78,12 @@ class FilterSettings:
     control_dt_s: float = 0.001  # [s] the control period (the robust margin's running statistics)
     friction_cone: str = "pyramid"  # "pyramid" (paper: world z, one mu) | "terrain" (per foot, terrain normal)
     cone_edge_downhill: bool = False  # terrain cone: a pyramid edge down the slope (full mu there), not world x
+    # terrain cone: each stance pyramid turned per tick so an edge lies along the nominal torques' tangential
+    # force on that foot (full mu where the nominal pushes); below 0.5 N of it, the basis above
+    cone_edge_along_nominal: bool = False
+    # a stance foot whose force under the nominal torques (the stance model's) has a normal part below
+    # lambda_min_n -- the nominal is lifting it off -- is swing for this tick: no contact rows, no cone
+    release_lifted_feet: bool = False
     relaxation: str = "none"  # "none" (failure -> fallback) | "priority" (drop barrier families, last first)
     # [N·m] per joint: |u - u_nom| at most this on a stance leg's / a swing leg's joints (inf: the paper's, only
     # the torque limits bound u)
@@ -136,8 +144,12 @@ class SafetyFilter:
             if terrain is None:
                 raise ValueError("filter.friction_cone=terrain needs the world's terrain")
             self.friction: FrictionCone = TerrainFrictionCone(settings.lambda_min_n, terrain,
-                                                              edge_downhill=settings.cone_edge_downhill)
+                                                              edge_downhill=settings.cone_edge_downhill,
+                                                              edge_along_nominal=settings.cone_edge_along_nominal)
         else:
+            if settings.cone_edge_along_nominal:
+                raise ValueError("filter.cone_edge_along_nominal=true needs filter.friction_cone=terrain (the "
+                                 "paper's pyramid keeps world x)")
             self.friction = FrictionCone(settings.lambda_min_n)
         if settings.correction_limit_stance_nm < 0.0 or settings.correction_limit_swing_nm < 0.0:
             raise ValueError("filter.correction_limit_stance_nm and filter.correction_limit_swing_nm must be >= 0")
@@ -149,6 +161,8 @@ class SafetyFilter:
         if self._support_check and terrain is None:
             raise ValueError("filter.support_min_normal_z needs the world's terrain")
         self.unsupported_ticks = 0  # ticks with a scheduled stance foot the filter took as no support
+        self.released_ticks = 0  # ticks with a stance foot released because the nominal lifts it
+        self._nominal_force = np.zeros((quad.N_LEGS, 3))  # [N] the nominal torques' foot forces, world (scratch)
         self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families
         self.relaxed_by_family: dict[str, int] = {}  # family name -> ticks it was dropped
         self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
@@ -172,6 +186,9 @@ class SafetyFilter:
         n_rhs = 1 + quad.N_JOINTS if settings.formulation == "condensed" else 1
         self._equalities = FreeBlockSolver(n_rhs, self.eq_families[0].start, self.eq_families[1].start)
         self._rhs = np.zeros((m_eq, n_rhs))
+        # the nominal torques' contact forces (cone_edge_along_nominal, release_lifted_feet)
+        self._nominal_solver = FreeBlockSolver(1, self.eq_families[0].start, self.eq_families[1].start)
+        self._nominal_rhs = np.zeros((m_eq, 1))
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -253,19 +270,19 @@ class SafetyFilter:
         if np.array_equal(keep, stance):
             return inputs
         self.unsupported_ticks += 1
-        return TickInputs(m, inputs.v, keep, inputs.mu, inputs.swing_phase, inputs.swing_phase_rate,
-                          inputs.mu_per_foot)
+        return replace_stance(inputs, keep)
 
     def build(self, inputs: TickInputs, u_nom: np.ndarray) -> QPProblem:
         """Write this tick's QP (in place) and return it."""
         qp = self.problem
         qp.q[U] = -u_nom
         contact = self.supported(inputs) if self._support_check else inputs  # the stance set of the contact rows
-        for fam in self.eq_families:
-            fam.write(qp, contact)
-        if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
-            eom = self.eq_families[0]
-            qp.b[eom.start : eom.start + NV] += self.observer.d_hat
+        self._write_equalities(qp, contact)
+        if self.settings.release_lifted_feet:
+            contact = self._release_lifted(qp, contact, u_nom)
+        if self.settings.cone_edge_along_nominal:
+            assert isinstance(self.friction, TerrainFrictionCone)  # checked in __init__
+            self._nominal_forces(qp, u_nom, self.friction.nominal_force)
         self.friction.write(qp, contact)
         for fam in self.barriers:
             fam.write(qp, inputs)
@@ -274,6 +291,61 @@ class SafetyFilter:
         elif self.settings.regularization_target == "nominal":
             self._regularize_towards_nominal(qp, u_nom)
         return qp
+
+    def _write_equalities(self, qp: QPProblem, contact: TickInputs) -> None:
+        """The equations of motion and the contact-or-swing rows for the stance set of ``contact``."""
+        for fam in self.eq_families:
+            fam.write(qp, contact)
+        if self.observer is not None:  # M vdot + h = S u + J' lambda + d_hat (b = d_hat - h on the EoM rows)
+            eom = self.eq_families[0]
+            qp.b[eom.start : eom.start + NV] += self.observer.d_hat
+
+    def _nominal_forces(self, qp: QPProblem, u_nom: np.ndarray, out: np.ndarray) -> None:
+        """``out`` (4, 3) [N]: the foot forces (on the robot, world axes) the equality rows give for u = u_nom."""
+        sv = self._nominal_solver
+        _nominal_forces(qp.A, qp.b, u_nom, sv.rows, sv.workspace, self._nominal_rhs, out)
+
+    def _foot_normals(self) -> np.ndarray:
+        """(4, 3) the contact normal at each foot: the terrain cone's, last written; world z for the paper's."""
+        return self.friction.normals if isinstance(self.friction, TerrainFrictionCone) else _WORLD_Z
+
+    def lifted_feet(self, qp: QPProblem, contact: TickInputs, u_nom: np.ndarray) -> np.ndarray:
+        """(4,) bool: stance feet (of ``contact``, whose rows ``qp`` holds) whose force under u_nom has a
+        normal part below ``lambda_min_n``: sticking would need the ground to pull."""
+        force = self._nominal_force
+        self._nominal_forces(qp, u_nom, force)
+        normal_n = np.einsum("ij,ij->i", force, self._foot_normals())
+        return np.asarray(contact.in_stance, bool) & (normal_n < self.settings.lambda_min_n)
+
+    def separating_feet(self, qp: QPProblem, feet: np.ndarray, u_nom: np.ndarray, m: RobotModel) -> np.ndarray:
+        """(4,) bool: of ``feet`` (swing in ``qp``'s rows), those whose acceleration under u_nom, J vdot + J̇v
+        (world), points away from the ground (a positive normal part)."""
+        self._nominal_forces(qp, u_nom, self._nominal_force)
+        vdot = self._nominal_rhs[:NV, 0]
+        normals = self._foot_normals()
+        out = np.zeros(quad.N_LEGS, bool)
+        for i in np.flatnonzero(feet):
+            acc = m.foot_jac_in_world[i] @ vdot + m.foot_jdotv_in_world[i]
+            out[i] = float(acc @ normals[i]) > 0.0
+        return out
+
+    def _release_lifted(self, qp: QPProblem, contact: TickInputs, u_nom: np.ndarray) -> TickInputs:
+        """``release_lifted_feet``: the stance feet u_nom pulls off the ground -- sticking needs a normal force
+        below ``lambda_min_n`` and, let go, the foot accelerates away from the ground (the contact mode rigid
+        contact gives them) -- become swing for this tick (the equality rows rewritten). A foot that would
+        need a pull to stick yet accelerates into the ground when let go (it would slide) stays in stance."""
+        lifted = self.lifted_feet(qp, contact, u_nom)
+        if not lifted.any():
+            return contact
+        stance = np.asarray(contact.in_stance, bool)
+        self._write_equalities(qp, replace_stance(contact, stance & ~lifted))
+        released = lifted & self.separating_feet(qp, lifted, u_nom, contact.model)
+        if not np.array_equal(released, lifted):  # some stay: the rows of the feet released only
+            self._write_equalities(qp, replace_stance(contact, stance & ~released))
+        if not released.any():
+            return contact
+        self.released_ticks += 1
+        return replace_stance(contact, stance & ~released)
 
     def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
         """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom (zero target
@@ -337,6 +409,7 @@ class SafetyFilter:
         self.relaxed_ticks = 0
         self.relaxed_by_family = {}
         self.unsupported_ticks = 0
+        self.released_ticks = 0
         self.robust.reset()
         if self.observer is not None:
             self.observer.reset()
@@ -393,6 +466,11 @@ class SafetyFilter:
         return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
 
 
+def replace_stance(x: TickInputs, in_stance: np.ndarray) -> TickInputs:
+    """``x`` with the stance set ``in_stance`` (4,) bool."""
+    return TickInputs(x.model, x.v, in_stance, x.mu, x.swing_phase, x.swing_phase_rate, x.mu_per_foot)
+
+
 # ----------------------------------------------------------------------------------- compiled kernels
 # The equality rows A X = b determine (vdot, lambda) from u: (vdot, lambda) = A_free^-1 (b - A_u u), with
 # A_free the (vdot, lambda) columns of A (:mod:`taslel_bench.filter.equality_solve`).
@@ -412,6 +490,20 @@ def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
         q[c] = -eps * rhs[c, 0] if ok else 0.0
     for c in range(NL):
         q[NV + NU + c] = -eps * rhs[NV + c, 0] if ok else 0.0
+
+
+@kernel
+def _nominal_forces(A, b, u_nom, rows, ws, rhs, force):
+    """``force`` (4, 3) [N] = lambda_nom, the contact forces (on the robot, world axes) of the equality rows
+    under u = u_nom: A_free^-1 (b - A_u u_nom); zeros if A_free is singular."""
+    for r in range(A.shape[0]):
+        acc = b[r]
+        for j in range(NU):
+            acc -= A[r, NV + j] * u_nom[j]
+        rhs[r, 0] = acc
+    ok = solve_free(A, rhs, rows, ws)
+    for c in range(NL):
+        force[c // 3, c % 3] = rhs[NV + c, 0] if ok else 0.0
 
 
 @kernel

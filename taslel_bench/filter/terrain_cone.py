@@ -14,9 +14,14 @@ half-angle is atan(mu/sqrt 2), 35.3 deg at mu = 1, so a vertical force on a surf
 world x (a log's side: 10 % of loaded stance ticks on `logs`) is outside it although the true cone (45 deg)
 holds it. ``edge_downhill`` (``filter.cone_edge_downhill``) turns the pyramid about n_i so that an edge lies
 along the slope's steepest direction d (t_1 = (d + n x d)/sqrt 2): full mu up and down the slope, the pyramid
-still inside the true cone; on a level surface the basis stays the paper's. On flat ground with one mu the
-rows are the paper's exactly (tests/test_filter.py). Same rows, labels and pattern as the paper's pyramid, so
-a persistent backend sees one layout.
+still inside the true cone; on a level surface the basis stays the paper's. ``edge_along_nominal``
+(``filter.cone_edge_along_nominal``) turns it instead so that an edge lies along the tangential part of the
+force the nominal torques would produce this tick (:attr:`TerrainFrictionCone.nominal_force`, from the
+filter's own equality rows): the pyramid then holds the nominal's force whenever the true cone of the same mu
+does, and its conservatism (mu/sqrt 2 across the edges) falls in directions the nominal is not pushing. Where
+that tangential force is below EDGE_MIN_TANGENTIAL_N the downhill (or paper's) basis is used. On flat ground
+with one mu and neither option the rows are the paper's exactly (tests/test_filter.py). Same rows, labels and
+pattern as the paper's pyramid, so a persistent backend sees one layout.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from taslel_bench.util.jit import kernel
 
 CORNER_TOL_M = 0.005  # [m] a foot within this of two parts takes the more upward normal (floor beside a log)
 CONTACT_TOL_M = 0.005  # [m] a foot farther than this from the terrain takes the normal of the surface under it
+EDGE_MIN_TANGENTIAL_N = 0.5  # [N] a nominal force with less tangential part than this does not turn the pyramid
 
 
 def contact_normals(terrain: Terrain, foot_pos_in_world: np.ndarray, foot_radius_m: float) -> np.ndarray:
@@ -71,19 +77,39 @@ def downhill_edge_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     size = np.linalg.norm(d)
     if size < 1e-6:
         return tangent_basis(normal)
-    d /= size
+    return edge_basis(normal, d / size)
+
+
+def edge_basis(normal: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(t1, t2) with t1 - t2 along the unit tangent ``d`` (a pyramid edge there: full mu along d)."""
     e = cross3(normal, d)
     t1 = (d + e) / np.sqrt(2.0)
     return t1, cross3(normal, t1)
 
 
+def nominal_edge_basis(normal: np.ndarray, force: np.ndarray, fallback) -> tuple[np.ndarray, np.ndarray]:
+    """(t1, t2) with an edge along the tangential part of ``force`` [N] (world) on the plane normal to
+    ``normal``; ``fallback(normal)`` when that part is below EDGE_MIN_TANGENTIAL_N."""
+    fn = force[0] * normal[0] + force[1] * normal[1] + force[2] * normal[2]  # as the compiled write
+    d = force - fn * normal
+    size = np.linalg.norm(d)
+    if size < EDGE_MIN_TANGENTIAL_N:
+        return fallback(normal)
+    return edge_basis(normal, d / size)
+
+
 class TerrainFrictionCone(FrictionCone):
     """The square pyramid about each stance foot's terrain normal with its own mu (module doc)."""
 
-    def __init__(self, lambda_min_n: float, terrain: Terrain, edge_downhill: bool = False) -> None:
+    def __init__(self, lambda_min_n: float, terrain: Terrain, edge_downhill: bool = False,
+                 edge_along_nominal: bool = False) -> None:
         super().__init__(lambda_min_n)
         self.terrain = terrain
         self.basis = downhill_edge_basis if edge_downhill else tangent_basis  # (t1, t2) of a normal
+        self.edge_along_nominal = bool(edge_along_nominal)
+        # [N] (4, 3) this tick's force on each foot under the nominal torques, world axes (set by the filter
+        # before :meth:`write` when ``edge_along_nominal``)
+        self.nominal_force = np.zeros((quad.N_LEGS, 3))
         self.flat = all(isinstance(p, (Plane, FrictionStrips)) for p in terrain.parts)  # normal: world z
         self.normals = np.tile([0.0, 0.0, 1.0], (quad.N_LEGS, 1))  # the last normals used (world)
         self.mu_used = np.full(quad.N_LEGS, np.nan)  # [-] the last per-foot coefficients used
@@ -98,9 +124,9 @@ class TerrainFrictionCone(FrictionCone):
             return
         mu = self._feet_mu(x)
         _cone_rows(packed.rows, packed.field_heights, packed.field_grid, packed.has_field, packed.surface_rows,
-                   x.model.foot_pos_in_world, x.model.robot.foot_radius_m, self.flat, self.edge_downhill, x.in_stance,
-                   mu, self.lambda_min_n, self.start, qp.G, qp.h, self.normals, self._stance, self._mu, self._written,
-                   self._dist, self._point)  # fmt: skip
+                   x.model.foot_pos_in_world, x.model.robot.foot_radius_m, self.flat, self.edge_downhill,
+                   self.edge_along_nominal, self.nominal_force, x.in_stance, mu, self.lambda_min_n, self.start, qp.G,
+                   qp.h, self.normals, self._stance, self._mu, self._written, self._dist, self._point)  # fmt: skip
 
     def _feet_mu(self, x: TickInputs) -> np.ndarray:
         """``mu_used`` (4,) [-] set to this tick's coefficient of each foot: ``mu_per_foot``, or ``mu`` for all four
@@ -117,14 +143,19 @@ class TerrainFrictionCone(FrictionCone):
         for i in range(quad.N_LEGS):
             if x.in_stance[i]:
                 same = self._stance[i] and mu[i] == self._mu[i] and np.array_equal(self.normals[i], self._written[i])
-                if not same:  # rewrite a foot's rows only when its mode, normal or mu changed
+                # rewrite a foot's rows only when its mode, normal or mu changed (turned with the nominal's force:
+                # every tick)
+                if not same or self.edge_along_nominal:
                     self._write_foot_about(qp, i, self.normals[i], float(mu[i]))
             elif self._stance[i]:
                 self._write_foot(qp, i, False, np.nan)
 
     def _write_foot_about(self, qp: QPProblem, i: int, n: np.ndarray, mu: float) -> None:
         r, c = self.start + 5 * i, NV + NU + 3 * i
-        t1, t2 = self.basis(n)
+        if self.edge_along_nominal:
+            t1, t2 = nominal_edge_basis(n, self.nominal_force[i], self.basis)
+        else:
+            t1, t2 = self.basis(n)
         mu_t = mu / np.sqrt(2.0)
         block = qp.G[r : r + 5, c : c + 3]
         block[0], block[1], block[2] = -n, t1 - mu_t * n, -t1 - mu_t * n
@@ -167,6 +198,12 @@ def _downhill_edge_basis_into(n, t1, t2):
         return
     for a in range(3):
         d[a] /= size
+    _edge_basis_into(n, d, t1, t2)
+
+
+@kernel
+def _edge_basis_into(n, d, t1, t2):
+    """:func:`edge_basis` into ``t1``, ``t2`` (``t2`` is scratch for e first)."""
     _cross_into(n, d, t2)  # e
     root2 = np.sqrt(2.0)
     for a in range(3):
@@ -175,13 +212,25 @@ def _downhill_edge_basis_into(n, t1, t2):
 
 
 @kernel
-def _foot_rows_about(G, hvec, r, c, n, mu, lambda_min, downhill):
+def _foot_rows_about(G, hvec, r, c, n, mu, lambda_min, downhill, along_nominal, force):
     """A stance foot's 5 rows about the normal ``n`` with coefficient ``mu``
-    (:meth:`TerrainFrictionCone._write_foot_about`)."""
+    (:meth:`TerrainFrictionCone._write_foot_about`; ``force``: the nominal's force on it, world)."""
     t1, t2 = np.empty(3), np.empty(3)
-    if downhill:
+    turned = False
+    if along_nominal:  # :func:`nominal_edge_basis`
+        d = np.empty(3)
+        fn = force[0] * n[0] + force[1] * n[1] + force[2] * n[2]
+        for a in range(3):
+            d[a] = force[a] - fn * n[a]
+        size = _norm3(d)
+        if size >= EDGE_MIN_TANGENTIAL_N:
+            for a in range(3):
+                d[a] /= size
+            _edge_basis_into(n, d, t1, t2)
+            turned = True
+    if not turned and downhill:
         _downhill_edge_basis_into(n, t1, t2)
-    else:
+    elif not turned:
         _tangent_basis_into(n, t1, t2)
     mu_t = mu / np.sqrt(2.0)
     for a in range(3):
@@ -208,21 +257,23 @@ def _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot
 
 @kernel
 def _cone_rows(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, flat, downhill,
-               in_stance, mu, lambda_min, r0, G, hvec, normals, stance, mu_written, written, dist, point):  # fmt: skip
+               along_nominal, nominal_force, in_stance, mu, lambda_min, r0, G, hvec, normals, stance, mu_written,
+               written, dist, point):  # fmt: skip
     """:meth:`TerrainFrictionCone.write_python` in one call: the normals (unless ``flat``), then per foot its rows
-    rewritten when its mode, normal or mu changed (``stance``, ``mu_written``, ``written``: what they were written
-    with)."""
+    rewritten when its mode, normal or mu changed, or on every tick with ``along_nominal`` (``stance``,
+    ``mu_written``, ``written``: what they were written with)."""
     if not flat:
         _cone_normals(rows, field_heights, field_grid, has_field, surface_rows, foot_pos, foot_radius, normals, dist,
                       point)
     for i in range(foot_pos.shape[0]):
         r, c = r0 + 5 * i, NV + NU + 3 * i
         if in_stance[i]:
-            same = stance[i] and mu[i] == mu_written[i]
+            same = stance[i] and mu[i] == mu_written[i] and not along_nominal
             for a in range(3):
                 same = same and normals[i, a] == written[i, a]
             if not same:
-                _foot_rows_about(G, hvec, r, c, normals[i], mu[i], lambda_min, downhill)
+                _foot_rows_about(G, hvec, r, c, normals[i], mu[i], lambda_min, downhill, along_nominal,
+                                 nominal_force[i])
                 stance[i], mu_written[i] = True, mu[i]
                 for a in range(3):
                     written[i, a] = normals[i, a]

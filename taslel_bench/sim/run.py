@@ -315,6 +315,7 @@ def _episode_summary(cfg: DictConfig, built: Built, res: EpisodeResult, metrics:
         out.estimator.update({f"estimator_{k}": v for k, v in diagnostics().items()})
     if built.filter is not None:  # filter.relaxation=priority: ticks solved only after dropping barrier families
         out.filter["filter_relaxed_ticks"] = int(built.filter.relaxed_ticks)
+        out.filter["filter_released_ticks"] = int(built.filter.released_ticks)
         out.filter.update({f"filter_relaxed_{k}_ticks": int(v) for k, v in built.filter.relaxed_by_family.items()})
     estimate = getattr(built.stance, "estimate", None)
     if estimate is not None:  # filter.stance_source=estimate: early touchdowns taken as stance

@@ -17,8 +17,9 @@ from taslel_bench.util.tables import markdown_table
 
 CONTROLLER_COLUMN = "controller"
 CONTROLLERS = ("trot", "policy")
-VARIANTS = ("nominal", "paper", "terrain", "bounded")  # filter off, filter=id_cbf_qp, filter=terrain, terrain_bounded
-FILTERS = ("paper", "terrain", "bounded")
+# filter off, filter=id_cbf_qp, filter=terrain, filter=terrain_release, filter=terrain_bounded
+VARIANTS = ("nominal", "paper", "terrain", "release", "bounded")
+FILTERS = ("paper", "terrain", "release", "bounded")
 WORLD_ORDER = ("flat", "low_friction", "friction_patch", "logs", "steps", "rough", "slope", "push", "payload")
 SLIPPERY = ("low_friction", "friction_patch")  # the help target: strictly fewer unsafe runs than alone
 ROUGH = ("logs", "steps", "rough", "slope")  # the help target: fewer falls or trips on at least two
@@ -104,7 +105,7 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
                        f"ground: mean intervention {torque:.2f} N·m (target <= {MAX_FLAT_INTERVENTION_NM}), falls "
                        f"{_count(filtered, 'fell')} vs {_count(alone, 'fell')} alone.")
     for controller in CONTROLLERS:
-        for variant in ("terrain", "bounded"):
+        for variant in ("terrain", "release", "bounded"):
             out += _no_harm(frame, robot, controller, variant)
             out += _helps(frame, robot, controller, variant)
     return out
@@ -175,7 +176,9 @@ def policy_section(frame: pd.DataFrame) -> str:
     parts = ["## Filters on the deployed controllers: blind trot and learned policy\n",
              ("Per robot and world: each nominal controller (`trot`: the paper's blind trot; `policy`: the robot's "
               "shipped learned policy) alone (`nominal`), with the paper's filter (`paper`), the terrain filter "
-              "(`terrain`) and the terrain filter with bounded corrections (`bounded`). Means over finished runs "
+              "(`terrain`), the terrain filter that lets go of feet the nominal lifts (`release`, "
+              "`filter=terrain_release`) and the terrain filter with bounded corrections (`bounded`), those the "
+              "sweep ran. Means over finished runs "
               "(`runs` = finished/all); `unsafe` = runs whose verdict is `safe: false`, with the reasons' counts.\n")]
     robots = sorted(set(frame["robot"].astype(str))) if "robot" in frame else ["a1"]
     for robot in robots:
