@@ -105,6 +105,8 @@ def test_the_preset_turns_both_on_and_validation_names_a_wrong_pairing():
     validate(cfg)
     assert cfg.filter.release_lifted_feet and cfg.filter.cone_edge_along_nominal
     assert cfg.filter.friction_cone == "terrain" and cfg.filter.stance_source == "estimate"  # the rest is terrain's
+    # swing rows only against surfaces steeper than 45 deg: the trip rule's walkable bound
+    assert cfg.filter.barriers.terrain_clearance.max_normal_z == pytest.approx(np.cos(np.radians(45.0)), abs=1e-3)
     with pytest.raises(ConfigError, match="filter.cone_edge_along_nominal.*friction_cone=pyramid"):
         validate(compose(["filter.cone_edge_along_nominal=true"]))
 
