@@ -43,8 +43,8 @@ def test_targets_say_met_or_missed_with_the_numbers():
     assert "**met**: do no harm, policy + terrain filter vs policy alone over 3 worlds: no world worse" in text
     assert ("**met**: helps on slippery ground, policy + terrain filter: unsafe runs vs alone: "
             "low_friction 0.3: 0 vs 2") in text
-    assert ("**missed**: helps on rough ground, policy + terrain filter: fewer falls, or fewer trips and no more "
-            "falls, than alone on 0 of 1 worlds") in text
+    assert ("**missed**: helps on rough ground, policy + terrain filter: fewer falls, or fewer trips with no more "
+            "falls and no shorter walk, than alone on 0 of 1 worlds") in text
 
 
 def test_fewer_trips_after_an_earlier_fall_is_no_help():
@@ -52,6 +52,18 @@ def test_fewer_trips_after_an_earlier_fall_is_no_help():
     rows += [_run("steps", "policy", "terrain", trips=1, fell=True) for _ in range(2)]
     text = "\n".join(target_sentences(pd.DataFrame(rows), "a1"))
     assert "**missed**: helps on rough ground, policy + terrain filter" in text
+
+
+def test_fewer_trips_on_a_shorter_walk_is_no_help():
+    """Equal falls, fewer trips, but the filtered runs walked half as far (the filter held the robot back)."""
+    rows = [_run("steps", "policy", "nominal", trips=8, fell=True, distance=1.2) for _ in range(2)]
+    rows += [_run("steps", "policy", "terrain", trips=1, fell=True, distance=0.6) for _ in range(2)]
+    text = "\n".join(target_sentences(pd.DataFrame(rows), "a1"))
+    assert "**missed**: helps on rough ground, policy + terrain filter" in text and "(none;" in text
+    rows = [_run("steps", "policy", "nominal", trips=8, fell=True, distance=1.2) for _ in range(2)]
+    rows += [_run("steps", "policy", "terrain", trips=1, fell=True, distance=1.2) for _ in range(2)]
+    text = "\n".join(target_sentences(pd.DataFrame(rows), "a1"))
+    assert "than alone on 1 of 1 worlds (steps;" in text
 
 
 def test_section_has_one_table_per_robot():

@@ -10,6 +10,7 @@ Hydra's sweeper re-raises the exception of a failed one and the sweep would end 
 from __future__ import annotations
 
 import sys
+import time
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,6 +32,7 @@ JOB_AXES: dict[str, dict[str, Any]] = {}
 
 # the signal that interrupted the sweep (SIGINT / SIGTERM), if one did: the sweep then exits 128 + its number
 SWEEP_INTERRUPTED: list[int] = []
+PROGRESS_EVERY_S = 5.0  # [s] a line on stderr this often while the jobs' configs are composed (~0.17 s each)
 
 
 class SweepRefused(SystemExit):
@@ -39,13 +41,19 @@ class SweepRefused(SystemExit):
 
 def job_folders(config: DictConfig, job_overrides: Sequence[Sequence[str]],
                 hydra_context: HydraContext) -> list[Path]:  # fmt: skip
-    """The run folder of each job (``hydra.sweep.dir/hydra.sweep.subdir`` of its composed config)."""
+    """The run folder of each job (``hydra.sweep.dir/hydra.sweep.subdir`` of its composed config). Composing
+    takes ~0.17 s a job (minutes for a study of a thousand): a progress line every PROGRESS_EVERY_S."""
     from hydra.core.hydra_config import HydraConfig
     from omegaconf import OmegaConf
 
     folders = []
     before = HydraConfig.instance().cfg
-    for overrides in job_overrides:
+    start = last = time.monotonic()
+    for k, overrides in enumerate(job_overrides):
+        if time.monotonic() - last >= PROGRESS_EVERY_S:
+            last = time.monotonic()
+            print(f"composing the jobs' configs before any runs: {k}/{len(job_overrides)} "
+                  f"({last - start:.0f} s)", file=sys.stderr, flush=True)
         job_cfg = hydra_context.config_loader.load_sweep_config(config, list(overrides))
         HydraConfig.instance().set_config(job_cfg)  # ${hydra:...} in the folder pattern
         sweep_dir = str(OmegaConf.select(job_cfg, "hydra.sweep.dir"))

@@ -111,6 +111,12 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
     return out
 
 
+def _shorter(filtered: pd.DataFrame, alone: pd.DataFrame) -> bool:
+    """The filtered runs' mean distance is lower than the controller's alone by more than MAX_DISTANCE_LOSS."""
+    d_alone, d_filtered = _mean(alone, "distance_m"), _mean(filtered, "distance_m")
+    return not math.isnan(d_alone) and d_alone > 0 and d_filtered < (1.0 - MAX_DISTANCE_LOSS) * d_alone
+
+
 def _no_harm(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> list[str]:
     worse = []
     judged = 0
@@ -125,7 +131,7 @@ def _no_harm(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> 
         for col, label in (("fell", "falls"), ("unsafe", "unsafe runs")):
             if _count(terrain, col) > _count(alone, col):
                 reasons.append(f"{label} {_count(terrain, col)} vs {_count(alone, col)}")
-        if not math.isnan(d_alone) and d_alone > 0 and d_terrain < (1.0 - MAX_DISTANCE_LOSS) * d_alone:
+        if _shorter(terrain, alone):
             reasons.append(f"distance {d_terrain:.2f} vs {d_alone:.2f} m")
         if reasons:
             worse.append(f"{world} ({', '.join(reasons)})")
@@ -150,9 +156,11 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
             slippery.append((world, _count(terrain, "unsafe"), _count(alone, "unsafe")))
         if base in ROUGH:
             rough_judged += 1
-            # fewer trips counts only without more falls: a run that falls early has less time to trip
+            # fewer trips counts only without more falls and without a shorter walk: a run that falls early, or
+            # is held back, has less time and ground to trip on
             falls, falls_alone = _count(terrain, "fell"), _count(alone, "fell")
-            fewer_trips = falls <= falls_alone and _mean(terrain, "trips") < _mean(alone, "trips")
+            fewer_trips = (falls <= falls_alone and _mean(terrain, "trips") < _mean(alone, "trips")
+                           and not _shorter(terrain, alone))
             if falls < falls_alone or fewer_trips:
                 rough_better.append(world)
     if slippery:
@@ -164,7 +172,7 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
         ok = len(rough_better) >= 2
         better = ", ".join(rough_better) or "none"
         out.append(f"**{'met' if ok else 'missed'}**: helps on rough ground, {controller} + {variant} filter: fewer "
-                   f"falls, or fewer trips and no more falls, than alone on {len(rough_better)} of {rough_judged} "
+                   f"falls, or fewer trips with no more falls and no shorter walk, than alone on {len(rough_better)} of {rough_judged} "
                    f"worlds ({better}; target: at least 2).")
     return out
 
