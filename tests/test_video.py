@@ -148,3 +148,26 @@ def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(
     assert first_trip_s(run_dir) == pytest.approx(steps["t_s"][600])
     still_strips(tmp_path / "sweep", pd.DataFrame([row]), keep=True)  # the run changed since: drawn again
     assert png.stat().st_mtime_ns > drawn[0] and clip.stat().st_mtime_ns > drawn[1]
+
+
+def test_still_strips_are_capped_first_of_each_group_first_and_the_rest_listed(tmp_path):
+    """With ``max_strips`` below the events: the earliest event of each group is drawn first; every other event is
+    still listed, with its time and replay command, and the report says how many were drawn."""
+    from taslel_bench.sweep.stills import strip_order, still_strips
+
+    rows = [{"scenario": "logs", "filter_variant": "paper"}, {"scenario": "logs", "filter_variant": "paper"},
+            {"scenario": "steps", "filter_variant": "paper"}, {"scenario": "logs", "filter_variant": "terrain"}]
+    events = [(f"r{i}", pd.Series(r), ("fall", 1.0)) for i, r in enumerate(rows)]
+    events.insert(1, ("bad", pd.Series(rows[0]), "ValueError: no trace"))
+    assert strip_order(events) == [0, 3, 4, 2]  # r0, r2, r3 (one per group), then r1; the failed event never
+    run_dir = tmp_path / "sweep" / "r0"
+    run(compose_cfg(SHORT), run_dir)
+    (tmp_path / "sweep" / "r1").symlink_to(run_dir, target_is_directory=True)
+    fell = {"status": "ok", "fell": True, "time_to_fall_s": 0.6, "fall_reason": "test"}
+    frame = pd.DataFrame([{"run_dir": "r0", **fell}, {"run_dir": "r1", **fell}])
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    lines = still_strips(tmp_path / "sweep", frame, max_strips=1)
+    assert "[video](" in lines[1] and "[video](" not in lines[2]
+    assert "fall at 0.600 s (test); replay: `python -m taslel_bench.view r1 --time 0.000`" in lines[2]
+    assert "Strips drawn for 1 of 2 events" in lines[3]
+    assert not (tmp_path / "sweep" / "stills" / "r1.png").exists()

@@ -21,6 +21,7 @@ from taslel_bench.sweep import table_set
 from taslel_bench.sweep.aggregate import SUMMARY_TABLE, aggregate, collect
 from taslel_bench.sweep.jobs import JOB_OUTCOMES
 from taslel_bench.sweep.report import write_report
+from taslel_bench.sweep.stills import MAX_STRIPS
 from taslel_bench.sweep.trackers import check_settings, log_sweep
 
 EXIT_OK, EXIT_RUNS_FAILED = 0, 1
@@ -60,7 +61,12 @@ def print_failed_rows(frame: pd.DataFrame) -> None:
 
 
 class SweepCallback(Callback):
-    """Hydra callback: aggregate the sweep folder and write the report when a multirun ends."""
+    """Hydra callback: aggregate the sweep folder and write the report when a multirun ends.
+    ``max_still_strips`` (``hydra.callbacks.sweep_report.max_still_strips``): falls and trips drawn as still
+    strips in the report, ~3 s each (:mod:`taslel_bench.sweep.stills`)."""
+
+    def __init__(self, max_still_strips: int = MAX_STRIPS) -> None:
+        self.max_still_strips = int(max_still_strips)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         """Refuse a bad ``tracker.*`` value before any job runs."""
@@ -82,7 +88,7 @@ class SweepCallback(Callback):
         try:
             table_set.begin(sweep_dir)  # summary.parquet, table.csv/.tex and report.md: one set
             aggregate(sweep_dir, dict(JOB_OUTCOMES), frame=frame)
-            report = write_report(sweep_dir, frame)
+            report = write_report(sweep_dir, frame, max_stills=self.max_still_strips)
             table_set.seal(sweep_dir, len(frame))
         except Exception as exc:  # the table is still printed below
             print(_one_line(f"the sweep's table or report in {sweep_dir}", exc), file=sys.stderr)

@@ -172,8 +172,8 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
         ok = len(rough_better) >= 2
         better = ", ".join(rough_better) or "none"
         out.append(f"**{'met' if ok else 'missed'}**: helps on rough ground, {controller} + {variant} filter: fewer "
-                   f"falls, or fewer trips with no more falls and no shorter walk, than alone on {len(rough_better)} of {rough_judged} "
-                   f"worlds ({better}; target: at least 2).")
+                   f"falls, or fewer trips with no more falls and no shorter walk, than alone on "
+                   f"{len(rough_better)} of {rough_judged} worlds ({better}; target: at least 2).")
     return out
 
 

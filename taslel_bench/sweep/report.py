@@ -26,7 +26,7 @@ from taslel_bench.sweep.claims import _unsafe, paper_claims
 from taslel_bench.sweep.policy_table import policy_section
 from taslel_bench.sweep.solver_verdict import _overall, machine_busy_line, solve_time_figure, solver_verdict
 from taslel_bench.sweep.solver_verdict import _sentence as _solver_sentence
-from taslel_bench.sweep.stills import still_strips
+from taslel_bench.sweep.stills import MAX_STRIPS, still_strips
 from taslel_bench.sweep.terrain_table import terrain_section, urdf_plant_runs
 from taslel_bench.sweep.verdict_table import verdict_section
 from taslel_bench.util.log import console_logging
@@ -469,7 +469,8 @@ def _guarded(make, what: str) -> tuple[list, str]:
         return [], f"{what} skipped: {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
 
 
-def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills: bool = False) -> Path:
+def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills: bool = False,
+                 max_stills: int = MAX_STRIPS) -> Path:
     sweep_dir = Path(sweep_dir)
     if frame is None:
         frame = (
@@ -508,7 +509,8 @@ def write_report(sweep_dir: Path, frame: pd.DataFrame | None = None, keep_stills
     ]
     lines += _run_list(frame, "degraded", "degraded_reasons", "Runs that ended degraded (a health limit crossed)")
     lines += _run_list(frame, "error", "message", "Runs that ended in an error")
-    strips, strips_skipped = _guarded(lambda: still_strips(sweep_dir, frame, keep_stills), "still strips")
+    strips, strips_skipped = _guarded(lambda: still_strips(sweep_dir, frame, keep_stills, max_stills),
+                                               "still strips")
     lines += strips  # falls and trips seen (taslel_bench.sweep.stills)
     lines += [f"_{note}_\n" for note in (skipped, strips_skipped) if note]
     if figures:
@@ -531,6 +533,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("sweep_dir", type=Path)
     ap.add_argument("--keep-stills", action="store_true",
                     help="keep still strips and clips newer than their run's files instead of drawing them again")
+    ap.add_argument("--max-stills", type=int, default=MAX_STRIPS,
+                    help=f"draw still strips and clips for at most this many falls and trips, ~3 s each (default "
+                         f"{MAX_STRIPS}; the first of each group first); the others are listed with their replay "
+                         f"command")
     args = ap.parse_args(argv)
     console_logging()
     if not args.sweep_dir.is_dir():
@@ -546,7 +552,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         table_set.begin(args.sweep_dir)  # summary.parquet, table.csv/.tex, report.md: one set (table_set.json)
         aggregate(args.sweep_dir, frame=frame)
-        print(write_report(args.sweep_dir, frame, args.keep_stills))
+        print(write_report(args.sweep_dir, frame, args.keep_stills, args.max_stills))
         table_set.seal(args.sweep_dir, len(frame))
     except OSError as exc:
         what = "disk full" if exc.errno == errno.ENOSPC else type(exc).__name__

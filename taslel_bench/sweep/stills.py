@@ -10,6 +10,11 @@ The event is the fall (``time_to_fall_s``) or, for a run that did not fall, the 
 Files: ``<sweep>/stills/<run>.png`` (and ``.mp4``). With ``keep=True`` (``python -m taslel_bench.report
 <sweep> --keep-stills``) a strip, and its clip, newer than every file of its run is kept as it is, not drawn
 again (a 420-run sweep's 210 strips and clips take ~15 min); a change of the drawing code is not seen then.
+
+At most ``max_strips`` events (default MAX_STRIPS; ``--max-stills`` of the report command,
+``hydra.callbacks.sweep_report.max_still_strips`` of a sweep) are drawn, ~3 s each: first the earliest event of
+each group of the sweep's axes (robot, scenario and its friction, controller, filter, solver, estimator), then the
+others in the table's order; every other event is listed with its time and replay command, without a strip.
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ CLIP_WINDOW_S = (-2.0, 0.5)  # [s] the event clip, relative to the event
 FPS = 30.0
 PROGRESS_EVERY = 20  # runs between progress lines while the stills render
 VIEW_LEAD_S = 1.0  # [s] the viewer command opens the run this long before the event
+MAX_STRIPS = 100  # events drawn as strips and clips per report (~3 s each); the rest are listed
+GROUP_KEYS = ("robot", "scenario", "scenario.friction", "controller", "filter_variant", "solver", "estimator")
 
 
 def event_of_run(run_dir: Path, row: pd.Series) -> tuple[str, float] | None:
@@ -120,6 +127,20 @@ def _event_or_error(run_dir: Path, row: pd.Series) -> tuple[str, float] | str | 
         return traceback.format_exc().strip().splitlines()[-1]
 
 
+def strip_order(events: list) -> list[int]:
+    """Indices of ``events`` ((run_dir, row, event) in table order) in drawing order: the earliest event of each
+    group of GROUP_KEYS first, then the rest, each part in table order; failed events (text) never drawn."""
+    seen: set[tuple] = set()
+    first, rest = [], []
+    for i, (_, row, event) in enumerate(events):
+        if isinstance(event, str):
+            continue
+        group = tuple(str(row.get(k, "")) for k in GROUP_KEYS)
+        (rest if group in seen else first).append(i)
+        seen.add(group)
+    return first + rest
+
+
 def _up_to_date(out: Path, run_dir: Path) -> bool:
     """``out`` exists and is newer than every file of the run (summary, steps, events, config)."""
     if not out.is_file():
@@ -128,35 +149,43 @@ def _up_to_date(out: Path, run_dir: Path) -> bool:
     return out.stat().st_mtime >= newest
 
 
-def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False) -> list[str]:
+def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False, max_strips: int = MAX_STRIPS) -> list[str]:
     """Report lines: per finished run that fell or tripped, its still strip linked to its video (``keep``:
-    strips and clips newer than their run's files are not drawn again)."""
+    strips and clips newer than their run's files are not drawn again); at most ``max_strips`` drawn (module
+    doc), the other events listed with their replay command."""
     if frame.empty or "run_dir" not in frame or "status" not in frame:
         return []
     lines: list[str] = []
     runs = [(str(row["run_dir"]), row) for _, row in frame[frame["status"].isin(("ok", "degraded"))].iterrows()]
     events = [(run_dir, row, _event_or_error(sweep_dir / run_dir, row)) for run_dir, row in runs]
     events = [(run_dir, row, event) for run_dir, row, event in events if event is not None]
+    drawn = set(strip_order(events)[:max(0, max_strips)])
     for i, (run_dir, row, event) in enumerate(events):
         if i % PROGRESS_EVERY == 0:  # ~3 s per run: a large sweep's report renders for minutes
             logger.info("report: still strips and clips %d/%d", i, len(events))
         if isinstance(event, str):  # event_of_run failed
             lines.append(f"- `{run_dir}`: no still ({event})\n")
             continue
+        kind, t = event
+        reason = f" ({row.get('fall_reason')})" if kind == "fall" else ""
+        if i not in drawn:
+            lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; replay: `{view_command(run_dir, t)}`\n")
+            continue
         try:
-            kind, t = event
             name = _name(run_dir)
             png = sweep_dir / STILLS_DIR / f"{name}.png"
             if not (keep and _up_to_date(png, sweep_dir / run_dir)):
                 still_strip(sweep_dir / run_dir, t, png)
             link = _video_link(sweep_dir, run_dir, t, name, keep)
-            reason = f" ({row.get('fall_reason')})" if kind == "fall" else ""
             lines.append(f"- `{run_dir}`: {kind} at {t:.3f} s{reason}; frames at "
                          f"{', '.join(f'{o:+g}' for o in STRIP_OFFSETS_S)} s, [video]({link}); "
                          f"replay: `{view_command(run_dir, t)}`\n\n"
                          f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
         except Exception:  # a still that cannot be drawn is reported, the report is still written
             lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
+    if len(events) > len(drawn):
+        lines.append(f"_Strips drawn for {len(drawn)} of {len(events)} events (the first of each group first; "
+                     f"`--max-stills` sets the number)._\n")
     if not lines:
         return []
     head = ("## The second before each fall or trip\n\nRendered from each run's steps.parquet (MuJoCo's offscreen "
