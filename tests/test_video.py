@@ -153,7 +153,7 @@ def test_still_strip_of_a_fall_links_its_clip_and_a_trip_is_found_from_contacts(
 def test_still_strips_are_capped_first_of_each_group_first_and_the_rest_listed(tmp_path):
     """With ``max_strips`` below the events: the earliest event of each group is drawn first; every other event is
     still listed, with its time and replay command, and the report says how many were drawn."""
-    from taslel_bench.sweep.stills import strip_order, still_strips
+    from taslel_bench.sweep.stills import still_strips, strip_order
 
     rows = [{"scenario": "logs", "filter_variant": "paper"}, {"scenario": "logs", "filter_variant": "paper"},
             {"scenario": "steps", "filter_variant": "paper"}, {"scenario": "logs", "filter_variant": "terrain"}]
