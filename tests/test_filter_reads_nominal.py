@@ -62,28 +62,6 @@ def test_lifted_feet_are_those_the_nominal_pulls_off_the_ground(states):
     assert all(v > 0 for v in seen.values()), seen  # the draws exercise every branch
 
 
-def test_light_feet_outside_their_cone_are_released_with_the_option(states):
-    """``release_sliding_below_n``: of the stance feet not lifted, those whose nominal force (numpy's solve) has a
-    normal part below the limit and a tangential part above mu times it are swing too."""
-    st, pm = states
-    rng = np.random.default_rng(4)
-    released = 0
-    for state in st:
-        for _ in range(8):
-            x = all_stance(inputs_for(pm, state, 0.6))
-            u_nom = state[3] + rng.normal(0.0, 4.0, 12)
-            f = SafetyFilter(FilterSettings(release_lifted_feet=True, release_sliding_below_n=30.0), TightReference())
-            f._write_equalities(f.problem, x)
-            force = unfiltered_prediction(f, u_nom)[-12:].reshape(4, 3)
-            lifted = f.lifted_feet(f.problem, x, u_nom)
-            expected = ~lifted & (force[:, 2] < 30.0) & (np.linalg.norm(force[:, :2], axis=1) > 0.6 * force[:, 2])
-            assert np.array_equal(f.sliding_light_feet(x) & ~lifted, expected)
-            res = f.filter(x, u_nom)
-            assert res.status == "solved" and np.all(res.lam.reshape(4, 3)[expected] == 0.0)
-            released += int(expected.sum())
-    assert released > 0
-
-
 def test_pyramid_along_the_nominal_holds_it_exactly_when_the_true_cone_does():
     rng = np.random.default_rng(2)
     mu = 0.8
@@ -131,8 +109,6 @@ def test_the_preset_turns_both_on_and_validation_names_a_wrong_pairing():
     assert cfg.filter.barriers.terrain_clearance.max_normal_z == pytest.approx(np.cos(np.radians(45.0)), abs=1e-3)
     with pytest.raises(ConfigError, match="filter.cone_edge_along_nominal.*friction_cone=pyramid"):
         validate(compose(["filter.cone_edge_along_nominal=true"]))
-    with pytest.raises(ConfigError, match="filter.release_sliding_below_n.*release_lifted_feet"):
-        validate(compose(["filter.release_sliding_below_n=12"]))
 
 
 def test_with_the_preset_a_shipped_policy_walks_on_flat_ground_barely_touched():

@@ -298,10 +298,6 @@ class FilterConfig:
     release_lifted_feet: bool = param(default_of(FilterSettings, "release_lifted_feet"),
                                       "a stance foot the nominal torques pull off the ground (normal force under "
                                       "the stance model below lambda_min) is swing for that tick")
-    release_sliding_below_n: float | None = param(default_of(FilterSettings, "release_sliding_below_n"),
-                                                  "with release_lifted_feet: a stance foot whose nominal force has "
-                                                  "a normal part below this and lies outside its cone is swing "
-                                                  "that tick (null: off)", unit="N", lo=0.0)
     relaxation: str = param(default_of(FilterSettings, "relaxation"),
                             "none (infeasible QP -> fallback) | priority (drop barrier families, last first)",
                             choices=RELAXATIONS)

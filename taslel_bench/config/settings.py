@@ -66,7 +66,6 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
         cone_edge_downhill=bool(f.cone_edge_downhill),
         cone_edge_along_nominal=bool(f.cone_edge_along_nominal),
         release_lifted_feet=bool(f.release_lifted_feet),
-        release_sliding_below_n=None if f.release_sliding_below_n is None else float(f.release_sliding_below_n),
         relaxation=str(f.relaxation),
         correction_limit_stance_nm=_limit(f.correction_limit_stance_nm),
         correction_limit_swing_nm=_limit(f.correction_limit_swing_nm),

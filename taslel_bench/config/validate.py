@@ -187,9 +187,6 @@ def _meaningful(cfg: DictConfig) -> None:
                    f"{walk_end_s:g} s, or filter.enabled=false")
     if cfg.record.qps and not filter_on:
         raise fail("record.qps", True, "there is no QP to record with filter.enabled=false (set one of them)")
-    if cfg.filter.release_sliding_below_n is not None and not cfg.filter.release_lifted_feet:
-        raise fail("filter.release_sliding_below_n", cfg.filter.release_sliding_below_n,
-                   "releases feet only together with filter.release_lifted_feet=true (it is false here)")
     if cfg.filter.cone_edge_along_nominal and cfg.filter.friction_cone != "terrain":
         raise fail("filter.cone_edge_along_nominal", True,
                    f"turns the terrain cone's pyramids; filter.friction_cone={cfg.filter.friction_cone} keeps the "

@@ -84,9 +84,6 @@ class FilterSettings:
     # a stance foot whose force under the nominal torques (the stance model's) has a normal part below
     # lambda_min_n -- the nominal is lifting it off -- is swing for this tick: no contact rows, no cone
     release_lifted_feet: bool = False
-    # [N] with release_lifted_feet: a stance foot whose nominal force has a normal part below this and lies
-    # outside its friction cone (it slides as it unloads) is swing that tick too; None: off
-    release_sliding_below_n: float | None = None
     relaxation: str = "none"  # "none" (failure -> fallback) | "priority" (drop barrier families, last first)
     # [N·m] per joint: |u - u_nom| at most this on a stance leg's / a swing leg's joints (inf: the paper's, only
     # the torque limits bound u)
@@ -320,18 +317,6 @@ class SafetyFilter:
         normal_n = np.einsum("ij,ij->i", force, self._foot_normals())
         return np.asarray(contact.in_stance, bool) & (normal_n < self.settings.lambda_min_n)
 
-    def sliding_light_feet(self, contact: TickInputs) -> np.ndarray:
-        """(4,) bool: with ``release_sliding_below_n``, the stance feet whose nominal force (the last
-        :meth:`lifted_feet` computed) has a normal part below it and a tangential part above mu times it."""
-        limit = self.settings.release_sliding_below_n
-        if limit is None:
-            return np.zeros(quad.N_LEGS, bool)
-        force, normals = self._nominal_force, self._foot_normals()
-        normal_n = np.einsum("ij,ij->i", force, normals)
-        tangential = np.linalg.norm(force - normal_n[:, None] * normals, axis=1)
-        mu = contact.mu_per_foot if contact.mu_per_foot is not None else np.full(quad.N_LEGS, contact.mu)
-        return np.asarray(contact.in_stance, bool) & (normal_n < limit) & (tangential > mu * normal_n)
-
     def separating_feet(self, qp: QPProblem, feet: np.ndarray, u_nom: np.ndarray, m: RobotModel) -> np.ndarray:
         """(4,) bool: of ``feet`` (swing in ``qp``'s rows), those whose acceleration under u_nom, J vdot + J̇v
         (world), points away from the ground (a positive normal part)."""
@@ -350,13 +335,12 @@ class SafetyFilter:
         contact gives them) -- become swing for this tick (the equality rows rewritten). A foot that would
         need a pull to stick yet accelerates into the ground when let go (it would slide) stays in stance."""
         lifted = self.lifted_feet(qp, contact, u_nom)
-        sliding = self.sliding_light_feet(contact) & ~lifted
-        if not lifted.any() and not sliding.any():
+        if not lifted.any():
             return contact
         stance = np.asarray(contact.in_stance, bool)
-        self._write_equalities(qp, replace_stance(contact, stance & ~lifted & ~sliding))
-        released = (lifted & self.separating_feet(qp, lifted, u_nom, contact.model)) | sliding
-        if not np.array_equal(released, lifted | sliding):  # some stay: the rows of the feet released only
+        self._write_equalities(qp, replace_stance(contact, stance & ~lifted))
+        released = lifted & self.separating_feet(qp, lifted, u_nom, contact.model)
+        if not np.array_equal(released, lifted):  # some stay: the rows of the feet released only
             self._write_equalities(qp, replace_stance(contact, stance & ~released))
         if not released.any():
             return contact
