@@ -121,36 +121,14 @@ class SafetyFilter:
         their priority: ``relaxation: priority`` drops the last first); with ``settings.ecbf_enabled`` false
         the filter has none. ``terrain``: the world's geometry (needed by ``friction_cone: terrain``)."""
         self.torque_limit_nm = np.array(settings.torque_limit_nm, dtype=float)  # [N·m] (12,) core order
-        if settings.fallback not in FALLBACKS:
-            raise ValueError(f"filter.fallback={settings.fallback!r}; valid: {', '.join(FALLBACKS)}")
-        if settings.regularization_target not in REGULARIZATION_TARGETS:
-            raise ValueError(
-                f"filter.regularization_target={settings.regularization_target!r}; "
-                f"valid: {', '.join(REGULARIZATION_TARGETS)}"
-            )
-        if settings.formulation not in FORMULATIONS:
-            raise ValueError(f"filter.formulation={settings.formulation!r}; valid: {', '.join(FORMULATIONS)}")
-        if settings.friction_cone not in FRICTION_CONES:
-            raise ValueError(f"filter.friction_cone={settings.friction_cone!r}; valid: {', '.join(FRICTION_CONES)}")
-        if settings.relaxation not in RELAXATIONS:
-            raise ValueError(f"filter.relaxation={settings.relaxation!r}; valid: {', '.join(RELAXATIONS)}")
+        _check_choices(settings)
         self.settings = settings
         self.backend = backend
         # settings read on every tick, looked up once (the settings are frozen)
         self._robust = settings.robust.enabled
         self._friction_margin = settings.robust.friction_margin  # [-]
         self.eq_families: list[EqualityFamily] = [EquationsOfMotion(), ContactOrSwing(settings.contact_velocity_gain)]
-        if settings.friction_cone == "terrain":
-            if terrain is None:
-                raise ValueError("filter.friction_cone=terrain needs the world's terrain")
-            self.friction: FrictionCone = TerrainFrictionCone(settings.lambda_min_n, terrain,
-                                                              edge_downhill=settings.cone_edge_downhill,
-                                                              edge_along_nominal=settings.cone_edge_along_nominal)
-        else:
-            if settings.cone_edge_along_nominal:
-                raise ValueError("filter.cone_edge_along_nominal=true needs filter.friction_cone=terrain (the "
-                                 "paper's pyramid keeps world x)")
-            self.friction = FrictionCone(settings.lambda_min_n)
+        self.friction: FrictionCone = _friction_cone(settings, terrain)
         if settings.correction_limit_stance_nm < 0.0 or settings.correction_limit_swing_nm < 0.0:
             raise ValueError("filter.correction_limit_stance_nm and filter.correction_limit_swing_nm must be >= 0")
         # bounds |u - u_nom| <= limit per leg (stance / swing) on top of the torque limits: only when one is finite
@@ -162,7 +140,10 @@ class SafetyFilter:
             raise ValueError("filter.support_min_normal_z needs the world's terrain")
         self.unsupported_ticks = 0  # ticks with a scheduled stance foot the filter took as no support
         self.released_ticks = 0  # ticks with a stance foot released because the nominal lifts it
-        self._nominal_force = np.zeros((quad.N_LEGS, 3))  # [N] the nominal torques' foot forces, world (scratch)
+        # [N] (4, 3) the nominal torques' foot forces, world axes (the terrain cone reads the same array)
+        cone = self.friction
+        own = np.zeros((quad.N_LEGS, 3))
+        self._nominal_force = cone.nominal_force if isinstance(cone, TerrainFrictionCone) else own
         self.relaxed_ticks = 0  # ticks whose QP was solved only after dropping barrier families
         self.relaxed_by_family: dict[str, int] = {}  # family name -> ticks it was dropped
         self.barriers: list[Barrier] = list(barriers) if settings.ecbf_enabled else []
@@ -278,11 +259,11 @@ class SafetyFilter:
         qp.q[U] = -u_nom
         contact = self.supported(inputs) if self._support_check else inputs  # the stance set of the contact rows
         self._write_equalities(qp, contact)
+        forces_current = False  # whether _nominal_force holds the forces of the rows now in qp
         if self.settings.release_lifted_feet:
-            contact = self._release_lifted(qp, contact, u_nom)
-        if self.settings.cone_edge_along_nominal:
-            assert isinstance(self.friction, TerrainFrictionCone)  # checked in __init__
-            self._nominal_forces(qp, u_nom, self.friction.nominal_force)
+            contact, forces_current = self._release_lifted(qp, contact, u_nom)
+        if self.settings.cone_edge_along_nominal and not forces_current:  # the terrain cone reads _nominal_force
+            self._nominal_forces(qp, u_nom, self._nominal_force)
         self.friction.write(qp, contact)
         for fam in self.barriers:
             fam.write(qp, inputs)
@@ -329,23 +310,26 @@ class SafetyFilter:
             out[i] = float(acc @ normals[i]) > 0.0
         return out
 
-    def _release_lifted(self, qp: QPProblem, contact: TickInputs, u_nom: np.ndarray) -> TickInputs:
+    def _release_lifted(self, qp: QPProblem, contact: TickInputs, u_nom: np.ndarray) -> tuple[TickInputs, bool]:
         """``release_lifted_feet``: the stance feet u_nom pulls off the ground -- sticking needs a normal force
         below ``lambda_min_n`` and, let go, the foot accelerates away from the ground (the contact mode rigid
         contact gives them) -- become swing for this tick (the equality rows rewritten). A foot that would
-        need a pull to stick yet accelerates into the ground when let go (it would slide) stays in stance."""
+        need a pull to stick yet accelerates into the ground when let go (it would slide) stays in stance.
+        Returns (the inputs with that stance set, whether ``_nominal_force`` holds the forces of the rows
+        written last)."""
         lifted = self.lifted_feet(qp, contact, u_nom)
         if not lifted.any():
-            return contact
+            return contact, True
         stance = np.asarray(contact.in_stance, bool)
         self._write_equalities(qp, replace_stance(contact, stance & ~lifted))
         released = lifted & self.separating_feet(qp, lifted, u_nom, contact.model)
-        if not np.array_equal(released, lifted):  # some stay: the rows of the feet released only
+        rewritten = not np.array_equal(released, lifted)
+        if rewritten:  # some stay: the rows of the feet released only
             self._write_equalities(qp, replace_stance(contact, stance & ~released))
         if not released.any():
-            return contact
+            return contact, not rewritten
         self.released_ticks += 1
-        return replace_stance(contact, stance & ~released)
+        return replace_stance(contact, stance & ~released), not rewritten
 
     def _regularize_towards_nominal(self, qp: QPProblem, u_nom: np.ndarray) -> None:
         """q[vdot, lambda] = -eps * (vdot_nom, lambda_nom), the equality solution for u = u_nom (zero target
@@ -466,6 +450,29 @@ class SafetyFilter:
         return FilterResult(u, np.full(NL, np.nan), np.full(NV, np.nan), status, True, build_s, sol)
 
 
+def _check_choices(settings: FilterSettings) -> None:
+    """ValueError naming the key and the valid values for a settings choice that is not one of them."""
+    choices = (("fallback", FALLBACKS), ("regularization_target", REGULARIZATION_TARGETS),
+               ("formulation", FORMULATIONS), ("friction_cone", FRICTION_CONES), ("relaxation", RELAXATIONS))
+    for key, valid in choices:
+        value = getattr(settings, key)
+        if value not in valid:
+            raise ValueError(f"filter.{key}={value!r}; valid: {', '.join(valid)}")
+
+
+def _friction_cone(settings: FilterSettings, terrain: Terrain | None) -> FrictionCone:
+    """The paper's pyramid, or the per-foot terrain cone (``friction_cone: terrain``, which needs the terrain)."""
+    if settings.friction_cone == "terrain":
+        if terrain is None:
+            raise ValueError("filter.friction_cone=terrain needs the world's terrain")
+        return TerrainFrictionCone(settings.lambda_min_n, terrain, edge_downhill=settings.cone_edge_downhill,
+                                   edge_along_nominal=settings.cone_edge_along_nominal)
+    if settings.cone_edge_along_nominal:
+        raise ValueError("filter.cone_edge_along_nominal=true needs filter.friction_cone=terrain (the "
+                         "paper's pyramid keeps world x)")
+    return FrictionCone(settings.lambda_min_n)
+
+
 def replace_stance(x: TickInputs, in_stance: np.ndarray) -> TickInputs:
     """``x`` with the stance set ``in_stance`` (4,) bool."""
     return TickInputs(x.model, x.v, in_stance, x.mu, x.swing_phase, x.swing_phase_rate, x.mu_per_foot)
@@ -477,15 +484,22 @@ def replace_stance(x: TickInputs, in_stance: np.ndarray) -> TickInputs:
 
 
 @kernel
-def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
-    """q[vdot, lambda] = -eps (vdot_nom, lambda_nom) with (vdot_nom, lambda_nom) = A_free^-1 (b - A_u u_nom);
-    0 if A_free is singular."""
+def _solve_for_u(A, b, u, rows, ws, rhs):
+    """rhs[:, 0] = (vdot, lambda) of the equality rows for the torques ``u``: A_free^-1 (b - A_u u); False if
+    A_free is singular."""
     for r in range(A.shape[0]):
         acc = b[r]
         for j in range(NU):
-            acc -= A[r, NV + j] * u_nom[j]
+            acc -= A[r, NV + j] * u[j]
         rhs[r, 0] = acc
-    ok = solve_free(A, rhs, rows, ws)
+    return solve_free(A, rhs, rows, ws)
+
+
+@kernel
+def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
+    """q[vdot, lambda] = -eps (vdot_nom, lambda_nom) with (vdot_nom, lambda_nom) = A_free^-1 (b - A_u u_nom);
+    0 if A_free is singular."""
+    ok = _solve_for_u(A, b, u_nom, rows, ws, rhs)
     for c in range(NV):
         q[c] = -eps * rhs[c, 0] if ok else 0.0
     for c in range(NL):
@@ -496,12 +510,7 @@ def _nominal_target(A, b, u_nom, eps, rows, ws, rhs, q):
 def _nominal_forces(A, b, u_nom, rows, ws, rhs, force):
     """``force`` (4, 3) [N] = lambda_nom, the contact forces (on the robot, world axes) of the equality rows
     under u = u_nom: A_free^-1 (b - A_u u_nom); zeros if A_free is singular."""
-    for r in range(A.shape[0]):
-        acc = b[r]
-        for j in range(NU):
-            acc -= A[r, NV + j] * u_nom[j]
-        rhs[r, 0] = acc
-    ok = solve_free(A, rhs, rows, ws)
+    ok = _solve_for_u(A, b, u_nom, rows, ws, rhs)
     for c in range(NL):
         force[c // 3, c % 3] = rhs[NV + c, 0] if ok else 0.0
 
