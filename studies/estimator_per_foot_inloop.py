@@ -6,7 +6,9 @@ is wrapped to record what it reported for each foot (``mu_per_foot``, or ``mu`` 
 on the ticks the foot is loaded (its contact sensor found a contact) and against the friction under it
 (the trace's ``mu_foot``):
 
-* over-estimation: share of the foot's loaded ticks with mu_hat > mu + 0.05;
+* over-estimation: share of the foot's loaded ticks with mu_hat > mu + 0.05 or with the filter's planned force
+  on the foot beyond the true cone there (:func:`taslel_bench.metrics.summary.foot_overestimates`: a plan the
+  ground cannot hold counts whatever the estimate and its floor);
 * time to safe [s]: after the foot's first loaded tick on a surface other than its starting one, until its
   first loaded tick that is not over-estimated (0 if none was); NaN if the foot never met another surface;
 * time to useful [s] (rises): from the same tick until its first loaded tick with
@@ -19,7 +21,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   tick on (the drop target's "<= 5 % of that foot's ticks");
 * falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)
   and each foot's slide on the new surface [m] (contact-point slip speed integrated over its loaded ticks
-  there), to hold against the per-foot oracle's.
+  there), to hold against the per-foot oracle's;
+* unsafe runs: the run's safety verdict (``summary.json``'s, :mod:`taslel_bench.metrics.verdict`) is not safe.
 
 Every world (``--world NAME=OVERRIDES``, default: the drop 0.8 -> 0.2) is run with every estimator set
 (``--set NAME=OVERRIDES``) and seed. Prints one row per world and set: the p95 of the time to safe and to
@@ -40,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from estimators.safety import useful
-from taslel_bench.interfaces import OVERESTIMATE_MARGIN, FrictionEstimate, Proprioception
+from taslel_bench.interfaces import FrictionEstimate, GroundTruth, Proprioception
+from taslel_bench.metrics.summary import foot_overestimates
 
 DROP_SCENARIO = ["scenario=friction_patch", "scenario.friction=0.8", "scenario.friction_after=0.2",
                  "scenario.change_at_m=0.6"]
@@ -63,23 +67,26 @@ class Recorder:
     def __init__(self, inner) -> None:
         self.inner, self.name, self.rows = inner, getattr(inner, "name", "estimator"), []
         self.reads_imu = bool(getattr(inner, "reads_imu", False))  # the loop samples the IMU only if asked
+        self.reads_ground_truth = bool(getattr(inner, "reads_ground_truth", False))  # the oracle: the loop passes it
 
     def reset(self) -> None:
         self.inner.reset()
         self.rows = []
 
-    def step(self, obs: Proprioception) -> FrictionEstimate:
-        est = self.inner.step(obs)
+    def step(self, obs: Proprioception, truth: GroundTruth | None = None) -> FrictionEstimate:
+        est = self.inner.step(obs) if truth is None else self.inner.step(obs, truth)
         self.rows.append(np.full(4, est.mu) if est.mu_per_foot is None else np.asarray(est.mu_per_foot, float))
         return est
 
 
 def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt: float,
-                slip_mps: np.ndarray | None = None, ready_from: int = 0) -> dict[str, list]:
+                slip_mps: np.ndarray | None = None, ready_from: int = 0,
+                beyond_cone: np.ndarray | None = None) -> dict[str, list]:
     """Per-foot over-estimation rate on loaded ticks (all, and on the new surface), time to safe and time to
     useful [s], useful share (all loaded ticks, and from tick ``ready_from`` on) and (with ``slip_mps`` (n, 4)
-    [m/s]) the slide on the new surface [m] (see the module doc)."""
-    over = mu_hat > mu_foot + OVERESTIMATE_MARGIN
+    [m/s]) the slide on the new surface [m] (see the module doc); ``beyond_cone`` (n, 4): ticks the filter
+    planned the foot's force beyond the true cone (over-estimated whatever mu_hat)."""
+    over = foot_overestimates(mu_hat, mu_foot, np.zeros_like(loaded) if beyond_cone is None else beyond_cone)
     good = useful(mu_foot, mu_hat)
     nan = float("nan")
     out: dict[str, list] = {k: [] for k in ("over_rate", "over_rate_new", "time_to_safe_s", "time_to_useful_s",
@@ -110,19 +117,35 @@ def _first(ok: np.ndarray, dt: float) -> float:
 
 
 def run(overrides: list[str], seed: int) -> dict[str, object]:
-    """One episode of ``overrides`` + ``seed``; its per-foot scores, fall and sliding."""
-    from studies.estimator_slip_observability import run_wrapped
+    """One episode of ``overrides`` + ``seed``; its per-foot scores, fall, sliding and safety verdict."""
+    from taslel_bench import api
+    from taslel_bench.config.settings import health_limits, safety_limits
+    from taslel_bench.metrics.contacts import ContactStream
+    from taslel_bench.metrics.summary import summary_sections
+    from taslel_bench.sim.build import Built
 
-    res, rec = run_wrapped([*overrides, f"seed={seed}"], Recorder)
+    cfg = api.compose([*overrides, f"seed={seed}"])
+    b = Built(cfg)
+    rec = b.episode.estimator = Recorder(b.episode.estimator)
+    res = b.episode.run()
+    if res.status == "error":
+        raise RuntimeError(f"{overrides} seed {seed}: {res.message}")
+    res.trace.finalize()
     tr = res.trace
     n = tr.n
     mu_hat, loaded = np.array(rec.rows[:n]), tr.in_contact[:n]
     dt = float(tr.t_s[1] - tr.t_s[0]) if n > 1 else 1e-3
     slip = np.linalg.norm(tr.slip_w[:n], axis=-1)
     ready = np.flatnonzero(tr.mu_hat_ready[:n])
-    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip, int(ready[0]) if len(ready) else n)
+    planned = ContactStream(dt, b.controller.stance_swing_s[0], "")
+    planned.feed(tr, slice(0, n))
+    scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip, int(ready[0]) if len(ready) else n,
+                         planned.last.beyond_cone)
+    verdict = summary_sections(res, dt, float(cfg.controller.stand_duration), b.controller.stance_swing_s[0],
+                               health_limits(cfg), safety_limits(cfg)).verdict
     return {"seed": seed, "fell": bool(res.fell), "status": res.status, **scores,
-            "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan")}
+            "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan"),
+            "safe": verdict.safe, "unsafe_reasons": [r.tag for r in verdict.reasons]}
 
 
 def _pooled(rows: list[dict], key: str) -> np.ndarray:
@@ -143,6 +166,7 @@ def summarise(rows: list[dict]) -> dict[str, float]:
     p = {k: _pooled(rows, k) for k in ("time_to_safe_s", "time_to_useful_s", "over_rate", "over_rate_new",
                                        "useful_share", "useful_ready", "slide_new_m")}
     return {"runs": len(rows), "falls": sum(r["fell"] for r in rows), "feet_on_new_surface": len(p["time_to_safe_s"]),
+            "unsafe": sum(not r.get("safe", True) for r in rows),
             "time_to_safe_p95_s": _stat(p["time_to_safe_s"], "p95"),
             "time_to_safe_max_s": _stat(p["time_to_safe_s"], "max"),
             "time_to_useful_p95_s": _stat(p["time_to_useful_s"], "p95"),
@@ -156,7 +180,7 @@ def summarise(rows: list[dict]) -> dict[str, float]:
             "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}
 
 
-COLUMNS = (("falls", "falls", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
+COLUMNS = (("falls", "falls", "{:d}"), ("unsafe", "unsafe", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
            ("time_to_safe_p95_s", "safe p95 [s]", "{:.3f}"), ("time_to_safe_max_s", "safe max [s]", "{:.3f}"),
            ("over_rate_new_mean", "over new", "{:.3f}"), ("over_rate_new_max", "over new max", "{:.3f}"),
            ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),

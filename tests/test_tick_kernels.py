@@ -12,7 +12,7 @@ import pytest
 
 from taslel_bench.control.nominal import _pd
 from taslel_bench.filter.safety_filter import FilterResult
-from taslel_bench.interfaces import QPSolution
+from taslel_bench.interfaces import FrictionEstimate, QPSolution
 from taslel_bench.plant.contacts import more_contacts_than_feet
 from taslel_bench.record.trace import EpisodeTrace
 from taslel_bench.robot import quadruped as quad
@@ -49,7 +49,8 @@ def test_trace_record_writes_every_row_the_numpy_assignments_wrote(fallback):
     stance = rng.random(4) < 0.5
     u_nom, u, barrier = rng.normal(size=12), rng.normal(size=12), _barrier(rng)
     clock = tuple(np.cumsum(rng.random(5)))
-    tr.record(2, 0.25, plant, gs, stance, u_nom, u, fres, 0.7, False, 0.9, clock, [barrier], True, False)
+    est = FrictionEstimate(mu=0.7, sigma=0.0, ready=False, mu_per_foot=np.array([0.7, 0.8, 0.9, 1.0]))
+    tr.record(2, 0.25, plant, gs, stance, u_nom, u, fres, est, 0.9, clock, [barrier], True, False)
     r = 2
     assert tr.n == 3 and tr.t_s[r] == 0.25 and tr.gait_phase[r] == gs.phi
     for got, want in ((tr.qpos_mj, plant[0]), (tr.qvel_mj, plant[1]), (tr.sensordata_mj, plant[2]), (tr.u_nom, u_nom),
@@ -58,6 +59,7 @@ def test_trace_record_writes_every_row_the_numpy_assignments_wrote(fallback):
         np.testing.assert_array_equal(got[r], want)
     np.testing.assert_array_equal(tr.grf_filter_w[r].ravel(), fres.lam)
     assert (tr.mu_hat[r], tr.mu_true[r], tr.mu_hat_ready[r]) == (0.7, 0.9, False)
+    np.testing.assert_array_equal(tr.mu_hat_foot[r], est.mu_per_foot)
     assert tr.tick_us[r] == (clock[4] - clock[0]) * 1e6
     np.testing.assert_array_equal(tr.tick_parts_s[r], np.diff(clock))
     assert tr.nonfoot_obstacle_contact[r] and not tr.shin_floor_contact[r]
@@ -80,17 +82,20 @@ def test_trace_record_without_a_filter_result_and_after_a_roll():
     tr = EpisodeTrace(4, filter_on=True, nq=NQ, nv=NV, nsensordata=NSENSOR, barrier_names=["clearance"])
     gs, fres, plant = _tick_inputs(rng, False, iterations=None)
     for k in range(3):
-        tr.record(k, 0.001 * k, plant, gs, np.ones(4, bool), plant[1][:12], plant[1][:12], fres if k else None, 1.0,
-                  True, 1.0, (0.0, 1.0, 2.0, 3.0, 4.0), [_barrier(rng)], False, True)  # fmt: skip
+        tr.record(k, 0.001 * k, plant, gs, np.ones(4, bool), plant[1][:12], plant[1][:12], fres if k else None,
+                  FrictionEstimate(mu=1.0, sigma=0.0, ready=True), 1.0, (0.0, 1.0, 2.0, 3.0, 4.0), [_barrier(rng)],
+                  False, True)  # fmt: skip
     # tick 0 had no filter: its filter rows keep their initial values; tick 1's iterations were None (-1 kept)
     assert np.all(np.isnan(tr.grf_filter_w[0])) and np.all(np.isnan(tr.vdot_filter[0]))
     assert tr.qp_status[0] == -1 and np.isnan(tr.qp_build_us[0]) and np.isnan(tr.qp_solve_us[0])
     assert tr.ecbf_margin_mps2[0] == 0.0 and np.all(np.isnan(tr.barriers["clearance"].h_m[0]))
     assert tr.qp_status[1] == 0 and tr.qp_iterations[1] == -1 and tr.qp_solve_us[1] == fres.solve.solve_time_s * 1e6
     tr.roll(2)  # episode tick 2 is row 0 now; tick 3 goes to row 1
-    tr.record(3, 0.003, plant, gs, np.zeros(4, bool), plant[1][:12], plant[1][:12], fres, 0.5, True, 1.0,
-              (0.0, 1.0, 2.0, 3.0, 4.0), [_barrier(rng)], False, False)  # fmt: skip
+    tr.record(3, 0.003, plant, gs, np.zeros(4, bool), plant[1][:12], plant[1][:12], fres,
+              FrictionEstimate(mu=0.5, sigma=0.0, ready=True), 1.0, (0.0, 1.0, 2.0, 3.0, 4.0), [_barrier(rng)], False,
+              False)  # fmt: skip
     assert tr.t_s[0] == 0.002 and tr.t_s[1] == 0.003 and tr.mu_hat[1] == 0.5 and not tr.in_stance[1].any()
+    np.testing.assert_array_equal(tr.mu_hat_foot[1], np.full(4, 0.5))  # one mu: every foot's
     assert tr.tick_us[1] == 4e6 and tr.n == 4
 
 

@@ -77,14 +77,24 @@ def stand_part(stand: dict[str, float]) -> dict[str, float]:
             and "worst_window" not in k}
 
 
+class JudgedFeet(NamedTuple):
+    """Per foot and tick of the rows last fed to a :class:`ContactStream`: ``loaded`` (plant-loaded or
+    filter-loaded) and ``beyond_cone`` (the filter planned its force outside the true cone under it)."""
+
+    loaded: np.ndarray
+    beyond_cone: np.ndarray
+
+
 class ContactStream:
     """The contact metrics of one tick set (walking: ``suffix=""``, the stand: ``"_stand"``) fed chunk by
-    chunk (:meth:`feed`, rows of the trace's current chunk), touchdowns and windows carried across chunks."""
+    chunk (:meth:`feed`, rows of the trace's current chunk), touchdowns and windows carried across chunks;
+    ``last``: the :class:`JudgedFeet` of the rows last fed (what the estimator metrics judge)."""
 
     def __init__(self, dt: float, stance_s: float, suffix: str) -> None:
         self.dt, self.suffix = dt, suffix
         self.acc = Reducer()
         self.touchdowns = Touchdowns(max(1, round(TOUCHDOWN_FRACTION * stance_s / dt)))
+        self.last = JudgedFeet(np.zeros((0, 0), bool), np.zeros((0, 0), bool))
 
     def result(self) -> dict[str, float]:
         out = self.acc.result()
@@ -112,6 +122,7 @@ class ContactStream:
             normals = terrain_normals(tr, ticks, lam_ok & (np.nan_to_num(lam[..., 2]) > 0.0))
             filter_loaded = lam_ok & (np.einsum("nlj,nlj->nl", np.nan_to_num(lam), normals) >= MIN_NORMAL_FORCE_N)
         loaded = plant_loaded | filter_loaded
+        self.last = JudgedFeet(loaded, np.zeros_like(loaded))
         acc.count(f"contacts_loaded{suffix}", loaded.sum())
         acc.count(f"contacts_loaded_outside_stance{suffix}", (loaded & ~in_stance).sum())
         acc.count(f"contacts_loaded_flank{suffix}", (loaded_c & (tr.contact_normal_w[ticks][..., 2] < FLANK_COS)).sum())
@@ -131,7 +142,9 @@ class ContactStream:
         if tr.filter_on:
             assert normals is not None  # set above when the filter is on
             feet = PlantFeet(sliding=foot_edge & foot_loaded, loaded=plant_loaded)
-            _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt, suffix, feet)
+            beyond = _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt,
+                                    suffix, feet)
+            self.last = JudgedFeet(loaded, beyond)
 
 
 class PlantFeet(NamedTuple):
@@ -163,9 +176,10 @@ def _foot_cone_edge(tr: EpisodeTrace, ticks: slice, mu_c: np.ndarray) -> tuple[n
 
 def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray, lam_ok: np.ndarray,
                    normals: np.ndarray, loaded: np.ndarray, in_stance: np.ndarray, filter_loaded: np.ndarray, dt: float,
-                   suffix: str, feet: PlantFeet) -> None:
+                   suffix: str, feet: PlantFeet) -> np.ndarray:
     """GRF prediction error (world axes: |e_z| and the lateral vector magnitude |(e_x, e_y)|) and the
-    filter's planned force against the true cone about the terrain normal under the foot."""
+    filter's planned force against the true cone about the terrain normal under the foot; returns (n, 4)
+    filter-loaded feet whose planned force lies beyond that cone."""
     f = tr.grf_plant_w[ticks]  # [N] net force on each foot (foot sensor), world axes
     # lambda = 0 for a foot the filter treats as swing; ticks whose QP failed have no lambda (qp_failed)
     err = np.where(lam_ok[..., None], lam, np.nan) - f
@@ -181,6 +195,7 @@ def _filter_forces(acc: Reducer, tr: EpisodeTrace, ticks: slice, lam: np.ndarray
     acc.mean(f"filter_demand_beyond_cone_rate{suffix}", beyond[filter_loaded])
     acc.window(f"filter_demand_beyond_cone_rate_worst_window{suffix}", beyond, filter_loaded, window_ticks(dt))
     _promises(acc, feet, filter_loaded & ~beyond, filter_loaded, dt, suffix)
+    return beyond
 
 
 def _promises(acc: Reducer, feet: PlantFeet, planned_inside: np.ndarray, filter_loaded: np.ndarray, dt: float,

@@ -12,7 +12,7 @@ import numpy as np
 
 from taslel_bench.interfaces import OVERESTIMATE_MARGIN, overestimates
 from taslel_bench.metrics.clearance import ClearanceStream
-from taslel_bench.metrics.contacts import ContactStream, stand_part
+from taslel_bench.metrics.contacts import ContactStream, JudgedFeet, stand_part
 from taslel_bench.metrics.health import HealthLimits, assess, model_errors
 from taslel_bench.metrics.residuals import ResidualStream
 from taslel_bench.metrics.sections import RunSummary, Verdict
@@ -141,9 +141,19 @@ class SummaryStream:
             self.fed["walk"] = True
         if tr.model_residual.shape[0] >= rows:
             self.residuals.feed(tr, walk)
-        self.estimator.feed(tr, rows)
+        self.estimator.feed(tr, rows, self._judged_feet(tr, rows, stand, walk))
         err = np.asarray(tr.qp_u_error_nm[:rows])
         self._u_errors.append(err[np.isfinite(err)])  # the reference-checked ticks only (record.reference_every)
+
+    def _judged_feet(self, tr, rows: int, stand: slice, walk: slice) -> JudgedFeet:
+        """The feet the contact streams judged on this chunk's rows (stand and walk rows joined; rows a stream
+        was not fed stay unloaded)."""
+        shape = (rows, tr.mu_hat_foot.shape[1])
+        loaded, beyond = np.zeros(shape, bool), np.zeros(shape, bool)
+        for part, stream in ((stand, self.stand_contacts), (walk, self.walk_contacts)):
+            if stream.last.loaded.shape[0] == part.stop - part.start and part.stop > part.start:
+                loaded[part], beyond[part] = stream.last.loaded, stream.last.beyond_cone
+        return JudgedFeet(loaded, beyond)
 
     def _locomotion(self, tr, rows: int, walk: slice) -> None:
         if rows == 0:
@@ -255,17 +265,13 @@ def filter_metrics(res: EpisodeResult, k0: int = 0, dt: float = 0.001) -> dict[s
     return {k: full[k] for k in keys if k in full}
 
 
-def estimator_metrics(res: EpisodeResult) -> dict[str, float]:
-    """mu_hat (what the filter used) vs the true friction under the trunk, every tick."""
-    stream = EstimatorStream()
-    trace = res.traced()
-    stream.feed(trace, trace.n - trace.offset)
-    return stream.result(trace.n)
-
-
 class EstimatorStream:
-    """:func:`estimator_metrics` fed chunk by chunk: means from sums and counts; the first friction change,
-    the first drop and the first ready tick found once; the last tick outside the band carried."""
+    """The estimate against the truth, fed chunk by chunk: means from sums and counts; the first friction
+    change, the first drop and the first ready tick found once; the last tick outside the band carried.
+
+    Over-estimation is judged per foot (:func:`foot_overestimates`) on the feet that carry load (plant-loaded or
+    filter-loaded: :class:`taslel_bench.metrics.contacts.JudgedFeet`); the error, bias, usefulness, settle time
+    and time to safe read the estimate's ``mu`` (its lowest foot's) against the friction under the trunk."""
 
     def __init__(self) -> None:
         self.acc, self.k, self.t01 = Reducer(), 0, []
@@ -274,27 +280,32 @@ class EstimatorStream:
         self.settle = _UntilClear(lambda mu, prev: mu != prev, lambda hat, mu: np.abs(hat - mu) > SETTLE_BAND)
         self.safe = _UntilClear(lambda mu, prev: mu < prev, lambda hat, mu: hat > mu + SETTLE_BAND)
 
-    def feed(self, tr, rows: int) -> None:
+    def feed(self, tr, rows: int, feet: JudgedFeet) -> None:
+        """The trace's first ``rows`` rows; ``feet``: their judged feet ((rows, 4) each)."""
         if rows == 0:
             return
         t, mu, hat, ready = tr.t_s[:rows], tr.mu_true[:rows], tr.mu_hat[:rows], tr.mu_hat_ready[:rows]
         acc, k = self.acc, self.k
         self.t01 = [*self.t01, *t[: 2 - len(self.t01)]][:2]
         err = hat - mu
-        over = overestimates(hat, mu)
         acc.mean("estimator_mae", np.abs(err))
         acc.mean("estimator_bias", err)
-        acc.mean("estimator_overestimate_rate", over)
+        # [share] loaded foot-ticks whose estimate exceeds the friction under that foot by more than 0.05, or whose
+        # planned force the filter put beyond the true cone there (whatever the estimate)
+        over = foot_overestimates(tr.mu_hat_foot[:rows], tr.mu_foot[:rows], feet.beyond_cone)
+        judged = feet.loaded
+        acc.mean("estimator_overestimate_rate", over[judged])
+        acc.mean("estimator_overestimate_rate_trunk", overestimates(hat, mu))  # [share] ticks: mu vs under the trunk
         prev = mu[0] if self.prev_mu is None else self.prev_mu
         self.settle.feed(t, mu, hat, prev, k)
         self.safe.feed(t, mu, hat, prev, k)
-        acc.mean("estimator_low_overestimate_rate", over[mu < LOW_FRICTION])
+        acc.mean("estimator_low_overestimate_rate", over[judged & (tr.mu_foot[:rows] < LOW_FRICTION)])
         if self.first_ready is None and ready.any():
             self.first_ready = k + int(np.argmax(ready))
         start = rows if self.first_ready is None else max(self.first_ready - k, 0)
-        acc.mean("estimator_startup_overestimate_rate", over[:start])
+        acc.mean("estimator_startup_overestimate_rate", over[:start][judged[:start]])
         after = slice(start, rows)
-        acc.mean("estimator_ready_overestimate_rate", over[after])
+        acc.mean("estimator_ready_overestimate_rate", over[after][judged[after]])
         acc.count("notready_after", (~ready[after]).sum())
         useful = hat[after] >= np.minimum(mu[after], USEFUL_CAP) - USEFUL_SLACK
         capped = np.abs(np.minimum(hat[after], CAPPED_MAE_CAP) - np.minimum(mu[after], CAPPED_MAE_CAP))
@@ -311,6 +322,7 @@ class EstimatorStream:
         return {
             "estimator_mae": a["estimator_mae"], "estimator_bias": a["estimator_bias"],
             "estimator_overestimate_rate": a["estimator_overestimate_rate"],
+            "estimator_overestimate_rate_trunk": a["estimator_overestimate_rate_trunk"],
             "estimator_settle_s": self.settle.value(),
             "estimator_low_overestimate_rate": a["estimator_low_overestimate_rate"],
             "estimator_startup_s": float(first_ready * dt),
@@ -367,6 +379,13 @@ class _UntilClear:
 
 
 SETTLE_BAND = OVERESTIMATE_MARGIN  # [-] |mu_hat - mu| band for the settle time
+
+
+def foot_overestimates(mu_hat_foot: np.ndarray, mu_foot: np.ndarray, beyond_cone: np.ndarray) -> np.ndarray:
+    """(n, 4) over-estimation per foot and tick: the foot's estimate exceeds the friction under it by more than
+    the margin (:func:`overestimates`), or the filter planned the foot's force beyond the true cone there
+    (``beyond_cone``): a plan the ground cannot hold counts whatever the estimate and its floor."""
+    return overestimates(mu_hat_foot, mu_foot) | beyond_cone
 
 
 def settle_time(t: np.ndarray, mu_true: np.ndarray, mu_hat: np.ndarray, band: float = SETTLE_BAND) -> float:

@@ -59,6 +59,7 @@ CHANNELS: dict[str, Spec] = {
         "stance": "{leg}_stance",
         "contact": "{leg}_contact",
         "mu_foot": "{leg}_mu_foot",
+        "mu_hat_foot": "{leg}_mu_hat_foot",
         "contact_point_speed_mps": "{leg}_contact_point_speed_mps",
     }),
     "/qp": {"status": "qp_status", "fallback": "qp_fallback", "solve_us": "qp_solve_us", "build_us": "qp_build_us",

@@ -5,7 +5,7 @@ Timing of the column groups within the row of tick k (control period dt, physics
 * ``t_s`` = k dt: the tick's start; the controller and filter read the plant state at ``t_s``;
 * commands (``u_nom_*``, ``u_*``), the filter's answer (``*_grf_filter_*``, ``qp_*``, ``*_barrier_*``), the
   gait schedule (``gait_phase``, ``*_scheduled_stance``, ``*_swing_phase``), the filter's stance set
-  (``*_stance``: the schedule's, or the contact estimate's) and ``mu_hat``/``mu_true``: computed at
+  (``*_stance``: the schedule's, or the contact estimate's) and ``mu_hat``/``*_mu_hat_foot``/``mu_true``: computed at
   ``t_s`` from that state; ``u`` is held over [t_s, t_s + dt);
 * the plant state (``base_*``, ``q_*``, ``qd_*``): the state at the end of the tick, t_s + dt (the state
   the next tick reads). ``base_*`` position and quaternion (wxyz), linear velocity in world axes, angular
@@ -29,6 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from taslel_bench.interfaces import FrictionEstimate
 from taslel_bench.plant.bridge import StateBridge
 from taslel_bench.plant.contact_frames import FLANK_COS, MAX_CONTACTS_PER_FOOT, ContactLog
 from taslel_bench.robot import quadruped as quad
@@ -78,6 +79,7 @@ class EpisodeTrace:
         self._raw = [(a, block_fills.get(id(a), fill))
                      for a, fill in _raw_arrays([self, self.contact_log, *self.barriers.values()], c)]
         self._no_filter = (np.full(3 * quad.N_LEGS, np.nan), np.full(quad.NV, np.nan))  # (lambda, vdot) stand-ins
+        self._mu_row = np.zeros(quad.N_LEGS)  # an estimate's one mu for every foot (record)
 
     def _allocate_loop_rows(self, c: int, nq: int, nv: int, nsensordata: int, barrier_names: Sequence[str]) -> None:
         """The raw rows the loop writes: plant state, torques, gait, the filter's outputs, leg contacts, the
@@ -101,15 +103,17 @@ class EpisodeTrace:
             ((12,), 0.0),  # u_nom
             ((12,), 0.0),  # u
             ((nl,), 0.0),  # swing_phase
+            ((nl,), nan),  # mu_hat_foot
             ((nl, 3), nan),  # grf_filter_w
             ((quad.NV,), nan),  # vdot_filter
         ))  # fmt: skip
         (self.t_s, self.gait_phase, self.mu_hat, self.mu_true, self.tick_us, self.tick_parts_s, self.qp_build_us,
          self.qp_solve_us, self.ecbf_margin_mps2, self.qpos_mj, self.qvel_mj, self.sensordata_mj, self.u_nom, self.u,
-         self.swing_phase, self.grf_filter_w, self.vdot_filter) = floats.views  # fmt: skip
+         self.swing_phase, self.mu_hat_foot, self.grf_filter_w, self.vdot_filter) = floats.views  # fmt: skip
         # t_s [s] = k dt; qpos/qvel/sensordata_mj: MuJoCo's after the tick; u_nom, u [N·m] (u applied);
         # grf_filter_w [N] the filter's lambda; vdot_filter the filter's predicted acceleration (Pinocchio);
-        # ecbf_margin_mps2 [m/s²] the robust margin of the ECBF rows (filter.robust)
+        # ecbf_margin_mps2 [m/s²] the robust margin of the ECBF rows (filter.robust); mu_hat [-] the estimate's mu
+        # (its lowest foot's), mu_hat_foot [-] its value for each foot (mu_per_foot, or mu for every foot)
         flags = _column_block(c, np.bool_, (
             ((nl,), False),  # in_stance: stance set used by the filter
             ((nl,), False),  # scheduled_stance: the gait schedule's stance (the filter's set may differ)
@@ -200,14 +204,15 @@ class EpisodeTrace:
         self.finalized = False
 
     def record(self, k: int, t: float, plant: tuple[np.ndarray, np.ndarray, np.ndarray], gs, in_stance: np.ndarray,
-               u_nom: np.ndarray, u: np.ndarray, fres, mu_hat: float, mu_hat_ready: bool, mu_true: float,
+               u_nom: np.ndarray, u: np.ndarray, fres, est: FrictionEstimate, mu_true: float,
                clock_s: tuple[float, float, float, float, float], barriers, nonfoot_obstacle_contact: bool,
                shin_floor_contact: bool) -> None:  # fmt: skip
         """Copy tick ``k``'s raw rows: ``plant`` = MuJoCo (qpos, qvel, sensordata) after the tick; the gait
         state ``gs``, the stance set, u_nom and u [N·m], the filter's result ``fres`` (None: no filter on this
-        tick), the friction estimate and truth; ``clock_s`` = the perf_counter times [s] at the tick's start
-        and at the end of each of its :data:`TICK_PARTS`; ``barriers``: the filter's barrier families (their
-        h, h_e and planned condition now). One compiled call for the fixed-size rows."""
+        tick), the friction estimate (per foot too) and the truth under the trunk; ``clock_s`` = the
+        perf_counter times [s] at the tick's start and at the end of each of its :data:`TICK_PARTS`; ``barriers``:
+        the filter's barrier families (their h, h_e and planned condition now). One compiled call for the
+        fixed-size rows."""
         r = k - self.offset
         qpos, qvel, sensordata = plant
         filtered = fres is not None
@@ -222,9 +227,13 @@ class EpisodeTrace:
         else:
             (lam, vdot), build_us, margin, solve_us, iterations, fallback = self._no_filter, np.nan, 0.0, np.nan, -1, \
                 False  # fmt: skip
-        _copy_rows(r, t, gs.phi, mu_hat, mu_true, *clock_s, build_us, solve_us, margin, mu_hat_ready,
+        mu_feet = est.mu_per_foot
+        if mu_feet is None:  # one coefficient for every foot
+            self._mu_row[:] = est.mu
+            mu_feet = self._mu_row
+        _copy_rows(r, t, gs.phi, est.mu, mu_true, *clock_s, build_us, solve_us, margin, est.ready,
                    nonfoot_obstacle_contact, shin_floor_contact, filtered, fallback, iterations, qpos, qvel, sensordata,
-                   u_nom, u, gs.swing_phase, lam, vdot, in_stance, gs.in_stance, self._floats, self._flags,
+                   u_nom, u, gs.swing_phase, mu_feet, lam, vdot, in_stance, gs.in_stance, self._floats, self._flags,
                    self.qp_status, self.qp_iterations)  # fmt: skip
         if filtered:
             if fallback:
@@ -372,6 +381,7 @@ class EpisodeTrace:
             cols[f"{leg}_barrier_h_m"] = h_min[:, i]
             cols[f"{leg}_clearance_m"] = d["clearance_m"][:, i]
             cols[f"{leg}_mu_foot"] = d["mu_foot"][:, i]
+            cols[f"{leg}_mu_hat_foot"] = self.mu_hat_foot[t, i]
             cols[f"{leg}_obstacle_contact"] = d["obstacle_contact"][:, i]
             cols[f"{leg}_obstacle_clearance_m"] = d["obstacle_clearance_m"][:, i]
             self._contact_frame_columns(cols, d, t, i, leg)
@@ -471,7 +481,7 @@ def _column_block(capacity: int, dtype, columns: Sequence[tuple[tuple[int, ...],
 @kernel
 def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock4, build_us, solve_us, margin,
                mu_hat_ready, nonfoot, shin, filtered, fallback, iterations, qpos, qvel, sensordata, u_nom, u,
-               swing_phase, lam, vdot, in_stance, scheduled, F, B, qp_status,
+               swing_phase, mu_feet, lam, vdot, in_stance, scheduled, F, B, qp_status,
                qp_iterations):  # pragma: no cover - compiled  # fmt: skip
     """Row ``k`` of the float block ``F`` and the flag block ``B`` (column order:
     :meth:`EpisodeTrace._allocate_loop_rows`) and of ``qp_status``, ``qp_iterations``: the tick's wall time and its
@@ -486,6 +496,7 @@ def _copy_rows(k, t, phi, mu_hat, mu_true, clock0, clock1, clock2, clock3, clock
     c = _put_row(F, k, c, u_nom)
     c = _put_row(F, k, c, u)
     c = _put_row(F, k, c, swing_phase)
+    c = _put_row(F, k, c, mu_feet)
     n = in_stance.shape[0]
     for i in range(n):
         B[k, i] = in_stance[i]

@@ -193,11 +193,12 @@ class Episode:
         self.contact_frames.warm_up(self.d)
         scratch = self._new_trace(1)
         gs = self.controller.contact_plan(self.controller.stand_duration_s)
+        est = FrictionEstimate(mu=1.0, sigma=0.0, ready=True)
         writable = SimpleNamespace(phi=gs.phi, swing_phase=gs.swing_phase.copy(), in_stance=gs.in_stance.copy())
         for fres in results:
             for state, stance in ((gs, gs.in_stance), (writable, gs.in_stance.copy())):
-                scratch.record(0, 0.0, self._plant_rows, state, stance, self._tau_prev, self._tau_prev, fres, 1.0,
-                               True, 1.0, (0.0, 0.0, 0.0, 0.0, 0.0), self._barriers, False, False)  # fmt: skip
+                scratch.record(0, 0.0, self._plant_rows, state, stance, self._tau_prev, self._tau_prev, fres, est, 1.0,
+                               (0.0, 0.0, 0.0, 0.0, 0.0), self._barriers, False, False)  # fmt: skip
 
     def _new_trace(self, capacity: int) -> EpisodeTrace:
         return EpisodeTrace(capacity, filter_on=self.filter is not None, nq=self.m.nq, nv=self.m.nv,
@@ -330,7 +331,7 @@ class Episode:
         fall, obstacle_touch, shin_touch, unstable = self._step_plant(u, t)
         tick4 = time.perf_counter()
         if trace is not None:
-            trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est.mu, est.ready, true_mu,
+            trace.record(k, t, self._plant_rows, gs, in_stance, u_nom, u, fres, est, true_mu,
                          (tick0, tick1, tick2, tick3, tick4), self._barriers, obstacle_touch, shin_touch)  # fmt: skip
             frames0 = time.perf_counter()
             self.contact_frames.record(self.d, trace.contact_log, k - trace.offset)  # the tick's last physics step
