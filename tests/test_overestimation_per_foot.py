@@ -55,3 +55,22 @@ def test_summary_rate_is_the_per_foot_recomputation(tmp_path: Path, estimator: s
     assert rate == pytest.approx(_recomputed(steps), abs=1e-12)
     assert over_min <= rate <= over_max
     assert summary["estimator_overestimate_rate_trunk"] == 0.0
+
+
+@pytest.mark.parametrize("estimator", ["oracle", "fixed", "slip_fixed"])
+def test_terrain_estimator_experiment_builds_each_of_its_estimators(estimator: str) -> None:
+    """``+experiment=estimators_terrain`` runs filter=terrain with each estimator of its sweep, and
+    ``slip_terrain_<model>`` puts a learned model under slip_fixed's caps."""
+    from omegaconf import OmegaConf
+
+    from taslel_bench.config.compose import CONF_DIR
+    from taslel_bench.sim.build import Built
+
+    sweep = OmegaConf.load(Path(CONF_DIR) / "experiment" / "estimators_terrain.yaml").hydra.sweeper.params
+    assert estimator in str(sweep.estimator).split(",")
+    cfg = compose_cfg(["+experiment=estimators_terrain", f"estimator={estimator}", "scenario=low_friction"])
+    assert cfg.filter.friction_cone == "terrain"
+    Built(cfg)
+    learned = compose_cfg(["estimator=slip_terrain_mlp"]).estimator
+    slip = compose_cfg(["estimator=slip_fixed"]).estimator
+    assert learned.base.variant == "mlp" and learned.detector == slip.detector and learned.floor_mu == slip.floor_mu
