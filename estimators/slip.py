@@ -19,10 +19,7 @@ plant contact flag, no true velocity. Every control tick:
      exceeds ``speed_mps`` for ``confirm_ticks`` consecutive ticks, after the first ``touchdown_s`` of its
      stance (the landing transient, which slides on any floor; the average starts after it);
    * fast (a foot sliding away as it lands): its speed exceeds ``fast_speed_mps`` on ``fast_confirm_ticks``
-     consecutive ticks after the first ``fast_touchdown_s`` of its stance;
-   * creep (a foot held just beyond the cone, sliding slowly all stance; ``creep_ticks`` > 0): its speed
-     averaged over the whole stance since ``touchdown_s`` exceeds ``creep_speed_mps`` once at least
-     ``creep_ticks`` ticks are in the average.
+     consecutive ticks after the first ``fast_touchdown_s`` of its stance.
 
 Each loaded foot's torque-implied force ratio ``|f_xy| / f_z`` is reported (``ratio``): while a foot slides,
 the ground's force ratio equals the friction coefficient, but through a quasi-static leg it reads high
@@ -62,11 +59,6 @@ class SlipSettings:
     # the quasi-static force: the ratio's median error on support ticks of flat floors +0.044..+0.053 ->
     # +0.005..+0.010, p90 0.07-0.08 -> 0.024-0.034 (studies/estimator_probe_signal.py); off: the detector without it
     leg_gravity: bool = False
-    # creep rule: a stance's mean foot speed since touchdown_s [m/s] above creep_speed_mps once it holds creep_ticks
-    # ticks (0: off). filter=terrain planning 0.18, seeds 100-101: at 60 ticks the mean stays below 0.025 in all 324
-    # stances on flat 0.18, 0.3 and 1.0, and exceeds it in 55 % of the stances on 0.15 (63 % on 0.12)
-    creep_speed_mps: float = 0.025
-    creep_ticks: int = 0
 
     def __post_init__(self) -> None:
         number("estimator.slip.contact_force_n", self.contact_force_n, 0.0, 500.0, lo_open=True, unit="N")
@@ -78,8 +70,6 @@ class SlipSettings:
         number("estimator.slip.fast_speed_mps", self.fast_speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
         integer("estimator.slip.fast_confirm_ticks", self.fast_confirm_ticks, 1)
         number("estimator.slip.velocity_tau_s", self.velocity_tau_s, 0.0, 10.0, lo_open=True, unit="s")
-        number("estimator.slip.creep_speed_mps", self.creep_speed_mps, 0.0, 10.0, lo_open=True, unit="m/s")
-        integer("estimator.slip.creep_ticks", self.creep_ticks, 0)
 
 
 class TrunkVelocityObserver:
@@ -145,11 +135,9 @@ class SlipDetector:
         self._prm = np.zeros(slip_kernel.N_PARAMS)
         self._prm[[slip_kernel.P_CONTACT, slip_kernel.P_TOUCHDOWN, slip_kernel.P_SPEED, slip_kernel.P_AVERAGE,
                    slip_kernel.P_CONFIRM, slip_kernel.P_FAST_TOUCHDOWN, slip_kernel.P_FAST_SPEED,
-                   slip_kernel.P_FAST_CONFIRM, slip_kernel.P_TAU, slip_kernel.P_SLOW, slip_kernel.P_CREEP_SPEED,
-                   slip_kernel.P_CREEP_TICKS]] = (
+                   slip_kernel.P_FAST_CONFIRM, slip_kernel.P_TAU, slip_kernel.P_SLOW]] = (
             s.contact_force_n, s.touchdown_s, s.speed_mps, s.average_ticks, s.confirm_ticks, s.fast_touchdown_s,
-            s.fast_speed_mps, s.fast_confirm_ticks, s.velocity_tau_s, float(bool(s.slow)), s.creep_speed_mps,
-            s.creep_ticks)
+            s.fast_speed_mps, s.fast_confirm_ticks, s.velocity_tau_s, float(bool(s.slow)))
         self.reset()
 
     def reset(self) -> None:
@@ -160,7 +148,6 @@ class SlipDetector:
         self._above_fast = np.zeros(4, np.int64)  # consecutive ticks above the fast rule's speed
         self._speeds = np.zeros((self.s.average_ticks, 4))  # [m/s] ring of the judged ticks' speeds
         self._judged = np.zeros(4, np.int64)  # judged ticks of each foot's current stance
-        self._stance_speed = np.zeros(4)  # [m/s] sum of each foot's speeds over those ticks (creep rule)
         self._heading = np.array([1.0, 0.0])
 
     def step(self, obs: Proprioception) -> FootState:
@@ -182,7 +169,6 @@ class SlipDetector:
             np.asarray(imu.quat_wxyz, float), np.asarray(imu.gyro_in_base, float),
             np.asarray(imu.accel_in_base, float), float(obs.t_s), float(dt), self._prm, v.started, v.v_w, v.p_w,
             self._heading, self._loaded_since, self._judged, self._speeds, self._above, self._above_fast,
-            self._stance_speed,
             out.loaded, out.slipping, out.speed_mps, out.ratio, out.feet_w)
         out.heading_w = self._heading.copy()
         return out

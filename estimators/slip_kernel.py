@@ -15,8 +15,8 @@ from numba import njit
 
 # indices of the float settings vector given to tick()
 P_CONTACT, P_TOUCHDOWN, P_SPEED, P_AVERAGE, P_CONFIRM, P_FAST_TOUCHDOWN, P_FAST_SPEED, P_FAST_CONFIRM, P_TAU, \
-    P_SLOW, P_CREEP_SPEED, P_CREEP_TICKS = range(12)
-N_PARAMS = 12
+    P_SLOW = range(10)
+N_PARAMS = 10
 GRAVITY_Z = -9.81  # [m/s²] world z
 
 
@@ -57,12 +57,12 @@ def _matvec(a: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def tick(p_b, jac, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p_w, heading, loaded_since,
-         judged_n, speeds, above, above_fast, stance_speed_sum, loaded, slipping, speed, ratio, feet_w) -> bool:
+         judged_n, speeds, above, above_fast, loaded, slipping, speed, ratio, feet_w) -> bool:
     """One tick: reads the feet ``p_b`` (4, 3) [m] and the leg Jacobians ``jac`` (4, 3, 3) [m/rad] (trunk axes,
     at this tick's joint angles), qd [rad/s] and tau [N·m] (12,), the IMU (quat wxyz, gyro [rad/s], accel [m/s²]),
     t_s, dt [s] and the settings ``prm`` (P_* indices); updates the observer state (``v_w``, ``p_w``,
     ``heading``) and the per-foot state (``loaded_since`` [s], ``judged_n``, ``speeds`` ring, ``above``,
-    ``above_fast``, ``stance_speed_sum`` [m/s] over the stance's judged ticks); writes the outputs ``loaded``, ``slipping``, ``speed`` [m/s], ``ratio``, ``feet_w`` [m].
+    ``above_fast``); writes the outputs ``loaded``, ``slipping``, ``speed`` [m/s], ``ratio``, ``feet_w`` [m].
     Returns whether the trunk velocity is known (``started``)."""
     rot = np.empty((3, 3))
     _rotation(quat, rot)
@@ -97,16 +97,13 @@ def tick(p_b, jac, qd, tau, quat, gyro_b, accel_b, t_s, dt, prm, started, v_w, p
             loaded_since[i] = np.inf
         judged[i] = loaded[i] and t_s - loaded_since[i] >= prm[P_TOUCHDOWN] - 1e-9
         judged_n[i] = judged_n[i] + 1 if judged[i] else 0
-        stance_speed_sum[i] = stance_speed_sum[i] + speed[i] if judged[i] else 0.0
         if judged[i]:
             speeds[(judged_n[i] - 1) % n_avg, i] = speed[i]
         fast[i] = prm[P_SLOW] > 0 and judged_n[i] >= n_avg and speeds[:, i].mean() > prm[P_SPEED]
         above[i] = above[i] + 1 if fast[i] else 0
         quick = loaded[i] and t_s - loaded_since[i] >= prm[P_FAST_TOUCHDOWN] - 1e-9 and speed[i] > prm[P_FAST_SPEED]
         above_fast[i] = above_fast[i] + 1 if quick else 0
-        creep = prm[P_CREEP_TICKS] > 0 and judged_n[i] >= prm[P_CREEP_TICKS] and \
-            stance_speed_sum[i] > prm[P_CREEP_SPEED] * judged_n[i]
-        slipping[i] = above[i] >= prm[P_CONFIRM] or above_fast[i] >= prm[P_FAST_CONFIRM] or creep
+        slipping[i] = above[i] >= prm[P_CONFIRM] or above_fast[i] >= prm[P_FAST_CONFIRM]
     # odometry from the feet that hold: judged (past the landing), no slip, not 4x the slip speed this tick
     hold = np.zeros(4, np.bool_)
     for i in range(4):
