@@ -57,7 +57,7 @@ def test_summary_rate_is_the_per_foot_recomputation(tmp_path: Path, estimator: s
     assert summary["estimator_overestimate_rate_trunk"] == 0.0
 
 
-@pytest.mark.parametrize("estimator", ["oracle", "fixed", "slip_fixed"])
+@pytest.mark.parametrize("estimator", ["oracle", "fixed", "slip_fixed", "fixed_lowest"])
 def test_terrain_estimator_experiment_builds_each_of_its_estimators(estimator: str) -> None:
     """``+experiment=estimators_terrain`` runs filter=terrain with each estimator of its sweep, and
     ``slip_terrain_<model>`` puts a learned model under slip_fixed's caps."""
