@@ -270,14 +270,16 @@ class EstimatorStream:
     change, the first drop and the first ready tick found once; the last tick outside the band carried.
 
     Over-estimation is judged per foot (:func:`foot_overestimates`) on the feet that carry load (plant-loaded or
-    filter-loaded: :class:`taslel_bench.metrics.contacts.JudgedFeet`); the error, bias, usefulness, settle time
-    and time to safe read the estimate's ``mu`` (its lowest foot's) against the friction under the trunk."""
+    filter-loaded: :class:`taslel_bench.metrics.contacts.JudgedFeet`), and so is ``estimator_time_to_safe_foot_s``
+    (:class:`_FootTimeToSafe`); the error, bias, usefulness, settle time and time to safe read the estimate's ``mu``
+    (its lowest foot's) against the friction under the trunk."""
 
     def __init__(self) -> None:
         self.acc, self.k, self.t01 = Reducer(), 0, []
         self.prev_mu: float | None = None
         self.first_ready: int | None = None
         self.settle = _UntilClear(lambda mu, prev: mu != prev, lambda hat, mu: np.abs(hat - mu) > SETTLE_BAND)
+        self.foot_safe = _FootTimeToSafe()
         self.safe = _UntilClear(lambda mu, prev: mu < prev, lambda hat, mu: hat > mu + SETTLE_BAND)
 
     def feed(self, tr, rows: int, feet: JudgedFeet) -> None:
@@ -294,6 +296,7 @@ class EstimatorStream:
         # planned force the filter put beyond the true cone there (whatever the estimate)
         over = foot_overestimates(tr.mu_hat_foot[:rows], tr.mu_foot[:rows], feet.beyond_cone)
         judged = feet.loaded
+        self.foot_safe.feed(tr.mu_foot[:rows], judged, over, k)
         acc.mean("estimator_overestimate_rate", over[judged])
         acc.mean("estimator_overestimate_rate_trunk", overestimates(hat, mu))  # [share] ticks: mu vs under the trunk
         prev = mu[0] if self.prev_mu is None else self.prev_mu
@@ -333,7 +336,48 @@ class EstimatorStream:
             "estimator_useful_rate": a["estimator_useful_rate"],
             "estimator_capped_mae": a["estimator_capped_mae"],
             "estimator_time_to_safe_s": self.safe.value(),
+            # [s] the slowest foot: from its first loaded tick on a surface other than its first to its first loaded
+            # tick not over-estimated there (0: at once; inf: never; nan: no foot met another surface)
+            "estimator_time_to_safe_foot_s": self.foot_safe.value(dt),
         }  # fmt: skip
+
+
+class _FootTimeToSafe:
+    """Per foot, fed chunk by chunk: the first loaded tick on friction other than the foot's at tick 0 (a new
+    surface), then the first loaded tick from there on that is not over-estimated (:func:`foot_overestimates`)."""
+
+    def __init__(self) -> None:
+        self.mu0: np.ndarray | None = None  # [-] friction under each foot at tick 0
+        self.k_new: np.ndarray | None = None  # episode tick of each foot's first loaded tick on a new surface (-1)
+        self.k_safe: np.ndarray | None = None  # ... and of its first loaded tick not over-estimated from there (-1)
+
+    def feed(self, mu_foot: np.ndarray, loaded: np.ndarray, over: np.ndarray, k: int) -> None:
+        """Rows of episode ticks ``k`` .. ``k + len(mu_foot) - 1``: (rows, 4) each."""
+        if self.mu0 is None:
+            self.mu0 = mu_foot[0].copy()
+            self.k_new, self.k_safe = np.full(mu_foot.shape[1], -1), np.full(mu_foot.shape[1], -1)
+        assert self.k_new is not None and self.k_safe is not None
+        for leg in range(mu_foot.shape[1]):
+            if self.k_new[leg] < 0:
+                hit = np.flatnonzero(loaded[:, leg] & (np.abs(mu_foot[:, leg] - self.mu0[leg]) > 1e-9))
+                if not len(hit):
+                    continue
+                self.k_new[leg] = k + int(hit[0])
+            if self.k_safe[leg] < 0:
+                start = max(self.k_new[leg] - k, 0)
+                ok = np.flatnonzero(loaded[start:, leg] & ~over[start:, leg])
+                if len(ok):
+                    self.k_safe[leg] = k + start + int(ok[0])
+
+    def value(self, dt: float) -> float:
+        """[s] the largest over the feet that met a new surface (inf if one never became safe; nan if none met
+        one)."""
+        if self.k_new is None or self.k_safe is None or not (self.k_new >= 0).any():
+            return math.nan
+        met = self.k_new >= 0
+        if (self.k_safe[met] < 0).any():
+            return math.inf
+        return float((self.k_safe[met] - self.k_new[met]).max() * dt)
 
 
 class _UntilClear:
