@@ -356,10 +356,11 @@ class _FootTimeToSafe:
         if self.mu0 is None:
             self.mu0 = mu_foot[0].copy()
             self.k_new, self.k_safe = np.full(mu_foot.shape[1], -1), np.full(mu_foot.shape[1], -1)
-        assert self.k_new is not None and self.k_safe is not None
+        mu0 = self.mu0
+        assert mu0 is not None and self.k_new is not None and self.k_safe is not None  # set on the first chunk
         for leg in range(mu_foot.shape[1]):
             if self.k_new[leg] < 0:
-                hit = np.flatnonzero(loaded[:, leg] & (np.abs(mu_foot[:, leg] - self.mu0[leg]) > 1e-9))
+                hit = np.flatnonzero(loaded[:, leg] & (np.abs(mu_foot[:, leg] - mu0[leg]) > 1e-9))
                 if not len(hit):
                     continue
                 self.k_new[leg] = k + int(hit[0])
