@@ -44,7 +44,7 @@ import numpy as np
 
 from estimators.safety import useful
 from taslel_bench.interfaces import FrictionEstimate, GroundTruth, Proprioception
-from taslel_bench.metrics.summary import foot_overestimates
+from taslel_bench.metrics.summary import FootTimeToSafe, foot_overestimates
 
 DROP_SCENARIO = ["scenario=friction_patch", "scenario.friction=0.8", "scenario.friction_after=0.2",
                  "scenario.change_at_m=0.6"]
@@ -89,6 +89,9 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
     over = foot_overestimates(mu_hat, mu_foot, np.zeros_like(loaded) if beyond_cone is None else beyond_cone)
     good = useful(mu_foot, mu_hat)
     nan = float("nan")
+    to_safe = FootTimeToSafe()
+    to_safe.feed(mu_foot, loaded, over, 0)
+    safe = to_safe.per_foot(dt)
     out: dict[str, list] = {k: [] for k in ("over_rate", "over_rate_new", "time_to_safe_s", "time_to_useful_s",
                                             "useful_share", "useful_ready", "slide_new_m")}
     for leg in range(4):
@@ -103,7 +106,7 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
                 out[k].append(nan)
             continue
         k0 = changed[0]
-        out["time_to_safe_s"].append(_first(ld[k0:] & ~over[k0:, leg], dt))
+        out["time_to_safe_s"].append(float(safe[leg]))
         out["time_to_useful_s"].append(_first(ld[k0:] & good[k0:, leg], dt))
         out["over_rate_new"].append(float(over[k0:, leg][ld[k0:]].mean()))
         out["slide_new_m"].append(float(slip_mps[k0:, leg][ld[k0:]].sum() * dt) if slip_mps is not None else nan)
@@ -118,19 +121,13 @@ def _first(ok: np.ndarray, dt: float) -> float:
 
 def run(overrides: list[str], seed: int) -> dict[str, object]:
     """One episode of ``overrides`` + ``seed``; its per-foot scores, fall, sliding and safety verdict."""
-    from taslel_bench import api
+    from studies.estimator_slip_observability import run_built
     from taslel_bench.config.settings import health_limits, safety_limits
     from taslel_bench.metrics.contacts import ContactStream
     from taslel_bench.metrics.summary import summary_sections
-    from taslel_bench.sim.build import Built
 
-    cfg = api.compose([*overrides, f"seed={seed}"])
-    b = Built(cfg)
-    rec = b.episode.estimator = Recorder(b.episode.estimator)
-    res = b.episode.run()
-    if res.status == "error":
-        raise RuntimeError(f"{overrides} seed {seed}: {res.message}")
-    res.trace.finalize()
+    res, rec, b = run_built([*overrides, f"seed={seed}"], Recorder)
+    cfg = b.cfg
     tr = res.trace
     n = tr.n
     mu_hat, loaded = np.array(rec.rows[:n]), tr.in_contact[:n]

@@ -62,6 +62,13 @@ def _estimator(plan: float | str) -> list[str]:
 def run_wrapped(overrides: list[str], wrapper):
     """One episode of ``overrides`` with its estimator wrapped by ``wrapper(estimator)`` (a recorder that passes
     the estimate through): (result with its trace finalized, the wrapper). A run that errors raises."""
+    res, w, _ = run_built(overrides, wrapper)
+    return res, w
+
+
+def run_built(overrides: list[str], wrapper):
+    """:func:`run_wrapped` that also returns the episode's :class:`taslel_bench.sim.build.Built` (its config,
+    controller and filter)."""
     from taslel_bench.sim.build import Built
 
     b = Built(api.compose(overrides))
@@ -71,7 +78,7 @@ def run_wrapped(overrides: list[str], wrapper):
     if res.status == "error":
         raise RuntimeError(f"{overrides}: {res.message}")
     res.trace.finalize()
-    return res, w
+    return res, w, b
 
 
 def _run(overrides: list[str]):

@@ -79,7 +79,7 @@ def test_terrain_estimator_experiment_builds_each_of_its_estimators(estimator: s
 def test_foot_time_to_safe_is_the_slowest_foot_and_chunk_invariant() -> None:
     """Foot 0 meets a new surface at tick 3 and is over-estimated until tick 6; foot 1 meets it at tick 4, safe at
     once; feet 2 and 3 stay on their surface. Fed whole or in chunks of 2: (6 - 3) ticks x dt."""
-    from taslel_bench.metrics.summary import _FootTimeToSafe
+    from taslel_bench.metrics.summary import FootTimeToSafe
 
     n = 10
     mu = np.full((n, 4), 0.8)
@@ -92,15 +92,15 @@ def test_foot_time_to_safe_is_the_slowest_foot_and_chunk_invariant() -> None:
     over[6, 0] = False
     values = []
     for step in (n, 2):
-        f = _FootTimeToSafe()
+        f = FootTimeToSafe()
         for k in range(0, n, step):
             f.feed(mu[k : k + step], loaded[k : k + step], over[k : k + step], k)
         values.append(f.value(0.001))
     assert values == [pytest.approx(0.003), pytest.approx(0.003)]
-    never = _FootTimeToSafe()
+    never = FootTimeToSafe()
     never.feed(mu, loaded, np.ones((n, 4), bool), 0)
     assert never.value(0.001) == np.inf
-    same = _FootTimeToSafe()
+    same = FootTimeToSafe()
     same.feed(np.full((n, 4), 0.8), loaded, over, 0)
     assert np.isnan(same.value(0.001))
 

@@ -122,7 +122,6 @@ class ContactStream:
             normals = terrain_normals(tr, ticks, lam_ok & (np.nan_to_num(lam[..., 2]) > 0.0))
             filter_loaded = lam_ok & (np.einsum("nlj,nlj->nl", np.nan_to_num(lam), normals) >= MIN_NORMAL_FORCE_N)
         loaded = plant_loaded | filter_loaded
-        self.last = JudgedFeet(loaded, np.zeros_like(loaded))
         acc.count(f"contacts_loaded{suffix}", loaded.sum())
         acc.count(f"contacts_loaded_outside_stance{suffix}", (loaded & ~in_stance).sum())
         acc.count(f"contacts_loaded_flank{suffix}", (loaded_c & (tr.contact_normal_w[ticks][..., 2] < FLANK_COS)).sum())
@@ -144,7 +143,9 @@ class ContactStream:
             feet = PlantFeet(sliding=foot_edge & foot_loaded, loaded=plant_loaded)
             beyond = _filter_forces(acc, tr, ticks, lam, lam_ok, normals, loaded, in_stance, filter_loaded, dt,
                                     suffix, feet)
-            self.last = JudgedFeet(loaded, beyond)
+        else:
+            beyond = np.zeros_like(loaded)  # no plan: nothing planned beyond the cone
+        self.last = JudgedFeet(loaded, beyond)
 
 
 class PlantFeet(NamedTuple):

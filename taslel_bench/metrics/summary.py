@@ -271,7 +271,7 @@ class EstimatorStream:
 
     Over-estimation is judged per foot (:func:`foot_overestimates`) on the feet that carry load (plant-loaded or
     filter-loaded: :class:`taslel_bench.metrics.contacts.JudgedFeet`), and so is ``estimator_time_to_safe_foot_s``
-    (:class:`_FootTimeToSafe`); the error, bias, usefulness, settle time and time to safe read the estimate's ``mu``
+    (:class:`FootTimeToSafe`); the error, bias, usefulness, settle time and time to safe read the estimate's ``mu``
     (its lowest foot's) against the friction under the trunk."""
 
     def __init__(self) -> None:
@@ -279,7 +279,7 @@ class EstimatorStream:
         self.prev_mu: float | None = None
         self.first_ready: int | None = None
         self.settle = _UntilClear(lambda mu, prev: mu != prev, lambda hat, mu: np.abs(hat - mu) > SETTLE_BAND)
-        self.foot_safe = _FootTimeToSafe()
+        self.foot_safe = FootTimeToSafe()
         self.safe = _UntilClear(lambda mu, prev: mu < prev, lambda hat, mu: hat > mu + SETTLE_BAND)
 
     def feed(self, tr, rows: int, feet: JudgedFeet) -> None:
@@ -342,7 +342,7 @@ class EstimatorStream:
         }  # fmt: skip
 
 
-class _FootTimeToSafe:
+class FootTimeToSafe:
     """Per foot, fed chunk by chunk: the first loaded tick on friction other than the foot's at tick 0 (a new
     surface), then the first loaded tick from there on that is not over-estimated (:func:`foot_overestimates`)."""
 
@@ -370,15 +370,18 @@ class _FootTimeToSafe:
                 if len(ok):
                     self.k_safe[leg] = k + start + int(ok[0])
 
+    def per_foot(self, dt: float) -> np.ndarray:
+        """[s] each foot's time to safe (nan: it met no new surface; inf: never safe there)."""
+        if self.k_new is None or self.k_safe is None:
+            return np.full(0, math.nan)
+        out = np.where(self.k_safe >= 0, (self.k_safe - self.k_new) * dt, math.inf)
+        return np.where(self.k_new >= 0, out, math.nan)
+
     def value(self, dt: float) -> float:
         """[s] the largest over the feet that met a new surface (inf if one never became safe; nan if none met
         one)."""
-        if self.k_new is None or self.k_safe is None or not (self.k_new >= 0).any():
-            return math.nan
-        met = self.k_new >= 0
-        if (self.k_safe[met] < 0).any():
-            return math.inf
-        return float((self.k_safe[met] - self.k_new[met]).max() * dt)
+        times = self.per_foot(dt)
+        return float(np.nanmax(times)) if (~np.isnan(times)).any() else math.nan
 
 
 class _UntilClear:

@@ -183,8 +183,9 @@ def still_strips(sweep_dir: Path, frame: pd.DataFrame, keep: bool = False, max_s
                          f"  [![{kind} of {run_dir}]({png.relative_to(sweep_dir)})]({link})\n")  # fmt: skip
         except Exception:  # a still that cannot be drawn is reported, the report is still written
             lines.append(f"- `{run_dir}`: no still ({traceback.format_exc().strip().splitlines()[-1]})\n")
-    if len(events) > len(drawn):
-        lines.append(f"_Strips drawn for {len(drawn)} of {len(events)} events (the first of each group first; "
+    drawable = sum(not isinstance(event, str) for _, _, event in events)  # a failed event is listed, never drawn
+    if drawable > len(drawn):
+        lines.append(f"_Strips drawn for {len(drawn)} of {drawable} events (the first of each group first; "
                      f"`--max-stills` sets the number)._\n")
     if not lines:
         return []
