@@ -21,7 +21,8 @@ on the ticks the foot is loaded (its contact sensor found a contact) and against
   tick on (the drop target's "<= 5 % of that foot's ticks");
 * falls and the plant's foot sliding: mean horizontal slip speed of loaded feet [m/s] (all feet, all ticks)
   and each foot's slide on the new surface [m] (contact-point slip speed integrated over its loaded ticks
-  there), to hold against the per-foot oracle's;
+  there), to hold against the per-foot oracle's; beside them the summary's ``touchdown_slip_mps_mean`` [m/s]
+  (the landing feet's slip) and ``distance_m`` [m] (how far the trunk walked: a lower plan slows the walk);
 * unsafe runs: the run's safety verdict (``summary.json``'s, :mod:`taslel_bench.metrics.verdict`) is not safe.
 
 Every world (``--world NAME=OVERRIDES``, default: the drop 0.8 -> 0.2) is run with every estimator set
@@ -138,10 +139,12 @@ def run(overrides: list[str], seed: int) -> dict[str, object]:
     planned.feed(tr, slice(0, n))
     scores = foot_scores(mu_hat, tr.mu_foot[:n], loaded, dt, slip, int(ready[0]) if len(ready) else n,
                          planned.last.beyond_cone)
-    verdict = summary_sections(res, dt, float(cfg.controller.stand_duration), b.controller.stance_swing_s[0],
-                               health_limits(cfg), safety_limits(cfg)).verdict
+    summary = summary_sections(res, dt, float(cfg.controller.stand_duration), b.controller.stance_swing_s[0],
+                               health_limits(cfg), safety_limits(cfg))
+    verdict, flat = summary.verdict, summary.flat()
     return {"seed": seed, "fell": bool(res.fell), "status": res.status, **scores,
             "sliding_mps": float(slip[loaded].mean()) if loaded.any() else float("nan"),
+            "touchdown_slip_mps": float(flat["touchdown_slip_mps_mean"]), "distance_m": float(flat["distance_m"]),
             "safe": verdict.safe, "unsafe_reasons": [r.tag for r in verdict.reasons]}
 
 
@@ -174,7 +177,13 @@ def summarise(rows: list[dict]) -> dict[str, float]:
             "useful_share_mean": _stat(p["useful_share"], "mean"),
             "useful_ready_mean": _stat(p["useful_ready"], "mean"),
             "slide_new_m_mean": _stat(p["slide_new_m"], "mean"),
-            "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows]))}
+            "sliding_mps": float(np.mean([r["sliding_mps"] for r in rows])),
+            "touchdown_slip_mps": _mean_of(rows, "touchdown_slip_mps"), "distance_m": _mean_of(rows, "distance_m")}
+
+
+def _mean_of(rows: list[dict], key: str) -> float:
+    """The mean of a per-run value over the seeds (NaN for rows written before the key existed)."""
+    return float(np.mean([r.get(key, np.nan) for r in rows]))
 
 
 COLUMNS = (("falls", "falls", "{:d}"), ("unsafe", "unsafe", "{:d}"), ("feet_on_new_surface", "feet", "{:d}"),
@@ -183,7 +192,8 @@ COLUMNS = (("falls", "falls", "{:d}"), ("unsafe", "unsafe", "{:d}"), ("feet_on_n
            ("over_rate_mean", "over all", "{:.3f}"), ("time_to_useful_p95_s", "useful p95 [s]", "{:.2f}"),
            ("useful_share_mean", "useful", "{:.3f}"), ("useful_ready_mean", "useful ready", "{:.3f}"),
            ("slide_new_m_mean", "slide new [m]", "{:.3f}"),
-           ("sliding_mps", "sliding [m/s]", "{:.4f}"))
+           ("sliding_mps", "sliding [m/s]", "{:.4f}"), ("touchdown_slip_mps", "touchdown slip [m/s]", "{:.3f}"),
+           ("distance_m", "distance [m]", "{:.2f}"))
 
 
 def markdown(table: dict[str, dict]) -> str:
@@ -192,8 +202,9 @@ def markdown(table: dict[str, dict]) -> str:
              "|---|---|" + "---|" * len(COLUMNS)]
     for key, v in table.items():
         world, name = key.split("/", 1)
-        cells = [fmt.format(v["summary"][k]) if np.isfinite(v["summary"][k]) or isinstance(v["summary"][k], int)
-                 else str(v["summary"][k]) for k, _, fmt in COLUMNS]
+        row = {k: v["summary"].get(k, float("nan")) for k, _, _ in COLUMNS}  # nan: a key newer than the file
+        cells = [fmt.format(row[k]) if np.isfinite(row[k]) or isinstance(row[k], int) else str(row[k])
+                 for k, _, fmt in COLUMNS]
         lines.append(f"| {world} | {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
