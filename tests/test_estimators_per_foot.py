@@ -193,6 +193,26 @@ def test_per_foot_inloop_summary_and_worlds() -> None:
     assert world_overrides("scenario.friction=0.9") == [*DEFAULT_WORLD, "scenario.friction=0.9"]
 
 
+def test_per_foot_inloop_paired_table() -> None:
+    """--paired pools the files' runs and pairs them by seed: the mean difference, its interval (1.96 standard
+    errors of the differences) and the pairs where the set is higher; a per-foot list counts as its feet's mean."""
+    from studies.estimator_per_foot_inloop import paired_markdown
+
+    def runs(values: list[float], slides: list[list[float]]) -> dict:
+        pairs = enumerate(zip(values, slides, strict=True))
+        return {"runs": [{"seed": s, "distance_m": v, "slide_new_m": sl} for s, (v, sl) in pairs]}
+
+    nan = float("nan")
+    ref = {"w/A": runs([1.0, 2.0, 3.0], [[0.1, nan], [0.2, 0.4], [0.3, 0.3]])}
+    first = {"w/B": runs([1.5, 2.0], [[0.2, nan], [0.3, 0.3]])}
+    later = {"w/B": {"runs": [{"seed": 2, "distance_m": 4.5, "slide_new_m": [0.3, 0.3]}]}}  # a second file's seed
+    row = paired_markdown([ref, first, later], "A", "B").splitlines()[-1].split(" | ")
+    d = np.array([0.5, 0.0, 1.5])
+    assert row[1] == "3"  # three pairs: the later file's seed 2 joined the first file's seeds 0-1
+    assert row[-1].startswith(f"2 / {d.mean():+.2f} ± {1.96 * d.std(ddof=1) / np.sqrt(3):.2g} / 2")
+    assert row[2].startswith("0.2333 / +0.0333 ± ")  # the slides' foot means: A 0.1, 0.3, 0.3; B 0.2, 0.3, 0.3
+
+
 def test_per_foot_offline_scores() -> None:
     """studies.estimator_per_foot_offline.score: MAE per foot and on loaded feet, over-estimation of the
     mean and the lower head, the lowest foot against the trunk label; a single output serves all feet."""
