@@ -144,6 +144,22 @@ def test_trips_are_strikes_and_lift_scuffs_in_the_air_and_leg_link_contacts_not_
     assert m["obstacle_clearance_min_m"] == pytest.approx(-0.001)
 
 
+def test_a_foot_dragged_from_lift_off_is_no_trip_but_its_drag_rate_counts_it():
+    """A foot the plan lifts that keeps touching the floor is one continuing contact (no onset, no trip);
+    ``foot_drag_rate_early_swing`` is the share of the first-half swing ticks it touched. Breaking the contact
+    and touching again in the first half is a trip."""
+    tr = synthetic_trace(n=40)
+    tr.in_stance[:, 1] = False
+    tr.swing_phase[:, 1] = 0.3
+    tr.swing_phase[20:, 1] = 0.8  # second half: ticks 20-39 are not judged
+    clear_contact(tr, slice(5, None), 1)  # dragged on ticks 0-4 (touching since before the walk), then lifted
+    m = clearance_metrics(tr, 0)
+    assert (m["trips"], m["foot_drag_rate_early_swing"]) == (0, pytest.approx(5 / 20))
+    set_contact(tr, [16], 1, 5.0)  # a touch again after 11 ticks off (past the 10 ms re-arm), first half: a scuff
+    m = clearance_metrics(tr, 0)
+    assert (m["trips"], m["foot_trips_top"], m["foot_drag_rate_early_swing"]) == (1, 1, pytest.approx(6 / 20))
+
+
 def test_a_late_touchdown_on_an_obstacle_top_is_a_landing_not_a_trip():
     """The contact estimate holds a foot whose planned stance has begun as swing until it is loaded (a late
     touchdown): its contact onset is where the plan means it to land, a stance contact; the same onset in the

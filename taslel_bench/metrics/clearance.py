@@ -40,7 +40,9 @@ foot) and ``stance_obstacle_contacts`` every new obstacle contact. ``foot_contac
 ``contacts_not_logged`` count the contacts of the walk the trace could not keep (beyond
 :data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_PER_FOOT` per foot or
 :data:`taslel_bench.plant.contact_frames.MAX_CONTACTS_LOGGED` per tick): 0 unless the slots are too few;
-``foot_contacts_max`` is the most contacts one foot had on one tick.
+``foot_contacts_max`` is the most contacts one foot had on one tick. ``foot_drag_rate_early_swing`` is the share of
+the feet's first-half swing ticks (in the air by the plan and the filter) on which the foot touches terrain: a
+foot dragged along the ground from lift-off is one contact, no trip, however long it drags; this rate measures it.
 """
 
 from __future__ import annotations
@@ -183,6 +185,9 @@ class ClearanceStream:
         acc.count("shin_trips", n_link)  # leg links: calf, thigh, hip (the name kept from the lower-leg count)
         acc.count("shin_trips_off_foot", self.link_off_foot(tr.leg_link_obstacle_contact_off_foot[w]).sum())
         acc.count("leg_link_floor_contacts", link_floor.sum())  # new leg-link contacts with the floor
+        # a foot the plan and the filter put in the air that still (or again) touches the ground in the first half
+        # of its swing: dragged, not lifted; an event count (trips) sees a drag only when the contact breaks
+        acc.mean("foot_drag_rate_early_swing", touching.any(axis=2)[air & (phase < LATE_SWING_PHASE)])
         acc.count("touchdowns_early", landing.sum())
         acc.count("touchdowns_early_floor", (landing & floor).sum())
         early = ticks_before_touchdown(phase[landing], self._step(phase, air))
