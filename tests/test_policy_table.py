@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 
-from taslel_bench.sweep.policy_table import is_policy_study, policy_section, target_sentences, world_of
+from taslel_bench.sweep.policy_table import fisher_p, is_policy_study, policy_section, target_sentences, world_of
 
 
 def _run(world, controller, variant, *, fell=False, safe=True, distance=4.0, speed=0.5, torque=0.5, trips=0,
@@ -42,9 +43,18 @@ def test_targets_say_met_or_missed_with_the_numbers():
             "(falls 1 vs 0") in text
     assert "**met**: do no harm, policy + terrain filter vs policy alone over 3 worlds: no world worse" in text
     assert ("**met**: helps on slippery ground, policy + terrain filter: unsafe runs vs alone: "
-            "low_friction 0.3: 0 vs 2") in text
+            "low_friction 0.3: 0 vs 2 (p 0.33)") in text  # 0 of 2 against 2 of 2: tables 0 and 2 of C(4,2)=6, 1/3
     assert ("**missed**: helps on rough ground, policy + terrain filter: fewer falls, or fewer trips with no more "
             "falls and no shorter walk, than alone on 0 of 1 worlds") in text
+
+
+def test_fisher_p_against_hypergeometric_sums():
+    """The two-sided p is the sum of the hypergeometric probabilities no larger than the table's: 4 of 10 against 3
+    of 10 is 1 (every table is as likely or likelier); 0 of 10 against 5 of 10 is 2 x C(10,5)/C(20,5) = 0.0325."""
+    from math import comb
+
+    assert fisher_p(4, 10, 3, 10) == 1.0
+    assert fisher_p(0, 10, 5, 10) == pytest.approx(2 * comb(10, 5) / comb(20, 5))
 
 
 def test_fewer_trips_after_an_earlier_fall_is_no_help():

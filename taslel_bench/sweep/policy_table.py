@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import pandas as pd
+from scipy.stats import fisher_exact
 
 from taslel_bench.sweep.terrain_table import VARIANT_COLUMN, _falls, _finished, _fmt, _mean, _unsafe
 from taslel_bench.util.tables import markdown_table
@@ -80,6 +81,18 @@ def _count(runs: pd.DataFrame, col: str) -> int:
     return int(runs[col].fillna(False).astype(bool).sum()) if col in runs else 0
 
 
+def fisher_p(count: int, runs: int, count_ref: int, runs_ref: int) -> float:
+    """Two-sided Fisher exact p of ``count`` of ``runs`` against ``count_ref`` of ``runs_ref`` (how often counts
+    this far apart arise when both cells have the same rate): 4 of 10 against 3 of 10 gives 1.0."""
+    return float(fisher_exact([[count, runs - count], [count_ref, runs_ref - count_ref]]).pvalue)
+
+
+def _versus(filtered: pd.DataFrame, alone: pd.DataFrame, col: str) -> str:
+    """"N vs M (p P)": the filtered runs' count of ``col`` against alone, with :func:`fisher_p`."""
+    n, n_alone = _count(filtered, col), _count(alone, col)
+    return f"{n} vs {n_alone} (p {fisher_p(n, len(filtered), n_alone, len(alone)):.2f})"
+
+
 def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
     """One sentence per target of the study for ``robot`` (met / missed, with the numbers)."""
     out = []
@@ -130,7 +143,7 @@ def _no_harm(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> 
         reasons = []
         for col, label in (("fell", "falls"), ("unsafe", "unsafe runs")):
             if _count(terrain, col) > _count(alone, col):
-                reasons.append(f"{label} {_count(terrain, col)} vs {_count(alone, col)}")
+                reasons.append(f"{label} {_versus(terrain, alone, col)}")
         if _shorter(terrain, alone):
             reasons.append(f"distance {d_terrain:.2f} vs {d_alone:.2f} m")
         if reasons:
@@ -153,7 +166,8 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
         if not len(alone) or not len(terrain):
             continue
         if base in SLIPPERY:
-            slippery.append((world, _count(terrain, "unsafe"), _count(alone, "unsafe")))
+            versus = _versus(terrain, alone, "unsafe")
+            slippery.append((world, _count(terrain, "unsafe"), _count(alone, "unsafe"), versus))
         if base in ROUGH:
             rough_judged += 1
             # fewer trips counts only without more falls and without a shorter walk: a run that falls early, or
@@ -164,8 +178,8 @@ def _helps(frame: pd.DataFrame, robot: str, controller: str, variant: str) -> li
             if falls < falls_alone or fewer_trips:
                 rough_better.append(world)
     if slippery:
-        ok = all(t < a for _, t, a in slippery)
-        cells = ", ".join(f"{w}: {t} vs {a}" for w, t, a in slippery)
+        ok = all(t < a for _, t, a, _ in slippery)
+        cells = ", ".join(f"{w}: {versus}" for w, _, _, versus in slippery)
         out.append(f"**{'met' if ok else 'missed'}**: helps on slippery ground, {controller} + {variant} filter: "
                    f"unsafe runs vs alone: {cells} (target: strictly fewer on each).")
     if rough_judged:
@@ -187,7 +201,10 @@ def policy_section(frame: pd.DataFrame) -> str:
               "(`terrain`), the terrain filter that lets go of feet the nominal lifts (`release`, "
               "`filter=terrain_release`) and the terrain filter with bounded corrections (`bounded`), those the "
               "sweep ran. Means over finished runs "
-              "(`runs` = finished/all); `unsafe` = runs whose verdict is `safe: false`, with the reasons' counts.\n")]
+              "(`runs` = finished/all); `unsafe` = runs whose verdict is `safe: false`, with the reasons' counts. "
+              "The targets compare counts; beside each count compared, `p` is the two-sided Fisher exact test of "
+              "the two counts over their runs (with 10 runs a cell, one or two runs apart gives p of 0.5 to 1: "
+              "the sentence's met or missed is then not a measured difference).\n")]
     robots = sorted(set(frame["robot"].astype(str))) if "robot" in frame else ["a1"]
     for robot in robots:
         table = comparison_table(frame, robot)
