@@ -90,7 +90,8 @@ def fisher_p(count: int, runs: int, count_ref: int, runs_ref: int) -> float:
 def _versus(filtered: pd.DataFrame, alone: pd.DataFrame, col: str) -> str:
     """"N vs M (p P)": the filtered runs' count of ``col`` against alone, with :func:`fisher_p`."""
     n, n_alone = _count(filtered, col), _count(alone, col)
-    return f"{n} vs {n_alone} (p {fisher_p(n, len(filtered), n_alone, len(alone)):.2f})"
+    p = fisher_p(n, len(filtered), n_alone, len(alone))
+    return f"{n} vs {n_alone} ({f'p {p:.2f}' if p >= 0.01 else 'p < 0.01'})"
 
 
 def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
