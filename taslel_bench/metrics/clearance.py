@@ -187,7 +187,8 @@ class ClearanceStream:
         acc.count("leg_link_floor_contacts", link_floor.sum())  # new leg-link contacts with the floor
         # a foot the plan and the filter put in the air that still (or again) touches the ground in the first half
         # of its swing: dragged, not lifted; an event count (trips) sees a drag only when the contact breaks
-        acc.mean("foot_drag_rate_early_swing", touching.any(axis=2)[air & (phase < LATE_SWING_PHASE)])
+        touching_foot = cast(np.ndarray, touching.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
+        acc.mean("foot_drag_rate_early_swing", touching_foot[air & (phase < LATE_SWING_PHASE)])
         acc.count("touchdowns_early", landing.sum())
         acc.count("touchdowns_early_floor", (landing & floor).sum())
         early = ticks_before_touchdown(phase[landing], self._step(phase, air))

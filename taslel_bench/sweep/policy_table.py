@@ -9,6 +9,7 @@ the scenario with its friction when the sweep varies ``scenario.friction`` (``lo
 from __future__ import annotations
 
 import math
+from typing import SupportsFloat, cast
 
 import pandas as pd
 from scipy.stats import fisher_exact
@@ -84,7 +85,8 @@ def _count(runs: pd.DataFrame, col: str) -> int:
 def fisher_p(count: int, runs: int, count_ref: int, runs_ref: int) -> float:
     """Two-sided Fisher exact p of ``count`` of ``runs`` against ``count_ref`` of ``runs_ref`` (how often counts
     this far apart arise when both cells have the same rate): 4 of 10 against 3 of 10 gives 1.0."""
-    return float(fisher_exact([[count, runs - count], [count_ref, runs_ref - count_ref]]).pvalue)
+    _, p = fisher_exact([[count, runs - count], [count_ref, runs_ref - count_ref]])  # (odds ratio, p)
+    return float(cast(SupportsFloat, p))  # cast: scipy's stub types the result's items as object
 
 
 def _versus(filtered: pd.DataFrame, alone: pd.DataFrame, col: str) -> str:
