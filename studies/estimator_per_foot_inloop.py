@@ -92,7 +92,8 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
     nan = float("nan")
     to_safe = FootTimeToSafe()
     to_safe.feed(mu_foot, loaded, over, 0)
-    safe = to_safe.per_foot(dt)
+    safe, new_surface = to_safe.per_foot(dt), to_safe.k_new
+    assert new_surface is not None  # set by the feed
     out: dict[str, list] = {k: [] for k in ("over_rate", "over_rate_new", "time_to_safe_s", "time_to_useful_s",
                                             "useful_share", "useful_ready", "slide_new_m")}
     for leg in range(4):
@@ -101,12 +102,11 @@ def foot_scores(mu_hat: np.ndarray, mu_foot: np.ndarray, loaded: np.ndarray, dt:
         out["useful_share"].append(float(good[ld, leg].mean()) if ld.any() else nan)
         lr = ld[ready_from:]
         out["useful_ready"].append(float(good[ready_from:, leg][lr].mean()) if lr.any() else nan)
-        changed = np.flatnonzero(ld & (np.abs(mu_foot[:, leg] - mu_foot[0, leg]) > 1e-9))
-        if not len(changed):
+        k0 = int(new_surface[leg])  # the foot's first loaded tick on a new surface (FootTimeToSafe's), -1: none
+        if k0 < 0:
             for k in ("over_rate_new", "time_to_safe_s", "time_to_useful_s", "slide_new_m"):
                 out[k].append(nan)
             continue
-        k0 = changed[0]
         out["time_to_safe_s"].append(float(safe[leg]))
         out["time_to_useful_s"].append(_first(ld[k0:] & good[k0:, leg], dt))
         out["over_rate_new"].append(float(over[k0:, leg][ld[k0:]].mean()))

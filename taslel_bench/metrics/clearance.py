@@ -171,7 +171,8 @@ class ClearanceStream:
         flank = cast(np.ndarray, (touching & (tr.contact_normal_w[w][..., 2] < FLANK_COS)).any(axis=2))  # (n, 4)
         on_obstacle = cast(np.ndarray, tr.contact_on_obstacle[w].any(axis=2))  # (numpy's stub: bool | array)
         phase = tr.swing_phase[w]
-        r = self.rule(cast(np.ndarray, touching.any(axis=2)), flank, air, phase, tr.leg_link_obstacle_contact[w])
+        touching_foot = cast(np.ndarray, touching.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
+        r = self.rule(touching_foot, flank, air, phase, tr.leg_link_obstacle_contact[w])
         strike, lift, landing, link_obstacle, new = r["strike"], r["lift"], r["landing"], r["link"], r["new"]
         floor = ~on_obstacle
         link_floor = self.link_floor(tr.leg_link_floor_contact[w])
@@ -187,7 +188,6 @@ class ClearanceStream:
         acc.count("leg_link_floor_contacts", link_floor.sum())  # new leg-link contacts with the floor
         # a foot the plan and the filter put in the air that still (or again) touches the ground in the first half
         # of its swing: dragged, not lifted; an event count (trips) sees a drag only when the contact breaks
-        touching_foot = cast(np.ndarray, touching.any(axis=2))  # (n, 4) (numpy's stub: bool | array)
         acc.mean("foot_drag_rate_early_swing", touching_foot[air & (phase < LATE_SWING_PHASE)])
         acc.count("touchdowns_early", landing.sum())
         acc.count("touchdowns_early_floor", (landing & floor).sum())
