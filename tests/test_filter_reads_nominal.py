@@ -127,3 +127,30 @@ def test_with_the_preset_a_shipped_policy_walks_on_flat_ground_barely_touched():
     intervention = np.linalg.norm(trace.u[:n] - trace.u_nom[:n], axis=1)  # [N·m] as the summary's
     assert intervention.mean() < 1.0, intervention.mean()
     assert built.filter.released_ticks > 0
+
+
+def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slide(states):
+    """``correction_limit_stance_unless_sliding``: a stance leg keeps the nominal's torques unless numpy's own
+    solve of the equality rows under u_nom puts its foot's force outside the true cone (or below lambda_min);
+    the legs it marks are the ones the filter may move, and on mu = 0.3 it moves some of them."""
+    st, pm = states
+    mu = 0.3
+    settings = FilterSettings(friction_cone="terrain", cone_edge_along_nominal=True, correction_limit_stance_nm=0.0,
+                              correction_limit_stance_unless_sliding=True)
+    moved, kept = 0, 0
+    for state in st:
+        x = inputs_for(pm, state, mu)
+        f = SafetyFilter(settings, TightReference(), terrain=Terrain((Plane(mu),)))
+        f._write_equalities(f.problem, x)
+        force = unfiltered_prediction(f, state[3])[-12:].reshape(4, 3)  # on the robot, world axes
+        tangential = np.linalg.norm(force[:, :2], axis=1)
+        sliding = np.asarray(x.in_stance, bool) & ((force[:, 2] < f.settings.lambda_min_n)
+                                                   | (tangential > mu * force[:, 2]))
+        res = f.filter(x, state[3])
+        assert res.status == "solved"
+        du = np.abs(res.u - state[3]).reshape(4, 3).max(axis=1)
+        fixed = np.asarray(x.in_stance, bool) & ~sliding
+        assert np.all(du[fixed] <= 1e-6), (du, sliding)
+        moved += int((du[sliding] > 0.1).sum())
+        kept += int(fixed.sum())
+    assert moved > 0 and kept > 0  # both branches seen

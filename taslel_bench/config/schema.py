@@ -305,6 +305,9 @@ class FilterConfig:
                                                            "(null: no limit, the paper's)", unit="N·m", lo=0.0)
     correction_limit_swing_nm: float | None = param(None, "|u - u_nom| at most this per joint of a swing leg "
                                                           "(null: no limit, the paper's)", unit="N·m", lo=0.0)
+    correction_limit_stance_unless_sliding: bool = param(False, "the stance limit is lifted for a leg whose "
+                                                                 "foot the nominal's force would slide (outside "
+                                                                 "its cone at the estimate's mu, no margin)")
     support_min_normal_z: float | None = param(None, "a stance foot whose terrain normal has n_z below this gets no "
                                                      "contact rows or cone (a toe on a riser face; null: off)",
                                                lo=-1.0, hi=1.0)

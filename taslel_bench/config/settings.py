@@ -69,6 +69,7 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
         relaxation=str(f.relaxation),
         correction_limit_stance_nm=_limit(f.correction_limit_stance_nm),
         correction_limit_swing_nm=_limit(f.correction_limit_swing_nm),
+        correction_limit_stance_unless_sliding=bool(f.correction_limit_stance_unless_sliding),
         support_min_normal_z=None if f.support_min_normal_z is None else float(f.support_min_normal_z),
     )
 

@@ -89,6 +89,10 @@ class FilterSettings:
     # the torque limits bound u)
     correction_limit_stance_nm: float = math.inf
     correction_limit_swing_nm: float = math.inf
+    # the stance limit is lifted, tick by tick, for each stance leg whose foot the nominal's force would slide
+    # (outside the foot's cone at the filter's mu without the margin, about the terrain normal, or a normal part
+    # below lambda_min): the filter may move a stance leg only to stop its foot sliding
+    correction_limit_stance_unless_sliding: bool = False
     # [-] a stance foot whose terrain normal has n_z below this is no support to the filter: no contact rows and
     # no cone for it (lambda = 0, the leg's motion free), its barrier rows those of a stance foot (none); None: off
     support_min_normal_z: float | None = None
@@ -170,6 +174,7 @@ class SafetyFilter:
         # the nominal torques' contact forces (cone_edge_along_nominal, release_lifted_feet)
         self._nominal_solver = FreeBlockSolver(1, self.eq_families[0].start, self.eq_families[1].start)
         self._nominal_rhs = np.zeros((m_eq, 1))
+        self._stance_rows = np.zeros(quad.N_LEGS, bool)  # the stance set of this tick's contact rows
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -265,6 +270,7 @@ class SafetyFilter:
         if self.settings.cone_edge_along_nominal and not forces_current:  # the terrain cone reads _nominal_force
             self._nominal_forces(qp, u_nom, self._nominal_force)
         self.friction.write(qp, contact)
+        self._stance_rows[:] = contact.in_stance  # the stance set of the rows written (after the release)
         for fam in self.barriers:
             fam.write(qp, inputs)
         if self.condensed is not None:
@@ -337,12 +343,32 @@ class SafetyFilter:
         sv, eps = self._equalities, self.settings.regularization
         _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
 
-    def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray) -> None:
+    def _sliding_feet(self, qp: QPProblem, u_nom: np.ndarray, inputs: TickInputs) -> np.ndarray:
+        """(4,) bool, ``correction_limit_stance_unless_sliding``: the stance feet of the rows in ``qp`` on which
+        the nominal torques' force lies outside the foot's cone (``inputs``' mu, which carries the friction
+        margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal part below
+        ``lambda_min_n``. None of them when the option is off."""
+        out = np.zeros(quad.N_LEGS, bool)
+        if not self.settings.correction_limit_stance_unless_sliding:
+            return out
+        force = self._nominal_force
+        self._nominal_forces(qp, u_nom, force)
+        normals = self._foot_normals()
+        mu = inputs.mu_per_foot if inputs.mu_per_foot is not None else np.full(quad.N_LEGS, inputs.mu)
+        mu = mu / (1.0 - self._friction_margin)
+        for i in np.flatnonzero(self._stance_rows):
+            fn = float(force[i] @ normals[i])
+            ft = float(np.linalg.norm(force[i] - fn * normals[i]))
+            out[i] = fn < self.settings.lambda_min_n or ft > mu[i] * fn
+        return out
+
+    def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray, free: np.ndarray) -> None:
         """The backend problem's bounds on u: the torque limits intersected with u_nom +- the correction limit
         of each joint's leg (``correction_limit_stance_nm`` for the filter's stance legs, ``..._swing_nm`` for the
-        others); a u_nom beyond a torque limit gets the limit itself."""
+        others, none for the legs ``free`` (4,) marks); a u_nom beyond a torque limit gets the limit itself."""
         s, lim = self.settings, self.torque_limit_nm
         per_leg = np.where(np.asarray(in_stance, bool), s.correction_limit_stance_nm, s.correction_limit_swing_nm)
+        per_leg = np.where(free, math.inf, per_leg)
         delta = np.repeat(per_leg, quad.N_JOINTS // quad.N_LEGS)
         lb = np.minimum(np.maximum(-lim, u_nom - delta), lim)
         ub = np.maximum(np.minimum(lim, u_nom + delta), -lim)
@@ -412,7 +438,7 @@ class SafetyFilter:
             inputs = inputs.with_mu_scaled(1.0 - self._friction_margin)  # per-foot values too
         qp = self.build(inputs, u_nom)
         if self._limit_correction:
-            self._correction_bounds(u_nom, inputs.in_stance)
+            self._correction_bounds(u_nom, inputs.in_stance, self._sliding_feet(qp, u_nom, inputs))
         if robust:
             self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
