@@ -154,3 +154,20 @@ def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slid
         moved += int((du[sliding] > 0.1).sum())
         kept += int(fixed.sum())
     assert moved > 0 and kept > 0  # both branches seen
+
+
+def test_the_guarded_preset_is_release_with_bounded_corrections_lifted_for_sliding_feet():
+    from taslel_bench.config.compose import compose
+    from taslel_bench.config.settings import filter_settings
+    from taslel_bench.config.validate import validate
+    from taslel_bench.robot.description import load_robot
+
+    cfg = compose(["filter=terrain_guarded"])
+    validate(cfg)
+    release = compose(["filter=terrain_release"]).filter
+    for key in ("release_lifted_feet", "cone_edge_along_nominal", "friction_cone", "stance_source"):
+        assert cfg.filter[key] == release[key]  # the rest is terrain_release's
+    s = filter_settings(cfg, load_robot("a1"))
+    assert s.correction_limit_stance_nm == 0.0 and s.correction_limit_swing_nm == 1.0
+    assert s.correction_limit_stance_unless_sliding
+    assert not filter_settings(compose([]), load_robot("a1")).correction_limit_stance_unless_sliding  # the paper's
