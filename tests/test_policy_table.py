@@ -80,3 +80,14 @@ def test_section_has_one_table_per_robot():
     section = policy_section(_frame())
     assert section.count("### a1") == 1 and "| low_friction 0.3 | policy | terrain | 2/2 |" in section
     assert policy_section(_frame().assign(controller="trot")) == ""
+
+
+def test_every_terrain_preset_gets_its_own_target_sentences():
+    """The report judges each terrain-filter column the sweep ran (`terrain`, `release`, `bounded`, `guarded`)."""
+    frame = _frame()
+    guarded = frame[frame["filter_variant"] == "terrain"].assign(filter_variant="guarded")
+    text = "\n".join(target_sentences(pd.concat([frame, guarded], ignore_index=True), "a1"))
+    for variant in ("terrain", "guarded"):
+        assert f"do no harm, trot + {variant} filter vs trot alone over 3 worlds" in text
+        assert f"helps on slippery ground, policy + {variant} filter" in text
+    assert "release filter" not in text  # a column the sweep did not run gets no sentence

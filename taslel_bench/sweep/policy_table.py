@@ -19,9 +19,10 @@ from taslel_bench.util.tables import markdown_table
 
 CONTROLLER_COLUMN = "controller"
 CONTROLLERS = ("trot", "policy")
-# filter off, filter=id_cbf_qp, filter=terrain, filter=terrain_release, filter=terrain_bounded
-VARIANTS = ("nominal", "paper", "terrain", "release", "bounded")
-FILTERS = ("paper", "terrain", "release", "bounded")
+# filter off, filter=id_cbf_qp, filter=terrain, filter=terrain_release, filter=terrain_bounded,
+# filter=terrain_guarded
+VARIANTS = ("nominal", "paper", "terrain", "release", "bounded", "guarded")
+FILTERS = ("paper", "terrain", "release", "bounded", "guarded")
 WORLD_ORDER = ("flat", "low_friction", "friction_patch", "logs", "steps", "rough", "slope", "push", "payload")
 SLIPPERY = ("low_friction", "friction_patch")  # the help target: strictly fewer unsafe runs than alone
 ROUGH = ("logs", "steps", "rough", "slope")  # the help target: fewer falls or trips on at least two
@@ -121,7 +122,7 @@ def target_sentences(frame: pd.DataFrame, robot: str) -> list[str]:
                        f"ground: mean intervention {torque:.2f} N·m (target <= {MAX_FLAT_INTERVENTION_NM}), falls "
                        f"{_count(filtered, 'fell')} vs {_count(alone, 'fell')} alone.")
     for controller in CONTROLLERS:
-        for variant in ("terrain", "release", "bounded"):
+        for variant in FILTERS[1:]:  # the terrain filters
             out += _no_harm(frame, robot, controller, variant)
             out += _helps(frame, robot, controller, variant)
     return out
@@ -202,7 +203,8 @@ def policy_section(frame: pd.DataFrame) -> str:
              ("Per robot and world: each nominal controller (`trot`: the paper's blind trot; `policy`: the robot's "
               "shipped learned policy) alone (`nominal`), with the paper's filter (`paper`), the terrain filter "
               "(`terrain`), the terrain filter that lets go of feet the nominal lifts (`release`, "
-              "`filter=terrain_release`) and the terrain filter with bounded corrections (`bounded`), those the "
+              "`filter=terrain_release`), the terrain filter with bounded corrections (`bounded`) and the one that "
+              "moves a stance leg only to stop its foot sliding (`guarded`, `filter=terrain_guarded`), those the "
               "sweep ran. Means over finished runs "
               "(`runs` = finished/all); `unsafe` = runs whose verdict is `safe: false`, with the reasons' counts. "
               "The targets compare counts; beside each count compared, `p` is the two-sided Fisher exact test of "
