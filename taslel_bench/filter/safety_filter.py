@@ -175,6 +175,8 @@ class SafetyFilter:
         self._nominal_solver = FreeBlockSolver(1, self.eq_families[0].start, self.eq_families[1].start)
         self._nominal_rhs = np.zeros((m_eq, 1))
         self._stance_rows = np.zeros(quad.N_LEGS, bool)  # the stance set of this tick's contact rows
+        self._forces_current = False  # whether _nominal_force holds the forces of those rows (set by build)
+        self._sliding = np.zeros(quad.N_LEGS, bool)  # the stance feet the nominal's force would slide this tick
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -269,6 +271,8 @@ class SafetyFilter:
             contact, forces_current = self._release_lifted(qp, contact, u_nom)
         if self.settings.cone_edge_along_nominal and not forces_current:  # the terrain cone reads _nominal_force
             self._nominal_forces(qp, u_nom, self._nominal_force)
+            forces_current = True
+        self._forces_current = forces_current  # whether _nominal_force holds the forces of the rows now in qp
         self.friction.write(qp, contact)
         self._stance_rows[:] = contact.in_stance  # the stance set of the rows written (after the release)
         for fam in self.barriers:
@@ -347,19 +351,22 @@ class SafetyFilter:
         """(4,) bool, ``correction_limit_stance_unless_sliding``: the stance feet of the rows in ``qp`` on which
         the nominal torques' force lies outside the foot's cone (``inputs``' mu, which carries the friction
         margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal part below
-        ``lambda_min_n``. None of them when the option is off."""
-        out = np.zeros(quad.N_LEGS, bool)
+        ``lambda_min_n``. None of them when the option is off. The forces are solved for only when
+        :meth:`build` left none for these rows (the release and the turned pyramids already need them)."""
+        out = self._sliding
+        out[:] = False
         if not self.settings.correction_limit_stance_unless_sliding:
             return out
         force = self._nominal_force
-        self._nominal_forces(qp, u_nom, force)
-        normals = self._foot_normals()
-        mu = inputs.mu_per_foot if inputs.mu_per_foot is not None else np.full(quad.N_LEGS, inputs.mu)
-        mu = mu / (1.0 - self._friction_margin)
+        if not self._forces_current:
+            self._nominal_forces(qp, u_nom, force)
+            self._forces_current = True
+        normals, feet_mu = self._foot_normals(), inputs.mu_per_foot
         for i in np.flatnonzero(self._stance_rows):
+            mu = (feet_mu[i] if feet_mu is not None else inputs.mu) / (1.0 - self._friction_margin)
             fn = float(force[i] @ normals[i])
             ft = float(np.linalg.norm(force[i] - fn * normals[i]))
-            out[i] = fn < self.settings.lambda_min_n or ft > mu[i] * fn
+            out[i] = fn < self.settings.lambda_min_n or ft > mu * fn
         return out
 
     def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray, free: np.ndarray) -> None:
