@@ -6,6 +6,7 @@ exactly when the true cone does."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -129,31 +130,41 @@ def test_with_the_preset_a_shipped_policy_walks_on_flat_ground_barely_touched():
     assert built.filter.released_ticks > 0
 
 
-def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slide(states):
+@pytest.mark.parametrize("ratio_max", [None, 0.5])
+def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slide(states, ratio_max):
     """``correction_limit_stance_unless_sliding``: a stance leg keeps the nominal's torques unless numpy's own
     solve of the equality rows under u_nom puts its foot's force outside the true cone (or below lambda_min);
-    the legs it marks are the ones the filter may move, and on mu = 0.3 it moves some of them."""
+    the legs it marks are the ones the filter may move, and on mu = 0.3 it moves some of them. With
+    ``sliding_ratio_max`` only forces between the cone and that ratio of tangential to normal mark a leg (a
+    normal part below lambda_min does not); 0.5 on mu = 0.3 so that both kinds occur in these states."""
     st, pm = states
     mu = 0.3
     settings = FilterSettings(friction_cone="terrain", cone_edge_along_nominal=True, correction_limit_stance_nm=0.0,
-                              correction_limit_stance_unless_sliding=True)
-    moved, kept = 0, 0
+                              correction_limit_stance_unless_sliding=True,
+                              sliding_ratio_max=math.inf if ratio_max is None else ratio_max)
+    moved, kept, beyond_ratio = 0, 0, 0
     for state in st:
         x = inputs_for(pm, state, mu)
         f = SafetyFilter(settings, TightReference(), terrain=Terrain((Plane(mu),)))
         f._write_equalities(f.problem, x)
         force = unfiltered_prediction(f, state[3])[-12:].reshape(4, 3)  # on the robot, world axes
-        tangential = np.linalg.norm(force[:, :2], axis=1)
-        sliding = np.asarray(x.in_stance, bool) & ((force[:, 2] < f.settings.lambda_min_n)
-                                                   | (tangential > mu * force[:, 2]))
+        tangential, normal = np.linalg.norm(force[:, :2], axis=1), force[:, 2]
+        stance = np.asarray(x.in_stance, bool)
+        if ratio_max is None:
+            sliding = stance & ((normal < f.settings.lambda_min_n) | (tangential > mu * normal))
+        else:
+            over = stance & ((normal < f.settings.lambda_min_n) | (tangential > ratio_max * normal))
+            sliding = stance & ~over & (tangential > mu * normal)
+            beyond_ratio += int(over.sum())
         res = f.filter(x, state[3])
         assert res.status == "solved"
         du = np.abs(res.u - state[3]).reshape(4, 3).max(axis=1)
-        fixed = np.asarray(x.in_stance, bool) & ~sliding
+        fixed = stance & ~sliding
         assert np.all(du[fixed] <= 1e-6), (du, sliding)
         moved += int((du[sliding] > 0.1).sum())
         kept += int(fixed.sum())
     assert moved > 0 and kept > 0  # both branches seen
+    assert ratio_max is None or beyond_ratio > 0  # and legs kept because their force is beyond the ratio
 
 
 def test_the_guarded_preset_is_release_with_bounded_corrections_lifted_for_sliding_feet():

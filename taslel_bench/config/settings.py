@@ -70,6 +70,7 @@ def filter_settings(cfg: DictConfig, robot: RobotDescription) -> FilterSettings:
         correction_limit_stance_nm=_limit(f.correction_limit_stance_nm),
         correction_limit_swing_nm=_limit(f.correction_limit_swing_nm),
         correction_limit_stance_unless_sliding=bool(f.correction_limit_stance_unless_sliding),
+        sliding_ratio_max=_limit(f.sliding_ratio_max),
         support_min_normal_z=None if f.support_min_normal_z is None else float(f.support_min_normal_z),
     )
 

@@ -93,6 +93,11 @@ class FilterSettings:
     # (outside the foot's cone at the filter's mu without the margin, about the terrain normal, or a normal part
     # below lambda_min): the filter may move a stance leg only to stop its foot sliding
     correction_limit_stance_unless_sliding: bool = False
+    # [-] with the option above: a stance foot whose nominal force has a tangential part beyond this times its
+    # normal part (or a normal part below lambda_min) would slide on any ground -- the nominal pushing against
+    # an obstacle, or placing or lifting the foot -- and is neither held nor moved: its leg keeps the nominal's
+    # torques and its friction rows are off this tick (inf: every such foot is held, its leg free to move)
+    sliding_ratio_max: float = math.inf
     # [-] a stance foot whose terrain normal has n_z below this is no support to the filter: no contact rows and
     # no cone for it (lambda = 0, the leg's motion free), its barrier rows those of a stance foot (none); None: off
     support_min_normal_z: float | None = None
@@ -177,6 +182,7 @@ class SafetyFilter:
         self._stance_rows = np.zeros(quad.N_LEGS, bool)  # the stance set of this tick's contact rows
         self._forces_current = False  # whether _nominal_force holds the forces of those rows (set by build)
         self._sliding = np.zeros(quad.N_LEGS, bool)  # the stance feet the nominal's force would slide this tick
+        self._unheld = np.zeros(quad.N_LEGS, bool)  # ... beyond sliding_ratio_max: not held, their legs not moved
         self._last_u: np.ndarray | None = None
         self.condensed: QPProblem | None = None
         if settings.formulation == "condensed":
@@ -275,6 +281,8 @@ class SafetyFilter:
         self._forces_current = forces_current  # whether _nominal_force holds the forces of the rows now in qp
         self.friction.write(qp, contact)
         self._stance_rows[:] = contact.in_stance  # the stance set of the rows written (after the release)
+        if self._limit_correction:
+            self._sliding_feet(qp, u_nom, inputs)
         for fam in self.barriers:
             fam.write(qp, inputs)
         if self.condensed is not None:
@@ -347,27 +355,35 @@ class SafetyFilter:
         sv, eps = self._equalities, self.settings.regularization
         _nominal_target(qp.A, qp.b, u_nom, eps, sv.rows, sv.workspace, self._rhs, qp.q)
 
-    def _sliding_feet(self, qp: QPProblem, u_nom: np.ndarray, inputs: TickInputs) -> np.ndarray:
-        """(4,) bool, ``correction_limit_stance_unless_sliding``: the stance feet of the rows in ``qp`` on which
-        the nominal torques' force lies outside the foot's cone (``inputs``' mu, which carries the friction
-        margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal part below
-        ``lambda_min_n``. None of them when the option is off. The forces are solved for only when
-        :meth:`build` left none for these rows (the release and the turned pyramids already need them)."""
-        out = self._sliding
+    def _sliding_feet(self, qp: QPProblem, u_nom: np.ndarray, inputs: TickInputs) -> None:
+        """``correction_limit_stance_unless_sliding``: marks in ``_sliding`` (4,) the stance feet of the rows in
+        ``qp`` on which the nominal torques' force lies outside the foot's cone (``inputs``' mu, which carries the
+        friction margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal
+        part below ``lambda_min_n``; with a finite ``sliding_ratio_max`` only those whose force is within that
+        ratio of tangential to normal, the others (``_unheld``) lose their friction rows in ``qp``. None of them
+        when the option is off. The forces are solved for only when :meth:`build` left none for these rows (the
+        release and the turned pyramids already need them)."""
+        out, unheld = self._sliding, self._unheld
         out[:] = False
+        unheld[:] = False
         if not self.settings.correction_limit_stance_unless_sliding:
-            return out
+            return
         force = self._nominal_force
         if not self._forces_current:
             self._nominal_forces(qp, u_nom, force)
             self._forces_current = True
         normals, feet_mu = self._foot_normals(), inputs.mu_per_foot
+        ratio_max, lambda_min = self.settings.sliding_ratio_max, self.settings.lambda_min_n
+        finite_ratio = math.isfinite(ratio_max)
         for i in np.flatnonzero(self._stance_rows):
             mu = (feet_mu[i] if feet_mu is not None else inputs.mu) / (1.0 - self._friction_margin)
             fn = float(force[i] @ normals[i])
             ft = float(np.linalg.norm(force[i] - fn * normals[i]))
-            out[i] = fn < self.settings.lambda_min_n or ft > mu * fn
-        return out
+            out[i] = fn < lambda_min or ft > mu * fn
+            unheld[i] = out[i] and finite_ratio and (fn < lambda_min or ft > ratio_max * fn)
+        if unheld.any():
+            out &= ~unheld
+            _friction_rows_off(qp, self.friction.start, unheld)
 
     def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray, free: np.ndarray) -> None:
         """The backend problem's bounds on u: the torque limits intersected with u_nom +- the correction limit
@@ -445,7 +461,7 @@ class SafetyFilter:
             inputs = inputs.with_mu_scaled(1.0 - self._friction_margin)  # per-foot values too
         qp = self.build(inputs, u_nom)
         if self._limit_correction:
-            self._correction_bounds(u_nom, inputs.in_stance, self._sliding_feet(qp, u_nom, inputs))
+            self._correction_bounds(u_nom, inputs.in_stance, self._sliding)
         if robust:
             self.robust.observe(self.barriers)
         build_s = time.perf_counter() - t0
@@ -491,6 +507,14 @@ def _check_choices(settings: FilterSettings) -> None:
         value = getattr(settings, key)
         if value not in valid:
             raise ValueError(f"filter.{key}={value!r}; valid: {', '.join(valid)}")
+
+
+def _friction_rows_off(qp: QPProblem, start: int, feet: np.ndarray) -> None:
+    """The friction family's rows (5 a foot from row ``start``) of the ``feet`` (4,) made inactive: 0 <= INACTIVE_RHS."""
+    for i in np.flatnonzero(feet):
+        rows = slice(start + 5 * i, start + 5 * i + 5)
+        qp.G[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = 0.0
+        qp.h[rows] = INACTIVE_RHS
 
 
 def _friction_cone(settings: FilterSettings, terrain: Terrain | None) -> FrictionCone:
