@@ -135,8 +135,9 @@ def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slid
     """``correction_limit_stance_unless_sliding``: a stance leg keeps the nominal's torques unless numpy's own
     solve of the equality rows under u_nom puts its foot's force outside the true cone (or below lambda_min);
     the legs it marks are the ones the filter may move, and on mu = 0.3 it moves some of them. With
-    ``sliding_ratio_max`` only forces between the cone and that ratio of tangential to normal mark a leg (a
-    normal part below lambda_min does not); 0.5 on mu = 0.3 so that both kinds occur in these states."""
+    ``sliding_ratio_max`` only forces between the cone and that ratio of tangential to normal mark a leg; a foot
+    beyond it (or with a normal part below lambda_min) keeps its leg's nominal torques and gets no planned force;
+    0.5 on mu = 0.3 so that both kinds occur in these states."""
     st, pm = states
     mu = 0.3
     settings = FilterSettings(friction_cone="terrain", cone_edge_along_nominal=True, correction_limit_stance_nm=0.0,
@@ -161,6 +162,8 @@ def test_the_stance_limit_lifts_only_for_the_legs_whose_nominal_force_would_slid
         du = np.abs(res.u - state[3]).reshape(4, 3).max(axis=1)
         fixed = stance & ~sliding
         assert np.all(du[fixed] <= 1e-6), (du, sliding)
+        if ratio_max is not None:  # the feet beyond the ratio are out of the contact model: no force planned
+            assert np.all(res.lam.reshape(4, 3)[over] == 0.0)
         moved += int((du[sliding] > 0.1).sum())
         kept += int(fixed.sum())
     assert moved > 0 and kept > 0  # both branches seen

@@ -309,8 +309,9 @@ class FilterConfig:
                                                                  "foot the nominal's force would slide (outside "
                                                                  "its cone at the estimate's mu, no margin)")
     sliding_ratio_max: float | None = param(None, "with the option above: a stance foot whose nominal force is beyond "
-                                                  "this ratio of tangential to normal is neither held nor moved "
-                                                  "(null: every sliding foot is held)", lo=0.0, lo_open=True)
+                                                  "this ratio of tangential to normal is neither held nor moved: "
+                                                  "out of the contact model, its leg at u_nom (null: every sliding "
+                                                  "foot is held)", lo=0.0, lo_open=True)
     support_min_normal_z: float | None = param(None, "a stance foot whose terrain normal has n_z below this gets no "
                                                      "contact rows or cone (a toe on a riser face; null: off)",
                                                lo=-1.0, hi=1.0)

@@ -95,8 +95,9 @@ class FilterSettings:
     correction_limit_stance_unless_sliding: bool = False
     # [-] with the option above: a stance foot whose nominal force has a tangential part beyond this times its
     # normal part (or a normal part below lambda_min) would slide on any ground -- the nominal pushing against
-    # an obstacle, or placing or lifting the foot -- and is neither held nor moved: its leg keeps the nominal's
-    # torques and its friction rows are off this tick (inf: every such foot is held, its leg free to move)
+    # an obstacle, or placing or lifting the foot -- and is neither held nor moved: it is out of the contact
+    # model this tick (no contact rows, no cone, lambda = 0) and its leg keeps the nominal's torques (inf: every
+    # such foot is held, its leg free to move)
     sliding_ratio_max: float = math.inf
     # [-] a stance foot whose terrain normal has n_z below this is no support to the filter: no contact rows and
     # no cone for it (lambda = 0, the leg's motion free), its barrier rows those of a stance foot (none); None: off
@@ -283,6 +284,12 @@ class SafetyFilter:
         self._stance_rows[:] = contact.in_stance  # the stance set of the rows written (after the release)
         if self._limit_correction:
             self._sliding_feet(qp, u_nom, inputs)
+            if self._unheld.any():  # out of the contact model this tick: no contact rows, no cone, lambda = 0
+                contact = replace_stance(contact, self._stance_rows & ~self._unheld)
+                self._write_equalities(qp, contact)
+                self.friction.write(qp, contact)
+                self._stance_rows[:] = contact.in_stance
+                self._forces_current = False
         for fam in self.barriers:
             fam.write(qp, inputs)
         if self.condensed is not None:
@@ -360,7 +367,8 @@ class SafetyFilter:
         ``qp`` on which the nominal torques' force lies outside the foot's cone (``inputs``' mu, which carries the
         friction margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal
         part below ``lambda_min_n``; with a finite ``sliding_ratio_max`` only those whose force is within that
-        ratio of tangential to normal, the others (``_unheld``) lose their friction rows in ``qp``. None of them
+        ratio of tangential to normal, the others in ``_unheld`` (:meth:`build` takes them out of the contact
+        rows). None of them
         when the option is off. The forces are solved for only when :meth:`build` left none for these rows (the
         release and the turned pyramids already need them)."""
         out, unheld = self._sliding, self._unheld
@@ -381,9 +389,7 @@ class SafetyFilter:
             ft = float(np.linalg.norm(force[i] - fn * normals[i]))
             out[i] = fn < lambda_min or ft > mu * fn
             unheld[i] = out[i] and finite_ratio and (fn < lambda_min or ft > ratio_max * fn)
-        if unheld.any():
-            out &= ~unheld
-            _friction_rows_off(qp, self.friction.start, unheld)
+        out &= ~unheld
 
     def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray, free: np.ndarray) -> None:
         """The backend problem's bounds on u: the torque limits intersected with u_nom +- the correction limit
@@ -507,14 +513,6 @@ def _check_choices(settings: FilterSettings) -> None:
         value = getattr(settings, key)
         if value not in valid:
             raise ValueError(f"filter.{key}={value!r}; valid: {', '.join(valid)}")
-
-
-def _friction_rows_off(qp: QPProblem, start: int, feet: np.ndarray) -> None:
-    """The friction family's rows (5 a foot from row ``start``) of the ``feet`` (4,) made inactive: 0 <= INACTIVE_RHS."""
-    for i in np.flatnonzero(feet):
-        rows = slice(start + 5 * i, start + 5 * i + 5)
-        qp.G[rows, NV + NU + 3 * i : NV + NU + 3 * i + 3] = 0.0
-        qp.h[rows] = INACTIVE_RHS
 
 
 def _friction_cone(settings: FilterSettings, terrain: Terrain | None) -> FrictionCone:
