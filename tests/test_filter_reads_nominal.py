@@ -183,5 +183,5 @@ def test_the_guarded_preset_is_release_with_bounded_corrections_lifted_for_slidi
         assert cfg.filter[key] == release[key]  # the rest is terrain_release's
     s = filter_settings(cfg, load_robot("a1"))
     assert s.correction_limit_stance_nm == 0.0 and s.correction_limit_swing_nm == 1.0
-    assert s.correction_limit_stance_unless_sliding
+    assert s.correction_limit_stance_unless_sliding and s.sliding_ratio_max == 2.0
     assert not filter_settings(compose([]), load_robot("a1")).correction_limit_stance_unless_sliding  # the paper's
