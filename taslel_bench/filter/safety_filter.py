@@ -368,9 +368,8 @@ class SafetyFilter:
         friction margin, divided back by 1 - margin; a circular cone about the terrain normal) or has a normal
         part below ``lambda_min_n``; with a finite ``sliding_ratio_max`` only those whose force is within that
         ratio of tangential to normal, the others in ``_unheld`` (:meth:`build` takes them out of the contact
-        rows). None of them
-        when the option is off. The forces are solved for only when :meth:`build` left none for these rows (the
-        release and the turned pyramids already need them)."""
+        rows). None of them when the option is off. The forces are solved for only when :meth:`build` left none
+        for these rows (the release and the turned pyramids already need them)."""
         out, unheld = self._sliding, self._unheld
         out[:] = False
         unheld[:] = False
