@@ -386,9 +386,10 @@ class SafetyFilter:
             mu = (feet_mu[i] if feet_mu is not None else inputs.mu) / (1.0 - self._friction_margin)
             fn = float(force[i] @ normals[i])
             ft = float(np.linalg.norm(force[i] - fn * normals[i]))
-            out[i] = fn < lambda_min or ft > mu * fn
-            unheld[i] = out[i] and finite_ratio and (fn < lambda_min or ft > ratio_max * fn)
-        out &= ~unheld
+            slides = fn < lambda_min or ft > mu * fn
+            beyond = finite_ratio and (fn < lambda_min or ft > ratio_max * fn)  # would slide on any ground
+            out[i] = slides and not beyond
+            unheld[i] = slides and beyond
 
     def _correction_bounds(self, u_nom: np.ndarray, in_stance: np.ndarray, free: np.ndarray) -> None:
         """The backend problem's bounds on u: the torque limits intersected with u_nom +- the correction limit
